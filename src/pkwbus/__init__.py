@@ -1,0 +1,3 @@
+"""pkwbus: an RS-485 bus master for the PKW parameter channel of FC and USS drives."""
+
+__version__ = "0.1.0"
