@@ -1,0 +1,15 @@
+"""The two kinds of protocol error, as in h11: ours and the peer's."""
+
+from __future__ import annotations
+
+
+class ProtocolError(Exception):
+    """Base of every error the protocol layer raises."""
+
+
+class LocalProtocolError(ProtocolError, ValueError):
+    """We were asked for something the protocol (or the dialect) cannot say."""
+
+
+class RemoteProtocolError(ProtocolError):
+    """The peer sent something the protocol does not allow."""
