@@ -184,12 +184,14 @@ def _read_yaml(text: str, origin: str) -> dict[str, Any]:
 # --- validation with readable errors ----------------------------------------
 
 
-def _format_errors(where: str, exc: ValidationError) -> str:
+def _format_errors(origin: str, place: str, exc: ValidationError) -> str:
+    """One line per problem: `FILE: place.field: message` (place may be empty)."""
     lines = []
     for error in exc.errors():
-        loc = ".".join(str(part) for part in error["loc"])
+        parts = [place] if place else []
+        path = ".".join(parts + [str(part) for part in error["loc"]])
         message = str(error["msg"]).removeprefix("Value error, ")
-        lines.append(f"{where}.{loc}: {message}" if loc else f"{where}: {message}")
+        lines.append(f"{origin}: {path}: {message}" if path else f"{origin}: {message}")
     return "\n".join(lines)
 
 
@@ -202,7 +204,8 @@ def _key_text(key: object) -> str:
 
 
 def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
-    where = f'{origin}: parameters."{_key_text(key)}"'
+    place = f'parameters."{_key_text(key)}"'
+    where = f"{origin}: {place}"
     try:
         pnu = _parse_key(_key_text(key))
     except ValueError as exc:
@@ -214,7 +217,7 @@ def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
     try:
         return ParameterSpec.model_validate({**entry, "pnu": pnu})
     except ValidationError as exc:
-        raise CatalogError(_format_errors(where, exc)) from None
+        raise CatalogError(_format_errors(origin, place, exc)) from None
 
 
 def _parse_parameters(data: Mapping[str, Any], origin: str) -> dict[int, ParameterSpec]:
@@ -247,7 +250,7 @@ def _parse_catalog(text: str, origin: str) -> Catalog:
     try:
         return Catalog.model_validate({**header, "parameters": parameters})
     except ValidationError as exc:
-        raise CatalogError(_format_errors(origin, exc)) from None
+        raise CatalogError(_format_errors(origin, "", exc)) from None
 
 
 # --- public entry points ----------------------------------------------------
