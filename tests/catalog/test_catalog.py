@@ -190,6 +190,26 @@ def test_catalog_checks_source_keys_when_built_directly() -> None:
         Catalog(name="c", dialect="uss", parameters={1: spec})
 
 
+def test_override_replaces_fields_and_keeps_the_rest() -> None:
+    spec = ParameterSpec(pnu=1500, name="Operating hours", type="u32", conversion=74, unit="s")
+    hours = spec.overridden({"scale": 1, "unit": "h"})
+    assert (hours.scale, hours.conversion, hours.unit) == (1.0, None, "h")
+    assert (hours.pnu, hours.name, hours.type) == (1500, "Operating hours", "u32")
+    back = hours.overridden({"conversion": -1})
+    assert (back.scale, back.conversion) == (None, -1)
+    assert spec.overridden({"type": "text"}).conversion is None
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [{"pnu": 2}, {"colour": "red"}, {"conversion": 9}, {"min": 5, "max": 1}, {"type": "u8"}],
+)
+def test_override_is_validated(changes: dict[str, object]) -> None:
+    spec = ParameterSpec(pnu=1, name="x", type="u16", conversion=0)
+    with pytest.raises(ValueError):
+        spec.overridden(changes)
+
+
 # --- keys ---------------------------------------------------------------------
 
 

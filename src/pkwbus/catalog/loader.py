@@ -64,6 +64,25 @@ class ParameterSpec(BaseModel):
             raise ValueError("verified: false needs a note saying what could not be sourced")
         return self
 
+    def overridden(self, changes: Mapping[str, Any]) -> ParameterSpec:
+        """A copy with `changes` (config overrides) applied and validated again.
+
+        Giving `scale` drops the catalog's `conversion` and vice versa, since
+        the two are exclusive; making it a text parameter drops both. `pnu`
+        cannot change. Raises ValueError naming the field.
+        """
+        if "pnu" in changes:
+            raise ValueError("pnu cannot be overridden")
+        fields = self.model_dump()
+        if "scale" in changes or changes.get("type") == "text":
+            fields["conversion"] = None
+        if "conversion" in changes or changes.get("type") == "text":
+            fields["scale"] = None
+        try:
+            return ParameterSpec.model_validate({**fields, **changes})
+        except ValidationError as exc:
+            raise ValueError(_format_errors("override", "", exc)) from None
+
 
 def _check_scaling(spec: ParameterSpec) -> None:
     if spec.conversion is not None and spec.conversion not in CONVERSION_INDEXES:
