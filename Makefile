@@ -23,5 +23,11 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
+run: $(STAMP)
+	$(BIN)/pkwbus run --config config/demo.yaml
+
+bench: $(STAMP)
+	$(BIN)/python bench/run_all.py
+
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

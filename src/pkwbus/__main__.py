@@ -1,0 +1,3 @@
+from pkwbus.cli import main
+
+raise SystemExit(main())

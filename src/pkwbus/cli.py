@@ -1,0 +1,65 @@
+"""The `pkwbus` command. No traceback reaches the user unless --debug asks for one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Sequence
+
+from pkwbus import __version__
+from pkwbus.commands import access, scan
+from pkwbus.commands.common import CommandError, Exit
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pkwbus",
+        description="RS-485 bus master for the PKW parameter channel (Danfoss FC, Siemens USS)",
+    )
+    parser.add_argument("--version", action="version", version=f"pkwbus {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    access.add_parsers(sub)
+    scan.add_parsers(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
+        return int(exc.code or 0)
+    logging.basicConfig(
+        level=logging.DEBUG if args.debug else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.func(args))
+    except CommandError as exc:
+        _report(args, exc)
+        return int(exc.code)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        if args.debug:
+            raise
+        print(
+            f"pkwbus: internal error: {type(exc).__name__}: {exc} (--debug shows more)",
+            file=sys.stderr,
+        )
+        return 70
+
+
+def _report(args: argparse.Namespace, exc: CommandError) -> None:
+    print(str(exc) if exc.code is Exit.REJECTED else f"pkwbus: {exc}", file=sys.stderr)
+    if getattr(args, "json", False):
+        error: dict[str, object] = {"kind": exc.kind, "text": str(exc)}
+        if exc.code is Exit.REJECTED:
+            text = str(exc).partition(": ")[2] if exc.fault is not None else str(exc)
+            error.update(fault=exc.fault, text=text)
+        print(json.dumps({"error": error}))

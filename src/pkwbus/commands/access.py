@@ -1,0 +1,168 @@
+"""`pkwbus read` and `pkwbus write`: one parameter of one drive."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from typing import Any
+
+from pkwbus.catalog import CatalogError, load_catalog
+from pkwbus.commands.common import (
+    DEFAULT_CATALOG,
+    CommandError,
+    Exit,
+    add_drive_options,
+    add_line_options,
+    build_line,
+    build_target,
+    emit_json,
+)
+from pkwbus.link import PortError
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import (
+    Answered,
+    LineFailed,
+    Outcome,
+    PkwTransaction,
+    Rejected,
+    TimedOut,
+)
+from pkwbus.master.values import ParameterFormat, Value
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter, parse_type
+from pkwbus.protocol.telegram import Protocol
+
+
+def add_parsers(sub: Any) -> None:
+    read = sub.add_parser("read", help="read one parameter")
+    _common(read)
+    read.set_defaults(func=run_read)
+    write = sub.add_parser("write", help="write one parameter")
+    _common(write)
+    write.add_argument("value", help="engineering value (scaled by the catalog) or text")
+    write.add_argument("--store", choices=[s.value for s in pkw.Store], default="ram")
+    write.set_defaults(func=run_write)
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    add_line_options(parser)
+    add_drive_options(parser)
+    parser.add_argument("parameter", help="16-13, 1613, r0021, P7841[2]")
+    parser.add_argument("--type", default=None, help="u16 i16 u32 i32 f32 text")
+    parser.add_argument("--catalog", default=None, help="catalog name, or 'none'")
+    parser.add_argument("--deadline", type=float, default=2.0, help="seconds for the whole job")
+
+
+def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterFormat]:
+    try:
+        ref = parse_parameter(args.parameter)
+        target = build_target(args)
+        target.dialect.check_pnu(ref.pnu)
+        vtype = parse_type(args.type) if args.type else None
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    return target, ref, _format(args, ref).with_type(vtype)
+
+
+def _format(args: argparse.Namespace, ref: ParameterRef) -> ParameterFormat:
+    name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
+    if name == "none":
+        return ParameterFormat()
+    try:
+        spec = load_catalog(name).get(ref.pnu)
+    except CatalogError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    return ParameterFormat.from_spec(spec)
+
+
+async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRequest) -> Outcome:
+    line = build_line(args)
+    try:
+        await line.open()
+    except PortError as exc:
+        raise CommandError(str(exc), Exit.PORT) from None
+    try:
+        loop = asyncio.get_running_loop()
+        tx = PkwTransaction(target, req, retries=args.retries, deadline=loop.time() + args.deadline)
+        return await line.run(tx)
+    finally:
+        await line.close()
+
+
+def _finish(outcome: Outcome) -> pkw.PkwResponse:
+    if isinstance(outcome, Rejected):
+        code = "" if outcome.fault is None else f"fault {outcome.fault}: "
+        raise CommandError(
+            f"{code}{outcome.text}", Exit.REJECTED, kind="rejected", fault=outcome.fault
+        )
+    if isinstance(outcome, TimedOut | LineFailed):
+        raise CommandError(f"no valid answer: {outcome.reason}", Exit.NO_ANSWER, kind="timeout")
+    assert isinstance(outcome, Answered)
+    return outcome.response
+
+
+def _report(
+    args: argparse.Namespace,
+    ref: ParameterRef,
+    raw: int | None,
+    value: Value,
+    fmt: ParameterFormat,
+    verb: str = "",
+) -> None:
+    if args.json:
+        emit_json(
+            {
+                "parameter": ref.name,
+                "pnu": ref.pnu,
+                "index": ref.index or 0,
+                "raw": raw,
+                "value": value,
+                "unit": fmt.unit,
+            }
+        )
+        return
+    unit = f" {fmt.unit}" if fmt.unit else ""
+    rawtext = f" (raw {raw})" if raw is not None and raw != value else ""
+    print(f"{ref} = {value}{unit}{rawtext}{verb}")
+
+
+def run_read(args: argparse.Namespace) -> int:
+    target, ref, fmt = _resolve(args)
+    try:
+        if fmt.is_text:
+            req = pkw.read_text(target.dialect, ref.pnu, ref.index or 0)
+        else:
+            req = pkw.read(target.dialect, ref.pnu, ref.index)
+        target.telegram(req)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    response = _finish(asyncio.run(_perform(args, target, req)))
+    try:
+        raw, value = fmt.value_of(response)
+    except RemoteProtocolError as exc:
+        raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
+    _report(args, ref, raw, value, fmt)
+    return Exit.OK
+
+
+def run_write(args: argparse.Namespace) -> int:
+    target, ref, fmt = _resolve(args)
+    store = pkw.Store(args.store)
+    try:
+        if fmt.is_text:
+            req = pkw.write_text(target.dialect, ref.pnu, encode_text(args.value), ref.index or 0)
+            raw: int | None = None
+        else:
+            raw, width = fmt.encode(args.value)
+            req = pkw.write(target.dialect, ref.pnu, raw, width, index=ref.index, store=store)
+        target.telegram(req)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    response = _finish(asyncio.run(_perform(args, target, req)))
+    try:
+        raw, value = fmt.value_of(response)
+    except RemoteProtocolError:
+        value = args.value
+    _report(args, ref, raw, value, fmt, f" written ({store.value})")
+    return Exit.OK

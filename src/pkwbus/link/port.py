@@ -1,0 +1,257 @@
+"""A serial port (device path or pyserial URL) seen as a half-duplex RS-485 link.
+
+The link writes one request at a time after the line has been quiet for the
+start pause, discards stale input before each request, optionally strips
+the echo of its own transmission, and hands every received chunk to one
+receiver callback. When the port fails or disappears it reports the error
+and reopens with capped exponential back-off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import functools
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import serial
+import serial_asyncio
+
+from pkwbus.link.backoff import Backoff
+
+log = logging.getLogger(__name__)
+
+PARITY_BITS = {"E": 1, "O": 1, "N": 0}
+PARITIES = {"E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "N": serial.PARITY_NONE}
+START_PAUSE_CHARS = 3.5
+
+
+class PortError(Exception):
+    """The port cannot be opened or was lost."""
+
+
+class LinkState(enum.Enum):
+    CLOSED = "closed"
+    OPEN = "open"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True, slots=True)
+class PortSettings:
+    """How to open the port. ``pause`` None = 3.5 character times at ``baudrate``."""
+
+    url: str
+    baudrate: int = 9600
+    parity: str = "E"
+    stopbits: int = 1
+    pause: float | None = None
+    echo: bool = False
+    reopen_initial: float = 0.5
+    reopen_cap: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.parity not in PARITIES:
+            raise ValueError(f"parity {self.parity!r} is not E, O or N")
+        if self.stopbits not in (1, 2):
+            raise ValueError(f"stop bits {self.stopbits} is not 1 or 2")
+        if self.baudrate <= 0:
+            raise ValueError(f"baud rate {self.baudrate} is not positive")
+
+    @property
+    def char_bits(self) -> int:
+        """Bits per character: start, 8 data, parity, stop (11 for 8E1)."""
+        return 1 + 8 + PARITY_BITS[self.parity] + self.stopbits
+
+    @property
+    def char_time(self) -> float:
+        return self.char_bits / self.baudrate
+
+    @property
+    def start_pause(self) -> float:
+        return self.pause if self.pause is not None else START_PAUSE_CHARS * self.char_time
+
+    def wire_time(self, nbytes: int) -> float:
+        return nbytes * self.char_time
+
+
+Receiver = Callable[[bytes], None]
+StateListener = Callable[[LinkState, str | None], None]
+
+
+class _Protocol(asyncio.Protocol):
+    def __init__(self, link: Link) -> None:
+        self._link = link
+
+    def data_received(self, data: bytes) -> None:
+        self._link._on_data(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._link._on_lost(exc)
+
+
+class Link:
+    """One port. Owned by one line; nothing else touches the port."""
+
+    def __init__(
+        self,
+        settings: PortSettings,
+        *,
+        receiver: Receiver | None = None,
+        on_state: StateListener | None = None,
+    ) -> None:
+        self.settings = settings
+        self.receiver = receiver
+        self.on_state = on_state
+        self.on_lost: Callable[[str], None] | None = None
+        self._transport: asyncio.Transport | None = None
+        self._state = LinkState.CLOSED
+        self._backoff = Backoff(settings.reopen_initial, settings.reopen_cap)
+        self._next_attempt = 0.0
+        self._quiet_at = 0.0
+        self._echo = b""
+        self._closing = False
+        self.last_error: str | None = None
+
+    @property
+    def state(self) -> LinkState:
+        return self._state
+
+    @property
+    def next_attempt(self) -> float:
+        """Loop time of the next reopen attempt (back-off after a failure)."""
+        return self._next_attempt
+
+    @property
+    def is_open(self) -> bool:
+        return self._state is LinkState.OPEN
+
+    # ------------------------------------------------------------ opening
+
+    async def open(self) -> None:
+        """Open now; :class:`PortError` with the reason when the port cannot be opened."""
+        loop = asyncio.get_running_loop()
+        s = self.settings
+        make = functools.partial(
+            serial.serial_for_url,
+            s.url,
+            baudrate=s.baudrate,
+            parity=PARITIES[s.parity],
+            stopbits=s.stopbits,
+            bytesize=8,
+            timeout=0,
+        )
+        try:
+            instance = await loop.run_in_executor(None, make)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            reason = _reason(exc).split(f"{s.url}: ", 1)[-1]
+            self._failed(f"cannot open {s.url}: {reason}")
+            raise PortError(self.last_error) from None
+        self._closing = False
+        transport, _ = await serial_asyncio.connection_for_serial(
+            loop, lambda: _Protocol(self), instance
+        )
+        self._transport = transport
+        self._backoff.reset()
+        self._quiet_at = loop.time()
+        self._set_state(LinkState.OPEN, None)
+
+    async def ensure_open(self, deadline: float | None = None) -> None:
+        """Open the port if it is not, waiting out the reopen back-off (never past ``deadline``)."""
+        if self._state is LinkState.OPEN:
+            return
+        loop = asyncio.get_running_loop()
+        wait = self._next_attempt - loop.time()
+        if wait > 0:
+            if deadline is not None and self._next_attempt > deadline:
+                raise PortError(self.last_error or f"{self.settings.url} is not open")
+            await asyncio.sleep(wait)
+        await self.open()
+
+    def _failed(self, message: str) -> None:
+        delay = self._backoff.next_delay()
+        with contextlib.suppress(RuntimeError):
+            self._next_attempt = asyncio.get_running_loop().time() + delay
+        self.last_error = message
+        self._set_state(LinkState.FAILED, message)
+
+    def _set_state(self, state: LinkState, error: str | None) -> None:
+        changed = state is not self._state
+        self._state = state
+        if changed and self.on_state is not None:
+            self.on_state(state, error)
+
+    async def close(self) -> None:
+        self._closing = True
+        transport, self._transport = self._transport, None
+        if transport is not None:
+            transport.close()
+            await asyncio.sleep(0)  # let connection_lost run
+        self._set_state(LinkState.CLOSED, None)
+
+    # ------------------------------------------------------------ traffic
+
+    async def send(self, data: bytes) -> None:
+        """Write ``data`` once the line has been quiet for the start pause; drop stale input."""
+        transport = self._transport
+        if transport is None or self._state is not LinkState.OPEN:
+            raise PortError(self.last_error or f"{self.settings.url} is not open")
+        loop = asyncio.get_running_loop()
+        wait = self._quiet_at + self.settings.start_pause - loop.time()
+        if wait > 0:
+            await asyncio.sleep(wait)
+            if self._transport is not transport:
+                raise PortError(self.last_error or f"{self.settings.url} was lost")
+        self._discard_input(transport)
+        if self.settings.echo:
+            self._echo = data
+        transport.write(data)
+        self._quiet_at = loop.time() + self.settings.wire_time(len(data))
+
+    def _discard_input(self, transport: asyncio.Transport) -> None:
+        port: Any = transport.get_extra_info("serial")
+        if port is not None:
+            with contextlib.suppress(serial.SerialException, OSError, NotImplementedError):
+                port.reset_input_buffer()
+
+    def _on_data(self, data: bytes) -> None:
+        loop = asyncio.get_running_loop()
+        self._quiet_at = max(self._quiet_at, loop.time())
+        if self._echo:
+            data = self._strip_echo(data)
+            if not data:
+                return
+        if self.receiver is not None:
+            self.receiver(data)
+
+    def _strip_echo(self, data: bytes) -> bytes:
+        """Remove the echo of our own request from the start of the input."""
+        n = min(len(self._echo), len(data))
+        if data[:n] != self._echo[:n]:
+            log.warning("echo does not match the request sent on %s", self.settings.url)
+            self._echo = b""
+            return data
+        self._echo = self._echo[n:]
+        return data[n:]
+
+    def _on_lost(self, exc: Exception | None) -> None:
+        self._transport = None
+        if self._closing:
+            return
+        reason = _reason(exc) if exc else "closed by the other end"
+        self._failed(f"lost {self.settings.url}: {reason}")
+        if self.on_lost is not None:
+            self.on_lost(self.last_error or reason)
+
+
+def _reason(exc: BaseException) -> str:
+    """A short reason: the system's words for an errno, else the exception's text."""
+    code = getattr(exc, "errno", None)
+    if isinstance(code, int) and code > 0:
+        return os.strerror(code)
+    text = str(exc).strip()
+    return text or type(exc).__name__

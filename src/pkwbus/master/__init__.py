@@ -1,0 +1,1 @@
+"""The bus master: drives as targets, PKW transactions, lines, the scheduler."""

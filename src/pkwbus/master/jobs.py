@@ -1,0 +1,69 @@
+"""Read and write jobs: what, for which drive, how urgent, until when, and their result."""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+from dataclasses import dataclass, field
+
+from pkwbus.master.transaction import Outcome, Tally
+from pkwbus.master.values import ParameterFormat, Value
+from pkwbus.protocol import pkw
+
+
+class JobKind(enum.StrEnum):
+    READ = "read"
+    WRITE = "write"
+
+
+class Priority(enum.IntEnum):
+    """Lower goes first: writes, then on-demand reads, then polls."""
+
+    WRITE = 0
+    READ = 1
+    POLL = 2
+
+
+class JobOutcome(enum.StrEnum):
+    """The ``outcome`` label of ``pkwbus_jobs_total``."""
+
+    OK = "ok"
+    REJECTED = "rejected"
+    TIMEOUT = "timeout"
+    CANCELLED = "cancelled"
+
+
+@dataclass(frozen=True, slots=True)
+class Cancelled(Outcome):
+    """The job never finished: the service stopped or the job was withdrawn."""
+
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class JobResult:
+    """What a job came to: its outcome, and the value when it carried one."""
+
+    outcome: Outcome
+    raw: int | None = None
+    value: Value | None = None
+    tally: Tally | None = None
+
+
+@dataclass(eq=False)
+class Job:
+    """A PKW job queued on a line for one drive."""
+
+    drive: str
+    request: pkw.PkwRequest
+    kind: JobKind
+    priority: Priority
+    deadline: float
+    fmt: ParameterFormat = field(default_factory=ParameterFormat)
+    future: asyncio.Future[JobResult] | None = None
+    parameter: str = ""
+    index: int = 0
+
+    def resolve(self, result: JobResult) -> None:
+        if self.future is not None and not self.future.done():
+            self.future.set_result(result)

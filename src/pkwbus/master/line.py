@@ -1,0 +1,185 @@
+"""One RS-485 line: owns its link, runs one exchange at a time.
+
+An exchange is one request telegram out and one answer (or an error) in.
+A PKW job is a series of exchanges (:class:`PkwTransaction`); the scheduler
+may put other drives' exchanges between its repeats.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+
+from pkwbus.link import Link, PortError, PortSettings
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import (
+    ErrorKind,
+    ExchangeResult,
+    Failure,
+    Outcome,
+    PkwTransaction,
+    Reply,
+)
+from pkwbus.protocol.telegram import (
+    BadChecksum,
+    BadLength,
+    Deframer,
+    DeframerEvent,
+    Protocol,
+    Telegram,
+    Truncated,
+    fc_lengths,
+    uss_lengths,
+)
+
+TraceHook = Callable[[str, bytes], None]
+
+# How many character times of silence inside a telegram end it.
+INTER_CHAR_GAP_CHARS = 20.0
+
+
+class Line:
+    """A line: one port, one exchange at a time."""
+
+    def __init__(
+        self,
+        settings: PortSettings,
+        protocol: Protocol,
+        *,
+        timeout: float = 0.1,
+        inter_char_timeout: float | None = None,
+        trace: TraceHook | None = None,
+        link: Link | None = None,
+    ) -> None:
+        self.protocol = protocol
+        self.timeout = timeout
+        self.inter_char_timeout = (
+            inter_char_timeout
+            if inter_char_timeout is not None
+            else max(0.005, INTER_CHAR_GAP_CHARS * settings.char_time)
+        )
+        self.trace = trace
+        self.link = link or Link(settings)
+        self.link.receiver = self._on_data
+        self.link.on_lost = self._on_lost
+        lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
+        self._deframer = Deframer(lengths)
+        self._lock = asyncio.Lock()
+        self._waiter: asyncio.Future[ExchangeResult] | None = None
+        self._expect_adr = 0
+        self._started = 0.0
+        self._gap_timer: asyncio.TimerHandle | None = None
+        self._pending_error: ErrorKind | None = None
+
+    # -------------------------------------------------------------- API
+
+    async def open(self) -> None:
+        await self.link.open()
+
+    async def close(self) -> None:
+        await self.link.close()
+
+    async def exchange(
+        self, target: DriveTarget, telegram: bytes, timeout: float | None = None
+    ) -> ExchangeResult:
+        """Send ``telegram`` to ``target`` and wait for its answer."""
+        async with self._lock:
+            return await self._exchange(target.adr, telegram, timeout or self.timeout)
+
+    async def send_broadcast(self, telegram: bytes) -> None:
+        """Send a telegram that no follower answers."""
+        async with self._lock:
+            await self.link.ensure_open()
+            await self.link.send(telegram)
+            if self.trace:
+                self.trace("tx", telegram)
+
+    async def run(self, tx: PkwTransaction) -> Outcome:
+        """Repeat ``tx``'s request until it is finished (no interleaving)."""
+        loop = asyncio.get_running_loop()
+        while True:
+            result = await self.exchange(tx.target, tx.telegram)
+            outcome = tx.feed(result, loop.time())
+            if outcome is not None:
+                return outcome
+
+    # --------------------------------------------------------- internals
+
+    async def _exchange(self, adr: int, telegram: bytes, timeout: float) -> ExchangeResult:
+        loop = asyncio.get_running_loop()
+        try:
+            await self.link.ensure_open(loop.time() + timeout)
+            self._deframer.reset()
+            self._pending_error = None
+            await self.link.send(telegram)
+        except PortError as exc:
+            return Failure(ErrorKind.PORT, str(exc))
+        if self.trace:
+            self.trace("tx", telegram)
+        self._started = loop.time()
+        self._expect_adr = adr
+        waiter: asyncio.Future[ExchangeResult] = loop.create_future()
+        self._waiter = waiter
+        wire = self.link.settings.wire_time(len(telegram))
+        timer = loop.call_later(timeout + wire, self._on_timeout, waiter)
+        try:
+            return await waiter
+        finally:
+            timer.cancel()
+            self._cancel_gap_timer()
+            self._waiter = None
+
+    def _resolve(self, result: ExchangeResult) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(result)
+
+    def _on_lost(self, reason: str) -> None:
+        self._resolve(Failure(ErrorKind.PORT, reason))
+
+    def _on_timeout(self, waiter: asyncio.Future[ExchangeResult]) -> None:
+        if waiter.done():
+            return
+        if not self.link.is_open:
+            waiter.set_result(Failure(ErrorKind.PORT, self.link.last_error or "port lost"))
+            return
+        kind = self._pending_error or ErrorKind.TIMEOUT
+        waiter.set_result(Failure(kind, "no answer" if kind is ErrorKind.TIMEOUT else ""))
+
+    def _on_data(self, data: bytes) -> None:
+        if self.trace:
+            self.trace("rx", data)
+        if self._waiter is None:
+            return  # stale input between exchanges: dropped before the next request
+        self._handle_events(self._deframer.feed(data))
+        self._cancel_gap_timer()
+        if self._waiter is not None and self._deframer.buffered:
+            loop = asyncio.get_running_loop()
+            self._gap_timer = loop.call_later(self.inter_char_timeout, self._on_gap)
+
+    def _on_gap(self) -> None:
+        self._gap_timer = None
+        self._handle_events(self._deframer.flush())
+
+    def _cancel_gap_timer(self) -> None:
+        if self._gap_timer is not None:
+            self._gap_timer.cancel()
+            self._gap_timer = None
+
+    def _handle_events(self, events: list[DeframerEvent]) -> None:
+        for event in events:
+            if isinstance(event, Telegram):
+                if event.adr != self._expect_adr:
+                    self._resolve(Failure(ErrorKind.ADDRESS, f"answer from ADR {event.adr:#04x}"))
+                    return
+                duration = asyncio.get_running_loop().time() - self._started
+                self._resolve(Reply(event.adr, event.data, duration))
+                return
+            if isinstance(event, BadChecksum):
+                self._resolve(Failure(ErrorKind.CHECKSUM, event.raw.hex(" ")))
+                return
+            if isinstance(event, Truncated):
+                self._resolve(Failure(ErrorKind.LENGTH, f"truncated: {event.raw.hex(' ')}"))
+                return
+            if isinstance(event, BadLength):
+                self._pending_error = ErrorKind.LENGTH

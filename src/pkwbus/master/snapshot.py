@@ -1,0 +1,38 @@
+"""The latest known state of every drive, as immutable entries a scrape can copy.
+
+The scheduler replaces entries; readers take :meth:`Snapshot.copy`, never
+touching the bus. A value is only ever one the drive actually sent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pkwbus.master.values import Value
+
+
+@dataclass(frozen=True, slots=True)
+class Reading:
+    value: Value
+    raw: int | None
+    timestamp: float  # wall clock, seconds
+
+
+@dataclass(frozen=True, slots=True)
+class DriveState:
+    up: bool = True
+    status_word: int | None = None
+    status_timestamp: float | None = None
+
+
+ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index
+
+
+@dataclass
+class Snapshot:
+    readings: dict[ReadingKey, Reading] = field(default_factory=dict)
+    drives: dict[str, DriveState] = field(default_factory=dict)
+    lines: dict[str, bool] = field(default_factory=dict)
+
+    def copy(self) -> Snapshot:
+        return Snapshot(dict(self.readings), dict(self.drives), dict(self.lines))

@@ -1,0 +1,104 @@
+"""A drive as the line addresses it: protocol, address, dialect, IND layout, block shape."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.pzd import MONITORING_CTW, Profile
+from pkwbus.protocol.telegram import (
+    FC_PARAMETER,
+    FC_PROCESS,
+    BlockShape,
+    FcAddressFormat,
+    Protocol,
+    encode_block,
+    fc_adr,
+    frame,
+    uss_adr,
+)
+
+
+@dataclass(frozen=True)
+class DriveTarget:
+    """Everything needed to build a drive's telegrams."""
+
+    protocol: Protocol
+    address: int
+    dialect: Dialect
+    ind_layout: IndLayout
+    shape: BlockShape
+    fc_format: FcAddressFormat = FcAddressFormat.RANGE_1_126
+    adr: int = field(init=False)
+    _idle_pzd: tuple[int, ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.protocol is Protocol.FC:
+            adr = fc_adr(self.address, self.fc_format)
+        else:
+            if not 0 <= self.address <= 30:
+                raise LocalProtocolError(f"USS address {self.address} is outside 0-30")
+            adr = uss_adr(self.address)
+        object.__setattr__(self, "adr", adr)
+        # PZD: control word with bit 10 = 0 (never take control), reference 0.
+        idle = (MONITORING_CTW,) + (0,) * (self.shape.pzd_words - 1) if self.shape.pzd_words else ()
+        object.__setattr__(self, "_idle_pzd", idle)
+
+    @classmethod
+    def create(
+        cls,
+        protocol: Protocol | str,
+        address: int,
+        *,
+        dialect_name: str | None = None,
+        ind_layout: IndLayout | str | None = None,
+        pkw_words: int | None = 4,
+        pzd_words: int = 2,
+        fc_format: FcAddressFormat | str = FcAddressFormat.RANGE_1_126,
+    ) -> DriveTarget:
+        proto = Protocol(protocol)
+        d = dialect(dialect_name or proto.value)
+        if proto is Protocol.FC:
+            if d.name != "fc":
+                raise LocalProtocolError(f"an FC line speaks the fc dialect, not {d.name}")
+            shape = FC_PARAMETER
+        else:
+            if d.name == "fc":
+                raise LocalProtocolError("a USS line cannot speak the fc dialect")
+            shape = BlockShape(pkw_words, pzd_words)
+        layout = IndLayout(ind_layout) if ind_layout is not None else d.default_ind_layout
+        return cls(proto, address, d, layout, shape, FcAddressFormat(fc_format))
+
+    @property
+    def profile(self) -> Profile:
+        return Profile.FC if self.protocol is Protocol.FC else Profile.PROFIDRIVE
+
+    @property
+    def has_pkw(self) -> bool:
+        return self.shape.pkw_words != 0
+
+    def telegram(self, request: pkw.PkwRequest) -> bytes:
+        """The whole request telegram: PKW, control word with bit 10 = 0, reference 0."""
+        words = self.shape.pkw_words
+        if self.protocol is Protocol.FC and request.text:
+            words = None
+        data = pkw.encode_request(request, self.dialect, self.ind_layout, words)
+        return frame(self.adr, encode_block(data, self._idle_pzd))
+
+    def probe(self) -> bytes:
+        """The shortest telegram the drive answers: process data only (FC) or PKW AK 0."""
+        if self.protocol is Protocol.FC:
+            return frame(self.adr, encode_block(b"", (MONITORING_CTW, 0)))
+        if not self.has_pkw:
+            return frame(self.adr, encode_block(b"", self._idle_pzd))
+        return self.telegram(pkw.none_request(self.dialect))
+
+    def response_shape(self, data_len: int) -> BlockShape:
+        """The shape to split a response of ``data_len`` bytes by."""
+        if self.protocol is Protocol.FC:
+            if data_len == 4:
+                return FC_PROCESS
+            return BlockShape(None, 2) if data_len != 12 else FC_PARAMETER
+        return self.shape

@@ -1,0 +1,164 @@
+"""One PKW job on the wire under seed 003's rule, as a state machine without I/O.
+
+The same request bytes go out again until the matching answer arrives or
+the deadline passes. A non-matching answer (AK 0, a stale answer, another
+PNU) is "not yet": counted as unexpected, never a failure. Timeouts and bad
+telegrams are retried up to ``retries`` times.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import Counter
+from dataclasses import dataclass, field
+
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.telegram import split_block
+
+
+class ErrorKind(enum.StrEnum):
+    """Why one exchange produced no usable answer (the metric's ``kind`` label)."""
+
+    TIMEOUT = "timeout"
+    CHECKSUM = "checksum"
+    LENGTH = "length"
+    ADDRESS = "address"
+    UNEXPECTED = "unexpected"
+    PORT = "port"
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """A valid telegram from the addressed drive."""
+
+    adr: int
+    data: bytes
+    duration: float
+
+
+@dataclass(frozen=True, slots=True)
+class Failure:
+    kind: ErrorKind
+    detail: str = ""
+
+
+ExchangeResult = Reply | Failure
+
+
+# ------------------------------------------------------------------ outcomes
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    """Base of a finished job's result."""
+
+
+@dataclass(frozen=True, slots=True)
+class Answered(Outcome):
+    """The drive answered the request: a value, a text, a description, a count."""
+
+    response: pkw.PkwResponse
+
+
+@dataclass(frozen=True, slots=True)
+class Rejected(Outcome):
+    fault: int | None
+    text: str
+    short: str
+
+
+@dataclass(frozen=True, slots=True)
+class TimedOut(Outcome):
+    """No matching answer: retries used up or the deadline passed."""
+
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class LineFailed(Outcome):
+    """The port is not there."""
+
+    reason: str
+
+
+@dataclass
+class Tally:
+    """What a job's exchanges cost, for the metrics."""
+
+    telegrams: int = 0
+    retries: int = 0
+    errors: Counter[ErrorKind] = field(default_factory=Counter)
+    status_word: int | None = None
+    busy: float = 0.0
+
+
+class PkwTransaction:
+    """Feed it exchange results; it says when the job is done and how."""
+
+    def __init__(
+        self, target: DriveTarget, request: pkw.PkwRequest, *, retries: int, deadline: float
+    ) -> None:
+        self.target = target
+        self.request = request
+        self.telegram = target.telegram(request)
+        self.retries = retries
+        self.deadline = deadline
+        self.tally = Tally()
+        self._failures = 0
+        self.outcome: Outcome | None = None
+        self.waiting = False  # last answer was "not yet"
+
+    def feed(self, result: ExchangeResult, now: float) -> Outcome | None:
+        """Account for one exchange; the outcome once the job is finished."""
+        tally = self.tally
+        tally.telegrams += 1
+        if isinstance(result, Reply):
+            tally.busy += result.duration
+            outcome = self._on_reply(result)
+        else:
+            outcome = self._on_failure(result)
+        if outcome is None and now >= self.deadline:
+            outcome = TimedOut("deadline passed" + self._last_error())
+        if outcome is not None:
+            self.outcome = outcome
+        else:
+            tally.retries += 1
+        return outcome
+
+    def _last_error(self) -> str:
+        if not self.tally.errors:
+            return ""
+        kinds = ", ".join(f"{n} {k.value}" for k, n in self.tally.errors.most_common())
+        return f" ({kinds})"
+
+    def _on_reply(self, reply: Reply) -> Outcome | None:
+        target = self.target
+        try:
+            block = split_block(reply.data, target.response_shape(len(reply.data)))
+            if block.pzd:
+                self.tally.status_word = block.pzd[0]
+            response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
+        except RemoteProtocolError as exc:
+            return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
+        if not pkw.matches(self.request, response, target.dialect):
+            self.tally.errors[ErrorKind.UNEXPECTED] += 1
+            self.waiting = True
+            return None
+        self.waiting = False
+        if isinstance(response, pkw.Rejection):
+            return Rejected(response.fault, response.text, response.short)
+        return Answered(response)
+
+    def _on_failure(self, failure: Failure) -> Outcome | None:
+        self.tally.errors[failure.kind] += 1
+        self.waiting = False
+        if failure.kind is ErrorKind.PORT:
+            return LineFailed(failure.detail)
+        if failure.kind is ErrorKind.UNEXPECTED:
+            return None  # a garbled answer from the right drive: not yet
+        self._failures += 1
+        if self._failures > self.retries:
+            return TimedOut(f"no valid answer after {self._failures} tries" + self._last_error())
+        return None

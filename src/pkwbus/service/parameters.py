@@ -1,0 +1,284 @@
+"""On-demand reads and audited, validated writes of one parameter, for the HTTP API.
+
+A write is refused before anything is sent unless: the bearer token is
+right (compared in constant time; no token configured = no writes), the
+parameter is in the drive's ``writable`` list, and the value passes the
+type, range and limits of the catalog and the configuration. Every attempt,
+refused ones included, lands in the audit log.
+"""
+
+from __future__ import annotations
+
+import hmac
+from dataclasses import dataclass
+from typing import Any
+
+from pkwbus.master.jobs import Cancelled, JobKind, JobResult
+from pkwbus.master.transaction import Answered, LineFailed, Rejected
+from pkwbus.master.values import ParameterFormat, Value
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter
+from pkwbus.service.audit import AuditEntry, AuditLog, token_id
+from pkwbus.service.runtime import DriveEntry, Runtime
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, kind: str, message: str, **extra: Any) -> None:
+        super().__init__(message)
+        self.status = status
+        self.kind = kind
+        self.extra = extra
+
+    def body(self) -> dict[str, Any]:
+        return {"error": {"kind": self.kind, "message": str(self), **self.extra}}
+
+
+@dataclass(frozen=True)
+class WriteOrder:
+    value: float | int | str
+    index: int | None = None
+    store: pkw.Store = pkw.Store.RAM
+    verify: bool = False
+    dry_run: bool = False
+
+
+@dataclass(frozen=True)
+class Caller:
+    client: str
+    authorization: str | None
+
+
+class ParameterService:
+    def __init__(self, runtime: Runtime, audit: AuditLog | None, token: str | None) -> None:
+        self.runtime = runtime
+        self.audit = audit
+        self._token = token
+
+    # -------------------------------------------------------------- read
+
+    async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
+        entry, ref = self._locate(drive, parameter, index)
+        fmt = entry.format_of(ref)
+        request = self._read_request(entry, ref, fmt)
+        result = await self.runtime.submit(
+            drive, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
+        )
+        self._raise_for(result)
+        return self._value_body(ref, fmt, result)
+
+    def _read_request(
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat
+    ) -> pkw.PkwRequest:
+        d = entry.target.dialect
+        try:
+            if fmt.is_text:
+                return pkw.read_text(d, ref.pnu, ref.index or 0)
+            return pkw.read(d, ref.pnu, ref.index)
+        except LocalProtocolError as exc:
+            raise ApiError(404, "not_encodable", str(exc)) from None
+
+    # ------------------------------------------------------------- write
+
+    async def write(
+        self, drive: str, parameter: str, order: WriteOrder, caller: Caller
+    ) -> dict[str, Any]:
+        entry, ref = self._locate(drive, parameter, order.index)
+        audit = AuditEntry(
+            client=caller.client,
+            drive=drive,
+            parameter=ref.name,
+            index=ref.index or 0,
+            outcome="pending",
+            store=order.store.value,
+            new_value=order.value,
+        )
+        try:
+            audit.token_id = self._authenticate(caller)
+            if ref.pnu not in entry.writable:
+                raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
+            fmt = entry.format_of(ref)
+            request = self._write_request(entry, ref, fmt, order)
+            audit.raw_value = request.value if not request.text else None
+        except ApiError as exc:
+            audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
+            audit.detail = str(exc)
+            self._record(audit)
+            raise
+        telegram = entry.target.telegram(request).hex(" ")
+        if order.dry_run:
+            audit.outcome = "dry_run"
+            self._record(audit)
+            return self._write_body(ref, fmt, order, request, telegram, audit, None)
+        row = self._record(audit)
+        return await self._perform(entry, ref, fmt, order, request, telegram, audit, row)
+
+    async def _perform(
+        self,
+        entry: DriveEntry,
+        ref: ParameterRef,
+        fmt: ParameterFormat,
+        order: WriteOrder,
+        request: pkw.PkwRequest,
+        telegram: str,
+        audit: AuditEntry,
+        row: int | None,
+    ) -> dict[str, Any]:
+        old = await self._try_read(entry, ref, fmt)
+        audit.old_value = old
+        self._update(row, old_value=old)
+        result = await self.runtime.submit(
+            entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
+        )
+        outcome, fault, detail = _audit_outcome(result)
+        verified: bool | None = None
+        if outcome == "ok" and order.verify:
+            back = await self._try_read(entry, ref, fmt)
+            verified = back is not None and _same(back, result.value)
+            if not verified:
+                outcome, detail = "mismatch", f"read back {back!r}"
+        self._update(row, outcome=outcome, fault=fault, detail=detail)
+        self._raise_for(result)
+        body = self._write_body(ref, fmt, order, request, telegram, audit, result)
+        body.update(old_value=old, verified=verified)
+        return body
+
+    async def _try_read(
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat
+    ) -> Value | None:
+        request = self._read_request(entry, ref, fmt)
+        result = await self.runtime.submit(
+            entry.name, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
+        )
+        return result.value if isinstance(result.outcome, Answered) else None
+
+    def _write_request(
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat, order: WriteOrder
+    ) -> pkw.PkwRequest:
+        d = entry.target.dialect
+        try:
+            if fmt.is_text:
+                if not isinstance(order.value, str):
+                    raise LocalProtocolError(f"{ref.name} is a text parameter: send a string")
+                return pkw.write_text(d, ref.pnu, encode_text(order.value), ref.index or 0)
+            if isinstance(order.value, str):
+                raise LocalProtocolError(f"{ref.name} takes a number, not a string")
+            raw, width = fmt.encode(order.value)
+            request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
+            entry.target.telegram(request)
+        except LocalProtocolError as exc:
+            raise ApiError(422, "invalid_value", str(exc)) from None
+        return request
+
+    def _authenticate(self, caller: Caller) -> str:
+        if self._token is None:
+            raise ApiError(403, "writes_disabled", "writes are disabled: no write token is set")
+        header = caller.authorization or ""
+        scheme, _, given = header.partition(" ")
+        if scheme.lower() != "bearer" or not given:
+            raise ApiError(401, "unauthenticated", "writes need Authorization: Bearer <token>")
+        if not hmac.compare_digest(given.strip().encode(), self._token.encode()):
+            raise ApiError(403, "forbidden", "the token is not the write token")
+        return token_id(self._token)
+
+    # ----------------------------------------------------------- helpers
+
+    def _locate(
+        self, drive: str, parameter: str, index: int | None
+    ) -> tuple[DriveEntry, ParameterRef]:
+        entry = self.runtime.drives.get(drive)
+        if entry is None:
+            raise ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+        try:
+            ref = parse_parameter(parameter)
+            entry.target.dialect.check_pnu(ref.pnu)
+        except LocalProtocolError as exc:
+            raise ApiError(404, "unknown_parameter", str(exc)) from None
+        if index is not None:
+            if ref.index is not None and ref.index != index:
+                raise ApiError(
+                    422, "invalid_index", f"{parameter} names index {ref.index}, not {index}"
+                )
+            if not 0 <= index <= 255:
+                raise ApiError(422, "invalid_index", f"index {index} is outside 0-255")
+            ref = ParameterRef(ref.pnu, index, ref.name)
+        return entry, ref
+
+    def _raise_for(self, result: JobResult) -> None:
+        outcome = result.outcome
+        if isinstance(outcome, Answered):
+            return
+        if isinstance(outcome, Rejected):
+            raise ApiError(
+                409,
+                "rejected",
+                f"the drive rejected the request: {outcome.text}",
+                fault=outcome.fault,
+                text=outcome.text,
+            )
+        if isinstance(outcome, Cancelled):
+            raise ApiError(503, "cancelled", outcome.reason)
+        reason = getattr(outcome, "reason", "no answer")
+        kind = "line_error" if isinstance(outcome, LineFailed) else "timeout"
+        raise ApiError(504, kind, f"no valid answer: {reason}")
+
+    def _value_body(
+        self, ref: ParameterRef, fmt: ParameterFormat, result: JobResult
+    ) -> dict[str, Any]:
+        return {
+            "parameter": ref.name,
+            "pnu": ref.pnu,
+            "index": ref.index or 0,
+            "raw": result.raw,
+            "value": result.value,
+            "unit": fmt.unit,
+        }
+
+    def _write_body(
+        self,
+        ref: ParameterRef,
+        fmt: ParameterFormat,
+        order: WriteOrder,
+        request: pkw.PkwRequest,
+        telegram: str,
+        audit: AuditEntry,
+        result: JobResult | None,
+    ) -> dict[str, Any]:
+        return {
+            "parameter": ref.name,
+            "pnu": ref.pnu,
+            "index": ref.index or 0,
+            "value": result.value if result is not None else order.value,
+            "raw": request.value if not request.text else None,
+            "unit": fmt.unit,
+            "store": order.store.value,
+            "dry_run": order.dry_run,
+            "telegram": telegram,
+            "audit_id": audit.id,
+        }
+
+    def _record(self, entry: AuditEntry) -> int | None:
+        return self.audit.record(entry) if self.audit is not None else None
+
+    def _update(self, row: int | None, **fields: Any) -> None:
+        if self.audit is not None and row is not None:
+            self.audit.update(row, **fields)
+
+
+def _audit_outcome(result: JobResult) -> tuple[str, int | None, str | None]:
+    outcome = result.outcome
+    if isinstance(outcome, Answered):
+        return "ok", None, None
+    if isinstance(outcome, Rejected):
+        return "rejected", outcome.fault, outcome.text
+    if isinstance(outcome, Cancelled):
+        sent = result.tally.telegrams if result.tally else 0
+        note = f"; the request went out {sent} times and may have been applied" if sent else ""
+        return "cancelled", None, outcome.reason + note
+    return "timeout", None, getattr(outcome, "reason", None)
+
+
+def _same(a: Value, b: Value | None) -> bool:
+    if isinstance(a, float) or isinstance(b, float):
+        return b is not None and abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))
+    return a == b

@@ -1,0 +1,120 @@
+"""The running service's object graph: lines with their schedulers, drives, snapshot, metrics.
+
+Built from the configuration by :mod:`pkwbus.service.build`; started and
+stopped by :mod:`pkwbus.service.app`. The HTTP API reads the snapshot and
+queues jobs through :meth:`Runtime.submit`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from prometheus_client import CollectorRegistry
+
+from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.scheduler import LineScheduler, PollSpec
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol import pkw
+from pkwbus.protocol.params import ParameterRef
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DriveEntry:
+    """A configured drive as the service knows it."""
+
+    name: str
+    line: str
+    target: DriveTarget
+    polls: tuple[PollSpec, ...] = ()
+    writable: frozenset[int] = frozenset()  # PNUs the API may write
+    format_of: Callable[[ParameterRef], ParameterFormat] = field(
+        default=lambda ref: ParameterFormat()
+    )
+    units: dict[str, str] = field(default_factory=dict)
+
+    def unit_of(self, parameter: str) -> str:
+        return self.units.get(parameter, "")
+
+
+class Runtime:
+    def __init__(
+        self,
+        schedulers: Iterable[LineScheduler],
+        drives: Iterable[DriveEntry],
+        snapshot: Snapshot,
+        registry: CollectorRegistry,
+        *,
+        job_timeout: float = 5.0,
+    ) -> None:
+        self.schedulers = {s.name: s for s in schedulers}
+        self.drives = {d.name: d for d in drives}
+        self.snapshot = snapshot
+        self.registry = registry
+        self.job_timeout = job_timeout
+        self._tasks: list[asyncio.Task[None]] = []
+        self.cleanups: list[Callable[[], object]] = []
+
+    async def start(self) -> None:
+        for scheduler in self.schedulers.values():
+            task = asyncio.create_task(scheduler.run(), name=f"line {scheduler.name}")
+            task.add_done_callback(self._line_ended)
+            self._tasks.append(task)
+
+    def _line_ended(self, task: asyncio.Task[None]) -> None:
+        if not task.cancelled() and task.exception() is not None:
+            log.error("%s stopped: %r", task.get_name(), task.exception())
+
+    async def stop(self, grace: float = 3.0) -> None:
+        """Stop taking jobs, let each line finish its exchange in flight, close the ports."""
+        for scheduler in self.schedulers.values():
+            scheduler.stop()
+        if self._tasks:
+            _, pending = await asyncio.wait(self._tasks, timeout=grace)
+            for task in pending:
+                task.cancel()
+            if pending:
+                await asyncio.wait(pending, timeout=1.0)
+        for cleanup in reversed(self.cleanups):
+            result = cleanup()
+            if asyncio.iscoroutine(result):
+                await result
+
+    def submit(
+        self,
+        drive: str,
+        request: pkw.PkwRequest,
+        kind: JobKind,
+        fmt: ParameterFormat,
+        *,
+        timeout: float | None = None,
+        parameter: str = "",
+        index: int = 0,
+    ) -> asyncio.Future[JobResult]:
+        """Queue a job on the drive's line; the future gets its result."""
+        entry = self.drives[drive]
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[JobResult] = loop.create_future()
+        job = Job(
+            drive,
+            request,
+            kind,
+            Priority.WRITE if kind is JobKind.WRITE else Priority.READ,
+            loop.time() + (timeout or self.job_timeout),
+            fmt,
+            future,
+            parameter,
+            index,
+        )
+        scheduler = self.schedulers.get(entry.line)
+        if scheduler is None:
+            future.set_result(JobResult(Cancelled("no such line")))
+        else:
+            scheduler.submit(job)
+        return future
