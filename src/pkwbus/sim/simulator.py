@@ -5,6 +5,7 @@ from __future__ import annotations
 import random
 import time
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.dialects import dialect as get_dialect
@@ -27,6 +28,9 @@ from pkwbus.sim.faults import Answer
 from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
+
+if TYPE_CHECKING:
+    from pkwbus.sim.ends import PtyEnd, TcpEnd
 
 Clock = Callable[[], float]
 
@@ -106,6 +110,24 @@ class Simulator:
 
     def is_dead(self, address: int) -> bool:
         return address in self._dead or address in self.faults_for(address).dead
+
+    # -------------------------------------------------------------- ends
+
+    async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
+        """Serve the line on TCP (raw telegram bytes); ``.url`` is a pyserial URL."""
+        from pkwbus.sim.ends import TcpEnd
+
+        end = TcpEnd(self)
+        await end.start(host, port)
+        return end
+
+    async def serve_pty(self, link: str) -> PtyEnd:
+        """Serve the line on a new pseudo-terminal reachable at the symlink ``link``."""
+        from pkwbus.sim.ends import PtyEnd
+
+        end = PtyEnd(self, link)
+        await end.start()
+        return end
 
     # --------------------------------------------------------- telegrams
 

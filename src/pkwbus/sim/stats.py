@@ -18,6 +18,7 @@ LINE_COUNTERS = (
     "bad_requests",
     "malformed",
     "ignored",
+    "unsent",
 )
 DRIVE_COUNTERS = ("requests", "responses", "control_taken", "lagged", "malformed")
 
