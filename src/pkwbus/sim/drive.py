@@ -56,7 +56,8 @@ class SimDrive:
         self.params = ParameterStore(specs, dialect, self._live)
         self.params.running = lambda: self.running
         self._steering = MODEL_PARAMS[protocol]
-        self.model.setpoint = self.model.frequency = self.limits().max_frequency * 0.8
+        self._limits = self.limits()
+        self.model.setpoint = self.model.frequency = self._limits.max_frequency * 0.8
         self.requests_seen = 0
         self.control_taken = 0
         self.ctw_log: deque[bool] = deque(maxlen=CTW_LOG)  # CTW bit 10 of each request
@@ -102,6 +103,7 @@ class SimDrive:
         return self.model.mav(self.limits())
 
     def limits(self) -> Limits:
+        """Maximum frequency and ramp times as the parameters say now."""
         number = self.params.number
         steer = self._steering
         return Limits(
@@ -109,10 +111,12 @@ class SimDrive:
         )
 
     def tick(self, now: float) -> None:
-        self.model.update(now, self.limits())
+        """Advance the model to ``now`` (the limits are read once a telegram)."""
+        self._limits = self.limits()
+        self.model.update(now, self._limits)
 
     def _live(self, name: str, index: int) -> float:
-        return self.model.quantity(name, self.limits(), index)
+        return self.model.quantity(name, self._limits, index)
 
     # ---------------------------------------------------------- telegrams
 
@@ -125,9 +129,11 @@ class SimDrive:
         self.requests_seen += 1
         if block.pzd:
             self._control(block.pzd)
-        pkw_out = self._pkw(pkw_in, now, broadcast=broadcast) if pkw_in else b""
-        limits = self.limits()
-        words = [self.model.status_word(limits), self.model.mav(limits)]
+        pkw_out = b""
+        if pkw_in:
+            pkw_out = self._pkw(pkw_in, now, broadcast=broadcast)
+            self._limits = self.limits()  # a write may have changed them
+        words = [self.model.status_word(self._limits), self.model.mav(self._limits)]
         words += [0] * self.shape.pzd_words
         return encode_block(pkw_out, words[: self.shape.pzd_words])
 
@@ -137,7 +143,7 @@ class SimDrive:
         self.ctw_log.append(taken)
         self.control_taken += taken
         self.model.received = list(words)
-        self.model.apply_control(ctw, words[1] if len(words) > 1 else None, self.limits())
+        self.model.apply_control(ctw, words[1] if len(words) > 1 else None, self._limits)
 
     def _pkw(self, pkw_in: bytes, now: float, *, broadcast: bool) -> bytes:
         try:
