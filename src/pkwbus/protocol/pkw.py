@@ -216,6 +216,57 @@ def encode_request(
     return head + req.value.to_bytes(4, "big")
 
 
+# ------------------------------------------------------- follower's side
+
+
+def decode_request(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRequest:
+    """Decode a PKW *request* (what a follower receives); inverse of :func:`encode_request`.
+
+    A word request carries its value in PWE low. A text request writes when
+    the dialect marks text writes in IND (FC: 0x05) and the marker is there,
+    or, in a dialect without markers, when PKW is not a 2- or 4-byte PWE.
+    """
+    if len(pkw) < 4:
+        raise RemoteProtocolError(f"PKW part of {len(pkw)} bytes is too short")
+    pke = (pkw[0] << 8) | pkw[1]
+    ind = (pkw[2] << 8) | pkw[3]
+    ak, pnu, subindex = decode_pke_ind(dialect, layout, pke, ind)
+    try:
+        command = dialect.command(ak)
+    except LocalProtocolError:
+        raise RemoteProtocolError(
+            f"request identifier {ak} is not in the {dialect.name} table"
+        ) from None
+    rest = bytes(pkw[4:])
+    if command is Command.TEXT and _is_text_write(dialect, layout, ind, rest):
+        return PkwRequest(ak, command, pnu, subindex, 0, rest)
+    value, low = _pwe(rest)
+    if command not in DWORD_COMMANDS and command is not Command.READ_DESCRIPTION:
+        value = low
+    return PkwRequest(ak, command, pnu, subindex, value)
+
+
+def _is_text_write(dialect: Dialect, layout: IndLayout, ind: int, rest: bytes) -> bool:
+    if dialect.text_ind_high is not None:
+        other = ind >> 8 if layout is IndLayout.USS else ind & 0xFF
+        return other == dialect.text_ind_high[1] and bool(rest)
+    return len(rest) not in (2, 4)
+
+
+def response_id(dialect: Dialect, reply: Reply) -> int:
+    """The response identifier a follower of ``dialect`` sends for ``reply``.
+
+    An array reply falls back to the plain one where the dialect has no
+    array identifier (FC answers array elements with AK 1 and 2).
+    """
+    fallback = {Reply.ARRAY_WORD: Reply.WORD, Reply.ARRAY_DWORD: Reply.DWORD}
+    for wanted in (reply, fallback.get(reply)):
+        for ak, (kind, _) in dialect.responses.items():
+            if kind is wanted:
+                return ak
+    raise LocalProtocolError(f"the {dialect.name} dialect has no response for {reply.value}")
+
+
 # ----------------------------------------------------------------- decoding
 
 

@@ -1,0 +1,24 @@
+"""Simulated Danfoss FC and Siemens USS drives for demos, tests and benchmarks.
+
+``Simulator`` holds the drives of one line; ``handle`` answers a request in
+process, ``serve_tcp`` and ``serve_pty`` put the line on a TCP port or a
+pseudo-terminal. Every answer is built with ``pkwbus.protocol``.
+"""
+
+from pkwbus.sim.config import SimFaults, SimTiming, parse_duration
+from pkwbus.sim.drive import SimDrive
+from pkwbus.sim.model import ModelConfig
+from pkwbus.sim.simulator import Simulator
+from pkwbus.sim.stats import SimStats
+from pkwbus.sim.table import ParamSpec
+
+__all__ = [
+    "ModelConfig",
+    "ParamSpec",
+    "SimDrive",
+    "SimFaults",
+    "SimStats",
+    "SimTiming",
+    "Simulator",
+    "parse_duration",
+]

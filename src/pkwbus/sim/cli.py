@@ -1,0 +1,194 @@
+"""``pkwbus simulate``: simulated drives on a TCP port or a pseudo-terminal."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+from pkwbus.protocol.dialects import DIALECTS, IndLayout
+from pkwbus.protocol.errors import ProtocolError
+from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming, parse_duration
+from pkwbus.sim.simulator import Simulator
+from pkwbus.sim.statsout import StatsServer, keep_stats_file
+
+EXIT_USAGE = 2
+EXIT_PORT = 4
+FAULT_OPTIONS = ("drop", "corrupt", "truncate", "garbage", "wrong_address", "late", "stale")
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``simulate`` to the ``pkwbus`` command's subparsers."""
+    parser: argparse.ArgumentParser = subparsers.add_parser(
+        "simulate", help="simulated drives on a TCP port or a pty", description=__doc__
+    )
+    configure(parser)
+    return parser
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--protocol", choices=("fc", "uss"), default="fc")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--listen", metavar="tcp://HOST:PORT", help="serve raw telegrams on TCP")
+    where.add_argument("--pty", metavar="PATH", help="create a pty, symlinked at PATH")
+    parser.add_argument("--drives", default="1", help="addresses: 1,2,5 or 1-3 (default 1)")
+    parser.add_argument("--dialect", choices=sorted(DIALECTS))
+    parser.add_argument("--ind-layout", choices=[x.value for x in IndLayout])
+    parser.add_argument("--pkw-words", default="4", help="USS: 0, 3, 4 or variable")
+    parser.add_argument("--pzd-words", type=int, default=2, help="USS: 0-16 (default 2)")
+    parser.add_argument("--catalog", help="parameters from this catalog")
+    parser.add_argument("--seed", type=int)
+    timing = parser.add_argument_group("timing")
+    timing.add_argument("--response-delay", default="3ms", help="e.g. 3ms (default), 0.01, 1s")
+    timing.add_argument("--baudrate", type=int)
+    timing.add_argument("--wire-timing", action="store_true", help="spend 11 bits a character")
+    timing.add_argument("--lag", default="0", help="PKW lag: N telegrams or a duration (50ms)")
+    timing.add_argument("--lag-mode", choices=LAG_MODES, default="none")
+    faults = parser.add_argument_group("faults (probability per answer)")
+    for name in FAULT_OPTIONS:
+        faults.add_argument(f"--{name.replace('_', '-')}", type=float, default=0.0, metavar="P")
+    faults.add_argument("--late-after", default="1s", help="how late a late answer is")
+    faults.add_argument("--dead", default="", help="addresses that never answer: 3,4")
+    stats = parser.add_argument_group("stats")
+    stats.add_argument("--stats-file", metavar="PATH", help="rewrite counters as JSON here")
+    stats.add_argument("--stats-interval", default="1s")
+    stats.add_argument("--stats-listen", metavar="HOST:PORT", help="serve GET /stats")
+
+
+def parse_addresses(text: str) -> list[int]:
+    """``1,2,5`` or ``1-3,7``."""
+    out: list[int] = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        low, _, high = part.partition("-")
+        if not low.isdigit() or (high and not high.isdigit()):
+            raise ValueError(f"{part!r} is not an address or a range of addresses")
+        out += range(int(low), int(high or low) + 1)
+    return out
+
+
+def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
+    rest = text.removeprefix(scheme) if scheme else text
+    if scheme and not text.startswith(scheme):
+        raise ValueError(f"{text!r}: write {scheme}HOST:PORT")
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise ValueError(f"{text!r}: write {scheme}HOST:PORT")
+    return host.strip("[]"), int(port)
+
+
+@dataclass(frozen=True)
+class Plan:
+    sim: Simulator
+    listen: tuple[str, int] | None
+    pty: str | None
+    stats_file: str | None
+    stats_interval: float
+    stats_listen: tuple[str, int] | None
+
+
+def plan(args: argparse.Namespace) -> Plan:
+    """Everything the options say, checked before anything opens. ValueError on bad input."""
+    lag = args.lag.strip()
+    lag_telegrams = int(lag) if lag.isdigit() else 0
+    lag_seconds = 0.0 if lag.isdigit() else parse_duration(lag)
+    timing = SimTiming(
+        response_delay=parse_duration(args.response_delay),
+        baudrate=args.baudrate,
+        wire_timing=args.wire_timing,
+        lag_telegrams=lag_telegrams,
+        lag_seconds=lag_seconds,
+        lag_mode=args.lag_mode,
+    )
+    probabilities = {name: getattr(args, name) for name in FAULT_OPTIONS}
+    dead = frozenset(parse_addresses(args.dead))
+    faults = SimFaults(**probabilities, late_seconds=parse_duration(args.late_after), dead=dead)
+    pkw_words = None if args.pkw_words in ("variable", "127") else int(args.pkw_words)
+    sim = Simulator(
+        args.protocol,
+        parse_addresses(args.drives),
+        dialect=args.dialect,
+        ind_layout=IndLayout(args.ind_layout) if args.ind_layout else None,
+        pkw_words=pkw_words,
+        pzd_words=args.pzd_words,
+        timing=timing,
+        faults=faults,
+        seed=args.seed,
+        catalog=args.catalog,
+    )
+    if not sim.drives:
+        raise ValueError("--drives names no drive")
+    return Plan(
+        sim,
+        parse_host_port(args.listen, "tcp://") if args.listen else None,
+        args.pty,
+        args.stats_file,
+        parse_duration(args.stats_interval),
+        parse_host_port(args.stats_listen) if args.stats_listen else None,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        the_plan = plan(args)
+    except (ValueError, ProtocolError) as exc:
+        print(f"pkwbus simulate: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        return asyncio.run(serve(the_plan))
+    except OSError as exc:
+        print(f"pkwbus simulate: cannot open: {exc}", file=sys.stderr)
+        return EXIT_PORT
+    except KeyboardInterrupt:
+        return 0
+
+
+async def serve(p: Plan) -> int:
+    """Open the ends, say where, run until SIGINT or SIGTERM, close cleanly."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    sim = p.sim
+    drives = ",".join(str(a) for a in sim.drives)
+    closers = []
+    if p.listen is not None:
+        tcp = await sim.serve_tcp(*p.listen)
+        closers.append(tcp.close)
+        where = tcp.url
+    else:
+        assert p.pty is not None
+        pty = await sim.serve_pty(p.pty)
+        closers.append(pty.close)
+        where = f"{pty.path} -> {pty.device}"
+    tasks = []
+    if p.stats_listen is not None:
+        server = StatsServer(sim.stats)
+        await server.start(*p.stats_listen)
+        closers.append(server.close)
+        print(f"stats on http://{p.stats_listen[0]}:{server.port}/stats", flush=True)
+    if p.stats_file is not None:
+        tasks.append(
+            asyncio.create_task(keep_stats_file(sim.stats, p.stats_file, p.stats_interval))
+        )
+    print(
+        f"simulating {sim.protocol.value} drives {drives} ({sim.dialect.name}) on {where}",
+        flush=True,
+    )
+    await stop.wait()
+    for task in tasks:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+    for close in reversed(closers):
+        await close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pkwbus.sim", description=__doc__)
+    configure(parser)
+    return run(parser.parse_args(argv))

@@ -1,0 +1,176 @@
+"""The simulator's ends: a TCP server (raw telegram bytes) and a pseudo-terminal.
+
+Timing of one exchange, as the master sees it on an RS-485 line:
+
+    first request byte ── request on the wire ── response delay ── answer on the wire ──┤
+
+The ends take the arrival of the request's first byte as the start, add
+the request's wire time (``len * 11 / baud``, when wire timing is on), the
+response delay and the answer's wire time, and write the whole answer at
+that instant: the master gets its last byte when a real line would deliver
+it, never earlier. Requests are answered one at a time, in order (half
+duplex). A late answer (fault) is written later without holding the line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import tty
+from collections.abc import Callable
+
+from pkwbus.protocol.telegram import Telegram
+from pkwbus.sim.faults import Answer
+from pkwbus.sim.simulator import Simulator
+
+Write = Callable[[bytes], None]
+
+
+class Session:
+    """One conversation on an end: deframes requests and answers them with timing."""
+
+    def __init__(self, sim: Simulator, write: Write) -> None:
+        self.sim = sim
+        self._write = write
+        self._deframer = sim.deframer()
+        self._queue: asyncio.Queue[tuple[Telegram, float]] = asyncio.Queue()
+        self._loop = asyncio.get_running_loop()
+        self._started = 0.0
+        self._task = self._loop.create_task(self._answer_in_turn())
+
+    def feed(self, chunk: bytes) -> None:
+        now = self._loop.time()
+        if not self._deframer.buffered:
+            self._started = now
+        for event in self._deframer.feed(chunk):
+            if isinstance(event, Telegram):
+                self._queue.put_nowait((event, self._started))
+                self._started = now
+            else:
+                self.sim.stats.count("bad_requests")
+
+    async def _answer_in_turn(self) -> None:
+        timing = self.sim.timing
+        while True:
+            telegram, started = await self._queue.get()
+            answer = self.sim.answer(telegram)
+            if answer is None:
+                continue
+            wire = timing.wire_seconds(len(telegram.data) + 4) + timing.wire_seconds(
+                len(answer.data)
+            )
+            delay = started + wire + timing.response_delay - self._loop.time()
+            if answer.late:
+                self._loop.call_later(max(delay, 0.0) + answer.late, self._send, answer)
+                continue
+            if delay > 0:
+                await asyncio.sleep(delay)
+            self._send(answer)
+
+    def _send(self, answer: Answer) -> None:
+        try:
+            self._write(answer.data)
+        except OSError:
+            self.sim.stats.count("unsent")
+
+    async def close(self) -> None:
+        self._task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await self._task
+
+
+class TcpEnd:
+    """Raw telegram bytes over TCP, like a serial-over-TCP gateway (pyserial ``socket://``)."""
+
+    def __init__(self, sim: Simulator) -> None:
+        self.sim = sim
+        self.host = ""
+        self.port = 0
+        self._server: asyncio.Server | None = None
+        self._clients: dict[asyncio.Task[None], asyncio.StreamWriter] = {}
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"socket://{host}:{self.port}"
+
+    async def start(self, host: str, port: int) -> None:
+        self._server = await asyncio.start_server(self._client, host, port)
+        self.host, self.port = self._server.sockets[0].getsockname()[:2]
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        self._clients[task] = writer
+        session = Session(self.sim, writer.write)
+        try:
+            while data := await reader.read(4096):
+                session.feed(data)
+        except ConnectionError:
+            pass
+        finally:
+            self._clients.pop(task, None)
+            await session.close()
+            writer.close()
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        clients = dict(self._clients)
+        for writer in clients.values():
+            writer.transport.abort()  # the handler sees the end of the stream and cleans up
+        await asyncio.gather(*clients, return_exceptions=True)
+        if self._server is not None:
+            await self._server.wait_closed()
+
+
+class PtyEnd:
+    """A pseudo-terminal: the follower side is reachable at ``path`` (a symlink)."""
+
+    def __init__(self, sim: Simulator, link: str) -> None:
+        self.sim = sim
+        self.path = link
+        self.device = ""
+        self._fds: tuple[int, int] | None = None
+        self._session: Session | None = None
+
+    async def start(self) -> None:
+        controller, follower = os.openpty()
+        self._fds = (controller, follower)  # we keep the follower open: no hang-up between users
+        tty.setraw(follower)
+        os.set_blocking(controller, False)
+        self.device = os.ttyname(follower)
+        if os.path.islink(self.path):
+            os.unlink(self.path)
+        os.symlink(self.device, self.path)
+        self._session = Session(self.sim, lambda data: _write_all(controller, data))
+        asyncio.get_running_loop().add_reader(controller, self._readable)
+
+    def _readable(self) -> None:
+        assert self._fds is not None and self._session is not None
+        try:
+            data = os.read(self._fds[0], 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:  # EIO: nobody holds the follower side; wait for the next user
+            return
+        self._session.feed(data)
+
+    async def close(self) -> None:
+        if self._fds is None:
+            return
+        asyncio.get_running_loop().remove_reader(self._fds[0])
+        if self._session is not None:
+            await self._session.close()
+        for fd in self._fds:
+            os.close(fd)
+        self._fds = None
+        if os.path.islink(self.path) and os.readlink(self.path) == self.device:
+            os.unlink(self.path)
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view) :]

@@ -1,0 +1,225 @@
+"""The physics of a simulated drive: ramp, current, power, energy, alarms, status word.
+
+Pure: the caller passes the time (``update(now, ...)``) and the random
+generator, so tests drive it with a fake clock and a fixed seed.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field
+
+from pkwbus.protocol import pzd
+from pkwbus.protocol.pzd import Profile
+
+SQRT3 = math.sqrt(3.0)
+
+
+@dataclass(frozen=True, slots=True)
+class ModelConfig:
+    """The motor and how often things go wrong (rates per second; 0 = never)."""
+
+    rated_power_kw: float = 11.0
+    rated_current_a: float = 21.0
+    dc_link_v: float = 560.0
+    noise: float = 0.01  # relative noise of current and power
+    warning_rate: float = 1 / 300
+    warning_seconds: float = 20.0
+    trip_rate: float = 1 / 3600
+    trip_reset_seconds: float = 30.0  # a local operator resets the trip; 0 = never
+
+
+# (code shown in the alarm log, bit in the alarm word): illustrative, not a vendor list.
+ALARMS = {Profile.FC: ((13, 3), (14, 4), (4, 14)), Profile.PROFIDRIVE: ((1, 0), (2, 1), (11, 2))}
+WARNING_BITS = (1, 9, 13)
+
+
+@dataclass(slots=True)
+class Limits:
+    """What the parameters say about the motion: maximum frequency and ramp times."""
+
+    max_frequency: float = 50.0
+    ramp_up: float = 5.0
+    ramp_down: float = 5.0
+
+
+@dataclass
+class DriveModel:
+    profile: Profile
+    rng: random.Random
+    config: ModelConfig = field(default_factory=ModelConfig)
+    log_length: int = 10
+    now: float = 0.0
+    running: bool = True
+    setpoint: float = 40.0  # Hz
+    frequency: float = 40.0
+    energy: float = 0.0  # kWh
+    hours: float = 0.0
+    alarm_word: int = 0
+    warning_word: int = 0
+    tripped: bool = False
+    bus_control: bool = False
+    control_word: int = 0
+    received: list[int] = field(default_factory=list)
+    alarm_log: list[int] = field(default_factory=list)
+    _tripped_at: float = 0.0
+    _warning_until: float = 0.0
+
+    # -------------------------------------------------------------- time
+
+    def update(self, now: float, limits: Limits) -> None:
+        """Advance the model to ``now``."""
+        dt = now - self.now
+        if dt <= 0:
+            return
+        before = self._load_kw(limits)
+        self._ramp(dt, limits)
+        self.energy += (before + self._load_kw(limits)) / 2 * dt / 3600
+        if self.frequency > 0:
+            self.hours += dt / 3600
+        self.now = now
+        self._events(dt)
+
+    def _ramp(self, dt: float, limits: Limits) -> None:
+        target = min(self.setpoint, limits.max_frequency) if self.running else 0.0
+        if self.tripped:
+            target = 0.0
+        if self.frequency < target:
+            rate = limits.max_frequency / max(limits.ramp_up, 1e-3)
+            self.frequency = min(target, self.frequency + rate * dt)
+        else:
+            rate = limits.max_frequency / max(limits.ramp_down, 1e-3)
+            self.frequency = max(target, self.frequency - rate * dt)
+
+    def _events(self, dt: float) -> None:
+        cfg = self.config
+        if self.tripped:
+            if cfg.trip_reset_seconds and self.now - self._tripped_at >= cfg.trip_reset_seconds:
+                self.reset()
+        elif self._chance(cfg.trip_rate, dt):
+            code, bit = self.rng.choice(ALARMS[self.profile])
+            self.trip(code, bit)
+        if self.warning_word and self.now >= self._warning_until:
+            self.warning_word = 0
+        if not self.warning_word and self._chance(cfg.warning_rate, dt):
+            self.warning_word = 1 << self.rng.choice(WARNING_BITS)
+            self._warning_until = self.now + cfg.warning_seconds
+
+    def _chance(self, rate: float, dt: float) -> bool:
+        return rate > 0 and self.rng.random() < -math.expm1(-rate * dt)
+
+    # ------------------------------------------------------------ events
+
+    def trip(self, code: int, bit: int = 0) -> None:
+        """Trip with alarm ``code``: the motor coasts, the alarm log gets the code."""
+        self.tripped = True
+        self._tripped_at = self.now
+        self.alarm_word |= 1 << bit
+        self.frequency = 0.0
+        self.alarm_log = [code, *self.alarm_log][: self.log_length]
+
+    def reset(self) -> None:
+        self.tripped = False
+        self.alarm_word = 0
+
+    def apply_control(self, ctw: int, ref: int | None, limits: Limits) -> None:
+        """Process data from the master; acted on only with CTW bit 10 set."""
+        self.control_word = ctw
+        self.bus_control = pzd.takes_control(ctw)
+        if not self.bus_control:
+            return
+        if ctw >> 7 & 1 and self.tripped:
+            self.reset()
+        if self.profile is Profile.FC:
+            self.running = ctw & 0x5C == 0x5C  # no DC brake, no coast, no quick stop, start
+        else:
+            self.running = ctw & 0x0F == 0x0F  # on, no coast, no quick stop, enable
+        if ref is not None:
+            self.setpoint = max(0.0, pzd.ref_to_percent(ref) * limits.max_frequency / 100)
+
+    # ------------------------------------------------------------ readings
+
+    def _load_kw(self, limits: Limits) -> float:
+        share = self.frequency / limits.max_frequency if limits.max_frequency > 0 else 0.0
+        return self.config.rated_power_kw * share**3
+
+    def _noisy(self, value: float) -> float:
+        if value == 0 or not self.config.noise:
+            return value
+        return value * (1 + self.rng.gauss(0.0, self.config.noise))
+
+    def quantity(self, name: str, limits: Limits, index: int = 0) -> float:
+        """A live reading by name (the ``live`` column of the parameter tables)."""
+        share = self.frequency / limits.max_frequency if limits.max_frequency > 0 else 0.0
+        cfg = self.config
+        if name == "frequency":
+            return self.frequency
+        if name == "current":
+            on = self.frequency > 0
+            return self._noisy(cfg.rated_current_a * (0.3 + 0.7 * share**2)) if on else 0.0
+        if name == "power":
+            return self._noisy(self._load_kw(limits))
+        if name == "output_voltage":
+            return cfg.dc_link_v / SQRT3 * 1.2 * min(share, 1.0)
+        if name == "dc_link":
+            return cfg.dc_link_v + self.rng.uniform(-2.0, 2.0)
+        if name == "energy":
+            return math.floor(self.energy * 100) / 100
+        if name == "hours":
+            return math.floor(self.hours)
+        if name == "alarm_log":
+            return self.alarm_log[index] if index < len(self.alarm_log) else 0
+        if name == "received_pzd":
+            return self.received[index] if index < len(self.received) else 0
+        return float(self._words(limits)[name])
+
+    def _words(self, limits: Limits) -> dict[str, int]:
+        return {
+            "status_word": self.status_word(limits),
+            "control_word": self.control_word,
+            "alarm_word": self.alarm_word,
+            "warning_word": self.warning_word,
+        }
+
+    def at_reference(self, limits: Limits) -> bool:
+        target = min(self.setpoint, limits.max_frequency)
+        return self.running and not self.tripped and abs(self.frequency - target) < 0.05
+
+    def status_word(self, limits: Limits) -> int:
+        at_ref = self.at_reference(limits)
+        warning = bool(self.warning_word)
+        if self.profile is Profile.FC:
+            return pzd.status_word(
+                Profile.FC,
+                control_ready=True,
+                drive_ready=not self.tripped,
+                enabled=not self.tripped,
+                trip=self.tripped,
+                warning=warning,
+                at_reference=at_ref,
+                bus_control=self.bus_control,
+                frequency_within_limit=True,
+                running=self.frequency > 0,
+            )
+        return pzd.status_word(
+            Profile.PROFIDRIVE,
+            ready_to_switch_on=not self.tripped,
+            ready=not self.tripped,
+            operation_enabled=self.running and not self.tripped,
+            fault=self.tripped,
+            no_coast_stop=True,
+            no_quick_stop=True,
+            switching_on_inhibited=self.tripped,
+            warning=warning,
+            speed_within_tolerance=at_ref,
+            control_requested=True,
+            reference_reached=at_ref,
+        )
+
+    def mav(self, limits: Limits) -> int:
+        """Main actual value: output frequency, 0x4000 = 100 % of the maximum frequency."""
+        if limits.max_frequency <= 0:
+            return 0
+        percent = max(-199.0, min(199.0, self.frequency / limits.max_frequency * 100))
+        return pzd.percent_to_ref(percent)

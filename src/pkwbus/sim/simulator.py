@@ -1,0 +1,222 @@
+"""The simulated line: many drives behind one end, addressing, broadcasts, mirrors, faults."""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
+
+from pkwbus.protocol.dialects import IndLayout
+from pkwbus.protocol.dialects import dialect as get_dialect
+from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.telegram import (
+    PCD_WORDS_FC,
+    BlockShape,
+    Deframer,
+    Protocol,
+    Telegram,
+    decode_adr,
+    fc_lengths,
+    frame,
+    uss_lengths,
+)
+from pkwbus.sim import faults as inject
+from pkwbus.sim.config import SimFaults, SimTiming
+from pkwbus.sim.drive import SimDrive
+from pkwbus.sim.faults import Answer
+from pkwbus.sim.model import ModelConfig
+from pkwbus.sim.stats import SimStats
+from pkwbus.sim.table import TABLES, ParamSpec
+
+if TYPE_CHECKING:
+    from pkwbus.sim.ends import PtyEnd, TcpEnd
+
+Clock = Callable[[], float]
+
+
+class Simulator:
+    """Simulated drives on one line. ``handle`` is the in-process end (no timing)."""
+
+    def __init__(
+        self,
+        protocol: str,
+        addresses: Iterable[int],
+        *,
+        dialect: str | None = None,
+        ind_layout: IndLayout | None = None,
+        pkw_words: int | None = 4,
+        pzd_words: int = 2,
+        timing: SimTiming | None = None,
+        faults: SimFaults | None = None,
+        seed: int | None = None,
+        catalog: str | None = None,
+        clock: Clock = time.monotonic,
+        model: ModelConfig | None = None,
+        specs: tuple[ParamSpec, ...] | None = None,
+    ) -> None:
+        self.protocol = Protocol(protocol)
+        self.dialect = get_dialect(dialect or self.protocol.value)
+        self.layout = ind_layout or self.dialect.default_ind_layout
+        if self.protocol is Protocol.FC:
+            self.shape = BlockShape(None, PCD_WORDS_FC)
+            self.lengths = fc_lengths()
+        else:
+            self.shape = BlockShape(pkw_words, pzd_words)
+            self.lengths = uss_lengths([self.shape])
+        self.timing = timing or SimTiming()
+        self.faults = faults or SimFaults()
+        self.clock = clock
+        self.rng = random.Random(seed)
+        self.stats = SimStats(sorted(set(addresses)))
+        self._drive_faults: dict[int, SimFaults] = {}
+        self._dead = set(self.faults.dead)
+        table = specs if specs is not None else _specs(self.protocol, catalog)
+        self.drives: dict[int, SimDrive] = {}
+        for address in self.stats.drives:
+            self._check_address(address)
+            rng = random.Random(None if seed is None else seed * 1000 + address)
+            self.drives[address] = SimDrive(
+                address, self.protocol, self.dialect, self.layout, self.shape,
+                table, self.timing, rng, model,
+            )  # fmt: skip
+            self.drives[address].model.now = clock()
+
+    def _check_address(self, address: int) -> None:
+        top = 126 if self.protocol is Protocol.FC else 30
+        low = 1 if self.protocol is Protocol.FC else 0
+        if not low <= address <= top:
+            raise ValueError(
+                f"{self.protocol.value} drive address {address} is outside {low}-{top}"
+            )
+
+    # ------------------------------------------------------------ faults
+
+    def set_faults(self, address: int, faults: SimFaults | None) -> None:
+        """Faults for one drive instead of the line's (None: the line's again)."""
+        if faults is None:
+            self._drive_faults.pop(address, None)
+        else:
+            self._drive_faults[address] = faults
+
+    def faults_for(self, address: int) -> SimFaults:
+        return self._drive_faults.get(address, self.faults)
+
+    def kill(self, address: int) -> None:
+        self._dead.add(address)
+
+    def revive(self, address: int) -> None:
+        self._dead.discard(address)
+
+    def is_dead(self, address: int) -> bool:
+        return address in self._dead or address in self.faults_for(address).dead
+
+    # -------------------------------------------------------------- ends
+
+    async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
+        """Serve the line on TCP (raw telegram bytes); ``.url`` is a pyserial URL."""
+        from pkwbus.sim.ends import TcpEnd
+
+        end = TcpEnd(self)
+        await end.start(host, port)
+        return end
+
+    async def serve_pty(self, link: str) -> PtyEnd:
+        """Serve the line on a new pseudo-terminal reachable at the symlink ``link``."""
+        from pkwbus.sim.ends import PtyEnd
+
+        end = PtyEnd(self, link)
+        await end.start()
+        return end
+
+    # --------------------------------------------------------- telegrams
+
+    def deframer(self) -> Deframer:
+        """A deframer for requests on this line (one per connection)."""
+        return Deframer(self.lengths)
+
+    def handle(self, request: bytes) -> bytes | None:
+        """One request telegram in, the answer out (None: silence). No timing."""
+        events = self.deframer().feed(request)
+        telegram = next((e for e in events if isinstance(e, Telegram)), None)
+        if telegram is None:
+            self.stats.count("bad_requests")
+            return None
+        answer = self.answer(telegram)
+        return answer.data if answer else None
+
+    def answer(self, telegram: Telegram, now: float | None = None) -> Answer | None:
+        """What the line answers to a deframed request, faults applied."""
+        now = self.clock() if now is None else now
+        stats = self.stats
+        stats.count("requests")
+        adr = decode_adr(self.protocol, telegram.adr)
+        if adr.special:
+            stats.count("ignored")
+            return None
+        if adr.broadcast:
+            self._broadcast(telegram, now)
+            return None
+        drive = self.drives.get(adr.address)
+        if drive is None:
+            stats.count("ignored")
+            return None
+        if self.is_dead(drive.address):
+            stats.inject("dead", drive.address)
+            return None
+        clean = telegram.encode() if adr.mirror else self._respond(drive, telegram, now)
+        if clean is None:
+            return None
+        return self._send(drive, clean)
+
+    def _respond(self, drive: SimDrive, telegram: Telegram, now: float) -> bytes | None:
+        self.stats.count_drive(drive.address, "requests")
+        data = self._drive_respond(drive, telegram.data, now, broadcast=False)
+        return None if data is None else frame(telegram.adr, data)
+
+    def _broadcast(self, telegram: Telegram, now: float) -> None:
+        """Every live drive applies a broadcast; none answers."""
+        self.stats.count("broadcasts")
+        for drive in self.drives.values():
+            if not self.is_dead(drive.address):
+                self._drive_respond(drive, telegram.data, now, broadcast=True)
+
+    def _drive_respond(
+        self, drive: SimDrive, data: bytes, now: float, *, broadcast: bool
+    ) -> bytes | None:
+        drive.tick(now)
+        taken, lagged = drive.control_taken, drive.lagged
+        try:
+            out = drive.respond(data, now, broadcast=broadcast)
+        except RemoteProtocolError:
+            self.stats.count("malformed", drive.address)
+            return None
+        self.stats.count("control_taken", drive.address, drive.control_taken - taken)
+        self.stats.count("lagged", drive.address, drive.lagged - lagged)
+        return out
+
+    def _send(self, drive: SimDrive, clean: bytes) -> Answer | None:
+        kind = inject.pick(self.faults_for(drive.address), self.rng)
+        if kind == "stale" and drive.last_answer is None:
+            kind = None
+        stale = drive.last_answer
+        drive.last_answer = clean
+        if kind is None:
+            answer: Answer | None = Answer(clean)
+        else:
+            self.stats.inject(kind, drive.address)
+            answer = inject.apply(
+                kind, clean, stale=stale, faults=self.faults_for(drive.address),
+                protocol=self.protocol, rng=self.rng,
+            )  # fmt: skip
+        if answer is not None:
+            self.stats.count("responses", drive.address)
+        return answer
+
+
+def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:
+    if catalog is not None:
+        from pkwbus.sim.catalogs import specs_from_catalog
+
+        return specs_from_catalog(protocol, catalog)
+    return TABLES[protocol]
