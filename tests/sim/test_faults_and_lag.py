@@ -91,6 +91,8 @@ def test_dead_drive_kill_and_revive_and_per_drive_faults() -> None:
     assert sim.handle(request_telegram(1, req, FC)) is not None
     sim.set_faults(2, None)
     assert sim.handle(request_telegram(2, req, FC)) is not None
+    sim.revive(3)  # dead from the start: comes back too
+    assert sim.handle(request_telegram(3, req, FC)) is not None
     stats = sim.stats.as_dict()
     assert stats["injected"]["dead"] == 2 and stats["injected"]["drop"] == 1
     assert stats["per_drive"]["2"]["injected"]["drop"] == 1

@@ -15,6 +15,7 @@ import enum
 import functools
 import logging
 import os
+import termios
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -144,18 +145,16 @@ class Link:
             stopbits=s.stopbits,
             bytesize=8,
             timeout=0,
+            write_timeout=0,
         )
         try:
             instance = await loop.run_in_executor(None, make)
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             reason = _reason(exc).split(f"{s.url}: ", 1)[-1]
             self._failed(f"cannot open {s.url}: {reason}")
             raise PortError(self.last_error) from None
         self._closing = False
-        transport, _ = await serial_asyncio.connection_for_serial(
-            loop, lambda: _Protocol(self), instance
-        )
-        self._transport = transport
+        self._transport = _transport(loop, self, instance)
         self._backoff.reset()
         self._quiet_at = loop.time()
         self._set_state(LinkState.OPEN, None)
@@ -246,6 +245,24 @@ class Link:
         self._failed(f"lost {self.settings.url}: {reason}")
         if self.on_lost is not None:
             self.on_lost(self.last_error or reason)
+
+
+def _transport(loop: asyncio.AbstractEventLoop, link: Link, instance: Any) -> asyncio.Transport:
+    """Wrap an open port in pyserial-asyncio's transport.
+
+    The transport assigns ``timeout = write_timeout = 0``, which the port
+    already has; pyserial would still call tcsetattr again, and Linux ptys
+    refuse that second call above 38400 baud (EINVAL). Skip the no-op.
+    """
+    reconfigure = instance._reconfigure_port
+    instance._reconfigure_port = lambda force_update=False: None
+    try:
+        transport: asyncio.Transport = serial_asyncio.SerialTransport(
+            loop, _Protocol(link), instance
+        )
+        return transport
+    finally:
+        instance._reconfigure_port = reconfigure
 
 
 def _reason(exc: BaseException) -> str:

@@ -109,7 +109,9 @@ class Simulator:
         self._dead.discard(address)
 
     def is_dead(self, address: int) -> bool:
-        return address in self._dead or address in self.faults_for(address).dead
+        """Dead by :meth:`kill` or the line's ``dead`` (both in ``_dead``), or by its own faults."""
+        own = self._drive_faults.get(address)
+        return address in self._dead or (own is not None and address in own.dead)
 
     # -------------------------------------------------------------- ends
 

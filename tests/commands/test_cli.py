@@ -1,0 +1,207 @@
+"""`pkwbus read`, `write` and `scan` against a simulator in another process."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+from pkwbus.cli import main
+
+
+@pytest.fixture(scope="module")
+def sim_port() -> Iterator[str]:
+    """`pkwbus simulate` with FC drives at scattered addresses, in its own process."""
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pkwbus",
+            "simulate",
+            "--protocol",
+            "fc",
+            "--listen",
+            "tcp://127.0.0.1:0",
+            "--drives",
+            "2,17,101",
+            "--response-delay",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    found = re.search(r"socket://127\.0\.0\.1:\d+", line)
+    assert found, line
+    yield found.group(0)
+    proc.terminate()
+    assert proc.wait(5) == 0
+
+
+@pytest.fixture(scope="module")
+def uss_port() -> Iterator[str]:
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pkwbus",
+            "simulate",
+            "--protocol",
+            "uss",
+            "--listen",
+            "tcp://127.0.0.1:0",
+            "--drives",
+            "3",
+            "--response-delay",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    found = re.search(r"socket://127\.0\.0\.1:\d+", proc.stdout.readline())
+    assert found
+    yield found.group(0)
+    proc.terminate()
+    proc.wait(5)
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_read_json(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, out, err = run(capsys, "read", "--port", sim_port, "--address", "17", "3-41", "--json")
+    assert code == 0, err
+    body = json.loads(out)
+    assert body["parameter"] == "3-41" and body["pnu"] == 341 and body["index"] == 0
+    assert body["unit"] == "s"
+    assert body["value"] == pytest.approx(body["raw"] / 100)  # conversion index -2
+
+
+def test_write_then_read(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, out, err = run(
+        capsys, "write", "--port", sim_port, "--address", "2", "3-42", "12.34", "--store", "eeprom"
+    )
+    assert code == 0, err
+    assert "written (eeprom)" in out
+    code, out, _ = run(capsys, "read", "--port", sim_port, "--address", "2", "3-42", "--json")
+    assert json.loads(out)["raw"] == 1234
+
+
+def test_rejection_exit_1(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, out, err = run(capsys, "read", "--port", sim_port, "--address", "2", "999", "--json")
+    assert code == 1
+    assert err.startswith("fault 0: The parameter number used does not exit")
+    assert json.loads(out) == {
+        "error": {"kind": "rejected", "fault": 0, "text": "The parameter number used does not exit"}
+    }
+
+
+def test_no_answer_exit_3(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, _, err = run(
+        capsys,
+        "read",
+        "--port",
+        sim_port,
+        "--address",
+        "5",
+        "16-13",
+        "--timeout",
+        "0.02",
+        "--retries",
+        "1",
+    )
+    assert code == 3
+    assert "no valid answer" in err
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["16-13x"],
+        ["5000"],  # beyond FC's 12-bit PNU
+        ["16-13", "--type", "u8"],
+        ["--protocol", "uss", "70000"],
+    ],
+)
+def test_bad_input_exit_2_and_nothing_sent(
+    capsys: pytest.CaptureFixture[str], args: list[str]
+) -> None:
+    # The port does not even exist: exit 2 proves nothing was opened or sent.
+    code, _, err = run(capsys, "read", "--port", "/nonexistent/tty", "--address", "1", *args)
+    assert code == 2, err
+    assert "Traceback" not in err
+
+
+def test_bad_write_value_exit_2(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, _, err = run(
+        capsys, "write", "--port", "/nonexistent/tty", "--address", "2", "3-41", "-5"
+    )
+    assert code == 2
+    assert "below the minimum" in err or "range" in err
+
+
+def test_port_cannot_be_opened_exit_4(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "read", "--port", "/nonexistent/tty", "--address", "1", "16-13")
+    assert code == 4
+    assert "cannot open /nonexistent/tty" in err and "Traceback" not in err
+
+
+def test_scan_finds_scattered_addresses(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, out, err = run(
+        capsys, "scan", "--port", sim_port, "--addresses", "1-126", "--timeout", "0.01", "--json"
+    )
+    assert code == 0, err
+    found = json.loads(out)
+    assert [d["address"] for d in found] == [2, 17, 101]
+    assert all(isinstance(d["status_word"], int) for d in found)
+    assert all("running" in d["status"] for d in found)
+
+
+def test_uss_float_parameter(capsys: pytest.CaptureFixture[str], uss_port: str) -> None:
+    code, out, err = run(
+        capsys,
+        "write",
+        "--port",
+        uss_port,
+        "--protocol",
+        "uss",
+        "--address",
+        "3",
+        "p1082",
+        "42.5",
+        "--type",
+        "f32",
+        "--json",
+    )
+    assert code == 0, err
+    code, out, err = run(
+        capsys,
+        "read",
+        "--port",
+        uss_port,
+        "--protocol",
+        "uss",
+        "--address",
+        "3",
+        "p1082",
+        "--type",
+        "f32",
+        "--json",
+    )
+    assert json.loads(out)["value"] == 42.5
+
+
+def test_trace_prints_telegrams(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    code, _, err = run(capsys, "read", "--port", sim_port, "--address", "2", "16-13", "--trace")
+    assert code == 0
+    assert re.search(r"tx 02 0e 82 1[0-9a-f] 4d", err)
+    assert re.search(r"rx 02 0e 82", err)

@@ -1,0 +1,89 @@
+"""Lines over the simulator's real ends: TCP (socket://) and a pty, the production path."""
+
+from __future__ import annotations
+
+import asyncio
+import tempfile
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from pkwbus.link import PortSettings
+from pkwbus.master.line import Line
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Outcome, PkwTransaction
+from pkwbus.protocol import pkw
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.sim import SimFaults, SimTiming, Simulator
+
+
+class Trace:
+    def __init__(self) -> None:
+        self.tx: list[bytes] = []
+        self.rx: list[bytes] = []
+
+    def __call__(self, direction: str, data: bytes) -> None:
+        (self.tx if direction == "tx" else self.rx).append(data)
+
+
+@asynccontextmanager
+async def serve(sim: Simulator, end: str) -> AsyncIterator[str]:
+    """Put ``sim`` on a TCP port or a pty; yield the port string a master opens."""
+    if end == "tcp":
+        server: Any = await sim.serve_tcp("127.0.0.1", 0)
+        try:
+            yield server.url
+        finally:
+            await server.close()
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        server = await sim.serve_pty(str(Path(tmp) / "ttySIM"))
+        try:
+            yield server.path
+        finally:
+            await server.close()
+
+
+@pytest.fixture(params=["tcp", "pty"])
+def end(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+def make_sim(protocol: str, addresses: list[int], **kw: Any) -> Simulator:
+    kw.setdefault("timing", SimTiming(response_delay=0.0))
+    kw.setdefault("seed", 7)
+    return Simulator(protocol, addresses, **kw)
+
+
+@asynccontextmanager
+async def open_line(
+    port: str, protocol: str, *, timeout: float = 0.05, **kw: Any
+) -> AsyncIterator[tuple[Line, Trace]]:
+    trace = Trace()
+    line = Line(
+        PortSettings(port, baudrate=115200, **kw), Protocol(protocol), timeout=timeout, trace=trace
+    )
+    await line.open()
+    try:
+        yield line, trace
+    finally:
+        await line.close()
+
+
+async def run_job(
+    line: Line,
+    target: DriveTarget,
+    request: pkw.PkwRequest,
+    *,
+    retries: int = 2,
+    deadline: float = 2.0,
+) -> Outcome:
+    loop = asyncio.get_running_loop()
+    tx = PkwTransaction(target, request, retries=retries, deadline=loop.time() + deadline)
+    return await line.run(tx)
+
+
+__all__ = ["Callable", "SimFaults", "Trace", "make_sim", "open_line", "run_job", "serve"]

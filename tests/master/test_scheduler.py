@@ -1,0 +1,214 @@
+"""The scheduler over simulated drives: order, health, interleaving, overruns, lines apart."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+from collections import Counter
+from typing import Any
+
+import pytest
+
+from pkwbus.link import PortSettings
+from pkwbus.master.health import HealthPolicy
+from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.line import Line
+from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Answered, ExchangeResult, Failure, Reply
+from pkwbus.protocol import pkw
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.sim import SimFaults, SimTiming
+from tests.master.conftest import Trace, make_sim, serve
+
+
+class Recorder:
+    """LineEvents that keeps what happened, per drive."""
+
+    def __init__(self) -> None:
+        self.exchanges: list[tuple[str, ExchangeResult]] = []
+        self.busy: Counter[str] = Counter()
+        self.done: list[tuple[str, Job, JobResult]] = []
+        self.overruns: Counter[str] = Counter()
+
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+        self.exchanges.append((drive, result))
+        self.busy[drive] += busy
+
+    def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
+        self.done.append((drive, job, result))
+
+    def overrun(self, drive: str) -> None:
+        self.overruns[drive] += 1
+
+    def polls_ok(self, drive: str) -> int:
+        return sum(
+            1
+            for d, job, r in self.done
+            if d == drive and job.priority is Priority.POLL and isinstance(r.outcome, Answered)
+        )
+
+
+def drive_specs(
+    protocol: str, addresses: list[int], pnus: list[int], every: float
+) -> list[DriveSpec]:
+    specs = []
+    for a in addresses:
+        target = DriveTarget.create(protocol, a)
+        polls = tuple(PollSpec(str(p), 0, pkw.read(target.dialect, p), every) for p in pnus)
+        specs.append(DriveSpec(f"d{a}", target, polls))
+    return specs
+
+
+def scheduler(
+    port: str, protocol: str, specs: list[DriveSpec], *, timeout: float = 0.03, **kw: Any
+) -> tuple[LineScheduler, Recorder, Trace]:
+    trace = Trace()
+    line = Line(
+        PortSettings(port, baudrate=115200), Protocol(protocol), timeout=timeout, trace=trace
+    )
+    events = Recorder()
+    return LineScheduler("line1", line, specs, events=events, **kw), events, trace
+
+
+async def run_for(s: LineScheduler, seconds: float) -> None:
+    task = asyncio.create_task(s.run())
+    await asyncio.sleep(seconds)
+    s.stop()
+    await asyncio.wait_for(task, 2.0)
+
+
+async def test_polls_reach_the_snapshot_with_the_drives_values() -> None:
+    sim = make_sim("fc", [1, 2])
+    async with serve(sim, "tcp") as port:
+        s, events, _ = scheduler(port, "fc", drive_specs("fc", [1, 2], [341, 1530], 0.05))
+        await run_for(s, 0.4)
+    for a in (1, 2):
+        reading = s.snapshot.readings[(f"d{a}", "341", 0)]
+        assert reading.value == sim.drives[a].value(341)
+        assert events.polls_ok(f"d{a}") >= 4
+    assert all(state.up for state in s.snapshot.drives.values())
+    assert s.snapshot.drives["d1"].status_word == sim.drives[1].status_word
+
+
+async def test_a_write_waits_at_most_for_the_exchange_in_flight() -> None:
+    sim = make_sim("fc", [1, 2, 3], timing=SimTiming(response_delay=0.002))
+    specs = drive_specs("fc", [1, 2, 3], [1613, 1614, 1610, 1630], 0.001)  # saturating
+    async with serve(sim, "tcp") as port:
+        s, _events, trace = scheduler(port, "fc", specs)
+        task = asyncio.create_task(s.run())
+        await asyncio.sleep(0.2)
+        loop = asyncio.get_running_loop()
+        target = specs[1].target
+        future: asyncio.Future[JobResult] = loop.create_future()
+        write = pkw.write(target.dialect, 341, 777, pkw.Width.DWORD)
+        sent_before = len(trace.tx)
+        s.submit(Job("d2", write, JobKind.WRITE, Priority.WRITE, loop.time() + 2, future=future))
+        result = await future
+        s.stop()
+        await task
+    assert isinstance(result.outcome, Answered)
+    position = trace.tx.index(target.telegram(write), sent_before)
+    assert position - sent_before <= 1, "the write went out right after the exchange in flight"
+    assert sim.drives[2].value(341) == 777
+
+
+async def test_dead_drive_costs_the_others_almost_nothing() -> None:
+    timing = SimTiming(response_delay=0.002)
+    pnus = [1613, 1614]
+    rates = []
+    for dead in (frozenset(), frozenset({4})):
+        sim = make_sim("fc", [1, 2, 3, 4], timing=timing, faults=SimFaults(dead=dead))
+        async with serve(sim, "tcp") as port:
+            specs = drive_specs("fc", [1, 2, 3, 4], pnus, 0.05)  # well within the line
+            s, events, _ = scheduler(
+                port, "fc", specs, policy=HealthPolicy(down_after=3, probe_initial=1.0)
+            )
+            await run_for(s, 1.5)
+        rates.append(sum(events.polls_ok(f"d{a}") for a in (1, 2, 3)))
+        if dead:
+            assert s.snapshot.drives["d4"].up is False
+    healthy, with_dead = rates
+    assert healthy > 150
+    assert with_dead >= 0.95 * healthy, f"{with_dead} polls against {healthy} with all healthy"
+
+
+async def test_a_drive_that_comes_back_is_polled_again_within_its_backoff() -> None:
+    sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1, 2], [1613], 0.02)
+        policy = HealthPolicy(down_after=2, probe_initial=0.2, probe_cap=0.4)
+        s, events, _ = scheduler(port, "fc", specs, policy=policy)
+        task = asyncio.create_task(s.run())
+        await asyncio.sleep(0.5)
+        assert s.snapshot.drives["d2"].up is False
+        sim.revive(2)
+        await asyncio.sleep(0.6)  # one probe interval (cap 0.4 s) and some polls
+        s.stop()
+        await task
+    assert s.snapshot.drives["d2"].up is True
+    assert events.polls_ok("d2") >= 1
+
+
+async def test_overruns_are_counted_when_polls_exceed_the_line() -> None:
+    sim = make_sim("fc", [1, 2], timing=SimTiming(response_delay=0.005))
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1, 2], [1613, 1614, 1610, 1630, 1690], 0.005)
+        s, events, _ = scheduler(port, "fc", specs)
+        await run_for(s, 0.5)
+    assert sum(events.overruns.values()) > 0
+
+
+async def test_lagging_drive_gets_other_exchanges_between_its_repeats() -> None:
+    timing = SimTiming(response_delay=0.0, lag_telegrams=3, lag_mode="none")
+    sim = make_sim("uss", [1, 2, 3], timing=timing)
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("uss", [1, 2, 3], [1120, 1121], 0.001)
+        s, events, trace = scheduler(port, "uss", specs)
+        await run_for(s, 0.4)
+    addresses = [t[2] for t in trace.tx]
+    repeats_back_to_back = sum(1 for a, b in itertools.pairwise(addresses) if a == b)
+    assert repeats_back_to_back < len(addresses) * 0.1
+    assert all(events.polls_ok(f"d{a}") > 0 for a in (1, 2, 3))
+
+
+async def test_two_lines_one_failing() -> None:
+    sim = make_sim("fc", [1])
+    async with serve(sim, "tcp") as port:
+        good, good_events, _ = scheduler(port, "fc", drive_specs("fc", [1], [1613], 0.01))
+        bad_line = Line(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC)
+        bad = LineScheduler("line2", bad_line, drive_specs("fc", [1], [1613], 0.01))
+        tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
+        await asyncio.sleep(0.4)
+        for x in (good, bad):
+            x.stop()
+        await asyncio.gather(*tasks)
+    assert good_events.polls_ok("d1") >= 10
+    assert good.snapshot.lines["line1"] is False  # closed at stop
+    assert bad_line.link.last_error and "cannot open" in bad_line.link.last_error
+
+
+async def test_stop_cancels_queued_jobs_and_returns() -> None:
+    sim = make_sim("fc", [1], timing=SimTiming(response_delay=0.05))
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1], [1613], 1.0)
+        s, _, _ = scheduler(port, "fc", specs, timeout=0.2)
+        task = asyncio.create_task(s.run())
+        await asyncio.sleep(0.02)
+        loop = asyncio.get_running_loop()
+        futures = []
+        for _ in range(3):
+            f: asyncio.Future[JobResult] = loop.create_future()
+            req = pkw.read(specs[0].target.dialect, 1614)
+            s.submit(Job("d1", req, JobKind.READ, Priority.READ, loop.time() + 5, future=f))
+            futures.append(f)
+        s.stop()
+        await asyncio.wait_for(task, 1.0)
+    results = [f.result() for f in futures]
+    assert any(isinstance(r.outcome, Cancelled) for r in results)
+    assert all(f.done() for f in futures)
+
+
+@pytest.mark.parametrize("kind", [Reply, Failure])
+def test_recorder_types(kind: type) -> None:
+    assert kind in (Reply, Failure)
