@@ -1,0 +1,312 @@
+"""Parameter catalogs as data: pydantic models and the YAML loader.
+
+A catalog tells, per parameter number (PNU), what the drive's manual says about
+it: name, value type, scaling (Danfoss conversion index or a plain factor),
+unit, limits, whether the API may write it by default, array length, and where
+the fact comes from. See docs/catalogs.md for the file format.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import re
+from collections.abc import Hashable, Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal, Self
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
+Dialect = Literal["fc", "uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"]
+
+#: Danfoss conversion indexes: 10**index for -7..6, plus the special indexes
+#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) [protocol.md section 6].
+CONVERSION_INDEXES: frozenset[int] = frozenset(range(-7, 7)) | {67, 74, 75, 100}
+
+MAX_PNU = 65535
+_DATA_PACKAGE = "pkwbus.catalog"
+_DATA_DIR = "data"
+_SUFFIX = ".yaml"
+
+
+class CatalogError(Exception):
+    """A catalog cannot be found, read or validated; the message names the place."""
+
+
+class ParameterSpec(BaseModel):
+    """What a catalog knows about one parameter."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    pnu: int = Field(ge=0, le=MAX_PNU)
+    name: str = Field(min_length=1)
+    type: ValueType | None = None
+    conversion: int | None = None
+    scale: float | None = None
+    unit: str = ""
+    min: float | None = None
+    max: float | None = None
+    writable: bool = False
+    array: int | None = Field(default=None, ge=1)
+    verified: bool = True
+    note: str = ""
+    source: str = ""
+
+    @model_validator(mode="after")
+    def _check(self) -> Self:
+        _check_scaling(self)
+        _check_limits(self)
+        if not self.verified and not self.note.strip():
+            raise ValueError("verified: false needs a note saying what could not be sourced")
+        return self
+
+    def overridden(self, changes: Mapping[str, Any]) -> ParameterSpec:
+        """A copy with `changes` (config overrides) applied and validated again.
+
+        Giving `scale` drops the catalog's `conversion` and vice versa, since
+        the two are exclusive; making it a text parameter drops both. `pnu`
+        cannot change. Raises ValueError naming the field.
+        """
+        if "pnu" in changes:
+            raise ValueError("pnu cannot be overridden")
+        fields = self.model_dump()
+        if "scale" in changes or changes.get("type") == "text":
+            fields["conversion"] = None
+        if "conversion" in changes or changes.get("type") == "text":
+            fields["scale"] = None
+        try:
+            return ParameterSpec.model_validate({**fields, **changes})
+        except ValidationError as exc:
+            raise ValueError(_format_errors("override", "", exc)) from None
+
+
+def _check_scaling(spec: ParameterSpec) -> None:
+    if spec.conversion is not None and spec.conversion not in CONVERSION_INDEXES:
+        raise ValueError(f"conversion index {spec.conversion} is not one of -7..6, 67, 74, 75, 100")
+    if spec.conversion is not None and spec.scale is not None:
+        raise ValueError("give either conversion or scale, not both")
+    if spec.scale is not None and (spec.scale == 0 or not math.isfinite(spec.scale)):
+        raise ValueError(f"scale must be a finite number other than 0, not {spec.scale}")
+    if spec.type == "text" and (spec.conversion is not None or spec.scale is not None):
+        raise ValueError("a text parameter has no conversion or scale")
+
+
+def _check_limits(spec: ParameterSpec) -> None:
+    if spec.min is not None and spec.max is not None and spec.min > spec.max:
+        raise ValueError(f"min {spec.min} is greater than max {spec.max}")
+
+
+class Catalog(BaseModel):
+    """A named set of parameter specs for one kind of drive, keyed by PNU."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str = Field(min_length=1)
+    dialect: Dialect
+    description: str = ""
+    sources: dict[str, str] = Field(default_factory=dict)
+    parameters: dict[int, ParameterSpec] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _check(self) -> Self:
+        for pnu, spec in self.parameters.items():
+            if pnu != spec.pnu:
+                raise ValueError(f"parameters.{pnu}: key and pnu {spec.pnu} differ")
+            problem = _source_problem(spec, self.sources)
+            if problem:
+                raise ValueError(f"parameters.{pnu}.source: {problem}")
+        return self
+
+    def get(self, pnu: int) -> ParameterSpec | None:
+        """The spec of parameter `pnu`, or None when the catalog lacks it."""
+        return self.parameters.get(pnu)
+
+
+def _source_problem(spec: ParameterSpec, sources: Mapping[str, str]) -> str | None:
+    if spec.source and spec.source not in sources:
+        known = ", ".join(sorted(sources)) or "none"
+        return f"{spec.source!r} is not in the sources table (known: {known})"
+    return None
+
+
+# --- parameter keys ---------------------------------------------------------
+
+_DANFOSS_KEY = re.compile(r"(\d{1,2})-(\d{2})")
+_PLAIN_KEY = re.compile(r"\d{1,5}")
+_SIEMENS_KEY = re.compile(r"[rRpP](\d{1,5})")
+
+
+def _parse_key(text: str) -> int:
+    """PNU of a catalog key: "16-13" -> 1613, "1613" -> 1613, "r0021"/"p1082" -> 21/1082.
+
+    Kept as one small function so that the shared notation parser from
+    pkwbus.protocol.params can replace it later.
+    """
+    key = text.strip()
+    if "[" in key:
+        raise ValueError(f"{text!r}: a catalog key names a parameter, not an index")
+    match = _DANFOSS_KEY.fullmatch(key)
+    if match:
+        return int(match[1]) * 100 + int(match[2])
+    match = _PLAIN_KEY.fullmatch(key) or _SIEMENS_KEY.fullmatch(key)
+    if match is None:
+        raise ValueError(
+            f"{text!r} is not a parameter number: write it as '16-13', '1613', 'r0021' or 'p1082'"
+        )
+    pnu = int(match[1] if match.lastindex else match[0])
+    if pnu > MAX_PNU:
+        raise ValueError(f"{text!r}: PNU {pnu} is above {MAX_PNU}")
+    return pnu
+
+
+# --- YAML -------------------------------------------------------------------
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key written twice in one mapping."""
+
+
+def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Hashable, Any]:
+    loader.flatten_mapping(node)
+    mapping: dict[Hashable, Any] = {}
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node)
+        if key in mapping:
+            line = key_node.start_mark.line + 1
+            raise CatalogError(f"line {line}: key {key!r} is written twice")
+        mapping[key] = loader.construct_object(value_node)
+    return mapping
+
+
+_StrictLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+    _construct_mapping,
+)
+
+
+def _read_yaml(text: str, origin: str) -> dict[str, Any]:
+    try:
+        data = yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: safe
+    except CatalogError as exc:
+        raise CatalogError(f"{origin}: {exc}") from None
+    except yaml.YAMLError as exc:
+        raise CatalogError(f"{origin}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise CatalogError(f"{origin}: the file must be a mapping with name, dialect, parameters")
+    return data
+
+
+# --- validation with readable errors ----------------------------------------
+
+
+def _format_errors(origin: str, place: str, exc: ValidationError) -> str:
+    """One line per problem: `FILE: place.field: message` (place may be empty)."""
+    lines = []
+    for error in exc.errors():
+        parts = [place] if place else []
+        path = ".".join(parts + [str(part) for part in error["loc"]])
+        message = str(error["msg"]).removeprefix("Value error, ")
+        lines.append(f"{origin}: {path}: {message}" if path else f"{origin}: {message}")
+    return "\n".join(lines)
+
+
+def _key_text(key: object) -> str:
+    if isinstance(key, int) and not isinstance(key, bool):
+        return str(key)
+    if isinstance(key, str):
+        return key
+    return repr(key)
+
+
+def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
+    place = f'parameters."{_key_text(key)}"'
+    where = f"{origin}: {place}"
+    try:
+        pnu = _parse_key(_key_text(key))
+    except ValueError as exc:
+        raise CatalogError(f"{where}: {exc}") from None
+    if not isinstance(entry, dict):
+        raise CatalogError(f"{where}: expected a mapping of fields (name, type, ...)")
+    if "pnu" in entry:
+        raise CatalogError(f"{where}.pnu: the PNU comes from the key; remove this field")
+    try:
+        return ParameterSpec.model_validate({**entry, "pnu": pnu})
+    except ValidationError as exc:
+        raise CatalogError(_format_errors(origin, place, exc)) from None
+
+
+def _parse_parameters(data: Mapping[str, Any], origin: str) -> dict[int, ParameterSpec]:
+    raw = data.get("parameters") or {}
+    if not isinstance(raw, dict):
+        raise CatalogError(f"{origin}: parameters: expected a mapping keyed by parameter")
+    sources = data.get("sources")
+    sources = sources if isinstance(sources, dict) else {}
+    specs: dict[int, ParameterSpec] = {}
+    first_key: dict[int, str] = {}
+    for key, entry in raw.items():
+        spec = _parse_entry(key, entry, origin)
+        where = f'{origin}: parameters."{_key_text(key)}"'
+        if spec.pnu in specs:
+            raise CatalogError(
+                f'{where}: PNU {spec.pnu} is already defined as "{first_key[spec.pnu]}"'
+            )
+        problem = _source_problem(spec, sources)
+        if problem:
+            raise CatalogError(f"{where}.source: {problem}")
+        specs[spec.pnu] = spec
+        first_key[spec.pnu] = _key_text(key)
+    return specs
+
+
+def _parse_catalog(text: str, origin: str) -> Catalog:
+    data = _read_yaml(text, origin)
+    parameters = _parse_parameters(data, origin)
+    header = {key: value for key, value in data.items() if key != "parameters"}
+    try:
+        return Catalog.model_validate({**header, "parameters": parameters})
+    except ValidationError as exc:
+        raise CatalogError(_format_errors(origin, "", exc)) from None
+
+
+# --- public entry points ----------------------------------------------------
+
+
+def _data_dir() -> Any:
+    return resources.files(_DATA_PACKAGE).joinpath(_DATA_DIR)
+
+
+def available_catalogs() -> list[str]:
+    """Names of the catalogs shipped with pkwbus, sorted."""
+    names = (
+        entry.name.removesuffix(_SUFFIX)
+        for entry in _data_dir().iterdir()
+        if entry.name.endswith(_SUFFIX)
+    )
+    return sorted(names)
+
+
+@functools.cache
+def load_catalog(name: str) -> Catalog:
+    """A built-in catalog by name (e.g. "danfoss-fc"); loaded once, then cached."""
+    known = available_catalogs()
+    if name not in known:
+        raise CatalogError(f"unknown catalog {name!r}; available: {', '.join(known)}")
+    filename = f"{name}{_SUFFIX}"
+    catalog = _parse_catalog(_data_dir().joinpath(filename).read_text("utf-8"), filename)
+    if catalog.name != name:
+        raise CatalogError(f"{filename}: name: {catalog.name!r} differs from the file name")
+    return catalog
+
+
+def load_catalog_file(path: str | os.PathLike[str]) -> Catalog:
+    """A catalog from a YAML file of the same format as the built-in ones."""
+    try:
+        text = Path(path).read_text("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise CatalogError(f"{os.fspath(path)}: cannot read: {reason}") from None
+    return _parse_catalog(text, os.fspath(path))
