@@ -11,6 +11,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from pkwbus.catalog import ParameterSpec
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.params import ParameterRef, Scaling, ValueType
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
@@ -39,8 +40,10 @@ class FakeCatalog:
     def __init__(self, pnus: set[int]) -> None:
         self.pnus = pnus
 
-    def get(self, pnu: int, /) -> object | None:
-        return {"pnu": pnu} if pnu in self.pnus else None
+    def get(self, pnu: int, /) -> ParameterSpec | None:
+        if pnu not in self.pnus:
+            return None
+        return ParameterSpec(pnu=pnu, name=f"parameter {pnu}", type="u16", min=0, max=100)
 
 
 FAKE_CONTENTS: Mapping[str, set[int]] = {
@@ -122,11 +125,57 @@ def test_example_loads() -> None:
     (drive,) = line.drives
     assert drive.overrides_for(ParameterRef(341, None, "3-41")).max == 60
     assert drive.overrides_for(ParameterRef(1617, None, "16-17")).unit == "rpm"
+    assert drive.overrides_for(ParameterRef(1617, None, "16-17")).scale == 1
 
 
 def test_demo_loads_with_the_builtin_catalogs() -> None:
-    pytest.importorskip("pkwbus.catalog")
-    load_config(DEMO, environ={})
+    config = load_config(DEMO, environ={})
+    for _, drive in config.drives():
+        for entry in drive.poll:
+            assert drive.spec(entry.ref) is not None, (drive.name, str(entry.ref))
+
+
+def test_specs_from_the_builtin_catalogs_with_overrides() -> None:
+    config = load_config(EXAMPLE, environ={})
+    _, fan = config.drive("supply_fan") or pytest.fail("no supply_fan")
+    ramp = fan.spec(ParameterRef(341, None, "3-41"))
+    assert ramp is not None
+    assert (ramp.name, ramp.type, ramp.conversion) == ("Ramp 1 Ramp Up Time", "u32", -2)
+    assert ramp.unit == "s"
+    assert (ramp.min, ramp.max) == (1, 60)  # the config's limits over the catalog's
+    speed = fan.spec(ParameterRef(1617, None, "16-17"))
+    assert speed is not None
+    assert (speed.scale, speed.conversion, speed.unit) == (1, None, "rpm")
+    assert fan.spec(ParameterRef(4095, None, "4095")) is None
+
+
+def test_spec_from_overrides_alone() -> None:
+    text = with_drive(
+        "{name: d, address: 1, poll: [{parameter: 1234, every: 1s, type: i16, scale: 0.5}]}"
+    )
+    drive = parse(text).lines[0].drives[0]
+    spec = drive.spec(drive.poll[0].ref)
+    assert spec is not None
+    assert (spec.pnu, spec.name, spec.type, spec.scale) == (1234, "1234", "i16", 0.5)
+
+
+def test_index_beyond_the_catalogs_array() -> None:
+    text = with_drive(
+        "{name: d, address: 1, catalog: danfoss-fc, poll: [{parameter: '15-30[10]', every: 1s}]}"
+    )
+    with pytest.raises(ConfigError) as caught:
+        parse_config(text, environ={})
+    assert caught.value.problems == [
+        "lines[0].drives[0].poll[0].parameter: 15-30[10]: the catalog gives it 10 elements"
+    ]
+
+
+def test_unknown_catalog_names_the_builtin_ones() -> None:
+    with pytest.raises(ConfigError) as caught:
+        parse_config(with_drive("{name: d, address: 1, catalog: abb}"), environ={})
+    assert caught.value.problems == [
+        "lines[0].drives[0].catalog: unknown catalog 'abb' (available: danfoss-fc, siemens-g120)"
+    ]
 
 
 def test_defaults_are_filled_in() -> None:
@@ -272,6 +321,10 @@ EXPECTED: dict[str, str] = {
     "negative_retries": "lines[0].retries: must be 0 or more, not -1",
     "negative_timeout": "lines[0].timeout: '-100ms' is not a duration above 0",
     "no_lines": "lines: must not be empty",
+    "override_conflicts_catalog": (
+        "lines[0].drives[0].parameters[3-41]: 3-41: min 200.0 is greater than max 100.0"
+    ),
+    "writable_read_only": "lines[0].drives[0].writable[1]: r0021 is read-only (r)",
     "pkw_words_on_fc": "lines[0].drives[0].pkw_words: applies to protocol uss only",
     "pkw_zero_with_polls": "lines[0].drives[0].pkw_words: is 0: the drive has no parameter",
     "pnu_too_big_fc": (

@@ -55,6 +55,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from pkwbus.catalog import CatalogError, ParameterSpec, available_catalogs, load_catalog
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -208,7 +209,7 @@ class _Model(BaseModel):
 class CatalogLike(Protocol):
     """What the config needs of a catalog: ``pkwbus.catalog.Catalog`` has it."""
 
-    def get(self, pnu: int, /) -> Any: ...
+    def get(self, pnu: int, /) -> ParameterSpec | None: ...
 
 
 @dataclass(frozen=True)
@@ -224,34 +225,20 @@ class Catalogs:
 
 
 def builtin_catalogs() -> Catalogs:
-    """The catalogs shipped in ``pkwbus.catalog``."""
-    import importlib
-
-    try:
-        module = importlib.import_module("pkwbus.catalog")
-    except ImportError:
-        return Catalogs(load=_no_catalog, available=tuple)
-    catalog_error: type[Exception] = module.CatalogError
-    cache: dict[str, CatalogLike] = {}
+    """The catalogs shipped in :mod:`pkwbus.catalog`."""
 
     def load(name: str) -> CatalogLike:
-        if name not in cache:
-            if name not in module.available_catalogs():
-                raise LookupError(f"unknown catalog {name!r}")
-            try:
-                cache[name] = module.load_catalog(name)
-            except catalog_error as exc:
-                raise ValueError(f"catalog {name!r} cannot be loaded: {exc}") from None
-        return cache[name]
+        if name not in available_catalogs():
+            raise LookupError(f"unknown catalog {name!r}")
+        try:
+            return load_catalog(name)
+        except CatalogError as exc:
+            raise ValueError(f"catalog {name!r} cannot be loaded: {exc}") from None
 
     def available() -> Sequence[str]:
-        return tuple(sorted(module.available_catalogs()))
+        return tuple(available_catalogs())
 
     return Catalogs(load=load, available=available)
-
-
-def _no_catalog(name: str) -> CatalogLike:
-    raise LookupError(f"unknown catalog {name!r}")
 
 
 def _catalogs(info: ValidationInfo) -> Catalogs:
@@ -272,7 +259,7 @@ class ParameterOverrides(_Model):
     unit: str | None = Field(default=None, strict=True)
     min: Number | None = None
     max: Number | None = None
-    name: str | None = Field(default=None, strict=True)
+    name: str | None = Field(default=None, strict=True, min_length=1)
 
     @field_validator("scale")
     @classmethod
@@ -311,6 +298,13 @@ class ParameterOverrides(_Model):
     def given(self) -> bool:
         """Whether any override is set."""
         return any(getattr(self, key) is not None for key in OVERRIDE_FIELDS)
+
+    def changes(self) -> dict[str, Any]:
+        """The overrides that are set, as :meth:`ParameterSpec.overridden` takes them."""
+        values = {key: getattr(self, key) for key in OVERRIDE_FIELDS}
+        if self.type is not None:
+            values["type"] = self.type.value
+        return {key: value for key, value in values.items() if value is not None}
 
     def overrides(self) -> ParameterOverrides:
         """Only the override fields (of a poll entry, say)."""
@@ -399,6 +393,43 @@ class Drive(_Model):
         if problems:
             raise _fail(problems)
         return self
+
+    @model_validator(mode="after")
+    def _fits_catalog(self, info: ValidationInfo) -> Self:
+        """Overrides must agree with the catalog entry they change; indexes fit arrays."""
+        catalogs = _catalogs(info)
+        problems: list[Place] = []
+        for place, ref in self.refs():
+            try:
+                spec = self.spec(ref, catalogs)
+            except ValueError as exc:
+                problems.append((place, f"{ref}: {str(exc).removeprefix('override: ')}"))
+                continue
+            if spec and spec.array and ref.index is not None and ref.index >= spec.array:
+                problems.append((place, f"{ref}: the catalog gives it {spec.array} elements"))
+        for i, ref in enumerate(self.writable):
+            if ref.name[:1] == "r":
+                problems.append((f"writable[{i}]", f"{ref} is read-only (r): settable ones are p"))
+        if problems:
+            raise _fail(problems)
+        return self
+
+    def spec(self, ref: ParameterRef, catalogs: Catalogs | None = None) -> ParameterSpec | None:
+        """What is known of ``ref`` on this drive: its catalog entry with the config's overrides.
+
+        From the overrides alone when the catalog lacks it; None when neither
+        says anything (the value is read and exported raw). ValueError when
+        the overrides do not fit the catalog entry (min above its max, say).
+        """
+        changes = self.overrides_for(ref).changes()
+        base = None
+        if self.catalog is not None:
+            base = (catalogs or builtin_catalogs()).load(self.catalog).get(ref.pnu)
+        if base is None:
+            if not changes:
+                return None
+            base = ParameterSpec(pnu=ref.pnu, name=ref.name)
+        return base.overridden(changes) if changes else base
 
     @property
     def protocol(self) -> BusProtocol:
