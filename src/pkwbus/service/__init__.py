@@ -1,0 +1,1 @@
+"""The long-running service around the bus master: configuration, metrics, API, audit."""

@@ -1,0 +1,151 @@
+"""How busy each line would be: the estimate ``pkwbus check-config`` prints.
+
+One PKW exchange on a line takes::
+
+    (request bytes + response bytes) * bits per character / baud
+    + the pause before the request (3.5 character times unless configured)
+    + the drive's response delay (5 ms unless the line says response_delay)
+
+An FC parameter telegram is 16 bytes each way; a USS telegram is
+``2 * (pkw + pzd) + 4`` bytes (a variable PKW part is counted as 4 words).
+A character is 11 bits with the default 8E1 (10 with parity N). Each polled
+parameter demands ``1 / every`` exchanges per second; the line's utilisation
+is the sum of exchange time times rate. Repeats after missing answers are
+not counted: a silent drive costs ``timeout`` per try on top of this.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Final
+
+from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
+from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
+
+DEFAULT_RESPONSE_DELAY: Final = 0.005  # seconds, FC and USS alike
+WARN_UTILISATION: Final = 0.8
+FC_PARAMETER_TELEGRAM: Final = 16  # bytes: STX LGE ADR PKE IND PWE PCD1 PCD2 BCC
+USS_OVERHEAD: Final = 4  # bytes: STX LGE ADR BCC
+USS_VARIABLE_PKW_WORDS: Final = 4
+
+
+@dataclass(frozen=True, slots=True)
+class LineLoad:
+    """The estimate for one line."""
+
+    line: str
+    protocol: Protocol
+    baudrate: int
+    drives: int
+    exchanges_per_second: float  # demanded by the polls
+    utilisation: float  # fraction of the line's time (1.0 = always busy)
+    capacity: float  # exchanges per second if the line did nothing else
+    exchange_seconds: dict[str, float] = field(default_factory=dict)  # per drive
+    warnings: list[str] = field(default_factory=list)
+
+
+def telegram_bytes(line: Line, drive: Drive) -> int:
+    """Bytes of one parameter telegram to or from ``drive``, STX to BCC."""
+    if line.protocol is Protocol.FC:
+        return FC_PARAMETER_TELEGRAM
+    pkw = drive.pkw_words if drive.pkw_words is not None else USS_VARIABLE_PKW_WORDS
+    return min(2 * (pkw + drive.pzd_words) + USS_OVERHEAD, MAX_TELEGRAM)
+
+
+def exchange_seconds(line: Line, drive: Drive) -> float:
+    """One request and its response, with the pause before and the drive's delay."""
+    delay = line.response_delay_seconds
+    if delay is None:
+        delay = DEFAULT_RESPONSE_DELAY
+    wire = 2 * telegram_bytes(line, drive) * line.character_time
+    return wire + line.pause_seconds + delay
+
+
+def line_load(line: Line) -> LineLoad:
+    """Utilisation, demand and capacity of one line."""
+    times = {d.name: exchange_seconds(line, d) for d in line.drives}
+    rate = 0.0
+    busy = 0.0
+    for drive in line.drives:
+        for entry in drive.poll:
+            rate += 1 / entry.every
+            busy += times[drive.name] / entry.every
+    mean = busy / rate if rate else sum(times.values()) / len(times)
+    load = LineLoad(
+        line=line.name,
+        protocol=line.protocol,
+        baudrate=line.baudrate,
+        drives=len(line.drives),
+        exchanges_per_second=rate,
+        utilisation=busy,
+        capacity=1 / mean,
+        exchange_seconds=times,
+    )
+    load.warnings.extend(_warnings(load))
+    return load
+
+
+def _warnings(load: LineLoad) -> Iterator[str]:
+    if load.utilisation > 1:
+        yield (
+            f"line {load.line}: polls demand {load.exchanges_per_second:.1f} exchanges/s, "
+            f"more than the {load.capacity:.1f} the line can carry: polls will run late"
+        )
+    elif load.utilisation > WARN_UTILISATION:
+        yield (
+            f"line {load.line}: utilisation {load.utilisation:.0%} is above "
+            f"{WARN_UTILISATION:.0%}: little room for writes, reads and repeats"
+        )
+
+
+def config_load(config: Config) -> list[LineLoad]:
+    return [line_load(line) for line in config.lines]
+
+
+def catalog_notes(config: Config, catalogs: Catalogs | None = None) -> list[str]:
+    """Polled parameters their drive's catalog lacks: read and exported as raw numbers."""
+    found = catalogs or builtin_catalogs()
+    notes: list[str] = []
+    for i, line in enumerate(config.lines):
+        for j, drive in enumerate(line.drives):
+            notes.extend(_drive_notes(f"lines[{i}].drives[{j}]", drive, found))
+    return notes
+
+
+def _drive_notes(place: str, drive: Drive, catalogs: Catalogs) -> Iterable[str]:
+    if drive.catalog is None:
+        untyped = [str(p.ref) for p in drive.poll if p.type is None]
+        if untyped:
+            yield (
+                f"{place}: drive {drive.name} has no catalog: "
+                f"{', '.join(untyped)} are exported as raw numbers"
+            )
+        return
+    try:
+        catalog = catalogs.load(drive.catalog)
+    except (LookupError, ValueError) as exc:
+        yield f"{place}.catalog: {exc}"
+        return
+    for k, entry in enumerate(drive.poll):
+        if catalog.get(entry.ref.pnu) is None:
+            how = (
+                "the config's type and scaling apply"
+                if entry.type is not None
+                else "it is read and exported as its raw number"
+            )
+            yield f"{place}.poll[{k}]: {entry.ref} is not in catalog {drive.catalog}: {how}"
+
+
+def check_config_report(config: Config, catalogs: Catalogs | None = None) -> list[str]:
+    """What ``pkwbus check-config`` prints for a valid configuration, line by line."""
+    report = [f"listen {config.listen}, audit log {config.audit_db}"]
+    for load in config_load(config):
+        report.append(
+            f"line {load.line}: {load.protocol} at {load.baudrate} baud, {load.drives} drives, "
+            f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "
+            f"(capacity {load.capacity:.0f} exchanges/s)"
+        )
+        report.extend(f"WARN {w}" for w in load.warnings)
+    report.extend(f"NOTE {n}" for n in catalog_notes(config, catalogs))
+    return report
