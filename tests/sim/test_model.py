@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import random
-import sys
-import types
-from dataclasses import dataclass
 
 import pytest
 
+from pkwbus.catalog import load_catalog
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import Profile
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.catalogs import CatalogError
@@ -31,29 +31,40 @@ def test_warnings_and_trips_come_now_and_then_and_clear() -> None:
     assert len(model.alarm_log) == 10 and all(model.alarm_log)
 
 
-@dataclass
-class Entry:
-    pnu: int
-    type: str
-    conversion: int = 0
-    unit: str = ""
-    min: float | None = None
-    max: float | None = None
-    writable: bool = False
-
-
-def test_catalog_adds_parameters_and_keeps_live_readings(monkeypatch: pytest.MonkeyPatch) -> None:
-    fake = types.ModuleType("pkwbus.catalog")
-    entries = [Entry(1613, "u16", -1), Entry(412, "u16", -1, "Hz", 0.0, 500.0, True)]
-    fake.load_catalog = lambda name: entries  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "pkwbus.catalog", fake)
-    sim = Simulator("fc", [1], catalog="danfoss-fc", seed=1, clock=FakeClock())
+@pytest.mark.parametrize(
+    ("protocol", "catalog", "pnu", "quantity", "factor"),
+    [
+        ("fc", "danfoss-fc", 1613, "frequency", 1.0),
+        ("fc", "danfoss-fc", 1610, "power", 1000.0),  # the model's kW, the catalog's W
+        ("uss", "siemens-g120", 27, "current", 1.0),
+        ("uss", "siemens-g120", 21, "frequency", 30.0),  # Hz of a 4-pole motor as rpm
+    ],
+)
+def test_catalog_readings_decode_to_the_models_quantity(
+    protocol: str, catalog: str, pnu: int, quantity: str, factor: float
+) -> None:
+    """A master decoding with the catalog reads the model's value in the catalog's unit."""
+    sim = Simulator(protocol, [1], catalog=catalog, seed=1, clock=FakeClock())
     drive = sim.drives[1]
-    assert drive.params.specs[1613].live == "frequency"
-    assert drive.params.specs[412].writable and drive.value(412) == 0
+    spec = load_catalog(catalog).get(pnu)
+    assert spec is not None and spec.type is not None
+    fmt = ParameterFormat.from_spec(spec)
+    vtype = ValueType(spec.type)
+    width = vtype.width
+    assert width is not None
+    got = decode_value(drive.value(pnu), width, vtype, fmt.scaling)
+    expected = drive.params.live(quantity, 0) * factor
+    # current and power carry noise from one reading to the next: a few percent
+    assert float(got) == pytest.approx(expected, rel=0.03, abs=float(fmt.scaling.factor))
 
 
-def test_missing_catalog_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "pkwbus.catalog", None)
-    with pytest.raises(CatalogError):
-        Simulator("fc", [1], catalog="danfoss-fc")
+def test_catalog_adds_parameters_the_table_lacks() -> None:
+    sim = Simulator("fc", [1], catalog="danfoss-fc", seed=1, clock=FakeClock())
+    specs = sim.drives[1].params.specs
+    assert 1613 in specs and specs[1613].live == "frequency"
+    assert 1634 in specs  # heatsink temperature: only in the catalog
+
+
+def test_unknown_catalog_is_a_clear_error() -> None:
+    with pytest.raises(CatalogError, match="nonesuch"):
+        Simulator("fc", [1], catalog="nonesuch")

@@ -1,72 +1,109 @@
 """Parameters from a catalog (``pkwbus.catalog``), merged over the built-in table.
 
-The catalog package is built in parallel; this adapter reads only the
-fields its contract names (pnu, type, conversion, unit, min, max, writable)
-and keeps the built-in live readings for parameters both know.
+A parameter both know keeps the built-in table's live reading (the drive
+model's quantity) but takes the catalog's type, scaling, unit and limits, so
+that a master decoding with the same catalog reads the model's value. The
+model's units are converted to the catalog's where they differ.
 """
 
 from __future__ import annotations
 
-import importlib
-from collections.abc import Iterable
-from typing import Any
+import dataclasses
 
+from pkwbus.catalog import Catalog, CatalogError, ParameterSpec, load_catalog
 from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim.table import TABLES, ParamSpec
 
+# (model unit, catalog unit) -> factor. The simulated motor has two pole pairs.
+UNIT_FACTORS = {
+    ("kW", "W"): 1000.0,
+    ("W", "kW"): 0.001,
+    ("h", "s"): 3600.0,
+    ("kWh", "J"): 3.6e6,
+    ("kWh", "Wh"): 1000.0,
+    ("Hz", "rpm"): 30.0,
+    ("Hz", "1/s"): 0.5,
+    ("ms", "s"): 0.001,
+}
 
-class CatalogError(ValueError):
-    """A catalog that cannot be loaded or read."""
+__all__ = ["CatalogError", "specs_from_catalog"]
 
 
 def specs_from_catalog(protocol: Protocol, name: str) -> tuple[ParamSpec, ...]:
-    try:
-        module = importlib.import_module("pkwbus.catalog")
-        entries = module.load_catalog(name)
-    except (ImportError, AttributeError) as exc:
-        raise CatalogError(f"catalogs are not available in this build ({exc})") from None
-    except (OSError, ValueError, KeyError) as exc:
-        raise CatalogError(f"catalog {name!r}: {exc}") from None
+    catalog: Catalog = load_catalog(name)
     merged = {spec.pnu: spec for spec in TABLES[protocol]}
-    for entry in _entries(entries):
-        spec = _spec(entry)
-        known = merged.get(spec.pnu)
-        if known is not None and known.live is not None:
-            continue  # the model's reading wins over a static default
-        merged[spec.pnu] = spec
+    for entry in catalog.parameters.values():
+        known = merged.get(entry.pnu)
+        merged[entry.pnu] = _merge(known, entry) if known is not None else _spec(entry)
     return tuple(merged.values())
 
 
-def _entries(entries: Any) -> Iterable[Any]:
-    values = getattr(entries, "values", None)
-    return list(values()) if callable(values) else list(entries)
+def _merge(known: ParamSpec, entry: ParameterSpec) -> ParamSpec:
+    """The built-in parameter with the catalog's type, scaling, unit and limits."""
+    vtype = ValueType(entry.type) if entry.type else known.vtype
+    factor = _unit_factor(known.unit, entry.unit) if known.live is not None else 1.0
+    return dataclasses.replace(
+        known,
+        name=entry.name,
+        vtype=vtype,
+        conversion=entry.conversion or 0,
+        scale=entry.scale,
+        unit=entry.unit or known.unit,
+        minimum=entry.min if entry.min is not None else _scaled(known.minimum, factor),
+        maximum=entry.max if entry.max is not None else _scaled(known.maximum, factor),
+        unit_factor=factor,
+        initial=_initial(entry, known) if known.live is None else known.initial,
+    )
 
 
-def _spec(entry: Any) -> ParamSpec:
+def _unit_factor(model: str, wanted: str) -> float:
+    if not model or not wanted or model == wanted:
+        return 1.0
     try:
-        pnu = int(getattr(entry, "pnu"))  # noqa: B009
-        vtype = ValueType(str(getattr(entry, "type", "u16")))
-        low, high = getattr(entry, "min", None), getattr(entry, "max", None)
-        return ParamSpec(
-            pnu=pnu,
-            name=str(getattr(entry, "name", pnu)),
-            vtype=vtype,
-            conversion=int(getattr(entry, "conversion", 0) or 0),
-            unit=str(getattr(entry, "unit", "") or ""),
-            minimum=None if low is None else float(low),
-            maximum=None if high is None else float(high),
-            writable=bool(getattr(entry, "writable", False)),
-            initial="" if vtype is ValueType.TEXT else _initial(low, high),
-        )
-    except (AttributeError, TypeError, ValueError) as exc:
-        raise CatalogError(f"catalog entry {entry!r} cannot be simulated: {exc}") from None
+        return UNIT_FACTORS[model, wanted]
+    except KeyError:
+        raise CatalogError(
+            f"the simulated drive gives {model!r}, the catalog wants {wanted!r}: no conversion"
+        ) from None
 
 
-def _initial(low: Any, high: Any) -> float:
-    """A value inside the limits: 0 when allowed, else the nearer limit."""
-    if low is not None and float(low) > 0:
+def _scaled(limit: float | None, factor: float) -> float | None:
+    return None if limit is None else limit * factor
+
+
+def _initial(entry: ParameterSpec, known: ParamSpec) -> float | str | tuple[float, ...]:
+    if isinstance(known.initial, str) or entry.type == "text":
+        return known.initial if isinstance(known.initial, str) else ""
+    low, high = entry.min, entry.max
+    number = known.initial if isinstance(known.initial, float | int) else 0.0
+    if low is not None and number < low:
         return float(low)
-    if high is not None and float(high) < 0:
+    if high is not None and number > high:
         return float(high)
-    return 0.0
+    return known.initial
+
+
+def _spec(entry: ParameterSpec) -> ParamSpec:
+    vtype = ValueType(entry.type) if entry.type else ValueType.U16
+    low, high = entry.min, entry.max
+    initial: float | str = 0.0
+    if vtype is ValueType.TEXT:
+        initial = entry.name[:16]
+    elif low is not None and low > 0:
+        initial = float(low)
+    elif high is not None and high < 0:
+        initial = float(high)
+    return ParamSpec(
+        pnu=entry.pnu,
+        name=entry.name,
+        vtype=vtype,
+        conversion=entry.conversion or 0,
+        scale=entry.scale,
+        unit=entry.unit,
+        minimum=low,
+        maximum=high,
+        writable=entry.writable,
+        array=entry.array or 0,
+        initial=initial,
+    )

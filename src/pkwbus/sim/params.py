@@ -97,7 +97,8 @@ class ParameterStore:
     def value(self, pnu: int, index: int = 0) -> int:
         spec = self.specs[pnu]
         if spec.live is not None:
-            return encode_value(_clamp(spec, self.live(spec.live, index)), spec.vtype, spec.scaling)
+            reading = self.live(spec.live, index) * spec.unit_factor
+            return encode_value(_clamp(spec, reading), spec.vtype, spec.scaling)
         return self.raw[pnu, index]
 
     def number(self, pnu: int, index: int = 0) -> float:

@@ -45,9 +45,13 @@ class ParamSpec:
     array: int = 0  # number of elements; 0 = not an array
     initial: Initial = 0
     live: str | None = None
+    scale: float | None = None  # instead of the conversion index
+    unit_factor: float = 1.0  # live quantity (model units) -> this parameter's unit
 
     @property
     def scaling(self) -> Scaling:
+        if self.scale is not None:
+            return Scaling.scale(self.scale)
         return Scaling.conversion(self.conversion)
 
     @property
