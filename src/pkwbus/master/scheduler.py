@@ -393,7 +393,7 @@ class LineScheduler:
         up = state is LinkState.OPEN
         self.snapshot.lines[self.name] = up
         if up:
-            log.warning(
+            log.info(
                 "line %s: port %s open",
                 self.name,
                 self.line.link.settings.url,

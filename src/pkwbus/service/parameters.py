@@ -95,7 +95,7 @@ class ParameterService:
         )
         try:
             audit.token_id = self._authenticate(caller)
-            if ref.pnu not in entry.writable:
+            if not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
             fmt = entry.format_of(ref)
             request = self._write_request(entry, ref, fmt, order)

@@ -33,7 +33,7 @@ class DriveEntry:
     line: str
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
-    writable: frozenset[int] = frozenset()  # PNUs the API may write
+    may_write: Callable[[ParameterRef], bool] = field(default=lambda ref: False)
     format_of: Callable[[ParameterRef], ParameterFormat] = field(
         default=lambda ref: ParameterFormat()
     )

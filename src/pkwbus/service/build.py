@@ -1,0 +1,179 @@
+"""From a configuration to a runtime: simulated drives, links, lines, schedulers, metrics.
+
+A ``sim://PROTOCOL?drives=...`` port starts built-in simulated drives on a
+pseudo-terminal; the line then opens that pty through pyserial like any
+adapter, so the demo takes the production path.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import prometheus_client
+from prometheus_client import CollectorRegistry
+
+from pkwbus.catalog import ParameterSpec
+from pkwbus.link import PortSettings
+from pkwbus.master.line import Line
+from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol import pkw
+from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.service import config as cfg
+from pkwbus.service.metrics import (
+    DriveInfo,
+    ParameterInfo,
+    ServiceMetrics,
+    SnapshotCollector,
+)
+from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.sim import SimTiming, Simulator
+
+DEFAULT_SIM_DELAY = 0.003
+
+
+async def build_runtime(config: cfg.Config) -> Runtime:
+    prometheus_client.disable_created_metrics()  # type: ignore[no-untyped-call]
+    registry = CollectorRegistry()
+    metrics = ServiceMetrics(registry)
+    snapshot = Snapshot()
+    schedulers: list[LineScheduler] = []
+    entries: list[DriveEntry] = []
+    infos: list[ParameterInfo] = []
+    cleanups: list[Callable[[], object]] = []
+    for line in config.lines:
+        port = line.port
+        if line.sim is not None:
+            port, close = await _start_sim(line, line.sim)
+            cleanups.append(close)
+        specs = [_drive(line, drive, entries, infos) for drive in line.drives]
+        schedulers.append(
+            LineScheduler(
+                line.name,
+                _line(line, port),
+                specs,
+                retries=line.retries,
+                snapshot=snapshot,
+                events=metrics.for_line(line.name, [d.name for d in line.drives]),
+            )
+        )
+    drives = {d.name: DriveInfo(line.name, _target(line, d).profile) for line, d in config.drives()}
+    registry.register(SnapshotCollector(snapshot, drives, infos))
+    runtime = Runtime(schedulers, entries, snapshot, registry)
+    runtime.cleanups.extend(cleanups)
+    return runtime
+
+
+def _line(line: cfg.Line, port: str) -> Line:
+    settings = PortSettings(
+        port,
+        baudrate=line.baudrate,
+        parity=line.parity,
+        stopbits=line.stopbits,
+        pause=line.pause,
+        echo=line.echo,
+    )
+    return Line(
+        settings,
+        Protocol(line.protocol),
+        timeout=line.timeout,
+        inter_char_timeout=line.inter_char_timeout,
+    )
+
+
+def _target(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
+    return DriveTarget(
+        Protocol(line.protocol),
+        drive.address,
+        drive.pkw_dialect,
+        drive.layout,
+        drive.shape,
+        line.address_format,
+    )
+
+
+def _drive(
+    line: cfg.Line, drive: cfg.Drive, entries: list[DriveEntry], infos: list[ParameterInfo]
+) -> DriveSpec:
+    target = _target(line, drive)
+    polls = []
+    units: dict[str, str] = {}
+    for entry in drive.poll:
+        ref = entry.ref
+        index = entry.index if entry.index is not None else ref.index
+        ref = ParameterRef(ref.pnu, index, ref.name)
+        spec = drive.spec(ref)
+        fmt = ParameterFormat.from_spec(spec)
+        polls.append(PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt))
+        units[ref.name] = fmt.unit
+        infos.append(_info(line, drive, ref, spec, fmt))
+    entries.append(
+        DriveEntry(
+            drive.name,
+            line.name,
+            target,
+            tuple(polls),
+            may_write=drive.may_write,
+            format_of=lambda r, d=drive: ParameterFormat.from_spec(d.spec(r)),  # type: ignore[misc]
+            units=units,
+        )
+    )
+    return DriveSpec(drive.name, target, tuple(polls))
+
+
+def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterFormat) -> pkw.PkwRequest:
+    if fmt.is_text:
+        return pkw.read_text(target.dialect, ref.pnu, ref.index or 0)
+    return pkw.read(target.dialect, ref.pnu, ref.index)
+
+
+def _info(
+    line: cfg.Line,
+    drive: cfg.Drive,
+    ref: ParameterRef,
+    spec: ParameterSpec | None,
+    fmt: ParameterFormat,
+) -> ParameterInfo:
+    return ParameterInfo(
+        line.name,
+        drive.name,
+        ref.name,
+        ref.index or 0,
+        ref.pnu,
+        spec.name if spec else "",
+        fmt.unit,
+        fmt.vtype.value if fmt.vtype else "raw",
+    )
+
+
+async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[], Awaitable[None]]]:
+    catalogs = {d.catalog for d in line.drives if d.catalog}
+    shapes = {(d.pkw_words, d.pzd_words, d.layout, d.pkw_dialect.name) for d in line.drives}
+    pkw_words, pzd_words, layout, dialect = next(iter(shapes))
+    simulator = Simulator(
+        line.protocol,
+        sim.drives,
+        dialect=dialect,
+        ind_layout=layout,
+        pkw_words=pkw_words,
+        pzd_words=pzd_words,
+        timing=SimTiming(
+            response_delay=sim.response_delay
+            if sim.response_delay is not None
+            else DEFAULT_SIM_DELAY
+        ),
+        catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
+    )
+    folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
+    end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))
+
+    async def close() -> None:
+        await end.close()
+        folder.rmdir()
+
+    return end.path, close
