@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from pkwbus import __version__
-from pkwbus.commands import access, scan, service
+from pkwbus.commands import access, describe, scan, service
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.sim import cli as sim_cli
 
@@ -25,6 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     access.add_parsers(sub)
     scan.add_parsers(sub)
+    describe.add_parsers(sub)
     service.add_parsers(sub)
     sim_cli.add_parser(sub).set_defaults(func=sim_cli.run)
     return parser

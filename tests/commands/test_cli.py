@@ -205,3 +205,35 @@ def test_trace_prints_telegrams(capsys: pytest.CaptureFixture[str], sim_port: st
     assert code == 0
     assert re.search(r"tx 02 0e 82 1[0-9a-f] 4d", err)
     assert re.search(r"rx 02 0e 82", err)
+
+
+def test_describe_reads_the_drives_own_description(
+    capsys: pytest.CaptureFixture[str], sim_port: str
+) -> None:
+    code, out, err = run(
+        capsys, "describe", "--port", sim_port, "--address", "17", "3-41", "--json"
+    )
+    assert code == 0, err
+    info = json.loads(out)
+    # The simulated drive's built-in 3-41: UInt32, conversion -2, limits 0.01-3600 s.
+    assert info["data_type"] == {"code": 7, "name": "UInt32"}
+    assert info["conversion_index"] == -2
+    assert info["name"].startswith("3-41")
+    assert (info["min"], info["max"]) == (0.01, 3600)
+
+
+def test_describe_needs_a_dialect_with_ak_4(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(
+        capsys,
+        "describe",
+        "--port",
+        "/nonexistent",
+        "--protocol",
+        "uss",
+        "--dialect",
+        "hitachi-sjpb",
+        "--address",
+        "1",
+        "p1082",
+    )
+    assert code == 2 and "no description request" in err

@@ -107,6 +107,25 @@ _BOUNDS = {
 }
 
 
+# Data type numbers of description element 1: Danfoss [D5, D6] and PROFIdrive
+# share them. Types without a ValueType travel as the nearest one.
+DATA_TYPES: Final = {
+    1: ("Boolean", ValueType.U16),
+    2: ("Int8", ValueType.I16),
+    3: ("Int16", ValueType.I16),
+    4: ("Int32", ValueType.I32),
+    5: ("UInt8", ValueType.U16),
+    6: ("UInt16", ValueType.U16),
+    7: ("UInt32", ValueType.U32),
+    8: ("FloatingPoint32", ValueType.F32),
+    9: ("text", ValueType.TEXT),
+    10: ("byte string", None),
+    13: ("time difference", ValueType.U32),
+    33: ("N2", ValueType.I16),
+    35: ("bit sequence", ValueType.U16),
+}
+
+
 def parse_type(text: str) -> ValueType:
     try:
         return ValueType(text.strip().lower())

@@ -377,6 +377,8 @@ def encode_response(
     head = pke.to_bytes(2, "big") + ind.to_bytes(2, "big")
     if isinstance(resp, TextResponse):
         return head + resp.text
+    if isinstance(resp, DescriptionResponse) and resp.data and pkw_words is None:
+        return head + resp.data  # a text element (the name) in a variable block
     if isinstance(resp, ValueResponse | DescriptionResponse | SpontaneousResponse):
         value = resp.raw
     elif isinstance(resp, ArrayCountResponse):

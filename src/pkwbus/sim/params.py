@@ -184,15 +184,29 @@ class ParameterStore:
         return pkw.TextResponse(ak, req.pnu, req.subindex, self.texts[spec.pnu])
 
     def _description(self, spec: ParamSpec, req: PkwRequest) -> PkwResponse:
-        """Element 1: data type (Danfoss numbers); 2: number of array elements."""
-        if req.subindex == 1:
+        """FC 300-style elements: 1 data type (Danfoss numbers), 2 number of array
+        elements, 4 conversion index (high byte, signed) and unit index (low byte,
+        0 here), 6 name (text), 7 and 8 low and high limit as raw numbers."""
+        element = req.subindex
+        data = b""
+        if element == 1:
             raw = TYPE_CODES[spec.vtype]
-        elif req.subindex == 2:
+        elif element == 2:
             raw = spec.array
+        elif element == 4 and spec.scale is None and -128 <= spec.conversion <= 127:
+            raw = (spec.conversion & 0xFF) << 8
+        elif element == 6:
+            data = spec.name.encode("latin-1", "replace")[:16].ljust(16, b" ")
+            raw = int.from_bytes(data[:4], "big")
+        elif element in (7, 8) and spec.vtype not in (ValueType.TEXT, ValueType.F32):
+            limit = spec.minimum if element == 7 else spec.maximum
+            if limit is None:
+                raise Refused(self.faults.no_description)
+            raw = encode_value(limit, spec.vtype, spec.scaling)
         else:
             raise Refused(self.faults.no_description)
         ak = pkw.response_id(self.dialect, Reply.DESCRIPTION)
-        return pkw.DescriptionResponse(ak, req.pnu, req.subindex, raw, b"")
+        return pkw.DescriptionResponse(ak, req.pnu, element, raw, data)
 
 
 def _value_reply(width: Width, array: bool) -> Reply:

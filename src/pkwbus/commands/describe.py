@@ -1,0 +1,139 @@
+"""`pkwbus describe`: a parameter's type, conversion index, name and limits, from the drive.
+
+FC 300-style drives (and PROFIdrive ones) answer description elements (AK 4):
+1 data type, 2 number of array elements, 4 conversion index (high byte) and
+unit index (low byte), 6 name, 7 low limit, 8 high limit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from typing import Any
+
+from pkwbus.commands.common import (
+    CommandError,
+    Exit,
+    add_drive_options,
+    add_line_options,
+    build_line,
+    build_target,
+    emit_json,
+)
+from pkwbus.link import PortError
+from pkwbus.master.line import Line
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Answered, LineFailed, PkwTransaction, TimedOut
+from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Command
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import (
+    CONVERSION_FACTORS,
+    DATA_TYPES,
+    Scaling,
+    ValueType,
+    decode_text,
+    decode_value,
+    parse_parameter,
+)
+
+ELEMENTS = (1, 2, 4, 6, 7, 8)
+
+
+def add_parsers(sub: Any) -> None:
+    describe = sub.add_parser("describe", help="read a parameter's description from the drive")
+    add_line_options(describe)
+    add_drive_options(describe)
+    describe.add_argument("parameter", help="16-13, 1613, r0021")
+    describe.set_defaults(func=run_describe)
+
+
+async def _elements(
+    args: argparse.Namespace, target: DriveTarget, pnu: int
+) -> dict[int, pkw.DescriptionResponse | None]:
+    line = build_line(args)
+    try:
+        await line.open()
+    except PortError as exc:
+        raise CommandError(str(exc), Exit.PORT) from None
+    found: dict[int, pkw.DescriptionResponse | None] = {}
+    try:
+        for element in ELEMENTS:
+            found[element] = await _element(line, args, target, pnu, element)
+    finally:
+        await line.close()
+    return found
+
+
+async def _element(
+    line: Line, args: argparse.Namespace, target: DriveTarget, pnu: int, element: int
+) -> pkw.DescriptionResponse | None:
+    request = pkw.read_description(target.dialect, pnu, element)
+    deadline = asyncio.get_running_loop().time() + 2.0
+    outcome = await line.run(
+        PkwTransaction(target, request, retries=args.retries, deadline=deadline)
+    )
+    if isinstance(outcome, TimedOut | LineFailed):
+        raise CommandError(f"no valid answer: {outcome.reason}", Exit.NO_ANSWER)
+    if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):
+        return outcome.response
+    return None  # rejected: this element is not available
+
+
+def describe(found: dict[int, pkw.DescriptionResponse | None]) -> dict[str, Any]:
+    """What the elements say, in words and numbers."""
+    out: dict[str, Any] = {}
+    kind = found.get(1)
+    vtype: ValueType | None = None
+    if kind is not None:
+        code = kind.raw & 0xFF
+        name, vtype = DATA_TYPES.get(code, (f"type {code}", None))
+        out["data_type"] = {"code": code, "name": name}
+    if (count := found.get(2)) is not None and count.raw:
+        out["array_elements"] = count.raw
+    scaling = Scaling()
+    if (conv := found.get(4)) is not None:
+        index = (conv.raw >> 8) & 0xFF
+        index = index - 0x100 if index & 0x80 else index
+        out["conversion_index"] = index
+        out["unit_index"] = conv.raw & 0xFF
+        if index in CONVERSION_FACTORS:
+            scaling = Scaling.conversion(index)
+    if (named := found.get(6)) is not None:
+        text = decode_text(named.data or named.raw.to_bytes(4, "big"))
+        if text:
+            out["name"] = text
+    for element, key in ((7, "min"), (8, "max")):
+        limit = found.get(element)
+        if limit is not None and vtype is not None and vtype is not ValueType.TEXT:
+            out[key] = decode_value(limit.raw, vtype.width or pkw.Width.DWORD, vtype, scaling)
+    return out
+
+
+def run_describe(args: argparse.Namespace) -> int:
+    try:
+        ref = parse_parameter(args.parameter)
+        target = build_target(args)
+        if not target.dialect.has(Command.READ_DESCRIPTION):
+            raise LocalProtocolError(
+                f"the {target.dialect.name} dialect has no description request (AK 4)"
+            )
+        target.dialect.check_pnu(ref.pnu)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    found = asyncio.run(_elements(args, target, ref.pnu))
+    if all(v is None for v in found.values()):
+        raise CommandError(
+            f"{ref}: the drive describes none of its elements", Exit.REJECTED, kind="rejected"
+        )
+    info = {"parameter": ref.name, "pnu": ref.pnu, **describe(found)}
+    if args.json:
+        emit_json(info)
+        return Exit.OK
+    print(f"{ref.name}: {info.get('name', '(no name)')}")
+    if "data_type" in info:
+        print(f"  data type: {info['data_type']['name']} ({info['data_type']['code']})")
+    for key in ("array_elements", "conversion_index", "unit_index", "min", "max"):
+        if key in info:
+            print(f"  {key.replace('_', ' ')}: {info[key]}")
+    return Exit.OK
