@@ -56,6 +56,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from pkwbus.catalog import CatalogError, ParameterSpec, available_catalogs, load_catalog
+from pkwbus.durations import parse_duration
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -111,37 +112,6 @@ def _fail(problems: Sequence[Place]) -> PydanticCustomError:
 
 
 # ------------------------------------------------------------------ scalars
-
-
-_DURATION = re.compile(r"^\s*([-+]?(?:\d+(?:\.\d*)?|\.\d+))\s*(ms|s|min|m|h)?\s*$")
-_DURATION_UNITS: Final[Mapping[str | None, float]] = {
-    "ms": 0.001,
-    "s": 1.0,
-    "m": 60.0,
-    "min": 60.0,
-    "h": 3600.0,
-    None: 1.0,
-}
-_DURATION_HINT = "write 250ms, 1s, 5m, 1h or plain seconds"
-
-
-def parse_duration(value: object) -> float:
-    """Seconds from ``250ms``, ``1s``, ``5m``, ``1h`` or a plain number of seconds; above 0."""
-    if isinstance(value, bool) or not isinstance(value, int | float | str):
-        raise ValueError(f"{_short(value)} is not a duration: {_DURATION_HINT}")
-    if isinstance(value, str):
-        found = _DURATION.match(value)
-        if found is None:
-            raise ValueError(f"{_short(value)} is not a duration: {_DURATION_HINT}")
-        seconds = float(found[1]) * _DURATION_UNITS[found[2]]
-    else:
-        try:
-            seconds = float(value)
-        except OverflowError:
-            seconds = math.inf
-    if not math.isfinite(seconds) or seconds <= 0:
-        raise ValueError(f"{_short(value)} is not a duration above 0: {_DURATION_HINT}")
-    return seconds
 
 
 def _number(value: object) -> float:
@@ -518,7 +488,9 @@ def parse_sim_port(url: str) -> SimPort:
         raise ValueError(f"{url!r}: list the simulated drives, e.g. ?drives=1,2,3")
     drives = _address_list(url, options["drives"])
     delay = options.get("response_delay")
-    return SimPort(protocol, drives, None if delay is None else parse_duration(delay))
+    return SimPort(
+        protocol, drives, None if delay is None else parse_duration(delay, allow_zero=True)
+    )
 
 
 def _sim_options(url: str, query: str) -> dict[str, str]:

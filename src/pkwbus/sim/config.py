@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from typing import Literal
+
+from pkwbus import durations
 
 LagMode = Literal["none", "stale"]
 LAG_MODES: tuple[LagMode, ...] = ("none", "stale")
@@ -86,13 +87,6 @@ class SimFaults:
         return tuple((kind, float(getattr(self, kind))) for kind in FAULT_KINDS)
 
 
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d*)?|\.\d+)\s*(ms|s|m)?\s*$")
-_UNIT = {None: 1.0, "s": 1.0, "ms": 0.001, "m": 60.0}
-
-
 def parse_duration(text: str) -> float:
-    """Seconds from ``3ms``, ``1s``, ``5m`` or plain seconds (``0.25``)."""
-    found = _DURATION.match(text)
-    if found is None:
-        raise ValueError(f"{text!r} is not a duration (write 3ms, 1s, 5m or seconds)")
-    return float(found[1]) * _UNIT[found[2]]
+    """Seconds from ``3ms``, ``1s``, ``5m`` or plain seconds; 0 allowed."""
+    return durations.parse_duration(text, allow_zero=True)
