@@ -1,0 +1,45 @@
+"""Helpers for the deployment tests: free loopback ports, a service config for a simulator."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+# Drives of the test line: name -> bus address.
+DRIVES = {"fan_a": 1, "fan_b": 2}
+# Values set in the simulator (raw, conversion index -2 in the catalog) -> seconds.
+RAMP_RAW = {"fan_a": 1234, "fan_b": 567}
+RAMP_SECONDS = {"fan_a": 12.34, "fan_b": 5.67}
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def service_config(port: str, folder: Path, extra_poll: str = "") -> str:
+    """A `pkwbus run` config: one FC line on ``port``, both drives polling 3-41 and 16-13."""
+    drives = "".join(
+        f"""
+      - name: {name}
+        address: {address}
+        catalog: danfoss-fc
+        poll:
+          - {{parameter: "3-41", every: 250ms}}
+          - {{parameter: "16-13", every: 250ms}}{extra_poll}
+"""
+        for name, address in DRIVES.items()
+    )
+    return f"""\
+listen: 127.0.0.1:9725
+audit_db: {folder / "audit.sqlite"}
+lines:
+  - name: test_line
+    port: {port}
+    protocol: fc
+    baudrate: 19200
+    parity: E
+    timeout: 200ms
+    retries: 2
+    drives:{drives}"""
