@@ -34,8 +34,9 @@ PROMETHEUS = (
 )
 STARTUP = 25.0  # seconds for the service and Prometheus to come up and scrape
 
+# In CI (CI=true) .ci/run installs Prometheus first: a missing binary there is a failure.
 pytestmark = pytest.mark.skipif(
-    not os.access(PROMETHEUS, os.X_OK),
+    not os.access(PROMETHEUS, os.X_OK) and os.environ.get("CI") != "true",
     reason=f"no prometheus binary at {PROMETHEUS}: install the Debian package prometheus"
     " (deploy/check does) or set PKWBUS_PROMETHEUS",
 )
