@@ -44,10 +44,10 @@ KNOWN = (
 def value(fdp: atheris.FuzzedDataProvider) -> float | int | str:
     kind = fdp.ConsumeIntInRange(0, 3)
     if kind == 0:
-        return fdp.ConsumeInt(8)
+        return int(fdp.ConsumeInt(8))
     if kind == 1:
-        return fdp.ConsumeRegularFloat() if fdp.ConsumeBool() else fdp.ConsumeFloat()
-    text = fdp.ConsumeUnicodeNoSurrogates(fdp.ConsumeIntInRange(0, 24))
+        return float(fdp.ConsumeRegularFloat() if fdp.ConsumeBool() else fdp.ConsumeFloat())
+    text = str(fdp.ConsumeUnicodeNoSurrogates(fdp.ConsumeIntInRange(0, 24)))
     if kind == 2:
         return text
     # number-shaped text, with the exponent kept small: a huge exponent is the
