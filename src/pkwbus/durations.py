@@ -7,7 +7,9 @@ import re
 from collections.abc import Mapping
 from typing import Final
 
-_DURATION = re.compile(r"^\s*([-+]?(?:\d+(?:\.\d*)?|\.\d+))\s*(ms|s|min|m|h)?\s*$")
+_DURATION = re.compile(
+    r"^\s*([-+]?(?:[0-9]{1,12}(?:\.[0-9]{0,12})?|\.[0-9]{1,12}))\s*(ms|s|min|m|h)?\s*$"
+)
 _UNITS: Final[Mapping[str | None, float]] = {
     "ms": 0.001,
     "s": 1.0,

@@ -12,13 +12,14 @@ import functools
 import math
 import os
 import re
-from collections.abc import Hashable, Mapping
+from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal, Self
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from pkwbus.yamlfile import YamlError, load_yaml
 
 ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
 Dialect = Literal["fc", "uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"]
@@ -135,9 +136,9 @@ def _source_problem(spec: ParameterSpec, sources: Mapping[str, str]) -> str | No
 
 # --- parameter keys ---------------------------------------------------------
 
-_DANFOSS_KEY = re.compile(r"(\d{1,2})-(\d{2})")
-_PLAIN_KEY = re.compile(r"\d{1,5}")
-_SIEMENS_KEY = re.compile(r"[rRpP](\d{1,5})")
+_DANFOSS_KEY = re.compile(r"([0-9]{1,2})-([0-9]{2})")
+_PLAIN_KEY = re.compile(r"[0-9]{1,5}")
+_SIEMENS_KEY = re.compile(r"[rRpP]([0-9]{1,5})")
 
 
 def _parse_key(text: str) -> int:
@@ -166,35 +167,11 @@ def _parse_key(text: str) -> int:
 # --- YAML -------------------------------------------------------------------
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key written twice in one mapping."""
-
-
-def _construct_mapping(loader: _StrictLoader, node: yaml.MappingNode) -> dict[Hashable, Any]:
-    loader.flatten_mapping(node)
-    mapping: dict[Hashable, Any] = {}
-    for key_node, value_node in node.value:
-        key = loader.construct_object(key_node)
-        if key in mapping:
-            line = key_node.start_mark.line + 1
-            raise CatalogError(f"line {line}: key {key!r} is written twice")
-        mapping[key] = loader.construct_object(value_node)
-    return mapping
-
-
-_StrictLoader.add_constructor(
-    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
-    _construct_mapping,
-)
-
-
 def _read_yaml(text: str, origin: str) -> dict[str, Any]:
     try:
-        data = yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: safe
-    except CatalogError as exc:
+        data = load_yaml(text)
+    except YamlError as exc:
         raise CatalogError(f"{origin}: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise CatalogError(f"{origin}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):
         raise CatalogError(f"{origin}: the file must be a mapping with name, dialect, parameters")
     return data

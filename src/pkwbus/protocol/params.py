@@ -30,10 +30,10 @@ MAX_INDEX: Final = 0xFF
 
 _NOTATION = re.compile(
     r"""^(?:
-        (?P<group>\d{1,2})-(?P<number>\d{2})
-      | (?P<prefix>[rRpP])(?P<siemens>\d{1,5})
-      | (?P<plain>\d{1,5})
-    )(?:\[(?P<index>\d{1,3})\])?$""",
+        (?P<group>[0-9]{1,2})-(?P<number>[0-9]{2})
+      | (?P<prefix>[rRpP])(?P<siemens>[0-9]{1,5})
+      | (?P<plain>[0-9]{1,5})
+    )(?:\[(?P<index>[0-9]{1,3})\])?$""",
     re.VERBOSE,
 )
 _HINT = "write it as 16-13, 1613, r0021 or P7841[2]"
@@ -175,13 +175,22 @@ class Scaling:
 UNSCALED = Scaling()
 
 
+# No parameter value needs more: f32 ends near 3.4e38, its smallest steps near 1e-45.
+MAX_DECIMAL_EXPONENT: Final = 60
+
+
 def _fraction(value: float | int | str) -> Fraction:
+    text = str(value).strip()
+    if len(text) > 100:
+        raise LocalProtocolError(f"{text[:20]}... is not a parameter value (too long)")
     try:
-        number = Decimal(str(value).strip())
+        number = Decimal(text)
     except InvalidOperation:
         raise LocalProtocolError(f"{value!r} is not a number") from None
     if not number.is_finite():
         raise LocalProtocolError(f"{value!r} is not a finite number")
+    if number and abs(number.adjusted()) > MAX_DECIMAL_EXPONENT:
+        raise LocalProtocolError(f"{value!r} is out of any parameter's range")
     return Fraction(number)
 
 
@@ -219,7 +228,10 @@ def encode_value(
     if vtype is ValueType.TEXT:
         raise LocalProtocolError("text values are written as text, not as a number")
     if vtype is ValueType.F32:
-        return _f32_bits(_float(value) / float(scaling.factor))
+        number = _float(value) / float(scaling.factor)
+        if not math.isfinite(number):
+            raise LocalProtocolError(f"{value} is outside the f32 range")
+        return _f32_bits(number)
     number = _fraction(value) / scaling.factor
     if number.denominator != 1 and rounding is Rounding.EXACT:
         step = float(scaling.factor)

@@ -183,11 +183,14 @@ def decode_pke_ind(dialect: Dialect, layout: IndLayout, pke: int, ind: int) -> t
         subindex, other = ind >> 8, ind & 0xFF
     ak = pke >> 12
     if dialect.pnu_bits == 12:
-        pnu = pke & 0xFFF
-    else:
-        pnu = pke & _PNU_MASK_11
-        if dialect.page_index:
-            pnu += PAGE_SIZE * page_multiple(other)
+        return ak, pke & 0xFFF, subindex
+    pnu = pke & _PNU_MASK_11
+    if dialect.page_index:
+        if pnu >= PAGE_SIZE:
+            raise RemoteProtocolError(f"PNU field {pnu} beside a page index (1-1999 allowed)")
+        pnu += PAGE_SIZE * page_multiple(other)
+        if pnu > dialect.max_pnu:
+            raise RemoteProtocolError(f"page index {other:#04x} makes PNU {pnu}, above 65535")
     return ak, pnu, subindex
 
 

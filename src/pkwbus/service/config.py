@@ -38,7 +38,6 @@ from pathlib import Path
 from typing import Annotated, Any, Final, Literal, Protocol, Self
 from urllib.parse import parse_qsl, urlsplit
 
-import yaml
 from pydantic import (
     BaseModel,
     BeforeValidator,
@@ -75,6 +74,7 @@ from pkwbus.protocol.telegram import (
 from pkwbus.protocol.telegram import (
     Protocol as BusProtocol,
 )
+from pkwbus.yamlfile import YamlError, load_yaml
 
 DEFAULT_LISTEN: Final = "127.0.0.1:9725"
 LISTEN_ENV: Final = "PKWBUS_LISTEN"
@@ -834,34 +834,6 @@ class Config(_Model):
 # ---------------------------------------------------------------- loading
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key given twice in one mapping."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
-        seen: dict[Any, yaml.Mark] = {}
-        for key_node, _ in node.value:
-            if key_node.tag == "tag:yaml.org,2002:merge":
-                continue
-            key = self.construct_object(key_node, deep=deep)
-            try:
-                first = seen.setdefault(key, key_node.start_mark)
-            except TypeError:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping",
-                    node.start_mark,
-                    "found a key that is not a plain value",
-                    key_node.start_mark,
-                ) from None
-            if first is not key_node.start_mark:
-                raise yaml.constructor.ConstructorError(
-                    "while constructing a mapping",
-                    node.start_mark,
-                    f"found duplicate key {_short(key)} (first at line {first.line + 1})",
-                    key_node.start_mark,
-                )
-        return super().construct_mapping(node, deep=deep)
-
-
 def load_config(
     path: str | os.PathLike[str],
     *,
@@ -901,27 +873,14 @@ def parse_config(
 
 def _parse_yaml(text: str) -> dict[str, Any]:
     try:
-        data = yaml.load(text, Loader=_UniqueKeyLoader)
-    except yaml.MarkedYAMLError as exc:
-        raise ConfigError([_yaml_problem(exc)]) from None
-    except yaml.YAMLError as exc:
-        raise ConfigError([f"not valid YAML: {exc}"]) from None
-    except (ValueError, OverflowError) as exc:
-        raise ConfigError([f"not valid YAML: {exc}"]) from None
-    except RecursionError:
-        raise ConfigError(["the file nests too deeply"]) from None
+        data = load_yaml(text)
+    except YamlError as exc:
+        raise ConfigError([str(exc)]) from None
     if data is None:
         raise ConfigError(["the file is empty: it needs at least lines:"])
     if not isinstance(data, dict):
         raise ConfigError([f"the top level must be a mapping (key: value), not {_kind(data)}"])
     return data
-
-
-def _yaml_problem(exc: yaml.MarkedYAMLError) -> str:
-    mark = exc.problem_mark or exc.context_mark
-    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-    problem = exc.problem or exc.context or "not valid YAML"
-    return f"{where}{problem}"
 
 
 def _kind(value: object) -> str:
