@@ -3,12 +3,14 @@
 A write is refused before anything is sent unless: the bearer token is
 right (compared in constant time; no token configured = no writes), the
 parameter is in the drive's ``writable`` list, and the value passes the
-type, range and limits of the catalog and the configuration. Every attempt,
-refused ones included, lands in the audit log.
+type, range and limits of the catalog and the configuration. A value the raw
+number cannot represent exactly (1.234 s on a 0.01 s parameter) is refused,
+never rounded. Every attempt, refused ones included, lands in the audit log.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hmac
 from dataclasses import dataclass
 from typing import Any
@@ -18,7 +20,7 @@ from pkwbus.master.transaction import Answered, LineFailed, Rejected
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter
+from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
 from pkwbus.service.audit import AuditEntry, AuditLog, token_id
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -83,18 +85,19 @@ class ParameterService:
     async def write(
         self, drive: str, parameter: str, order: WriteOrder, caller: Caller
     ) -> dict[str, Any]:
-        entry, ref = self._locate(drive, parameter, order.index)
         audit = AuditEntry(
             client=caller.client,
             drive=drive,
-            parameter=ref.name,
-            index=ref.index or 0,
+            parameter=parameter,
+            index=order.index or 0,
             outcome="pending",
             store=order.store.value,
             new_value=order.value,
         )
         try:
             audit.token_id = self._authenticate(caller)
+            entry, ref = self._locate(drive, parameter, order.index)
+            audit.parameter, audit.index = ref.name, ref.index or 0
             if not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
             fmt = entry.format_of(ref)
@@ -112,6 +115,23 @@ class ParameterService:
             return self._write_body(ref, fmt, order, request, telegram, audit, None)
         row = self._record(audit)
         return await self._perform(entry, ref, fmt, order, request, telegram, audit, row)
+
+    def refuse_malformed(self, drive: str, parameter: str, caller: Caller, problem: str) -> None:
+        """Audit a write whose body did not validate (nothing was sent)."""
+        identity = None
+        with contextlib.suppress(ApiError):
+            identity = self._authenticate(caller)
+        self._record(
+            AuditEntry(
+                client=caller.client,
+                drive=drive,
+                parameter=parameter,
+                index=0,
+                outcome="invalid",
+                token_id=identity,
+                detail=problem,
+            )
+        )
 
     async def _perform(
         self,
@@ -161,9 +181,11 @@ class ParameterService:
                 if not isinstance(order.value, str):
                     raise LocalProtocolError(f"{ref.name} is a text parameter: send a string")
                 return pkw.write_text(d, ref.pnu, encode_text(order.value), ref.index or 0)
+            if isinstance(order.value, bool):
+                raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
             if isinstance(order.value, str):
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
-            raw, width = fmt.encode(order.value)
+            raw, width = fmt.encode(order.value, Rounding.EXACT)
             request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
             entry.target.telegram(request)
         except LocalProtocolError as exc:
