@@ -10,7 +10,7 @@ import pytest
 
 from pkwbus.cli import main
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
-from pkwbus.service.audit import AuditLog, token_id
+from pkwbus.service.audit import AuditEntry, AuditLog, as_dict, token_id
 from tests.api.conftest import AUTH, TOKEN, service
 
 WRONG = "Bearer guess-of-the-token-XYZ"
@@ -157,3 +157,16 @@ async def test_concurrent_writes_to_different_drives(tmp_path: Path) -> None:
         assert all(r.outcome == "ok" for r in rows)
         assert len({r.id for r in rows}) == len(targets)
         assert sorted(r.json()["audit_id"] for r in results) == sorted(r.id for r in rows)
+
+
+def test_non_finite_values_stay_readable_as_json(tmp_path: Path) -> None:
+    """A NaN kept as a float made GET /api/v1/audit fail (JSON has no NaN)."""
+    log = AuditLog(tmp_path / "a.sqlite")
+    try:
+        for value in (float("nan"), float("inf"), -float("inf")):
+            log.record(AuditEntry("c", "d", "p", 0, "invalid", new_value=value, old_value=value))
+        rows = log.latest(10)
+    finally:
+        log.close()
+    assert [r.new_value for r in rows] == ["-inf", "inf", "nan"]
+    json.dumps([as_dict(r) for r in rows], allow_nan=False)
