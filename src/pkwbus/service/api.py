@@ -9,7 +9,7 @@ from fastapi import FastAPI, Header, Query, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
 
 from pkwbus import __version__
 from pkwbus.protocol import pkw
@@ -53,9 +53,12 @@ class Readiness(BaseModel):
 
 
 class WriteBody(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    value: float | int | str = Field(description="engineering value, scaled by the catalog")
+    # Strict: true/false is not 1/0, and "10" stays a string (refused for a number).
+    value: StrictInt | StrictFloat | StrictStr = Field(
+        description="engineering value, scaled by the catalog; a string for text parameters"
+    )
     index: int | None = Field(default=None, ge=0, le=255)
     store: pkw.Store = pkw.Store.RAM
     verify: bool = Field(default=False, description="read the parameter back after writing")
@@ -110,7 +113,12 @@ def create_app(
             f"{'.'.join(str(x) for x in e.get('loc', ()))}: {e.get('msg', '')}"
             for e in exc.errors()
         ]
-        body = {"error": {"kind": "invalid_request", "message": "; ".join(problems)}}
+        message = "; ".join(problems)
+        params = request.path_params
+        if request.method == "PUT" and "drive" in params and "parameter" in params:
+            caller = Caller(_client(request), request.headers.get("authorization"))
+            service.refuse_malformed(params["drive"], params["parameter"], caller, message)
+        body = {"error": {"kind": "invalid_request", "message": message}}
         return JSONResponse(body, status_code=422)
 
     @app.middleware("http")
@@ -144,8 +152,8 @@ def create_app(
         authorization: str | None = Header(default=None),
     ) -> dict[str, Any]:
         order = WriteOrder(body.value, body.index, body.store, body.verify, body.dry_run)
-        client = request.client.host if request.client else "unknown"
-        return await service.write(drive, parameter, order, Caller(client, authorization))
+        caller = Caller(_client(request), authorization)
+        return await service.write(drive, parameter, order, caller)
 
     @app.get("/api/v1/audit")
     async def audit_log(limit: int = Query(default=100, ge=1, le=10000)) -> list[dict[str, Any]]:
@@ -176,6 +184,10 @@ def create_app(
         return [drive_view(runtime, name) for name in runtime.drives]
 
     return app
+
+
+def _client(request: Request) -> str:
+    return request.client.host if request.client else "unknown"
 
 
 def drive_view(runtime: Runtime, name: str) -> DriveView:

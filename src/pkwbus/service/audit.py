@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import sqlite3
 import threading
 import time
@@ -129,7 +130,12 @@ class AuditLog:
 
 
 def _text(value: Any) -> str | None:
-    return None if value is None else json.dumps(value)
+    """JSON of a value; a non-finite number is kept as its name ("nan"), which JSON lacks."""
+    if value is None:
+        return None
+    if isinstance(value, float) and not math.isfinite(value):
+        return json.dumps(str(value))
+    return json.dumps(value)
 
 
 def _value(text: str | None) -> Any:

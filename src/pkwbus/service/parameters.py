@@ -3,22 +3,27 @@
 A write is refused before anything is sent unless: the bearer token is
 right (compared in constant time; no token configured = no writes), the
 parameter is in the drive's ``writable`` list, and the value passes the
-type, range and limits of the catalog and the configuration. Every attempt,
-refused ones included, lands in the audit log.
+type, range and limits of the catalog and the configuration. A value the raw
+number cannot represent exactly (1.234 s on a 0.01 s parameter) is refused,
+never rounded. Every attempt, refused ones included, lands in the audit log;
+once a write is queued it runs to its end and its row is completed even if
+the HTTP client goes away.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import hmac
 from dataclasses import dataclass
 from typing import Any
 
 from pkwbus.master.jobs import Cancelled, JobKind, JobResult
 from pkwbus.master.transaction import Answered, LineFailed, Rejected
-from pkwbus.master.values import ParameterFormat, Value
+from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter
+from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
 from pkwbus.service.audit import AuditEntry, AuditLog, token_id
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -54,6 +59,7 @@ class ParameterService:
         self.runtime = runtime
         self.audit = audit
         self._token = token
+        self._running: set[asyncio.Future[dict[str, Any]]] = set()
 
     # -------------------------------------------------------------- read
 
@@ -83,18 +89,19 @@ class ParameterService:
     async def write(
         self, drive: str, parameter: str, order: WriteOrder, caller: Caller
     ) -> dict[str, Any]:
-        entry, ref = self._locate(drive, parameter, order.index)
         audit = AuditEntry(
             client=caller.client,
             drive=drive,
-            parameter=ref.name,
-            index=ref.index or 0,
+            parameter=parameter,
+            index=order.index or 0,
             outcome="pending",
             store=order.store.value,
             new_value=order.value,
         )
         try:
             audit.token_id = self._authenticate(caller)
+            entry, ref = self._locate(drive, parameter, order.index)
+            audit.parameter, audit.index = ref.name, ref.index or 0
             if not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
             fmt = entry.format_of(ref)
@@ -111,7 +118,31 @@ class ParameterService:
             self._record(audit)
             return self._write_body(ref, fmt, order, request, telegram, audit, None)
         row = self._record(audit)
-        return await self._perform(entry, ref, fmt, order, request, telegram, audit, row)
+        # Once queued, the write runs to its end and its audit row is completed even
+        # when the HTTP client goes away: the request may reach the drive regardless.
+        task = asyncio.ensure_future(
+            self._perform(entry, ref, fmt, order, request, telegram, audit, row)
+        )
+        self._running.add(task)
+        task.add_done_callback(self._running.discard)
+        return await asyncio.shield(task)
+
+    def refuse_malformed(self, drive: str, parameter: str, caller: Caller, problem: str) -> None:
+        """Audit a write whose body did not validate (nothing was sent)."""
+        identity = None
+        with contextlib.suppress(ApiError):
+            identity = self._authenticate(caller)
+        self._record(
+            AuditEntry(
+                client=caller.client,
+                drive=drive,
+                parameter=parameter,
+                index=0,
+                outcome="invalid",
+                token_id=identity,
+                detail=problem,
+            )
+        )
 
     async def _perform(
         self,
@@ -124,7 +155,7 @@ class ParameterService:
         audit: AuditEntry,
         row: int | None,
     ) -> dict[str, Any]:
-        old = await self._try_read(entry, ref, fmt)
+        old = (await self._try_read(entry, ref, fmt)).value
         audit.old_value = old
         self._update(row, old_value=old)
         result = await self.runtime.submit(
@@ -134,9 +165,13 @@ class ParameterService:
         verified: bool | None = None
         if outcome == "ok" and order.verify:
             back = await self._try_read(entry, ref, fmt)
-            verified = back is not None and _same(back, result.value)
-            if not verified:
-                outcome, detail = "mismatch", f"read back {back!r}"
+            if isinstance(back.outcome, Answered):
+                verified = back.value == result.value if request.text else back.raw == request.value
+                if not verified:
+                    outcome, detail = "mismatch", f"read back {back.value!r} (raw {back.raw})"
+            else:
+                verified = False
+                outcome, detail = "unverified", "the read-back had no answer"
         self._update(row, outcome=outcome, fault=fault, detail=detail)
         self._raise_for(result)
         body = self._write_body(ref, fmt, order, request, telegram, audit, result)
@@ -145,12 +180,15 @@ class ParameterService:
 
     async def _try_read(
         self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat
-    ) -> Value | None:
+    ) -> JobResult:
+        """A read whose failure is not an error: the result, with no value when unanswered."""
         request = self._read_request(entry, ref, fmt)
         result = await self.runtime.submit(
             entry.name, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
         )
-        return result.value if isinstance(result.outcome, Answered) else None
+        if not isinstance(result.outcome, Answered):
+            return JobResult(result.outcome)
+        return result
 
     def _write_request(
         self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat, order: WriteOrder
@@ -161,9 +199,11 @@ class ParameterService:
                 if not isinstance(order.value, str):
                     raise LocalProtocolError(f"{ref.name} is a text parameter: send a string")
                 return pkw.write_text(d, ref.pnu, encode_text(order.value), ref.index or 0)
+            if isinstance(order.value, bool):
+                raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
             if isinstance(order.value, str):
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
-            raw, width = fmt.encode(order.value)
+            raw, width = fmt.encode(order.value, Rounding.EXACT)
             request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
             entry.target.telegram(request)
         except LocalProtocolError as exc:
@@ -276,9 +316,3 @@ def _audit_outcome(result: JobResult) -> tuple[str, int | None, str | None]:
         note = f"; the request went out {sent} times and may have been applied" if sent else ""
         return "cancelled", None, outcome.reason + note
     return "timeout", None, getattr(outcome, "reason", None)
-
-
-def _same(a: Value, b: Value | None) -> bool:
-    if isinstance(a, float) or isinstance(b, float):
-        return b is not None and abs(float(a) - float(b)) <= 1e-9 * max(1.0, abs(float(a)))
-    return a == b

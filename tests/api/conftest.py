@@ -1,0 +1,249 @@
+"""The HTTP API over the real service graph: simulator on TCP, build_runtime, FastAPI app.
+
+``service()`` writes a configuration whose lines point at simulator TCP ends,
+builds the runtime with :func:`build_runtime`, starts it and serves the app
+to an ``httpx.AsyncClient`` through ``ASGITransport`` in the same loop. A
+:class:`Recorder` sees every PKW request a simulated drive executes, so a
+test can prove that a refused write sent nothing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import AsyncIterator, Callable
+from contextlib import AsyncExitStack, asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from pkwbus.protocol.pkw import PkwRequest, PkwResponse
+from pkwbus.service.api import create_app
+from pkwbus.service.audit import AuditLog
+from pkwbus.service.build import build_runtime
+from pkwbus.service.config import Config, parse_config
+from pkwbus.service.runtime import Runtime
+from pkwbus.sim import SimFaults, SimTiming, Simulator
+
+TOKEN = "s3cret-Write-Token-0123456789"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+FC_DRIVES = ("fan1", "fan2", "fan3")
+
+
+@dataclass
+class Recorder:
+    """Every PKW request each simulated drive executed, decoded, in order."""
+
+    requests: list[tuple[int, PkwRequest]] = field(default_factory=list)
+    # called after a request is executed: (address, request, response) -> None
+    after: list[Callable[[int, PkwRequest, PkwResponse], None]] = field(default_factory=list)
+
+    def attach(self, sim: Simulator) -> None:
+        for address, drive in sim.drives.items():
+            params = drive.params
+            original = params.execute
+
+            def execute(
+                req: PkwRequest,
+                _address: int = address,
+                _original: Callable[[PkwRequest], PkwResponse] = original,
+            ) -> PkwResponse:
+                self.requests.append((_address, req))
+                resp = _original(req)
+                for hook in self.after:
+                    hook(_address, req, resp)
+                return resp
+
+            params.execute = execute  # type: ignore[method-assign]
+
+    def writes(self, address: int | None = None, pnu: int | None = None) -> list[PkwRequest]:
+        return [
+            r
+            for a, r in self.requests
+            if r.is_write and (address is None or a == address) and (pnu is None or r.pnu == pnu)
+        ]
+
+    def for_pnu(self, address: int, pnu: int) -> list[PkwRequest]:
+        return [r for a, r in self.requests if a == address and r.pnu == pnu]
+
+
+@dataclass
+class Service:
+    sims: dict[str, Simulator]
+    recorder: Recorder
+    config: Config
+    runtime: Runtime
+    audit: AuditLog | None
+    audit_path: Path
+    client: httpx.AsyncClient
+    app: Any
+
+    @property
+    def sim(self) -> Simulator:
+        return self.sims["fc"]
+
+    async def put(
+        self,
+        drive: str,
+        parameter: str,
+        body: dict[str, Any],
+        headers: dict[str, str] | None = None,
+    ) -> httpx.Response:
+        return await self.client.put(
+            f"/api/v1/drives/{drive}/parameters/{parameter}",
+            json=body,
+            headers=AUTH if headers is None else headers,
+        )
+
+
+def line_yaml(
+    name: str,
+    url: str,
+    protocol: str,
+    drives: list[dict[str, Any]],
+    *,
+    timeout: float = 0.1,
+    retries: int = 1,
+) -> str:
+    lines = [
+        f"  - name: {name}",
+        f"    port: {url}",
+        f"    protocol: {protocol}",
+        "    baudrate: 115200",
+        f"    timeout: {timeout}",
+        f"    retries: {retries}",
+        "    drives:",
+    ]
+    for d in drives:
+        lines.append(f"      - name: {d['name']}")
+        lines.append(f"        address: {d['address']}")
+        lines.append(f"        catalog: {d['catalog']}")
+        polls = d.get("poll", [])
+        if polls:
+            lines.append("        poll:")
+            lines += [f'          - {{parameter: "{p}", every: {e}}}' for p, e in polls]
+        writable = ", ".join(f'"{w}"' for w in d.get("writable", []))
+        lines.append(f"        writable: [{writable}]")
+    return "\n".join(lines)
+
+
+def fc_drives(
+    polls: list[tuple[str, str]] | None = None, writable: list[str] | None = None
+) -> list[dict[str, Any]]:
+    polls = [("16-13", "50ms")] if polls is None else polls
+    writable = ["3-41", "3-42", "1-20", "4-14"] if writable is None else writable
+    return [
+        {
+            "name": name,
+            "address": i + 1,
+            "catalog": "danfoss-fc",
+            "poll": polls,
+            "writable": writable,
+        }
+        for i, name in enumerate(FC_DRIVES)
+    ]
+
+
+USS_DRIVES = [
+    {
+        "name": "pump1",
+        "address": 1,
+        "catalog": "siemens-g120",
+        "poll": [("r0021", "100ms")],
+        "writable": ["p1120", "p1121"],
+    }
+]
+
+
+@asynccontextmanager
+async def service(
+    tmp_path: Path,
+    *,
+    token: str | None = TOKEN,
+    fc: list[dict[str, Any]] | None = None,
+    uss: list[dict[str, Any]] | None = None,
+    timing: SimTiming | None = None,
+    faults: SimFaults | None = None,
+    line_timeout: float = 0.1,
+    retries: int = 1,
+    audit: bool = True,
+) -> AsyncIterator[Service]:
+    """A running service: simulators, runtime, app and client; stopped on exit."""
+    fc = fc_drives() if fc is None else fc
+    timing = timing or SimTiming(response_delay=0.002)
+    recorder = Recorder()
+    async with AsyncExitStack() as stack:
+        sims: dict[str, Simulator] = {}
+        blocks = []
+        for protocol, drives, catalog in (("fc", fc, "danfoss-fc"), ("uss", uss, "siemens-g120")):
+            if not drives:
+                continue
+            sim = Simulator(
+                protocol,
+                [d["address"] for d in drives],
+                timing=timing,
+                faults=faults,
+                catalog=catalog,
+                seed=11,
+            )
+            recorder.attach(sim)
+            end = await sim.serve_tcp("127.0.0.1", 0)
+            stack.push_async_callback(end.close)
+            sims[protocol] = sim
+            blocks.append(
+                line_yaml(
+                    f"line_{protocol}",
+                    end.url,
+                    protocol,
+                    drives,
+                    timeout=line_timeout,
+                    retries=retries,
+                )
+            )
+        audit_path = tmp_path / "audit.sqlite"
+        text = "\n".join(
+            [
+                "listen: 127.0.0.1:9725",
+                f"audit_db: {audit_path}",
+                "api:",
+                "  write_token_env: TEST_PKWBUS_TOKEN",
+                "lines:",
+                *blocks,
+            ]
+        )
+        env = {"TEST_PKWBUS_TOKEN": token} if token is not None else {}
+        config = parse_config(text, environ=env)
+        runtime = await build_runtime(config)
+        await runtime.start()
+        stack.push_async_callback(runtime.stop)
+        await wait_ready(runtime)
+        log = AuditLog(config.audit_db) if audit else None
+        if log is not None:
+            stack.callback(log.close)
+        app = create_app(runtime, audit=log, write_token=config.write_token(env))
+        client = httpx.AsyncClient(
+            transport=httpx.ASGITransport(app=app), base_url="http://pkwbus.test", timeout=30.0
+        )
+        stack.push_async_callback(client.aclose)
+        yield Service(sims, recorder, config, runtime, log, audit_path, client, app)
+
+
+async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
+    """Until every line's port is open (generous: the machine may be loaded)."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while loop.time() < end:
+        lines = runtime.snapshot.lines
+        if lines and all(lines.values()) and len(lines) == len(runtime.schedulers):
+            return
+        await asyncio.sleep(0.01)
+    raise AssertionError(f"lines not up after {timeout} s: {dict(runtime.snapshot.lines)}")
+
+
+@pytest.fixture
+def caplog_all(caplog: pytest.LogCaptureFixture) -> pytest.LogCaptureFixture:
+    caplog.set_level(logging.DEBUG)
+    return caplog

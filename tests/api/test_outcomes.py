@@ -1,0 +1,72 @@
+"""What the drive and the line make of a write: 409 with the drive's fault, 504 without answer."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+from tests.api.conftest import service
+
+
+async def test_not_while_running_is_409_with_fault_17(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        drive = svc.sim.drives[1]
+        assert drive.running
+        before = drive.value(120)
+        r = await svc.put("fan1", "1-20", {"value": 7500})  # 7.5 kW, in W
+        assert r.status_code == 409, r.text
+        error = r.json()["error"]
+        assert error["kind"] == "rejected"
+        assert error["fault"] == 17
+        assert error["text"]
+        assert drive.value(120) == before
+        assert len(svc.recorder.writes(1, 120)) == 1  # sent once: a rejection is not retried
+        assert svc.audit is not None
+        (row,) = svc.audit.latest(5)
+        assert (row.outcome, row.fault, row.raw_value) == ("rejected", 17, 750)
+        assert row.old_value == before * 10
+        assert row.detail == error["text"]
+
+
+async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path) -> None:
+    # the catalog gives 3-41 no maximum; the drive's is 3600 s
+    async with service(tmp_path) as svc:
+        r = await svc.put("fan1", "3-41", {"value": 5000})
+        assert r.status_code == 409, r.text
+        assert r.json()["error"]["fault"] == 2
+        assert svc.sim.drives[1].value(341) == 500
+        assert svc.audit is not None
+        assert svc.audit.latest(1)[0].outcome == "rejected"
+
+
+async def test_dead_drive_is_504(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        svc.sim.kill(2)
+        r = await svc.put("fan2", "3-41", {"value": 20})
+        assert r.status_code == 504, r.text
+        assert r.json()["error"]["kind"] == "timeout"
+        assert svc.audit is not None
+        (row,) = svc.audit.latest(5)
+        assert row.outcome == "timeout"
+        assert row.old_value is None  # the pre-read had no answer either
+        assert row.raw_value == 2000
+        # the other drives are not disturbed
+        r = await svc.put("fan1", "3-41", {"value": 20})
+        assert r.status_code == 200
+
+
+async def test_a_write_whose_client_goes_away_is_still_audited(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        assert svc.audit is not None
+        audit = svc.audit
+        task = asyncio.create_task(svc.put("fan1", "3-42", {"value": 7}))
+        loop = asyncio.get_running_loop()
+        end = loop.time() + 20
+        while not audit.latest(1) and loop.time() < end:
+            await asyncio.sleep(0)
+        task.cancel()
+        while audit.latest(1)[0].outcome == "pending" and loop.time() < end:
+            await asyncio.sleep(0.01)
+        row = audit.latest(1)[0]
+        assert row.outcome == "ok", row
+        assert svc.sim.drives[1].value(342) == 700

@@ -1,0 +1,123 @@
+"""The real thing: `pkwbus run` in a subprocess on a loopback port, over a simulator's TCP end."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import socket
+import sys
+from pathlib import Path
+
+import httpx
+
+from pkwbus.sim import SimTiming, Simulator
+from tests.api.conftest import TOKEN, line_yaml
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), catalog="danfoss-fc")
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    port = free_port()
+    drives = [
+        {
+            "name": f"fan{a}",
+            "address": a,
+            "catalog": "danfoss-fc",
+            "poll": [("16-13", "100ms")],
+            "writable": ["3-41"],
+        }
+        for a in (1, 2)
+    ]
+    config = tmp_path / "pkwbus.yaml"
+    config.write_text(
+        "\n".join(
+            [
+                f"listen: 127.0.0.1:{port}",
+                "audit_db: var/audit.sqlite",  # relative: to the working directory
+                "lines:",
+                line_yaml("line1", end.url, "fc", drives, timeout=0.2, retries=2),
+            ]
+        )
+    )
+    env = {**os.environ, "PKWBUS_WRITE_TOKEN": TOKEN}
+    env.pop("PKWBUS_LISTEN", None)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "pkwbus",
+        "--debug",
+        "run",
+        "--config",
+        str(config),
+        cwd=tmp_path,
+        env=env,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    try:
+        async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + 60
+            while True:
+                assert proc.returncode is None, "pkwbus run ended early"
+                try:
+                    if (await client.get("/readyz")).status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                assert loop.time() < deadline, "pkwbus run did not become ready"
+                await asyncio.sleep(0.1)
+            url = "/api/v1/drives/fan2/parameters/3-41"
+            r = await client.put(
+                url, json={"value": 17.5}, headers={"Authorization": f"Bearer {TOKEN}"}
+            )
+            assert r.status_code == 200, r.text
+            assert sim.drives[2].value(341) == 1750
+            r = await client.put(url, json={"value": 1}, headers={"Authorization": "Bearer no"})
+            assert r.status_code == 403
+            r = await client.get("/api/v1/audit", params={"limit": 5})
+            assert [e["outcome"] for e in r.json()] == ["refused", "ok"]
+            r = await client.get("/metrics")
+            assert "pkwbus_jobs_total" in r.text
+    finally:
+        if proc.returncode is None:
+            proc.send_signal(signal.SIGTERM)
+        out, err = await asyncio.wait_for(proc.communicate(), 60)
+        await end.close()
+    assert proc.returncode == 0, err.decode()
+    logs = (out + err).decode()
+    assert "writes allowed with the token" in logs
+    assert TOKEN not in logs
+    db = tmp_path / "var" / "audit.sqlite"
+    assert db.exists()
+    for f in db.parent.iterdir():
+        assert TOKEN.encode() not in f.read_bytes()
+    audit = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "pkwbus",
+        "audit",
+        "--config",
+        str(config),
+        "--json",
+        cwd=tmp_path,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    out, err = await asyncio.wait_for(audit.communicate(), 60)
+    assert audit.returncode == 0, err.decode()
+    rows = json.loads(out)
+    assert [(e["outcome"], e["new_value"], e["raw_value"]) for e in rows] == [
+        ("refused", 1, None),
+        ("ok", 17.5, 1750),
+    ]
+    assert rows[1]["old_value"] == 5
+    assert rows[1]["token_id"].startswith("sha256:")

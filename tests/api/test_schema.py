@@ -1,0 +1,164 @@
+"""Schemathesis against the OpenAPI schema of the running service: no 5xx, ever.
+
+The service (simulators, runtime, app) runs in its own event loop in a
+thread, served by uvicorn on a loopback port; schemathesis generates
+requests from the schema (valid and invalid ones) and sends them over HTTP.
+Some path parameters and the token are swapped for real ones, so that the
+requests also reach the checks and the bus, not only the 404 and 401 paths.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import hypothesis
+import requests
+import schemathesis
+import uvicorn
+from hypothesis import strategies as st
+from schemathesis.checks import not_a_server_error
+
+from pkwbus.service.api import create_app
+from tests.api.conftest import AUTH, USS_DRIVES, service
+
+BUDGET = 45.0  # seconds for the whole run, checked as it goes
+DRIVES = [None, "fan1", "fan2", "pump1"]
+PARAMETERS = [None, "3-41", "3-42", "1-20", "16-13", "15-30", "15-30[3]", "p1120", "r0021"]
+
+
+class Running:
+    """The service in a thread of its own: started, served on ``url``, stopped."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.loop = asyncio.new_event_loop()
+        self.ready = threading.Event()
+        self.stop = threading.Event()
+        self.url = ""
+        self.app: Any = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="service", daemon=True)
+
+    def _run(self) -> None:
+        try:
+            self.loop.run_until_complete(self._main())
+        except BaseException as exc:  # reported to the test
+            self.error = exc
+            self.ready.set()
+
+    async def _main(self) -> None:
+        async with service(self.tmp_path, uss=USS_DRIVES) as svc:
+            self.app = create_app(svc.runtime, audit=svc.audit, write_token=AUTH_TOKEN)
+            sock = socket.socket()
+            sock.bind(("127.0.0.1", 0))
+            host, port = sock.getsockname()
+            config = uvicorn.Config(
+                self.app, log_config=None, access_log=False, lifespan="off", log_level="error"
+            )
+            server = uvicorn.Server(config)
+            task = asyncio.create_task(server.serve(sockets=[sock]))
+            while not server.started:
+                await asyncio.sleep(0.01)
+            self.url = f"http://{host}:{port}"
+            self.ready.set()
+            while not self.stop.is_set():
+                await asyncio.sleep(0.05)
+            server.should_exit = True
+            await task
+
+
+AUTH_TOKEN = AUTH["Authorization"].removeprefix("Bearer ")
+
+
+@contextlib.contextmanager
+def running(tmp_path: Path) -> Iterator[Running]:
+    svc = Running(tmp_path)
+    svc.thread.start()
+    assert svc.ready.wait(60), "the service did not start"
+    if svc.error is not None:
+        raise svc.error
+    try:
+        yield svc
+    finally:
+        svc.stop.set()
+        svc.thread.join(30)
+
+
+def test_no_server_errors(tmp_path: Path) -> None:
+    with running(tmp_path) as svc:
+        schema = schemathesis.openapi.from_dict(svc.app.openapi())
+        operations = [result.ok() for result in schema.get_all_operations()]
+        assert {op.path for op in operations} >= {
+            "/api/v1/drives/{drive}/parameters/{parameter}",
+            "/api/v1/audit",
+            "/healthz",
+        }
+        session = requests.Session()
+        deadline = time.monotonic() + BUDGET
+        seen: dict[str, set[int]] = {}
+        for op in operations:
+            for mode in (
+                schemathesis.GenerationMode.POSITIVE,
+                schemathesis.GenerationMode.NEGATIVE,
+            ):
+                check = make_check(op, mode, svc.url, session, deadline, seen)
+                try:
+                    check()
+                except hypothesis.errors.Unsatisfiable:
+                    # nothing in the operation can be made invalid (GET /healthz)
+                    assert mode is schemathesis.GenerationMode.NEGATIVE
+        print(
+            f"\n{time.monotonic() - deadline + BUDGET:.1f} s; statuses seen:",
+            {k: sorted(v) for k, v in seen.items()},
+        )
+        assert svc.error is None
+        put = seen["PUT /api/v1/drives/{drive}/parameters/{parameter}"]
+        assert {200, 401, 403, 404, 422} <= put, put
+        assert time.monotonic() < deadline + 30
+
+
+def make_check(
+    op: Any,
+    mode: schemathesis.GenerationMode,
+    url: str,
+    session: requests.Session,
+    deadline: float,
+    seen: dict[str, set[int]],
+) -> Any:
+    name = f"{op.method.upper()} {op.path}"
+
+    @hypothesis.settings(
+        max_examples=120 if op.method.upper() == "PUT" else 25,
+        deadline=None,
+        database=None,
+        derandomize=True,
+        suppress_health_check=list(hypothesis.HealthCheck),
+        phases=[hypothesis.Phase.generate],
+    )
+    @hypothesis.given(
+        case=op.as_strategy(mode),
+        drive=st.sampled_from(DRIVES),
+        parameter=st.sampled_from(PARAMETERS),
+        authed=st.booleans(),
+    )
+    def check(case: Any, drive: str | None, parameter: str | None, authed: bool) -> None:
+        if time.monotonic() > deadline:
+            return
+        if case.path_parameters is not None:
+            if drive and "drive" in case.path_parameters:
+                case.path_parameters["drive"] = drive
+            if parameter and "parameter" in case.path_parameters:
+                case.path_parameters["parameter"] = parameter
+        headers = {"Authorization": f"Bearer {AUTH_TOKEN}"} if authed else None
+        response = case.call(base_url=url, session=session, headers=headers, timeout=30)
+        seen.setdefault(name, set()).add(response.status_code)
+        case.validate_response(response, checks=[not_a_server_error])
+
+    return check
