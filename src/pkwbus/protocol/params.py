@@ -228,10 +228,10 @@ def encode_value(
     if vtype is ValueType.TEXT:
         raise LocalProtocolError("text values are written as text, not as a number")
     if vtype is ValueType.F32:
-        number = _float(value) / float(scaling.factor)
-        if not math.isfinite(number):
+        single = _float(value) / float(scaling.factor)
+        if not math.isfinite(single):
             raise LocalProtocolError(f"{value} is outside the f32 range")
-        return _f32_bits(number)
+        return _f32_bits(single)
     number = _fraction(value) / scaling.factor
     if number.denominator != 1 and rounding is Rounding.EXACT:
         step = float(scaling.factor)
