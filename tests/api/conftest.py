@@ -130,6 +130,10 @@ def line_yaml(
     return "\n".join(lines)
 
 
+# A write's old value is the latest polled one: tests of old values poll these.
+POLLED_WRITABLES = [("16-13", "50ms"), ("3-41", "50ms"), ("1-20", "50ms")]
+
+
 def fc_drives(
     polls: list[tuple[str, str]] | None = None, writable: list[str] | None = None
 ) -> list[dict[str, Any]]:
@@ -232,12 +236,15 @@ async def service(
 
 
 async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
-    """Until every line's port is open (generous: the machine may be loaded)."""
+    """Until every line's port is open and every polled parameter has a first value
+    (generous: the machine may be loaded)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout
+    polled = {(d.name, p.parameter, p.index) for d in runtime.drives.values() for p in d.polls}
     while loop.time() < end:
         lines = runtime.snapshot.lines
-        if lines and all(lines.values()) and len(lines) == len(runtime.schedulers):
+        up = lines and all(lines.values()) and len(lines) == len(runtime.schedulers)
+        if up and polled <= runtime.snapshot.readings.keys():
             return
         await asyncio.sleep(0.01)
     raise AssertionError(f"lines not up after {timeout} s: {dict(runtime.snapshot.lines)}")

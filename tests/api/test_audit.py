@@ -11,7 +11,7 @@ import pytest
 from pkwbus.cli import main
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.service.audit import AuditEntry, AuditLog, as_dict, token_id
-from tests.api.conftest import AUTH, TOKEN, service
+from tests.api.conftest import AUTH, POLLED_WRITABLES, TOKEN, fc_drives, service
 
 WRONG = "Bearer guess-of-the-token-XYZ"
 
@@ -19,7 +19,7 @@ WRONG = "Bearer guess-of-the-token-XYZ"
 async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
     """Every kind of attempt once; returns (expected outcome, status) in order."""
     done: list[tuple[str, int]] = []
-    async with service(tmp_path) as svc:
+    async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
         drive3 = svc.sim.drives[3]
 
         def clamp(address: int, req: PkwRequest, resp: PkwResponse) -> None:
@@ -84,7 +84,7 @@ async def test_one_row_per_attempt_kept_across_restart(
     eeprom = rows[10]
     assert (eeprom.store, eeprom.raw_value, eeprom.old_value) == ("eeprom", 3000, 5)
     timeout = rows[11]
-    assert timeout.old_value is None and timeout.raw_value == 100
+    assert timeout.old_value == 5 and timeout.raw_value == 100  # polled before it died
     # neither the token nor a guess at it is kept or logged
     for f in tmp_path.glob("audit.sqlite*"):
         data = f.read_bytes()

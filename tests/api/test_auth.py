@@ -1,7 +1,7 @@
 """Who may write: (no token configured | no header | wrong token | right token) x (writable or not).
 
 Every refused write must leave the drive untouched: no request for the
-parameter reached it (not even the pre-read of the old value) and its value
+parameter reached it and its value
 is unchanged. Polls run meanwhile, so the check is per parameter.
 """
 

@@ -1,9 +1,9 @@
 """Write latency while polls saturate the line.
 
 Design goal: a write waits at most for the exchange in flight. A write over
-the API is two exchanges of its own (the pre-read of the old value, then
-the write, both ahead of every poll), so the expected figure is about 2-3
-exchange times whatever the poll load. The bound asserted is loose (the
+the API is one exchange of its own (its old value is the latest polled one),
+ahead of every poll, so the expected figure is under 2 exchange times
+whatever the poll load. The bound asserted is loose (the
 machine is shared); the figures are printed (pytest -s).
 """
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
-from tests.api.conftest import service
+from tests.api.conftest import POLLED_WRITABLES, fc_drives, service
 
 
 async def test_not_while_running_is_409_with_fault_17(tmp_path: Path) -> None:
-    async with service(tmp_path) as svc:
+    async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
         drive = svc.sim.drives[1]
         assert drive.running
         before = drive.value(120)
@@ -40,7 +40,7 @@ async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path)
 
 
 async def test_dead_drive_is_504(tmp_path: Path) -> None:
-    async with service(tmp_path) as svc:
+    async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
         svc.sim.kill(2)
         r = await svc.put("fan2", "3-41", {"value": 20})
         assert r.status_code == 504, r.text
@@ -48,7 +48,7 @@ async def test_dead_drive_is_504(tmp_path: Path) -> None:
         assert svc.audit is not None
         (row,) = svc.audit.latest(5)
         assert row.outcome == "timeout"
-        assert row.old_value is None  # the pre-read had no answer either
+        assert row.old_value == 5  # the latest polled value, from before the drive died
         assert row.raw_value == 2000
         # the other drives are not disturbed
         r = await svc.put("fan1", "3-41", {"value": 20})

@@ -31,7 +31,7 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
             "name": f"fan{a}",
             "address": a,
             "catalog": "danfoss-fc",
-            "poll": [("16-13", "100ms")],
+            "poll": [("16-13", "100ms"), ("3-41", "100ms")],  # 3-41: the old value
             "writable": ["3-41"],
         }
         for a in (1, 2)

@@ -35,6 +35,8 @@ class SpecLike(Protocol):
     @property
     def unit(self) -> str: ...
     @property
+    def array(self) -> int | None: ...
+    @property
     def min(self) -> float | None: ...
     @property
     def max(self) -> float | None: ...
@@ -50,6 +52,7 @@ class ParameterFormat:
     unit: str = ""
     minimum: float | None = None
     maximum: float | None = None
+    array: int | None = None  # number of elements, when the catalog says it is an array
 
     @classmethod
     def from_spec(cls, spec: SpecLike | None) -> ParameterFormat:
@@ -62,13 +65,13 @@ class ParameterFormat:
         else:
             scaling = UNSCALED
         vtype = ValueType(spec.type) if spec.type else None
-        return cls(spec.name, vtype, scaling, spec.unit, spec.min, spec.max)
+        return cls(spec.name, vtype, scaling, spec.unit, spec.min, spec.max, spec.array)
 
     def with_type(self, vtype: ValueType | None) -> ParameterFormat:
         if vtype is None:
             return self
         return ParameterFormat(
-            self.name, vtype, self.scaling, self.unit, self.minimum, self.maximum
+            self.name, vtype, self.scaling, self.unit, self.minimum, self.maximum, self.array
         )
 
     @property

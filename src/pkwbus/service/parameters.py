@@ -20,7 +20,7 @@ from typing import Any
 
 from pkwbus.master.jobs import Cancelled, JobKind, JobResult
 from pkwbus.master.transaction import Answered, LineFailed, Rejected
-from pkwbus.master.values import ParameterFormat
+from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
@@ -66,6 +66,7 @@ class ParameterService:
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
         entry, ref = self._locate(drive, parameter, index)
         fmt = entry.format_of(ref)
+        ref = _fit_index(ref, fmt)
         request = self._read_request(entry, ref, fmt)
         result = await self.runtime.submit(
             drive, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
@@ -105,6 +106,7 @@ class ParameterService:
             if not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
             fmt = entry.format_of(ref)
+            ref = _fit_index(ref, fmt)
             request = self._write_request(entry, ref, fmt, order)
             audit.raw_value = request.value if not request.text else None
         except ApiError as exc:
@@ -155,7 +157,9 @@ class ParameterService:
         audit: AuditEntry,
         row: int | None,
     ) -> dict[str, Any]:
-        old = (await self._try_read(entry, ref, fmt)).value
+        # The old value is the latest polled one: reading it first would cost an
+        # exchange and let a poll in between, doubling the write's latency.
+        old = self._latest(entry, ref)
         audit.old_value = old
         self._update(row, old_value=old)
         result = await self.runtime.submit(
@@ -177,6 +181,13 @@ class ParameterService:
         body = self._write_body(ref, fmt, order, request, telegram, audit, result)
         body.update(old_value=old, verified=verified)
         return body
+
+    def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
+        key = entry.polled_as(ref)
+        if key is None:
+            return None
+        reading = self.runtime.snapshot.readings.get((entry.name, *key))
+        return reading.value if reading is not None else None
 
     async def _try_read(
         self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat
@@ -303,6 +314,20 @@ class ParameterService:
     def _update(self, row: int | None, **fields: Any) -> None:
         if self.audit is not None and row is not None:
             self.audit.update(row, **fields)
+
+
+def _fit_index(ref: ParameterRef, fmt: ParameterFormat) -> ParameterRef:
+    """Index 0 of a parameter the catalog does not call an array is the parameter itself;
+    an index past the catalog's array length is refused before anything is sent."""
+    if ref.index is None:
+        return ref
+    if fmt.array is None:
+        return ParameterRef(ref.pnu, None, ref.name) if ref.index == 0 else ref
+    if ref.index >= fmt.array:
+        raise ApiError(
+            422, "invalid_index", f"{ref.name} has {fmt.array} elements: index {ref.index}"
+        )
+    return ref
 
 
 def _audit_outcome(result: JobResult) -> tuple[str, int | None, str | None]:
