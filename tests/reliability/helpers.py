@@ -83,7 +83,7 @@ def _log_answer(sim: Simulator, log: WireLog, telegram: Telegram) -> None:
         log.values[address, resp.pnu, resp.subindex].add(resp)
 
 
-def config_text(lines: list[dict[str, Any]], *, audit_db: str = ":memory:", **top: str) -> str:
+def config_text(lines: list[dict[str, Any]], *, audit_db: str = ":memory:", **top: Any) -> str:
     """A service configuration in YAML from plain dictionaries (JSON is YAML)."""
     import json
 
