@@ -354,6 +354,27 @@ EXPECTED: dict[str, str] = {
     "wrong_writable": "lines[0].drives[0].writable: must be a list, not '3-41'",
     "yaml_syntax": "line 12, column 1: expected ',' or '}'",
     "zero_duration": "lines[0].drives[0].poll[0].every: 0 is not a duration above 0",
+    "wrong_type_timeout_list": "lines[0].timeout: a list is not a duration",
+    "wrong_type_retries_float": "lines[0].retries: must be a whole number, not 2.5",
+    "wrong_type_poll_entry": "lines[0].drives[0].poll[0]: must be a mapping (key: value)",
+    "wrong_type_drive_name": "lines[0].drives[0].name: must be text, not 12",
+    "unknown_line_key": "lines[0].retry: is not a known setting; did you mean retries?",
+    "unknown_poll_key": "lines[0].drives[0].poll[0].unitt: is not a known setting; did you mean",
+    "duplicate_drive_name_one_line": (
+        "lines[0].drives[1].name: drive name 'fan' is already used at lines[0].drives[0]"
+    ),
+    "address_zero_fc": "lines[0].drives[0].address: 0 is outside 1-126 for protocol fc",
+    "address_negative_uss": "lines[0].drives[0].address: -1 is outside 0-30 for protocol uss",
+    "bad_notation_writable": "lines[0].drives[0].writable[0]: '3-4x' is not a parameter",
+    "bad_notation_parameters_key": "lines[0].drives[0].parameters[q341]: 'q341' is not a parameter",
+    "pnu_too_big_uss": "lines[0].drives[0].poll[0].parameter: '70000': parameter number 70000 is",
+    "pnu_too_big_fc_writable": (
+        "lines[0].drives[0].writable[0]: p9000: parameter number 9000 cannot be encoded "
+        "in the fc dialect (0-4095)"
+    ),
+    "bad_duration_unit": "lines[0].drives[0].poll[0].every: '1d' is not a duration",
+    "negative_every": "lines[0].drives[0].poll[0].every: '-1s' is not a duration above 0",
+    "bad_duration_pause": "lines[0].pause: 'short' is not a duration",
 }
 
 

@@ -260,9 +260,32 @@ def _transport(loop: asyncio.AbstractEventLoop, link: Link, instance: Any) -> as
         transport: asyncio.Transport = serial_asyncio.SerialTransport(
             loop, _Protocol(link), instance
         )
-        return transport
     finally:
         instance._reconfigure_port = reconfigure
+    instance.close = functools.partial(_close_in_thread, loop, instance.close, link.settings.url)
+    return transport
+
+
+def _close_in_thread(loop: asyncio.AbstractEventLoop, close: Callable[[], None], url: str) -> None:
+    """Close the port off the event loop.
+
+    The transport closes the port from a loop callback. pyserial's
+    ``socket://`` close sleeps 0.3 s ("give the server some time"), and a
+    real port's close may wait for its output to drain: either would stall
+    every other line. The close runs in the default executor instead
+    (``asyncio.run`` waits for it before the process ends).
+    """
+
+    def close_quietly() -> None:
+        try:
+            close()
+        except Exception as exc:  # a failing close changes nothing for us: the port is gone
+            log.debug("closing %s: %s", url, _reason(exc))
+
+    if loop.is_closed():
+        close_quietly()
+        return
+    loop.run_in_executor(None, close_quietly)
 
 
 def _reason(exc: BaseException) -> str:
