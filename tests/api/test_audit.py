@@ -170,3 +170,20 @@ def test_non_finite_values_stay_readable_as_json(tmp_path: Path) -> None:
         log.close()
     assert [r.new_value for r in rows] == ["-inf", "inf", "nan"]
     json.dumps([as_dict(r) for r in rows], allow_nan=False)
+
+
+def test_rows_left_pending_by_a_killed_service_are_marked_interrupted(tmp_path: Path) -> None:
+    path = tmp_path / "audit.sqlite"
+    log = AuditLog(path)
+    row = log.record(AuditEntry("c", "fan1", "3-41", 0, "pending", new_value=1.0))
+    log.record(AuditEntry("c", "fan1", "3-41", 0, "ok", new_value=2.0))
+    log.close()  # as a SIGKILL would leave it: one row still pending
+    look = AuditLog(path, readonly=True)
+    assert [e.outcome for e in look.latest(5)] == ["ok", "pending"]  # a look changes nothing
+    look.close()
+    log = AuditLog(path)
+    assert log.close_interrupted() == 1
+    entries = {e.id: e for e in log.latest(5)}
+    log.close()
+    assert entries[row].outcome == "interrupted"
+    assert "may have applied" in (entries[row].detail or "")

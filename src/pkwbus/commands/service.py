@@ -72,6 +72,9 @@ async def _serve(config: Config, sock: Any) -> None:
 
     runtime = await build_runtime(config)
     audit = AuditLog(config.audit_db)
+    interrupted = audit.close_interrupted()
+    if interrupted:
+        log.warning("audit log: %d write(s) were in flight when the service last died", interrupted)
     token = config.write_token()
     app = create_app(runtime, audit=audit, write_token=token)
     host = config.listen.host
@@ -87,10 +90,12 @@ async def _serve(config: Config, sock: Any) -> None:
 def run_audit(args: argparse.Namespace) -> int:
     from pkwbus.service.audit import AuditLog, as_dict
 
+    if args.limit < 1:
+        raise CommandError("--limit must be at least 1", Exit.BAD_INPUT)
     config = load(args.config)
     if not config.audit_db.exists():
         raise CommandError(f"no audit database at {config.audit_db}", Exit.BAD_INPUT)
-    audit = AuditLog(config.audit_db)
+    audit = AuditLog(config.audit_db, readonly=True)
     try:
         entries = audit.latest(args.limit)
     finally:

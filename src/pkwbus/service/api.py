@@ -10,6 +10,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.protocol import pkw
@@ -92,6 +93,57 @@ ERRORS: dict[int | str, dict[str, object]] = {
 }
 
 
+class _TooLarge(BaseException):
+    """Raised out of ``receive``; a BaseException so that FastAPI's body parsing,
+    which turns every Exception into 400, lets it through to :class:`BodyLimit`."""
+
+
+class BodyLimit:
+    """ASGI middleware: a body over ``limit`` bytes gets 413, whether it announces its
+    length or comes chunked; nothing beyond the limit is kept in memory."""
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        headers = dict(scope.get("headers") or [])
+        length = headers.get(b"content-length")
+        if length is not None and (not length.isdigit() or int(length) > self.limit):
+            await self._refuse(scope, receive, send)
+            return
+        seen = 0
+
+        async def counted() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.limit:
+                    raise _TooLarge
+            return message
+
+        started = False
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counted, watched)
+        except _TooLarge:
+            if not started:
+                await self._refuse(scope, receive, send)
+
+    async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
+        body = {"error": {"kind": "too_large", "message": f"body over {self.limit} bytes"}}
+        await JSONResponse(body, status_code=413)(scope, receive, send)
+
+
 def create_app(
     runtime: Runtime, *, audit: AuditLog | None = None, write_token: str | None = None
 ) -> FastAPI:
@@ -121,13 +173,7 @@ def create_app(
         body = {"error": {"kind": "invalid_request", "message": message}}
         return JSONResponse(body, status_code=422)
 
-    @app.middleware("http")
-    async def limit_body(request: Request, call_next: Any) -> Any:
-        length = request.headers.get("content-length")
-        if length is not None and (not length.isdigit() or int(length) > MAX_BODY):
-            body = {"error": {"kind": "too_large", "message": f"body over {MAX_BODY} bytes"}}
-            return JSONResponse(body, status_code=413)
-        return await call_next(request)
+    app.add_middleware(BodyLimit, limit=MAX_BODY)
 
     @app.get(
         "/api/v1/drives/{drive}/parameters/{parameter}",

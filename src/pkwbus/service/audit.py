@@ -64,15 +64,29 @@ class AuditEntry:
 class AuditLog:
     """A small synchronous store; each call is one short transaction."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, readonly: bool = False) -> None:
         self.path = Path(path)
+        self._lock = threading.Lock()
+        if readonly:  # a look at the log: nothing is created or changed
+            uri = f"file:{self.path.resolve()}?mode=ro"
+            self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
+            return
         if str(path) != ":memory:":
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._lock = threading.Lock()
         self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(SCHEMA)
+
+    def close_interrupted(self) -> int:
+        """Rows a killed service left 'pending': their outcome is unknown. Returns how many."""
+        with self._lock:
+            cur = self._db.execute(
+                "UPDATE writes SET outcome = 'interrupted', detail = 'the service stopped"
+                " before the answer; the drive may have applied the write'"
+                " WHERE outcome = 'pending'"
+            )
+        return cur.rowcount
 
     def record(self, entry: AuditEntry) -> int:
         """Insert an attempt (outcome may be 'pending'); returns its row id."""
