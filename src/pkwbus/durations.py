@@ -22,6 +22,11 @@ HINT: Final = "write 250ms, 1s, 5m, 1h or plain seconds"
 
 
 def _shown(value: object) -> str:
+    """A scalar's repr (shortened); for anything else, what kind of thing it is."""
+    if isinstance(value, list | tuple):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
     text = repr(value)
     return text if len(text) <= 40 else text[:37] + "..."
 
