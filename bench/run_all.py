@@ -103,6 +103,9 @@ def main() -> int:
         "each benchmark repeats its runs and gives the best and the median."
         f"{' Quick form (--quick).' if args.quick else ''}\n\n"
     )
+    findings = Path(__file__).resolve().parent / "findings.md"
+    if findings.exists():  # what the figures mean, kept by hand
+        sections.append(findings.read_text())
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(header + "\n".join(sections))
     print(f"wrote {args.out} in {time.monotonic() - started:.0f} s")
