@@ -14,9 +14,12 @@ import contextlib
 import enum
 import functools
 import logging
+import math
 import os
 import termios
+import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +33,10 @@ log = logging.getLogger(__name__)
 PARITY_BITS = {"E": 1, "O": 1, "N": 0}
 PARITIES = {"E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "N": serial.PARITY_NONE}
 START_PAUSE_CHARS = 3.5
+# The event loop's selector (epoll) waits whole milliseconds, rounded up: a
+# pause of 0.3 ms would last about 1 ms. The part of a pause below this is
+# waited out by a helper thread (``time.sleep`` has microsecond resolution).
+LOOP_TIMER_RESOLUTION = 0.001
 
 
 class PortError(Exception):
@@ -116,6 +123,11 @@ class Link:
         self._quiet_at = 0.0
         self._echo = b""
         self._closing = False
+        self._serial: Any = None
+        self._fd = -1
+        self._pause = settings.start_pause
+        self._char_time = settings.char_time
+        self._fine_timer: ThreadPoolExecutor | None = None
         self.last_error: str | None = None
 
     @property
@@ -155,6 +167,8 @@ class Link:
             raise PortError(self.last_error) from None
         self._closing = False
         self._transport = _transport(loop, self, instance)
+        self._serial = instance
+        self._fd = _raw_fd(instance)
         self._backoff.reset()
         self._quiet_at = loop.time()
         self._set_state(LinkState.OPEN, None)
@@ -187,9 +201,13 @@ class Link:
     async def close(self) -> None:
         self._closing = True
         transport, self._transport = self._transport, None
+        self._serial, self._fd = None, -1
         if transport is not None:
             transport.close()
             await asyncio.sleep(0)  # let connection_lost run
+        if self._fine_timer is not None:
+            self._fine_timer.shutdown(wait=False)
+            self._fine_timer = None
         self._set_state(LinkState.CLOSED, None)
 
     # ------------------------------------------------------------ traffic
@@ -200,30 +218,60 @@ class Link:
         if transport is None or self._state is not LinkState.OPEN:
             raise PortError(self.last_error or f"{self.settings.url} is not open")
         loop = asyncio.get_running_loop()
-        wait = self._quiet_at + self.settings.start_pause - loop.time()
+        wait = self._quiet_at + self._pause - loop.time()
         if wait > 0:
-            await asyncio.sleep(wait)
+            await self._pause_for(loop, wait)
             if self._transport is not transport:
                 raise PortError(self.last_error or f"{self.settings.url} was lost")
-        self._discard_input(transport)
+        self._discard_input()
         if self.settings.echo:
             self._echo = data
-        transport.write(data)
-        self._quiet_at = loop.time() + self.settings.wire_time(len(data))
+        self._write(transport, data)
+        self._quiet_at = loop.time() + len(data) * self._char_time
 
-    def _discard_input(self, transport: asyncio.Transport) -> None:
-        port: Any = transport.get_extra_info("serial")
+    async def _pause_for(self, loop: asyncio.AbstractEventLoop, wait: float) -> None:
+        """Wait ``wait`` seconds, to the microsecond rather than to the loop's millisecond."""
+        coarse = math.floor(wait / LOOP_TIMER_RESOLUTION) * LOOP_TIMER_RESOLUTION
+        if coarse > 0:
+            end = loop.time() + wait
+            await asyncio.sleep(coarse)
+            wait = end - loop.time()
+        if wait > 0:
+            if self._fine_timer is None:
+                self._fine_timer = ThreadPoolExecutor(1, thread_name_prefix="pkwbus-pause")
+            await loop.run_in_executor(self._fine_timer, time.sleep, wait)
+
+    def _write(self, transport: asyncio.Transport, data: bytes) -> None:
+        """Write straight to the port when nothing is queued; else through the transport."""
+        fd = self._fd
+        if fd >= 0 and not transport.get_write_buffer_size():
+            try:
+                n = os.write(fd, data)
+            except (BlockingIOError, InterruptedError):
+                n = 0
+            except OSError:
+                transport.write(data)  # the transport reports the error and closes
+                return
+            if n == len(data):
+                return
+            data = data[n:]
+        transport.write(data)
+
+    def _discard_input(self) -> None:
+        port = self._serial
         if port is not None:
             with contextlib.suppress(serial.SerialException, OSError, NotImplementedError):
                 port.reset_input_buffer()
 
     def _on_data(self, data: bytes) -> None:
-        loop = asyncio.get_running_loop()
-        self._quiet_at = max(self._quiet_at, loop.time())
+        now = asyncio.get_running_loop().time()
         if self._echo:
+            self._quiet_at = max(self._quiet_at, now)
             data = self._strip_echo(data)
             if not data:
                 return
+        # Another station's bytes: our request has left the wire, the line was busy until now.
+        self._quiet_at = now
         if self.receiver is not None:
             self.receiver(data)
 
@@ -239,6 +287,7 @@ class Link:
 
     def _on_lost(self, exc: Exception | None) -> None:
         self._transport = None
+        self._serial, self._fd = None, -1
         if self._closing:
             return
         reason = _reason(exc) if exc else "closed by the other end"
@@ -286,6 +335,26 @@ def _close_in_thread(loop: asyncio.AbstractEventLoop, close: Callable[[], None],
         close_quietly()
         return
     loop.run_in_executor(None, close_quietly)
+
+
+# Ports whose write() is a plain write(2) of the bytes to their descriptor.
+_RAW_WRITE_MODULES = frozenset({"serial.serialposix", "serial.urlhandler.protocol_socket"})
+
+
+def _raw_fd(instance: Any) -> int:
+    """The descriptor to write requests to directly, or -1 to use the transport.
+
+    Only for a POSIX serial port (device or pty) and a raw TCP socket: other
+    URL handlers (rfc2217 escapes bytes, loop has no descriptor) keep their
+    own write path.
+    """
+    if type(instance).__module__ not in _RAW_WRITE_MODULES:
+        return -1
+    try:
+        fd = instance.fileno()
+    except (AttributeError, OSError, ValueError, serial.SerialException):
+        return -1
+    return fd if isinstance(fd, int) else -1
 
 
 def _reason(exc: BaseException) -> str:

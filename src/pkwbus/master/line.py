@@ -70,6 +70,9 @@ class Line:
         self._started = 0.0
         self._gap_timer: asyncio.TimerHandle | None = None
         self._pending_error: ErrorKind | None = None
+        # One response timer, re-armed only when it fires early (not one per exchange).
+        self._deadline = 0.0
+        self._timer: asyncio.TimerHandle | None = None
 
     # -------------------------------------------------------------- API
 
@@ -107,27 +110,49 @@ class Line:
 
     async def _exchange(self, adr: int, telegram: bytes, timeout: float) -> ExchangeResult:
         loop = asyncio.get_running_loop()
+        link = self.link
         try:
-            await self.link.ensure_open(loop.time() + timeout)
+            if not link.is_open:
+                await link.ensure_open(loop.time() + timeout)
             self._deframer.reset()
             self._pending_error = None
-            await self.link.send(telegram)
+            await link.send(telegram)
         except PortError as exc:
             return Failure(ErrorKind.PORT, str(exc))
         if self.trace:
             self.trace("tx", telegram)
-        self._started = loop.time()
+        now = loop.time()
+        self._started = now
         self._expect_adr = adr
         waiter: asyncio.Future[ExchangeResult] = loop.create_future()
         self._waiter = waiter
-        wire = self.link.settings.wire_time(len(telegram))
-        timer = loop.call_later(timeout + wire, self._on_timeout, waiter)
+        self._arm(loop, now + timeout + link.settings.wire_time(len(telegram)))
         try:
             return await waiter
         finally:
-            timer.cancel()
-            self._cancel_gap_timer()
+            if self._gap_timer is not None:
+                self._cancel_gap_timer()
             self._waiter = None
+
+    def _arm(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
+        self._deadline = deadline
+        timer = self._timer
+        if timer is not None:
+            if timer.when() <= deadline:
+                return  # fires first, sees the new deadline and re-arms
+            timer.cancel()
+        self._timer = loop.call_at(deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        waiter = self._waiter
+        if waiter is None or waiter.done():
+            return
+        loop = asyncio.get_running_loop()
+        if self._deadline - loop.time() > 1e-4:
+            self._timer = loop.call_at(self._deadline, self._on_timer)
+            return
+        self._on_timeout(waiter)
 
     def _resolve(self, result: ExchangeResult) -> None:
         waiter = self._waiter

@@ -99,8 +99,9 @@ class _Active:
 
 
 class _Drive:
-    def __init__(self, spec: DriveSpec, policy: HealthPolicy, start: float) -> None:
+    def __init__(self, spec: DriveSpec, policy: HealthPolicy, start: float, slot: int = 0) -> None:
         self.spec = spec
+        self.slot = slot  # position in the scheduler's list
         self.name = spec.name
         self.target = spec.target
         self.health = DriveHealth(policy)
@@ -147,6 +148,7 @@ class LineScheduler:
         self._by_name: dict[str, _Drive] = {}
         self._rr = 0
         self._job_seq = itertools.count()
+        self._lagging: list[_Drive] = []  # drives whose last answer was "not yet"
         self._wake = asyncio.Event()
         self._stopping = False
         self.line.link.on_state = self._on_link_state
@@ -178,7 +180,7 @@ class LineScheduler:
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
         start = loop.time()
-        self._drives = [_Drive(s, self.policy, start) for s in self._specs]
+        self._drives = [_Drive(s, self.policy, start, i) for i, s in enumerate(self._specs)]
         self._by_name = {d.name: d for d in self._drives}
         try:
             while not self._stopping:
@@ -218,8 +220,10 @@ class LineScheduler:
         """The drive's claim on the next exchange, or when it will have one."""
         if d.active is not None:
             return (d.active.priority, int(d.lagging), d.active.order), now
-        self._expire(d.writes, now)
-        self._expire(d.reads, now)
+        if d.writes:
+            self._expire(d.writes, now)
+        if d.reads:
+            self._expire(d.reads, now)
         if d.writes:
             return (Priority.WRITE, 0, d.writes[0].deadline), now
         if d.reads:
@@ -269,10 +273,12 @@ class LineScheduler:
         result = await self.line.exchange(d.target, telegram)
         now = loop.time()
         self.events.exchange(d.name, result, now - t0)
-        self._rr = (self._drives.index(d) + 1) % len(self._drives)
-        for other in self._drives:
-            if other is not d:
-                other.lagging = False
+        self._rr = (d.slot + 1) % len(self._drives)
+        if self._lagging:
+            for other in self._lagging:
+                if other is not d:
+                    other.lagging = False
+            self._lagging.clear()
         self._health(d, result, now)
         if probe:
             if isinstance(result, Reply):
@@ -286,6 +292,8 @@ class LineScheduler:
             self._set_status(d, active.tx.tally.status_word)
         if outcome is None:
             d.lagging = active.tx.waiting
+            if d.lagging:
+                self._lagging.append(d)
             return
         self._complete(d, active, outcome, now)
 

@@ -53,7 +53,17 @@ class DriveInfo:
     profile: Profile
 
 
+_LABEL_OF_TYPE: dict[type[Outcome], JobOutcome] = {
+    Answered: JobOutcome.OK,
+    Rejected: JobOutcome.REJECTED,
+    Cancelled: JobOutcome.CANCELLED,
+}
+
+
 def outcome_label(outcome: Outcome) -> JobOutcome:
+    label = _LABEL_OF_TYPE.get(type(outcome))
+    if label is not None:
+        return label
     if isinstance(outcome, Answered):
         return JobOutcome.OK
     if isinstance(outcome, Rejected):
@@ -223,10 +233,12 @@ class LineMetrics:
         self._retries = {d: m.retries.labels(line, d) for d in drives}
         self._overruns = {d: m.overruns.labels(line, d) for d in drives}
         self._errors = {(d, k): m.errors.labels(line, d, k) for d in drives for k in ERROR_KINDS}
-        for d in drives:
-            for kind in ("read", "write"):
-                for outcome in JobOutcome:
-                    m.jobs.labels(line, d, kind, outcome.value)
+        self._jobs = {
+            (d, kind, outcome): m.jobs.labels(line, d, kind, outcome.value)
+            for d in drives
+            for kind in ("read", "write")
+            for outcome in JobOutcome
+        }
 
     def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
         if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
@@ -240,7 +252,11 @@ class LineMetrics:
 
     def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
         outcome = result.outcome
-        self._m.jobs.labels(self._line, drive, job.kind.value, outcome_label(outcome).value).inc()
+        key = (drive, job.kind.value, outcome_label(outcome))
+        child = self._jobs.get(key)
+        if child is None:
+            child = self._jobs[key] = self._m.jobs.labels(self._line, drive, key[1], key[2].value)
+        child.inc()
         tally = result.tally
         if tally is not None:
             if tally.retries:

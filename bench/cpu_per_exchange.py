@@ -1,0 +1,181 @@
+"""CPU per exchange of the master process, side by side with pymodbus's async RTU client.
+
+The simulated drive runs in another process on a pty with zero response
+delay and no wire timing, so the line is as fast as the software on both
+ends; ``time.process_time()`` here counts the master's CPU only.
+
+(a) ``Line.exchange`` in a loop: one FC parameter read after another.
+(b) the service path: a ``LineScheduler`` over 3 drives whose polls are
+    always due, with ``LineMetrics`` turning every event into Prometheus
+    counter increments, as ``pkwbus run`` does.
+
+    .venv/bin/python bench/cpu_per_exchange.py [--n 5000] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import best_median, make_line, sim_process
+from _measure import markdown_table, measure_cpu
+from prometheus_client import CollectorRegistry
+
+from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Reply
+from pkwbus.protocol import pkw
+from pkwbus.service.metrics import ServiceMetrics
+
+BAUDRATE = 115200
+
+
+async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
+    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    target = DriveTarget.create("fc", 1)
+    telegram = target.telegram(pkw.read(target.dialect, 1613))
+    await line.open()
+    bad = 0
+    try:
+        for _ in range(warmup):
+            await line.exchange(target, telegram)
+        with measure_cpu(ops=n) as t:
+            for _ in range(n):
+                if not isinstance(await line.exchange(target, telegram), Reply):
+                    bad += 1
+    finally:
+        await line.close()
+    return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s, "errors": bad}
+
+
+async def service_path(port: str, n: int) -> dict[str, float]:
+    registry = CollectorRegistry()
+    metrics = ServiceMetrics(registry)
+    names = ["d1", "d2", "d3"]
+    drives = []
+    for i, name in enumerate(names, 1):
+        target = DriveTarget.create("fc", i)
+        polls = tuple(
+            PollSpec(p, 0, pkw.read(target.dialect, int(p.replace("-", ""))), 0.0)
+            for p in ("16-13", "16-14", "16-10")
+        )
+        drives.append(DriveSpec(name, target, polls))
+    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    sched = LineScheduler(
+        "bench", line, drives, events=metrics.for_line("bench", names), poll_deadline=1.0
+    )
+
+    def done() -> float:
+        total = 0.0
+        for name in names:
+            v = registry.get_sample_value(
+                "pkwbus_jobs_total",
+                {"line": "bench", "drive": name, "kind": "read", "outcome": "ok"},
+            )
+            total += v or 0.0
+        return total
+
+    def telegrams() -> float:
+        return sum(
+            registry.get_sample_value("pkwbus_telegrams_total", {"line": "bench", "drive": d})
+            or 0.0
+            for d in names
+        )
+
+    task = asyncio.create_task(sched.run())
+    while telegrams() < 200:
+        await asyncio.sleep(0.01)
+    t0, j0 = telegrams(), done()
+    with measure_cpu() as t:
+        while telegrams() - t0 < n:
+            await asyncio.sleep(0.005)
+        t.ops = int(telegrams() - t0)
+        jobs = done() - j0
+    sched.stop()
+    await task
+    return {
+        "cpu_us_per_op": t.cpu_us_per_op,
+        "ops_per_s": t.ops_per_s,
+        "errors": int(t.ops - jobs),
+    }
+
+
+def measure_pkwbus(n: int) -> dict[str, dict[str, float]]:
+    out = {}
+    with sim_process("fc", "1-3") as port:
+        out["raw"] = asyncio.run(raw_loop(port, n))
+    with sim_process("fc", "1-3") as port:
+        out["service"] = asyncio.run(service_path(port, n))
+    return out
+
+
+def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
+    import pymodbus_baseline
+
+    runs: dict[str, list[dict[str, Any]]] = {"raw": [], "service": [], "pymodbus": []}
+    for _ in range(repeat):
+        ours = measure_pkwbus(n)
+        runs["raw"].append(ours["raw"])
+        runs["service"].append(ours["service"])
+        runs["pymodbus"].append(pymodbus_baseline.measure(n))
+    py = statistics.median(r["cpu_us_per_op"] for r in runs["pymodbus"])
+    rows = []
+    titles = {
+        "raw": "pkwbus (a) Line.exchange loop",
+        "service": "pkwbus (b) LineScheduler + metrics",
+        "pymodbus": runs["pymodbus"][0]["name"],
+    }
+    for key, results in runs.items():
+        cpu = [r["cpu_us_per_op"] for r in results]
+        rate = [r["ops_per_s"] for r in results]
+        best, med = best_median(cpu, higher_is_better=False)
+        rows.append(
+            {
+                "master": titles[key],
+                "cpu_best": best,
+                "cpu_median": med,
+                "rate_median": statistics.median(rate),
+                "ratio": med / py,
+                "errors": sum(int(r["errors"]) for r in results),
+            }
+        )
+    table = markdown_table(
+        rows,
+        {
+            "master": "Master",
+            "cpu_best": "CPU µs/exchange, best",
+            "cpu_median": "median",
+            "rate_median": "exchanges/s (median)",
+            "ratio": "median / pymodbus median",
+            "errors": "errors",
+        },
+        digits=1,
+    )
+    return {"rows": rows, "table": table, "n": n, "repeat": repeat}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--n", type=int, default=5000)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--only", choices=("raw", "service"), help="pkwbus only, no baseline")
+    args = parser.parse_args()
+    if args.only:
+        for _ in range(args.repeat):
+            with sim_process("fc", "1-3") as port:
+                f = raw_loop if args.only == "raw" else service_path
+                r = asyncio.run(f(port, args.n))
+            print(f"{args.only}: {r['cpu_us_per_op']:.1f} us CPU, {r['ops_per_s']:.0f}/s, {r}")
+        return
+    result = run(args.n, args.repeat)
+    print(result["table"])
+
+
+if __name__ == "__main__":
+    main()

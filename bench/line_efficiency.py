@@ -1,0 +1,121 @@
+"""Line efficiency: exchanges per second against the line's theoretical rate.
+
+The simulated drive runs in another process on a pty with wire timing: it
+answers when a real RS-485 line would deliver the last byte of its answer
+(request bytes x 11 / baud + response delay + answer bytes x 11 / baud after
+the request's first byte). The master runs ``Line.run`` back to back (one
+FC parameter read after another). The theoretical exchange time is
+
+    request bytes x 11 / baud + start pause (3.5 characters)
+    + response delay + response bytes x 11 / baud
+
+with 16 bytes each way (FC parameter telegram).
+
+    .venv/bin/python bench/line_efficiency.py [--seconds 5] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
+from _measure import markdown_table
+
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Answered, PkwTransaction
+from pkwbus.protocol import pkw
+
+BAUDRATES = (9600, 19200, 115200)
+DELAY = 0.002
+GOALS = {9600: 0.98, 115200: 0.95}
+
+
+async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
+    """Completed jobs per second of ``Line.run``, one after another."""
+    line = make_line(port, "fc", baudrate, timeout=0.2)
+    target = DriveTarget.create("fc", 1)
+    request = pkw.read(target.dialect, 1613)
+    loop = asyncio.get_running_loop()
+    await line.open()
+    try:
+        for _ in range(3):  # warm-up
+            await line.run(PkwTransaction(target, request, retries=2, deadline=loop.time() + 1))
+        done = bad = 0
+        start = time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            tx = PkwTransaction(target, request, retries=2, deadline=loop.time() + 1)
+            outcome = await line.run(tx)
+            if isinstance(outcome, Answered) and tx.tally.telegrams == 1:
+                done += 1
+            else:
+                bad += 1
+        elapsed = time.perf_counter() - start
+    finally:
+        await line.close()
+    if bad:
+        print(f"  {bad} jobs took more than one exchange at {baudrate} baud", file=sys.stderr)
+    return done / elapsed
+
+
+def measure(baudrate: int, seconds: float) -> float:
+    with sim_process("fc", "1", response_delay=DELAY, baudrate=baudrate, wire_timing=True) as port:
+        return asyncio.run(back_to_back(port, baudrate, seconds))
+
+
+def run(
+    seconds: float = 5.0, repeat: int = 3, baudrates: tuple[int, ...] = BAUDRATES
+) -> dict[str, Any]:
+    rows = []
+    for baud in baudrates:
+        theory = 1.0 / exchange_time(baud, FC_TELEGRAM, FC_TELEGRAM, DELAY)
+        rates = [measure(baud, seconds) for _ in range(repeat)]
+        best, med = best_median(rates)
+        goal = GOALS.get(baud)
+        rows.append(
+            {
+                "baud": baud,
+                "theory": theory,
+                "best": best,
+                "median": med,
+                "ratio_best": best / theory,
+                "ratio_median": med / theory,
+                "goal": f"≥ {goal}" if goal else "",
+                "met": ("yes" if med / theory >= goal else "no") if goal else "",
+            }
+        )
+    table = markdown_table(
+        rows,
+        {
+            "baud": "baud",
+            "theory": "theoretical exchanges/s",
+            "best": "achieved, best",
+            "median": "achieved, median",
+            "ratio_best": "ratio, best",
+            "ratio_median": "ratio, median",
+            "goal": "goal",
+            "met": "met (median)",
+        },
+        digits=3,
+    )
+    return {"rows": rows, "table": table, "delay": DELAY, "seconds": seconds, "repeat": repeat}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--baud", type=int, action="append")
+    args = parser.parse_args()
+    result = run(args.seconds, args.repeat, tuple(args.baud or BAUDRATES))
+    print(result["table"])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,128 @@
+"""PKW lag: completed jobs/s over 4 USS drives that answer a parameter request late.
+
+Each simulated drive (another process, pty, wire timing at 115200 baud,
+2 ms response delay) answers a PKW request only after ``lag_telegrams``
+further telegrams to it, or after a time, meanwhile with AK 0. Compared:
+the ``LineScheduler`` interleaving the 4 drives (polls always due), and
+strictly sequential handling (``Line.run`` one job after another, drive
+after drive).
+
+    .venv/bin/python bench/pkw_lag.py [--seconds 5] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import Counting, best_median, fc_drive, make_line, sim_process
+from _measure import markdown_table
+
+from pkwbus.master.scheduler import LineScheduler
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import Answered, PkwTransaction
+from pkwbus.protocol import pkw
+
+BAUD = 115200
+DELAY = 0.002
+PNUS = (21, 27)
+LAGS = {"lag_telegrams=3": "3", "lag 20 ms": "20ms"}
+
+
+async def interleaved(port: str, seconds: float) -> float:
+    events = Counting()
+    drives = [fc_drive(f"d{a}", a, PNUS, 0.0, "uss") for a in (1, 2, 3, 4)]
+    sched = LineScheduler(
+        "bench", make_line(port, "uss", BAUD, timeout=0.1), drives, events=events,
+        poll_deadline=2.0,
+    )  # fmt: skip
+    task = asyncio.create_task(sched.run())
+    await asyncio.sleep(0.5)
+    n0, t0 = events.total(), time.perf_counter()
+    await asyncio.sleep(seconds)
+    rate = (events.total() - n0) / (time.perf_counter() - t0)
+    sched.stop()
+    await task
+    return rate
+
+
+async def sequential(port: str, seconds: float) -> float:
+    line = make_line(port, "uss", BAUD, timeout=0.1)
+    targets = [DriveTarget.create("uss", a) for a in (1, 2, 3, 4)]
+    loop = asyncio.get_running_loop()
+    await line.open()
+    done = 0
+    try:
+        start = time.perf_counter()
+        i = 0
+        while time.perf_counter() - start < seconds:
+            target = targets[i % 4]
+            req = pkw.read(target.dialect, PNUS[(i // 4) % len(PNUS)])
+            tx = PkwTransaction(target, req, retries=2, deadline=loop.time() + 2.0)
+            if isinstance(await line.run(tx), Answered):
+                done += 1
+            i += 1
+        rate = done / (time.perf_counter() - start)
+    finally:
+        await line.close()
+    return rate
+
+
+def measure(mode: str, lag: str, seconds: float) -> float:
+    with sim_process(
+        "uss", "1-4", response_delay=DELAY, baudrate=BAUD, wire_timing=True, lag=lag
+    ) as port:
+        f = interleaved if mode == "interleaved" else sequential
+        return asyncio.run(f(port, seconds))
+
+
+def run(
+    seconds: float = 5.0, repeat: int = 3, lags: dict[str, str] | None = None
+) -> dict[str, Any]:
+    rows = []
+    for name, lag in (lags or LAGS).items():
+        seq = [measure("sequential", lag, seconds) for _ in range(repeat)]
+        inter = [measure("interleaved", lag, seconds) for _ in range(repeat)]
+        sb, sm = best_median(seq)
+        ib, im = best_median(inter)
+        rows.append(
+            {
+                "lag": name,
+                "seq_best": sb,
+                "seq_median": sm,
+                "int_best": ib,
+                "int_median": im,
+                "ratio": im / sm,
+            }
+        )
+    table = markdown_table(
+        rows,
+        {
+            "lag": "lag",
+            "seq_best": "sequential jobs/s, best",
+            "seq_median": "median",
+            "int_best": "interleaved jobs/s, best",
+            "int_median": "median",
+            "ratio": "interleaved / sequential (median)",
+        },
+        digits=1,
+    )
+    return {"rows": rows, "table": table}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    print(run(args.seconds, args.repeat)["table"])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,116 @@
+"""Run every benchmark and write docs/benchmarks.md (``make bench``).
+
+    .venv/bin/python bench/run_all.py [--quick] [--out docs/benchmarks.md]
+
+``--quick`` runs each benchmark in a short form (about a minute in all);
+the default takes a few minutes. The figures are noisy on a shared machine:
+each benchmark repeats its runs and reports the best and the median.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import cpu_per_exchange
+import dead_drive
+import line_efficiency
+import pkw_lag
+import scale
+import write_latency
+from _common import machine
+
+ROOT = Path(__file__).resolve().parent.parent
+
+Plan = list[tuple[str, str, Callable[[], dict[str, Any]]]]
+
+
+def plan(quick: bool) -> Plan:
+    q = quick
+    return [
+        (
+            "1. Line efficiency",
+            "Simulator in another process with wire timing and a 2 ms response delay; "
+            "`Line.run` back to back, FC parameter telegrams of 16 bytes each way. "
+            "Theoretical rate = 1 / (16·11/baud + 3.5·11/baud + 2 ms + 16·11/baud).",
+            lambda: line_efficiency.run(2.0 if q else 5.0, 2 if q else 3),
+        ),
+        (
+            "2. CPU per exchange of the master process",
+            "Simulator in another process on a pty, zero response delay, no wire timing; "
+            "`time.process_time()` of the master only. pymodbus: async RTU client against "
+            "its own RTU server over a socat pty pair, in the same run.",
+            lambda: cpu_per_exchange.run(1500 if q else 5000, 2 if q else 3),
+        ),
+        (
+            "3. Dead-drive cost",
+            "4 FC drives at 115200 baud (wire timing, 2 ms delay), 3 parameters each every "
+            "100 ms; completed polls/s of the 3 healthy drives.",
+            lambda: dead_drive.run(4.0 if q else 10.0, 1 if q else 3),
+        ),
+        (
+            "4. PKW lag",
+            "4 USS drives at 115200 baud (wire timing, 2 ms delay) answering late; "
+            "`LineScheduler` interleaving against `Line.run` one job after another.",
+            lambda: pkw_lag.run(2.0 if q else 5.0, 1 if q else 3),
+        ),
+        (
+            "5. Write latency",
+            "HTTP PUT from a client in another process to the service (in this process), "
+            "3 drives whose polls keep the line saturated; in units of one exchange time.",
+            lambda: write_latency.run(30 if q else 100),
+        ),
+        (
+            "6. Scale",
+            "126 FC drives × 20 parameters per line, each polled every second (full line load); "
+            "1 line and 8 lines in one process, one simulator process per line.",
+            lambda: scale.run((1, 8), 126, 4.0 if q else 10.0),
+        ),
+    ]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
+    parser.add_argument("--only", type=int, action="append", help="benchmark number(s)")
+    args = parser.parse_args()
+    info = machine()
+    started = time.monotonic()
+    sections = []
+    for i, (title, how, fn) in enumerate(plan(args.quick), 1):
+        if args.only and i not in args.only:
+            continue
+        print(f"== {title}", flush=True)
+        t0 = time.monotonic()
+        result = fn()
+        print(result["table"], flush=True)
+        sections.append(
+            f"## {title}\n\n{how}\n\n{result['table']}\n_({time.monotonic() - t0:.0f} s)_\n"
+        )
+    header = (
+        "# Benchmarks\n\n"
+        "Written by `bench/run_all.py` (`make bench`). "
+        f"Machine: {info['cpu']}, {info['cores']} cores, Python {info['python']}, "
+        f"{info['platform']}; run {info['date']}, load average at the start {info['load']}. "
+        "The machine was shared with other developers' test runs, so figures are noisy: "
+        "each benchmark repeats its runs and gives the best and the median."
+        f"{' Quick form (--quick).' if args.quick else ''}\n\n"
+    )
+    findings = Path(__file__).resolve().parent / "findings.md"
+    if findings.exists():  # what the figures mean, kept by hand
+        sections.append(findings.read_text())
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(header + "\n".join(sections))
+    print(f"wrote {args.out} in {time.monotonic() - started:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""Scale: 126 drives x 20 parameters on one line, and 8 such lines in one process.
+
+Each line goes to its own simulated line (another process, pty, wire timing
+at 115200 baud, 2 ms response delay, 126 FC drives). Every parameter is
+polled every second, far more than a line carries, so each line runs at
+full load. Measured in this process (the service: runtime from a
+configuration, FastAPI on uvicorn): resident memory (VmRSS), CPU per second
+and per exchange, the time and size of ``generate_latest`` on the runtime's
+registry, and of ``GET /metrics`` from a client in another process.
+
+    .venv/bin/python bench/scale.py [--lines 1 --lines 8] [--seconds 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import Service, http_client, rss_mb, service_config, sim_process
+from _measure import markdown_table
+
+BAUD = 115200
+DELAY = 0.002
+PARAMETERS = (
+    "16-00", "16-01", "16-02", "16-03", "16-05", "16-09", "16-10", "16-11", "16-12", "16-13",
+    "16-14", "16-15", "16-16", "16-17", "16-18", "16-22", "16-30", "16-34", "16-35", "16-90",
+)  # fmt: skip
+
+
+def _telegrams(runtime: Any) -> float:
+    total = 0.0
+    for metric in runtime.registry.collect():
+        if metric.name == "pkwbus_telegrams":
+            total += sum(s.value for s in metric.samples if s.name.endswith("_total"))
+    return total
+
+
+async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, Any]:
+    from prometheus_client import generate_latest
+
+    with tempfile.TemporaryDirectory() as tmp:
+        text = service_config(
+            ports, drives=drives, pnus=PARAMETERS, every="1s", baudrate=BAUD,
+            audit_db=f"{tmp}/audit.sqlite",
+        )  # fmt: skip
+        rss0 = rss_mb()
+        async with Service(text, nodelay=True) as service:
+            runtime = service.runtime
+            await asyncio.sleep(min(5.0, seconds))  # every drive answered at least once
+            n0, c0, t0 = _telegrams(runtime), time.process_time(), time.perf_counter()
+            await asyncio.sleep(seconds)
+            n1, c1, t1 = _telegrams(runtime), time.process_time(), time.perf_counter()
+            rss = rss_mb()
+            gen = []
+            size = 0
+            for _ in range(5):
+                g0 = time.perf_counter()
+                payload = generate_latest(runtime.registry)
+                gen.append(time.perf_counter() - g0)
+                size = len(payload)
+                await asyncio.sleep(0.05)
+            http = await http_client("scrape", service.base, "5")
+    http_s = statistics.median(http["latencies"])  # type: ignore[arg-type]
+    slowest = max(statistics.median(gen), http_s)
+    return {
+        "met": "yes" if rss < 80 and slowest < 0.05 else "no",
+        "lines": len(ports),
+        "polled": len(ports) * drives * len(PARAMETERS),
+        "rss_mb": rss,
+        "rss_before_mb": rss0,
+        "exchanges_s": (n1 - n0) / (t1 - t0),
+        "cpu_load": (c1 - c0) / (t1 - t0),
+        "cpu_us": (c1 - c0) * 1e6 / max(1.0, n1 - n0),
+        "gen_ms": statistics.median(gen) * 1e3,
+        "http_ms": http_s * 1e3,
+        "size_kb": size / 1024,
+    }
+
+
+def measure(lines: int, drives: int, seconds: float) -> dict[str, Any]:
+    with contextlib.ExitStack() as stack:
+        ports = [
+            stack.enter_context(
+                sim_process(
+                    "fc",
+                    f"1-{drives}",
+                    response_delay=DELAY,
+                    baudrate=BAUD,
+                    wire_timing=True,
+                    catalog="danfoss-fc",
+                )
+            )
+            for _ in range(lines)
+        ]
+        return asyncio.run(_measure(ports, drives, seconds))
+
+
+def run(
+    lines: tuple[int, ...] = (1, 8), drives: int = 126, seconds: float = 10.0
+) -> dict[str, Any]:
+    rows = [measure(n, drives, seconds) for n in lines]
+    table = markdown_table(
+        rows,
+        {
+            "lines": "lines",
+            "polled": "polled parameters",
+            "exchanges_s": "exchanges/s",
+            "rss_mb": "VmRSS MB",
+            "cpu_load": "CPU (cores)",
+            "cpu_us": "CPU µs/exchange",
+            "gen_ms": "generate_latest ms",
+            "http_ms": "GET /metrics ms",
+            "size_kb": "size KiB",
+            "met": "< 80 MB, < 50 ms",
+        },
+        digits=1,
+    )
+    return {"rows": rows, "table": table, "drives": drives}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--lines", type=int, action="append")
+    parser.add_argument("--drives", type=int, default=126)
+    parser.add_argument("--seconds", type=float, default=10.0)
+    args = parser.parse_args()
+    print(run(tuple(args.lines or (1, 8)), args.drives, args.seconds)["table"])
+
+
+if __name__ == "__main__":
+    main()

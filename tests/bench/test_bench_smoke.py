@@ -1,0 +1,66 @@
+"""The benchmarks in their smallest form, so that they do not rot (a few seconds in all)."""
+
+from __future__ import annotations
+
+import asyncio
+import importlib
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+MODULES = [
+    "cpu_per_exchange",
+    "dead_drive",
+    "line_efficiency",
+    "pkw_lag",
+    "run_all",
+    "scale",
+    "write_latency",
+]
+
+
+def load(name: str) -> ModuleType:
+    if str(BENCH) not in sys.path:
+        sys.path.insert(0, str(BENCH))
+    return importlib.import_module(name)
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_imports(name: str) -> None:
+    assert load(name).__doc__
+
+
+def test_line_efficiency_smallest() -> None:
+    result = load("line_efficiency").run(0.3, 1, (115200,))
+    assert result["rows"][0]["median"] > 0
+
+
+def test_cpu_raw_loop_smallest() -> None:
+    mod = load("cpu_per_exchange")
+    common = load("_common")
+    with common.sim_process("fc", "1-3") as port:
+        got = asyncio.run(mod.raw_loop(port, 50, warmup=5))
+    assert got["errors"] == 0 and got["cpu_us_per_op"] > 0
+
+
+def test_service_path_smallest() -> None:
+    mod = load("cpu_per_exchange")
+    common = load("_common")
+    with common.sim_process("fc", "1-3") as port:
+        got = asyncio.run(mod.service_path(port, 50))
+    assert got["cpu_us_per_op"] > 0
+
+
+def test_dead_drive_and_lag_smallest() -> None:
+    assert load("dead_drive").measure("drive 4 dead", 0.3) > 0
+    assert load("pkw_lag").measure("interleaved", "3", 0.3) > 0
+
+
+def test_write_latency_and_scale_smallest() -> None:
+    rows = load("write_latency").measure(115200, 2, 0.01)
+    assert all(r["errors"] == 0 for r in rows)
+    row = load("scale").measure(1, 3, 0.3)
+    assert row["size_kb"] > 0

@@ -1,0 +1,45 @@
+"""The line's one response timer: re-armed for each exchange's own timeout, early or late."""
+
+from __future__ import annotations
+
+import asyncio
+
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import ErrorKind, Failure, Reply
+from pkwbus.protocol import pkw
+from pkwbus.sim import SimFaults
+from tests.master.conftest import make_sim, open_line, serve
+
+
+def _telegram(target: DriveTarget) -> bytes:
+    return target.telegram(pkw.read(target.dialect, 1613))
+
+
+async def test_a_shorter_timeout_after_a_longer_one_fires_on_time() -> None:
+    sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
+    alive, dead = DriveTarget.create("fc", 1), DriveTarget.create("fc", 2)
+    async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+        loop = asyncio.get_running_loop()
+        assert isinstance(await line.exchange(alive, _telegram(alive), timeout=2.0), Reply)
+        t0 = loop.time()
+        result = await line.exchange(dead, _telegram(dead), timeout=0.05)
+        waited = loop.time() - t0
+    assert isinstance(result, Failure) and result.kind is ErrorKind.TIMEOUT
+    assert 0.05 <= waited < 0.5
+
+
+async def test_a_longer_timeout_after_a_shorter_one_is_not_cut_short() -> None:
+    sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
+    alive, dead = DriveTarget.create("fc", 1), DriveTarget.create("fc", 2)
+    async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+        loop = asyncio.get_running_loop()
+        assert isinstance(await line.exchange(alive, _telegram(alive), timeout=0.03), Reply)
+        t0 = loop.time()
+        result = await line.exchange(dead, _telegram(dead), timeout=0.2)
+        waited = loop.time() - t0
+        assert isinstance(result, Failure) and result.kind is ErrorKind.TIMEOUT
+        assert waited >= 0.2
+        # and back to back timeouts keep their own length
+        t0 = loop.time()
+        await line.exchange(dead, _telegram(dead), timeout=0.04)
+        assert 0.04 <= loop.time() - t0 < 0.15
