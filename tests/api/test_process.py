@@ -69,7 +69,12 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
             while True:
                 assert proc.returncode is None, "pkwbus run ended early"
                 try:
-                    if (await client.get("/readyz")).status_code == 200:
+                    ready = (await client.get("/readyz")).status_code == 200
+                    drives = (await client.get("/api/v1/drives")).json() if ready else []
+                    # ready, and fan2's 3-41 polled once: it is the write's old value
+                    if any(d["name"] == "fan2" and d["values"] for d in drives) and all(
+                        len(d["values"]) == 2 for d in drives
+                    ):
                         break
                 except httpx.TransportError:
                     pass

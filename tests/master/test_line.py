@@ -12,7 +12,14 @@ import pytest
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, LineFailed, Rejected, TimedOut
+from pkwbus.master.transaction import (
+    Answered,
+    ErrorKind,
+    Failure,
+    LineFailed,
+    Rejected,
+    TimedOut,
+)
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.params import Scaling, ValueType, encode_value
@@ -226,3 +233,39 @@ async def test_the_port_vanishes_mid_exchange_and_comes_back(end: str, tmp_path:
     finally:
         await line.close()
         await server.close()
+
+
+async def test_a_foreign_telegram_before_the_answer_is_not_taken_for_it() -> None:
+    """A late answer to an earlier request (another ADR) arrives first: ours still counts."""
+    sim = make_sim("fc", [1, 2])
+    target = DriveTarget.create("fc", 1)
+    other = DriveTarget.create("fc", 2)
+    stray = sim.handle(other.telegram(pkw.read(other.dialect, 341)))
+    assert stray is not None
+
+    async def relay(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        sim_reader, sim_writer = await asyncio.open_connection(host, sim_port)
+        while data := await reader.read(256):
+            sim_writer.write(data)
+            answer = await sim_reader.read(256)
+            writer.write(stray + answer)  # drive 2's stale answer, then drive 1's
+        sim_writer.close()
+        writer.close()
+
+    async with serve(sim, "tcp") as port:
+        host, sim_port = port.removeprefix("socket://").split(":")
+        server = await asyncio.start_server(relay, "127.0.0.1", 0)
+        url = f"socket://127.0.0.1:{server.sockets[0].getsockname()[1]}"
+        async with open_line(url, "fc") as (line, trace):
+            outcome = await run_job(line, target, pkw.read(target.dialect, 341), retries=0)
+        server.close()
+    assert value(outcome) == sim.drives[1].value(341)
+    assert len(trace.tx) == 1, "answered on the first try"
+
+
+async def test_only_foreign_answers_end_as_an_address_error() -> None:
+    sim = make_sim("fc", [1], faults=SimFaults(wrong_address=1.0))
+    target = DriveTarget.create("fc", 1)
+    async with serve(sim, "tcp") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+        result = await line.exchange(target, target.telegram(pkw.read(target.dialect, 341)))
+    assert isinstance(result, Failure) and result.kind is ErrorKind.ADDRESS

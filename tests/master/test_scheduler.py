@@ -148,6 +148,7 @@ async def test_a_drive_that_comes_back_is_polled_again_within_its_backoff() -> N
         await task
     assert s.snapshot.drives["d2"].up is True
     assert events.polls_ok("d2") >= 1
+    assert events.overruns["d2"] == 0, "polls of a drive that was away are not overruns"
 
 
 async def test_overruns_are_counted_when_polls_exceed_the_line() -> None:
@@ -212,3 +213,22 @@ async def test_stop_cancels_queued_jobs_and_returns() -> None:
 @pytest.mark.parametrize("kind", [Reply, Failure])
 def test_recorder_types(kind: type) -> None:
     assert kind in (Reply, Failure)
+
+
+async def test_a_dying_drives_retries_let_the_others_in_between() -> None:
+    sim = make_sim("fc", [1, 2, 3], timing=SimTiming(response_delay=0.001))
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1, 2, 3], [1613], 0.005)
+        s, events, _ = scheduler(port, "fc", specs, timeout=0.03)
+        task = asyncio.create_task(s.run())
+        await asyncio.sleep(0.2)
+        sim.kill(3)
+        await asyncio.sleep(0.4)
+        s.stop()
+        await task
+    failed = [
+        i for i, (d, r) in enumerate(events.exchanges) if d == "d3" and isinstance(r, Failure)
+    ]
+    assert len(failed) >= 3  # retries, then down
+    followers = [events.exchanges[i + 1][0] for i in failed[:2] if i + 1 < len(events.exchanges)]
+    assert all(f != "d3" for f in followers), "another drive's exchange came between the tries"

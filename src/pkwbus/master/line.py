@@ -195,8 +195,10 @@ class Line:
         for event in events:
             if isinstance(event, Telegram):
                 if event.adr != self._expect_adr:
-                    self._resolve(Failure(ErrorKind.ADDRESS, f"answer from ADR {event.adr:#04x}"))
-                    return
+                    # Another station (or a late answer to an earlier request): keep
+                    # listening for ours; reported as an address error if it never comes.
+                    self._pending_error = ErrorKind.ADDRESS
+                    continue
                 duration = asyncio.get_running_loop().time() - self._started
                 self._resolve(Reply(event.adr, event.data, duration))
                 return

@@ -31,6 +31,7 @@ from pkwbus.master.transaction import (
     Answered,
     ErrorKind,
     ExchangeResult,
+    Failure,
     Outcome,
     PkwTransaction,
     Reply,
@@ -116,6 +117,14 @@ class _Drive:
 
     def push_poll(self, poll: _Poll) -> None:
         heapq.heappush(self.polls, (poll.due, next(self._seq), poll))
+
+    def restart_polls(self, now: float) -> None:
+        """Every poll due now: after the drive was down, none of them is late."""
+        polls = [entry[2] for entry in self.polls]
+        self.polls.clear()
+        for poll in polls:
+            poll.due = now
+            self.push_poll(poll)
 
 
 _Action = tuple[_Drive, bytes, bool]  # drive, telegram, is a probe
@@ -291,7 +300,9 @@ class LineScheduler:
         if active.tx.tally.status_word is not None:
             self._set_status(d, active.tx.tally.status_word)
         if outcome is None:
-            d.lagging = active.tx.waiting
+            # A "not yet" or a failed try: the repeat yields to another drive's
+            # exchange first, so a lagging or dying drive cannot hold the line.
+            d.lagging = active.tx.waiting or isinstance(result, Failure)
             if d.lagging:
                 self._lagging.append(d)
             return
@@ -338,6 +349,7 @@ class LineScheduler:
             if d.health.answered():
                 log.warning("drive %s answers again", d.name, extra=self._ctx(d))
                 self._set_up(d, True)
+                d.restart_polls(now)  # not overruns: the drive was away
             return
         if result.kind is ErrorKind.PORT:
             return
