@@ -21,6 +21,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import best_median, make_line, sim_process
@@ -109,9 +111,9 @@ async def service_path(port: str, n: int) -> dict[str, float]:
 def measure_pkwbus(n: int) -> dict[str, dict[str, float]]:
     out = {}
     with sim_process("fc", "1-3") as port:
-        out["raw"] = asyncio.run(raw_loop(port, n))
+        out["raw"] = link.run(raw_loop(port, n))
     with sim_process("fc", "1-3") as port:
-        out["service"] = asyncio.run(service_path(port, n))
+        out["service"] = link.run(service_path(port, n))
     return out
 
 
@@ -170,7 +172,7 @@ def main() -> None:
         for _ in range(args.repeat):
             with sim_process("fc", "1-3") as port:
                 f = raw_loop if args.only == "raw" else service_path
-                r = asyncio.run(f(port, args.n))
+                r = link.run(f(port, args.n))
             print(f"{args.only}: {r['cpu_us_per_op']:.1f} us CPU, {r['ops_per_s']:.0f}/s, {r}")
         return
     result = run(args.n, args.repeat)

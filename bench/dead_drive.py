@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Counting, best_median, fc_drive, make_line, sim_process
@@ -59,7 +61,7 @@ def measure(case: str, seconds: float) -> float:
     with sim_process(
         "fc", "1-4", response_delay=DELAY, baudrate=BAUD, wire_timing=True, **kw
     ) as port:
-        return asyncio.run(polls(port, seconds))
+        return link.run(polls(port, seconds))
 
 
 def run(seconds: float = 10.0, repeat: int = 3) -> dict[str, Any]:

@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
@@ -66,7 +68,7 @@ async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
 
 def measure(baudrate: int, seconds: float) -> float:
     with sim_process("fc", "1", response_delay=DELAY, baudrate=baudrate, wire_timing=True) as port:
-        return asyncio.run(back_to_back(port, baudrate, seconds))
+        return link.run(back_to_back(port, baudrate, seconds))
 
 
 def run(

@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Counting, best_median, fc_drive, make_line, sim_process
@@ -79,7 +81,7 @@ def measure(mode: str, lag: str, seconds: float) -> float:
         "uss", "1-4", response_delay=DELAY, baudrate=BAUD, wire_timing=True, lag=lag
     ) as port:
         f = interleaved if mode == "interleaved" else sequential
-        return asyncio.run(f(port, seconds))
+        return link.run(f(port, seconds))
 
 
 def run(

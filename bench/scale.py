@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import Service, http_client, rss_mb, service_config, sim_process
@@ -101,7 +103,7 @@ def measure(lines: int, drives: int, seconds: float) -> dict[str, Any]:
             )
             for _ in range(lines)
         ]
-        return asyncio.run(_measure(ports, drives, seconds))
+        return link.run(_measure(ports, drives, seconds))
 
 
 def run(

@@ -33,6 +33,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pkwbus import link
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import (
@@ -121,9 +123,9 @@ def _row(path: str, baud: int, latencies: list[float], errors: int, busy: float)
 
 def measure(baud: int, writes: int, gap: float) -> list[dict[str, Any]]:
     with sim_process("fc", "1-3", response_delay=DELAY, baudrate=baud, wire_timing=True) as port:
-        got = asyncio.run(_serve(port, baud, writes, gap, nodelay=False))
+        got = link.run(_serve(port, baud, writes, gap, nodelay=False))
     with sim_process("fc", "1-3", response_delay=DELAY, baudrate=baud, wire_timing=True) as port:
-        fixed = asyncio.run(_serve(port, baud, writes, gap, nodelay=True))
+        fixed = link.run(_serve(port, baud, writes, gap, nodelay=True))
     http: dict[str, Any] = got["http"]
     http2: dict[str, Any] = fixed["http"]
     return [

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import serial
 
-from pkwbus.link import Link, PortSettings
+from pkwbus.link import Link, PortSettings, new_event_loop
+from pkwbus.link import run as run_on_pkwbus_loop
+from pkwbus.link.eventloop import has_fine_timers
 from pkwbus.link.port import _raw_fd
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
@@ -75,3 +77,29 @@ def test_only_raw_ports_are_written_to_directly() -> None:
         assert _raw_fd(loop_port) == -1
     finally:
         loop_port.close()
+
+
+def test_on_pkwbus_loop_a_short_pause_needs_no_helper_thread() -> None:
+    """select() waits to the microsecond: the pause is a plain sleep, no thread hand-off."""
+
+    async def pauses() -> tuple[list[float], bool]:
+        link = Link(PortSettings("/dev/null", baudrate=115200))
+        loop = asyncio.get_running_loop()
+        waited = []
+        for _ in range(21):
+            t0 = loop.time()
+            await link._pause_for(loop, 0.0003)
+            waited.append(loop.time() - t0)
+        threads = link._fine_timer is not None
+        await link.close()
+        return waited, threads
+
+    waited, threads = run_on_pkwbus_loop(pauses())
+    assert not threads
+    assert min(waited) >= 0.0003
+    assert statistics.median(waited) < 0.00095
+    loop = new_event_loop()
+    try:
+        assert has_fine_timers(loop)
+    finally:
+        loop.close()

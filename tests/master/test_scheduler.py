@@ -232,3 +232,28 @@ async def test_a_dying_drives_retries_let_the_others_in_between() -> None:
     assert len(failed) >= 3  # retries, then down
     followers = [events.exchanges[i + 1][0] for i in failed[:2] if i + 1 < len(events.exchanges)]
     assert all(f != "d3" for f in followers), "another drive's exchange came between the tries"
+
+
+async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCaptureFixture) -> None:
+    sim = make_sim("fc", [1])
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1], [1613], 0.01)
+        s, events, _ = scheduler(port, "fc", specs)
+        real = s.line.exchange
+        calls = 0
+
+        async def flaky(*args: Any, **kw: Any) -> ExchangeResult:
+            nonlocal calls
+            calls += 1
+            if calls == 5:
+                raise RuntimeError("something nobody expected")
+            return await real(*args, **kw)
+
+        s.line.exchange = flaky  # type: ignore[method-assign]
+        task = asyncio.create_task(s.run())
+        await asyncio.sleep(1.2)  # the port is reopened after 0.5 s
+        s.stop()
+        await asyncio.wait_for(task, 2.0)
+    assert calls > 10, "the line went on after the error"
+    assert events.polls_ok("d1") >= 5
+    assert any("unexpected error" in r.getMessage() for r in caplog.records)

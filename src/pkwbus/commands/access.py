@@ -6,6 +6,7 @@ import argparse
 import asyncio
 from typing import Any
 
+from pkwbus import link
 from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
@@ -137,7 +138,7 @@ def run_read(args: argparse.Namespace) -> int:
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = _finish(asyncio.run(_perform(args, target, req)))
+    response = _finish(link.run(_perform(args, target, req)))
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError as exc:
@@ -159,7 +160,7 @@ def run_write(args: argparse.Namespace) -> int:
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = _finish(asyncio.run(_perform(args, target, req)))
+    response = _finish(link.run(_perform(args, target, req)))
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError:

@@ -11,6 +11,7 @@ import argparse
 import asyncio
 from typing import Any
 
+from pkwbus import link
 from pkwbus.commands.common import (
     CommandError,
     Exit,
@@ -121,7 +122,7 @@ def run_describe(args: argparse.Namespace) -> int:
         target.dialect.check_pnu(ref.pnu)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    found = asyncio.run(_elements(args, target, ref.pnu))
+    found = link.run(_elements(args, target, ref.pnu))
     if all(v is None for v in found.values()):
         raise CommandError(
             f"{ref}: the drive describes none of its elements", Exit.REJECTED, kind="rejected"

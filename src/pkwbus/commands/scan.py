@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
+from pkwbus import link
 from pkwbus.commands.common import (
     CommandError,
     Exit,
@@ -99,7 +99,7 @@ def run_scan(args: argparse.Namespace) -> int:
     protocol = Protocol(args.protocol)
     low, high = ADDRESS_RANGE[protocol]
     addresses = parse_addresses(args.addresses) if args.addresses else list(range(low, high + 1))
-    found = asyncio.run(_scan(args, addresses))
+    found = link.run(_scan(args, addresses))
     if args.json:
         emit_json(found)
     elif not found:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import datetime
 import json
 import logging
 import sys
 from typing import Any
 
+from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.service.config import Config, ConfigError, load_config
 from pkwbus.service.load import check_config_report
@@ -60,7 +60,7 @@ def run_service(args: argparse.Namespace) -> int:
         sock = bind(config.listen.host, config.listen.port)
     except ListenError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    asyncio.run(_serve(config, sock))
+    link.run(_serve(config, sock))
     return Exit.OK
 
 

@@ -16,7 +16,9 @@ import functools
 import logging
 import math
 import os
+import queue
 import termios
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -27,15 +29,17 @@ import serial
 import serial_asyncio
 
 from pkwbus.link.backoff import Backoff
+from pkwbus.link.eventloop import has_fine_timers
 
 log = logging.getLogger(__name__)
 
 PARITY_BITS = {"E": 1, "O": 1, "N": 0}
 PARITIES = {"E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "N": serial.PARITY_NONE}
 START_PAUSE_CHARS = 3.5
-# The event loop's selector (epoll) waits whole milliseconds, rounded up: a
-# pause of 0.3 ms would last about 1 ms. The part of a pause below this is
-# waited out by a helper thread (``time.sleep`` has microsecond resolution).
+# On a loop with an epoll selector waits last whole milliseconds, rounded up: a
+# pause of 0.3 ms would last about 1 ms. There the part of a pause below this is
+# waited out by a helper thread (``time.sleep`` has microsecond resolution);
+# pkwbus's own loop (link.eventloop) needs no thread.
 LOOP_TIMER_RESOLUTION = 0.001
 
 
@@ -166,6 +170,7 @@ class Link:
             self._failed(f"cannot open {s.url}: {reason}")
             raise PortError(self.last_error) from None
         self._closing = False
+        _closer.start()
         self._transport = _transport(loop, self, instance)
         self._serial = instance
         self._fd = _raw_fd(instance)
@@ -210,6 +215,15 @@ class Link:
             self._fine_timer = None
         self._set_state(LinkState.CLOSED, None)
 
+    def abort(self, reason: str) -> None:
+        """Give the port up after an unexpected error; it is reopened at back-off."""
+        transport, self._transport = self._transport, None
+        self._serial, self._fd = None, -1
+        self._closing = True  # connection_lost of the old transport reports nothing more
+        if transport is not None:
+            transport.abort()
+        self._failed(reason)
+
     # ------------------------------------------------------------ traffic
 
     async def send(self, data: bytes) -> None:
@@ -231,6 +245,9 @@ class Link:
 
     async def _pause_for(self, loop: asyncio.AbstractEventLoop, wait: float) -> None:
         """Wait ``wait`` seconds, to the microsecond rather than to the loop's millisecond."""
+        if has_fine_timers(loop):  # pkwbus's own loop: select() waits to the microsecond
+            await asyncio.sleep(wait)
+            return
         coarse = math.floor(wait / LOOP_TIMER_RESOLUTION) * LOOP_TIMER_RESOLUTION
         if coarse > 0:
             end = loop.time() + wait
@@ -260,7 +277,11 @@ class Link:
     def _discard_input(self) -> None:
         port = self._serial
         if port is not None:
-            with contextlib.suppress(serial.SerialException, OSError, NotImplementedError):
+            # termios.error (a vanished pty: EIO) is no OSError; the write that
+            # follows finds the port gone and reports it.
+            with contextlib.suppress(
+                serial.SerialException, OSError, NotImplementedError, termios.error
+            ):
                 port.reset_input_buffer()
 
     def _on_data(self, data: bytes) -> None:
@@ -311,30 +332,50 @@ def _transport(loop: asyncio.AbstractEventLoop, link: Link, instance: Any) -> as
         )
     finally:
         instance._reconfigure_port = reconfigure
-    instance.close = functools.partial(_close_in_thread, loop, instance.close, link.settings.url)
+    _closer.wrap(instance, link.settings.url)
     return transport
 
 
-def _close_in_thread(loop: asyncio.AbstractEventLoop, close: Callable[[], None], url: str) -> None:
-    """Close the port off the event loop.
+class _Closer:
+    """Closes ports off the event loop, in one daemon thread.
 
-    The transport closes the port from a loop callback. pyserial's
+    The transport closes its port from a loop callback. pyserial's
     ``socket://`` close sleeps 0.3 s ("give the server some time"), and a
     real port's close may wait for its output to drain: either would stall
-    every other line. The close runs in the default executor instead
-    (``asyncio.run`` waits for it before the process ends).
+    every other line. Closes are handed over through a ``SimpleQueue``,
+    whose ``put`` is safe even from a finaliser (a port garbage-collected
+    in the middle of other work), unlike an executor's ``submit``.
     """
 
-    def close_quietly() -> None:
-        try:
-            close()
-        except Exception as exc:  # a failing close changes nothing for us: the port is gone
-            log.debug("closing %s: %s", url, _reason(exc))
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[tuple[Callable[[], None], str]] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
 
-    if loop.is_closed():
-        close_quietly()
-        return
-    loop.run_in_executor(None, close_quietly)
+    def start(self) -> None:
+        """Called from ordinary code (a port being opened), never from a finaliser."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="pkwbus-close", daemon=True)
+            self._thread.start()
+
+    def wrap(self, instance: Any, url: str) -> None:
+        original: Callable[[], None] = instance.close
+
+        def close() -> None:
+            instance.close = original  # one shot: later calls (__del__) close in place
+            self._queue.put((original, url))
+
+        instance.close = close
+
+    def _run(self) -> None:
+        while True:
+            close, url = self._queue.get()
+            try:
+                close()
+            except Exception as exc:  # a failing close changes nothing: the port is gone
+                log.debug("closing %s: %s", url, _reason(exc))
+
+
+_closer = _Closer()
 
 
 # Ports whose write() is a plain write(2) of the bytes to their descriptor.

@@ -193,18 +193,29 @@ class LineScheduler:
         self._by_name = {d.name: d for d in self._drives}
         try:
             while not self._stopping:
-                if not self.line.link.is_open:
-                    await self._reopen()
-                    continue
-                action, wake = self._pick(loop.time())
-                if action is None:
-                    await self._idle(wake)
-                    continue
-                await self._perform(action)
+                try:
+                    await self._step(loop)
+                except Exception as exc:  # a line never stops: report, reopen, go on
+                    log.exception(
+                        "line %s: unexpected error, reopening its port",
+                        self.name,
+                        extra={"line": self.name},
+                    )
+                    self.line.link.abort(f"unexpected error: {exc!r}")
         finally:
             self._cancel_all("the service is stopping")
             await self.line.close()
             self.snapshot.lines[self.name] = False
+
+    async def _step(self, loop: asyncio.AbstractEventLoop) -> None:
+        if not self.line.link.is_open:
+            await self._reopen()
+            return
+        action, wake = self._pick(loop.time())
+        if action is None:
+            await self._idle(wake)
+            return
+        await self._perform(action)
 
     # ------------------------------------------------------------ choice
 

@@ -21,6 +21,9 @@ from pkwbus.service.runtime import Runtime
 log = logging.getLogger(__name__)
 
 
+MAX_HTTP_CONNECTIONS = 256
+
+
 class ListenError(Exception):
     """The HTTP address cannot be bound."""
 
@@ -55,8 +58,15 @@ async def serve(runtime: Runtime, app: FastAPI, sock: socket.socket) -> None:
     stop = asyncio.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         loop.add_signal_handler(sig, stop.set)
+    # The loop waits with select() (link.eventloop), which handles file descriptors
+    # below 1024: a bounded number of HTTP connections keeps the process far below.
     config = uvicorn.Config(
-        app, log_config=None, access_log=False, lifespan="off", timeout_graceful_shutdown=2
+        app,
+        log_config=None,
+        access_log=False,
+        lifespan="off",
+        timeout_graceful_shutdown=2,
+        limit_concurrency=MAX_HTTP_CONNECTIONS,
     )
     server = _Server(config)
     await runtime.start()
