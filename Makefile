@@ -27,6 +27,8 @@ run: $(STAMP)
 	$(BIN)/pkwbus run --config config/demo.yaml
 
 bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[bench]'
+	command -v socat >/dev/null || { echo "make bench needs socat (apt-get install -y socat)"; exit 2; }
 	$(BIN)/python bench/run_all.py
 
 clean:

@@ -13,62 +13,32 @@ import pytest
 from pkwbus.cli import main
 
 
-@pytest.fixture(scope="module")
-def sim_port() -> Iterator[str]:
-    """`pkwbus simulate` with FC drives at scattered addresses, in its own process."""
+def simulate(protocol: str, drives: str) -> Iterator[str]:
+    """`pkwbus simulate` in its own process; yields the socket:// URL it prints."""
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "pkwbus",
-            "simulate",
-            "--protocol",
-            "fc",
-            "--listen",
-            "tcp://127.0.0.1:0",
-            "--drives",
-            "2,17,101",
-            "--response-delay",
-            "0",
-        ],
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", protocol,
+         "--listen", "tcp://127.0.0.1:0", "--drives", drives, "--response-delay", "0"],
         stdout=subprocess.PIPE,
         text=True,
-    )
+    )  # fmt: skip
     assert proc.stdout is not None
     line = proc.stdout.readline()
     found = re.search(r"socket://127\.0\.0\.1:\d+", line)
     assert found, line
     yield found.group(0)
     proc.terminate()
-    assert proc.wait(5) == 0
+    assert proc.wait(5) == 0  # Ctrl-C/SIGTERM stop it cleanly
+
+
+@pytest.fixture(scope="module")
+def sim_port() -> Iterator[str]:
+    """FC drives at scattered addresses."""
+    yield from simulate("fc", "2,17,101")
 
 
 @pytest.fixture(scope="module")
 def uss_port() -> Iterator[str]:
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "pkwbus",
-            "simulate",
-            "--protocol",
-            "uss",
-            "--listen",
-            "tcp://127.0.0.1:0",
-            "--drives",
-            "3",
-            "--response-delay",
-            "0",
-        ],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stdout is not None
-    found = re.search(r"socket://127\.0\.0\.1:\d+", proc.stdout.readline())
-    assert found
-    yield found.group(0)
-    proc.terminate()
-    proc.wait(5)
+    yield from simulate("uss", "3")
 
 
 def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
