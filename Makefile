@@ -3,7 +3,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: test lint typecheck pytest run bench clean
+.PHONY: test lint typecheck pytest run bench fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -30,6 +30,10 @@ bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[bench]'
 	command -v socat >/dev/null || { echo "make bench needs socat (apt-get install -y socat)"; exit 2; }
 	$(BIN)/python bench/run_all.py
+
+fuzz: $(STAMP)
+	$(BIN)/python -m pip install --quiet atheris
+	$(BIN)/python fuzz/run.py --seconds $${SECONDS_PER_TARGET:-60}
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
