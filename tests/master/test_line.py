@@ -269,3 +269,32 @@ async def test_only_foreign_answers_end_as_an_address_error() -> None:
     async with serve(sim, "tcp") as port, open_line(port, "fc", timeout=0.05) as (line, _):
         result = await line.exchange(target, target.telegram(pkw.read(target.dialect, 341)))
     assert isinstance(result, Failure) and result.kind is ErrorKind.ADDRESS
+
+
+async def test_an_echo_is_not_taken_for_the_answer_when_echo_is_off(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """An adapter that hears itself on a line configured without echo: the echo of a
+    read (AK 1, PWE 0) would otherwise pass for the drive's answer of 0."""
+    sim = make_sim("fc", [5])
+    sim.drives[5].set_value(341, 4321)
+    target = DriveTarget.create("fc", 5)
+
+    async def relay(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        sim_reader, sim_writer = await asyncio.open_connection(host, sim_port)
+        while data := await reader.read(256):
+            writer.write(data)  # the echo
+            sim_writer.write(data)
+            writer.write(await sim_reader.read(256))
+        sim_writer.close()
+        writer.close()
+
+    async with serve(sim, "tcp") as port:
+        host, sim_port = port.removeprefix("socket://").split(":")
+        server = await asyncio.start_server(relay, "127.0.0.1", 0)
+        url = f"socket://127.0.0.1:{server.sockets[0].getsockname()[1]}"
+        async with open_line(url, "fc") as (line, _):
+            raw = value(await run_job(line, target, pkw.read(target.dialect, 341), retries=0))
+        server.close()
+    assert raw == 4321
+    assert any("echoes our requests" in r.getMessage() for r in caplog.records)

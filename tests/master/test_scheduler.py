@@ -15,7 +15,7 @@ from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ExchangeResult, Failure, Reply
+from pkwbus.master.transaction import Answered, ExchangeResult, Failure, LineFailed, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming
@@ -257,3 +257,45 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
     assert calls > 10, "the line went on after the error"
     assert events.polls_ok("d1") >= 5
     assert any("unexpected error" in r.getMessage() for r in caplog.records)
+
+
+async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> None:
+    """Nothing waits for a lost port: the write in flight fails at once and is not
+    sent again when the port returns; drives read as down while their line is."""
+    timing = SimTiming(response_delay=0.0, lag_telegrams=1000, lag_mode="none")
+    sim = make_sim("uss", [1, 2], timing=timing)
+    server = await sim.serve_tcp("127.0.0.1", 0)
+    port = server.url
+    specs = drive_specs("uss", [1, 2], [1120], 0.05)
+    trace = Trace()
+    line = Line(
+        PortSettings(port, reopen_initial=0.1, reopen_cap=0.2),
+        Protocol.USS,
+        timeout=0.05,
+        trace=trace,
+    )
+    s = LineScheduler("line1", line, specs, events=Recorder())
+    task = asyncio.create_task(s.run())
+    loop = asyncio.get_running_loop()
+    try:
+        await asyncio.sleep(0.2)
+        target = specs[0].target
+        write = pkw.write(target.dialect, 1121, 0x41200000, pkw.Width.DWORD)
+        future: asyncio.Future[JobResult] = loop.create_future()
+        s.submit(Job("d1", write, JobKind.WRITE, Priority.WRITE, loop.time() + 30, future=future))
+        await asyncio.sleep(0.2)  # the write lags: it is in flight, repeated
+        assert not future.done()
+        await server.close()
+        result = await asyncio.wait_for(future, 2.0)
+        assert isinstance(result.outcome, LineFailed)
+        await asyncio.sleep(0.1)
+        assert s.snapshot.drives["d1"].up is False and s.snapshot.lines["line1"] is False
+        sent_before = len(trace.tx)
+        server = await sim.serve_tcp("127.0.0.1", int(port.rsplit(":", 1)[1]))
+        await asyncio.sleep(0.8)
+        assert s.snapshot.lines["line1"] is True
+        assert target.telegram(write) not in trace.tx[sent_before:]
+    finally:
+        s.stop()
+        await asyncio.wait_for(task, 2.0)
+        await server.close()

@@ -8,6 +8,7 @@ may put other drives' exchanges between its repeats.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Callable
 
 from pkwbus.link import Link, PortError, PortSettings
@@ -31,6 +32,8 @@ from pkwbus.protocol.telegram import (
     fc_lengths,
     uss_lengths,
 )
+
+log = logging.getLogger(__name__)
 
 TraceHook = Callable[[str, bytes], None]
 
@@ -70,6 +73,8 @@ class Line:
         self._started = 0.0
         self._gap_timer: asyncio.TimerHandle | None = None
         self._pending_error: ErrorKind | None = None
+        self._sent = b""
+        self._warned_echo = False
         # One response timer, re-armed only when it fires early (not one per exchange).
         self._deadline = 0.0
         self._timer: asyncio.TimerHandle | None = None
@@ -124,6 +129,7 @@ class Line:
         now = loop.time()
         self._started = now
         self._expect_adr = adr
+        self._sent = telegram
         waiter: asyncio.Future[ExchangeResult] = loop.create_future()
         self._waiter = waiter
         self._arm(loop, now + timeout + link.settings.wire_time(len(telegram)))
@@ -194,6 +200,17 @@ class Line:
     def _handle_events(self, events: list[DeframerEvent]) -> None:
         for event in events:
             if isinstance(event, Telegram):
+                if self._sent and event.data == self._sent[3:-1] and event.adr == self._sent[2]:
+                    # Our own request, heard back: an adapter that echoes although the
+                    # line's echo option is off. Never taken for the drive's answer.
+                    self._sent = b""
+                    if not self._warned_echo:
+                        self._warned_echo = True
+                        log.warning(
+                            "%s echoes our requests: set echo: true for this line",
+                            self.link.settings.url,
+                        )
+                    continue
                 if event.adr != self._expect_adr:
                     # Another station (or a late answer to an earlier request): keep
                     # listening for ours; reported as an address error if it never comes.

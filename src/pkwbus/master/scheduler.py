@@ -32,6 +32,7 @@ from pkwbus.master.transaction import (
     ErrorKind,
     ExchangeResult,
     Failure,
+    LineFailed,
     Outcome,
     PkwTransaction,
     Reply,
@@ -234,16 +235,16 @@ class LineScheduler:
                 best, best_key = d, key
         if best is None:
             return None, wake
-        return self._start(best, now), wake
+        return self._start(best, now), now
 
     def _candidate(self, d: _Drive, now: float) -> tuple[tuple[int, int, float] | None, float]:
         """The drive's claim on the next exchange, or when it will have one."""
-        if d.active is not None:
-            return (d.active.priority, int(d.lagging), d.active.order), now
         if d.writes:
             self._expire(d.writes, now)
         if d.reads:
             self._expire(d.reads, now)
+        if d.active is not None:
+            return (d.active.priority, int(d.lagging), d.active.order), now
         if d.writes:
             return (Priority.WRITE, 0, d.writes[0].deadline), now
         if d.reads:
@@ -264,8 +265,11 @@ class LineScheduler:
             job = queue.popleft()
             self._finish_job(job, JobResult(TimedOut("deadline passed before it was sent")))
 
-    def _start(self, d: _Drive, now: float) -> _Action:
+    def _start(self, d: _Drive, now: float) -> _Action | None:
         if d.active is not None:
+            if now >= d.active.tx.deadline:  # never resend a request past its deadline
+                self._complete(d, d.active, TimedOut("deadline passed"), now)
+                return None
             return d, d.active.tx.telegram, False
         queue = d.writes or d.reads
         if queue:
@@ -279,7 +283,9 @@ class LineScheduler:
         spec = poll.spec
         if now - poll.due > spec.every:
             self.events.overrun(d.name)
-        deadline = now + (self.poll_deadline or max(spec.every, 4 * self.line.timeout))
+        # Long enough for the retries and a lagging answer; never the poll's whole
+        # interval, which would hold the drive's parameter channel for minutes.
+        deadline = now + (self.poll_deadline or 4 * (self.retries + 1) * self.line.timeout)
         tx = PkwTransaction(d.target, spec.request, retries=self.retries, deadline=deadline)
         d.active = _Active(tx, Priority.POLL, poll.due, poll=poll)
         return d, tx.telegram, False
@@ -308,7 +314,7 @@ class LineScheduler:
         if active is None:  # the drive went down and its poll was dropped
             return
         outcome = active.tx.feed(result, now)
-        if active.tx.tally.status_word is not None:
+        if isinstance(result, Reply) and active.tx.tally.status_word is not None:
             self._set_status(d, active.tx.tally.status_word)
         if outcome is None:
             # A "not yet" or a failed try: the repeat yields to another drive's
@@ -361,6 +367,8 @@ class LineScheduler:
                 log.warning("drive %s answers again", d.name, extra=self._ctx(d))
                 self._set_up(d, True)
                 d.restart_polls(now)  # not overruns: the drive was away
+            elif not self.snapshot.drives[d.name].up:
+                self._set_up(d, True)  # back after its line was down
             return
         if result.kind is ErrorKind.PORT:
             return
@@ -396,20 +404,27 @@ class LineScheduler:
 
     async def _reopen(self) -> None:
         link = self.line.link
-        self._fail_queued("the line's port is not open")
-        wait = link.next_attempt - asyncio.get_running_loop().time()
+        loop = asyncio.get_running_loop()
+        self._fail_all("the line's port is not open", loop.time())
+        wait = link.next_attempt - loop.time()
         if wait > 0:
-            await self._idle(asyncio.get_running_loop().time() + wait)
-            if self._stopping:
-                return
+            await self._idle(loop.time() + wait)
+            if self._stopping or loop.time() < link.next_attempt:
+                return  # woken by a new job: it fails at once, the back-off stands
         with contextlib.suppress(PortError):  # reported once by the link's state change
             await link.open()
+        if link.is_open:
+            for d in self._drives:
+                d.restart_polls(loop.time())  # not overruns: the line was away
 
-    def _fail_queued(self, reason: str) -> None:
+    def _fail_all(self, reason: str, now: float) -> None:
+        """The port is gone: no job waits for it, and nothing in flight is sent later."""
         for d in self._drives:
+            if d.active is not None:
+                self._complete(d, d.active, LineFailed(reason), now)
             for queue in (d.writes, d.reads):
                 while queue:
-                    self._finish_job(queue.popleft(), JobResult(TimedOut(reason)))
+                    self._finish_job(queue.popleft(), JobResult(LineFailed(reason)))
 
     async def _idle(self, until: float) -> None:
         loop = asyncio.get_running_loop()
@@ -432,6 +447,8 @@ class LineScheduler:
             )
         elif state is LinkState.FAILED:
             log.warning("line %s: %s", self.name, error, extra={"line": self.name})
+            for d in self._drives:  # nobody can tell whether they answer
+                self._set_up(d, False)
 
     def _cancel_all(self, reason: str) -> None:
         for d in self._drives:

@@ -78,8 +78,12 @@ async def serve(runtime: Runtime, app: FastAPI, sock: socket.socket) -> None:
     finally:
         await runtime.stop()
         server.should_exit = True
-        with contextlib.suppress(asyncio.CancelledError):
+        try:
             await asyncio.wait_for(server_task, 5.0)
+        except asyncio.CancelledError:
+            pass
+        except Exception as exc:  # the service is stopping anyway: say so, no traceback
+            log.warning("HTTP server: %s", exc or type(exc).__name__)
         stop_task.cancel()
         for sig in (signal.SIGTERM, signal.SIGINT):
             loop.remove_signal_handler(sig)

@@ -126,8 +126,13 @@ class ParameterService:
             self._perform(entry, ref, fmt, order, request, telegram, audit, row)
         )
         self._running.add(task)
-        task.add_done_callback(self._running.discard)
+        task.add_done_callback(self._finished)
         return await asyncio.shield(task)
+
+    def _finished(self, task: asyncio.Future[dict[str, Any]]) -> None:
+        self._running.discard(task)
+        if not task.cancelled():
+            task.exception()  # collected: a client that left is not told, the audit row is
 
     def refuse_malformed(self, drive: str, parameter: str, caller: Caller, problem: str) -> None:
         """Audit a write whose body did not validate (nothing was sent)."""
@@ -336,8 +341,11 @@ def _audit_outcome(result: JobResult) -> tuple[str, int | None, str | None]:
         return "ok", None, None
     if isinstance(outcome, Rejected):
         return "rejected", outcome.fault, outcome.text
+    sent = result.tally.telegrams if result.tally else 0
+    note = f"; the request went out {sent} times and may have been applied" if sent else ""
+    reason = getattr(outcome, "reason", "")
     if isinstance(outcome, Cancelled):
-        sent = result.tally.telegrams if result.tally else 0
-        note = f"; the request went out {sent} times and may have been applied" if sent else ""
-        return "cancelled", None, outcome.reason + note
-    return "timeout", None, getattr(outcome, "reason", None)
+        return "cancelled", None, reason + note
+    if not sent:
+        return "not_sent", None, reason  # refused by the line before it went out
+    return "timeout", None, reason + note
