@@ -15,7 +15,7 @@ from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ExchangeResult, Failure, LineFailed, Reply
+from pkwbus.master.transaction import Answered, ExchangeResult, Failure, LineFailed
 from pkwbus.protocol import pkw
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming
@@ -208,11 +208,6 @@ async def test_stop_cancels_queued_jobs_and_returns() -> None:
     results = [f.result() for f in futures]
     assert any(isinstance(r.outcome, Cancelled) for r in results)
     assert all(f.done() for f in futures)
-
-
-@pytest.mark.parametrize("kind", [Reply, Failure])
-def test_recorder_types(kind: type) -> None:
-    assert kind in (Reply, Failure)
 
 
 async def test_a_dying_drives_retries_let_the_others_in_between() -> None:

@@ -94,14 +94,6 @@ class Line:
         async with self._lock:
             return await self._exchange(target.adr, telegram, timeout or self.timeout)
 
-    async def send_broadcast(self, telegram: bytes) -> None:
-        """Send a telegram that no follower answers."""
-        async with self._lock:
-            await self.link.ensure_open()
-            await self.link.send(telegram)
-            if self.trace:
-                self.trace("tx", telegram)
-
     async def run(self, tx: PkwTransaction) -> Outcome:
         """Repeat ``tx``'s request until it is finished (no interleaving)."""
         loop = asyncio.get_running_loop()
