@@ -3,7 +3,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: test lint typecheck pytest run bench fuzz clean
+.PHONY: test test-long lint typecheck pytest run bench fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,11 @@ pytest: $(STAMP)
 	$(BIN)/python -m pytest -q --cov=pkwbus --cov-report=term:skip-covered
 
 test: lint typecheck pytest
+
+# The minute-long forms (60 s soak, schemathesis over the API); .ci/run runs them
+# after make test.
+test-long: $(STAMP)
+	$(BIN)/python -m pytest -q -m long
 
 run: $(STAMP)
 	$(BIN)/pkwbus run --config config/demo.yaml

@@ -1,4 +1,9 @@
-"""Async tests run on the event loop the service and the commands run on."""
+"""Async tests run on the event loop the service and the commands run on.
+
+Hypothesis runs without deadlines and without the too-slow health check: on a
+loaded two-core CI machine one example can take far longer than usual, and a
+test must not fail for that.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +11,12 @@ from collections.abc import Mapping
 from typing import Any
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from pkwbus.link import new_event_loop
+
+settings.register_profile("pkwbus", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("pkwbus")
 
 
 def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> Mapping[str, Any]:

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import hypothesis
+import pytest
 import requests
 import schemathesis
 import uvicorn
@@ -91,6 +92,7 @@ def running(tmp_path: Path) -> Iterator[Running]:
         svc.thread.join(30)
 
 
+@pytest.mark.long
 def test_no_server_errors(tmp_path: Path) -> None:
     with running(tmp_path) as svc:
         schema = schemathesis.openapi.from_dict(svc.app.openapi())

@@ -2,16 +2,13 @@
 
 The atheris harnesses in fuzz/ check the same properties for minutes at a
 time (docs/fuzzing.md). Bugs they found are pinned at the end of this module
-as strict xfail tests with the minimal input (F-PKW-*, F-PAR-*, F-CAT-*), and
-tolerated, narrowly, by the property tests through ``KNOWN_*`` below, so the
-properties keep guarding everything else. Fixing a bug turns its xfail test
-into an XPASS failure: then drop the marker and the matching ``KNOWN_*`` entry.
+with the minimal input (F-PKW-*, F-PAR-*, F-CAT-*), each asserting the fixed
+behaviour.
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
@@ -47,19 +44,6 @@ LENGTH_SETS = {
     "uss-3-2": uss_lengths([BlockShape(3, 2)]),
 }
 DIALECT_LAYOUTS = [(d, layout) for d in DIALECTS.values() for layout in IndLayout]
-
-# ------------------------------------------------------------- known findings
-
-Predicate = Callable[[BaseException], bool]
-
-# Every finding so far is fixed; a new one would be pinned here while open.
-KNOWN_CATALOG: dict[str, Predicate] = {}
-KNOWN_VALUES: dict[str, Predicate] = {}
-
-
-def is_known(exc: BaseException, known: dict[str, Predicate]) -> bool:
-    return any(test(exc) for test in known.values())
-
 
 # ------------------------------------------------------------------ deframer
 
@@ -315,10 +299,6 @@ def test_encode_value_only_raises_protocol_errors(
         raw = params.encode_value(value, vtype, scaling, rounding)
     except ProtocolError:
         return
-    except (ValueError, OverflowError) as exc:
-        if is_known(exc, KNOWN_VALUES):
-            return
-        raise
     assert vtype.width is not None
     assert 0 <= raw < 1 << vtype.width.value
 
@@ -351,13 +331,8 @@ def test_decode_value_only_raises_remote_protocol_error(
 def test_check_limits_only_raises_local_protocol_error(
     value: float | int | str, low: float | None, high: float | None
 ) -> None:
-    try:
+    with contextlib.suppress(LocalProtocolError):
         params.check_limits(value, low, high, "Hz")
-    except LocalProtocolError:
-        pass
-    except ValueError as exc:
-        if not is_known(exc, KNOWN_VALUES):
-            raise
 
 
 # ------------------------------------------------------------------- catalog
@@ -401,13 +376,8 @@ def catalog_texts(draw: st.DrawFn) -> str:
 @settings(FAST, max_examples=400)
 @given(yaml_ish | st.text(max_size=40) | catalog_texts())
 def test_catalog_loader_only_raises_catalog_error(text: str) -> None:
-    try:
+    with contextlib.suppress(CatalogError):
         _parse_catalog(text, "fuzz.yaml")
-    except CatalogError:
-        pass
-    except Exception as exc:
-        if not is_known(exc, KNOWN_CATALOG):
-            raise
 
 
 # ----------------------------------------------- findings of the fuzzers, pinned
@@ -416,21 +386,16 @@ USS_PKE_2000 = bytes.fromhex("17D0 0000 0000 0000")  # AK 1, PNU field 2000, pag
 USS_PAGE_66000 = bytes.fromhex("1000 8800 0000 0000")  # AK 1, PNU field 0, page bits a+f = 33
 
 
-def test_f_pkw_1_pnu_field_above_1999_re_encodes_differently() -> None:
-    try:
-        resp = pkw.decode_response(USS_PKE_2000, USS, IndLayout.USS)
-    except RemoteProtocolError:
-        return  # a fix may also refuse the field as the peer's error
-    again = pkw.encode_response(resp, USS, IndLayout.USS, 4)
-    assert again[:4] == USS_PKE_2000[:4]
+def test_f_pkw_1_pnu_field_above_1999_beside_a_page_index_is_the_peer_s_error() -> None:
+    """Once decoded as PNU 2000 and re-encoded differently; now refused as the drive's error."""
+    with pytest.raises(RemoteProtocolError, match="PNU field 2000"):
+        pkw.decode_response(USS_PKE_2000, USS, IndLayout.USS)
 
 
-def test_f_pkw_2_decoded_pnu_above_65535_cannot_be_encoded() -> None:
-    try:
-        resp = pkw.decode_response(USS_PAGE_66000, USS, IndLayout.USS)
-    except RemoteProtocolError:
-        return  # a fix may also refuse the PNU as the peer's error
-    pkw.encode_response(resp, USS, IndLayout.USS, 4)
+def test_f_pkw_2_a_page_index_making_a_pnu_above_65535_is_the_peer_s_error() -> None:
+    """Once decoded as PNU 66000, which no request can name; now refused as the drive's error."""
+    with pytest.raises(RemoteProtocolError, match="66000"):
+        pkw.decode_response(USS_PAGE_66000, USS, IndLayout.USS)
 
 
 def test_f_par_1_huge_value_raises_local_protocol_error() -> None:

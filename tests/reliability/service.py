@@ -28,17 +28,23 @@ class Service:
     """One `pkwbus run` process; its stderr goes to a file (``log``)."""
 
     def __init__(
-        self, tmp: Path, url: str, *, timeout: str = "250ms", extra: tuple[str, ...] = ()
+        self,
+        tmp: Path,
+        url: str,
+        *,
+        timeout: str = "250ms",
+        every: str = "30s",
+        api: dict[str, Any] | None = None,
+        extra: tuple[str, ...] = (),
     ) -> None:
         self.tmp = tmp
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
         self.audit_db = tmp / "audit.sqlite"
         self.config = tmp / "config.yaml"
-        line = fc_line("l1", url, [1], ["16-13"], every="30s", timeout=timeout, retries=0)
-        self.config.write_text(
-            config_text([line], audit_db=str(self.audit_db), api={"write_token_env": TOKEN_ENV})
-        )
+        line = fc_line("l1", url, [1], ["16-13"], every=every, timeout=timeout, retries=0)
+        api = {"write_token_env": TOKEN_ENV, **(api or {})}
+        self.config.write_text(config_text([line], audit_db=str(self.audit_db), api=api))
         self.log = tmp / "stderr.log"
         self.extra = list(extra)
         self.proc: asyncio.subprocess.Process | None = None

@@ -8,6 +8,8 @@ import signal
 import sqlite3
 from pathlib import Path
 
+import pytest
+
 from pkwbus.service.audit import AuditLog
 from pkwbus.sim import SimTiming, Simulator
 
@@ -16,7 +18,8 @@ from .service import TOKEN, Service
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 
-async def test_sigterm_during_a_write(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+async def test_a_stop_signal_during_a_write(tmp_path: Path, sig: signal.Signals) -> None:
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.8), seed=1, catalog="danfoss-fc")
     end = await sim.serve_tcp("127.0.0.1", 0)
     service = Service(tmp_path, end.url, timeout="3s")
@@ -32,7 +35,7 @@ async def test_sigterm_during_a_write(tmp_path: Path) -> None:
             # through, one of the two is on the wire.
             await asyncio.sleep(1.2)
             assert not write.done()
-            service.signal(signal.SIGTERM)
+            service.signal(sig)
             loop = asyncio.get_running_loop()
             sent = loop.time()
             response = await asyncio.wait_for(write, 5)
@@ -44,7 +47,9 @@ async def test_sigterm_during_a_write(tmp_path: Path) -> None:
         assert len(rows) == 1
         outcome, _detail = rows[0]
         assert outcome == ("ok" if response.status_code == 200 else "cancelled"), rows
-        assert "Traceback" not in service.log.read_text()
+        log = service.log.read_text()
+        assert "Traceback" not in log
+        assert f"stopping ({sig.name})" in log and "stopped" in log, log
     finally:
         await service.stop()
         await end.close()

@@ -206,6 +206,7 @@ def no_growth(samples: list[tuple[int, int]]) -> None:
 
 
 @pytest.mark.soak
+@pytest.mark.long
 async def test_soak_ci() -> None:
     await run_soak(SOAK_SECONDS)
 

@@ -82,7 +82,7 @@ async def _serve(config: Config, sock: Any) -> None:
     log.info("pkwbus: metrics on http://%s:%d/metrics", shown, config.listen.port)
     log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
     try:
-        await serve(runtime, app, sock)
+        await serve(runtime, app, sock, max_connections=config.api.max_connections)
     finally:
         audit.close()
 

@@ -245,7 +245,7 @@ class Link:
 
     async def _pause_for(self, loop: asyncio.AbstractEventLoop, wait: float) -> None:
         """Wait ``wait`` seconds, to the microsecond rather than to the loop's millisecond."""
-        if has_fine_timers(loop):  # pkwbus's own loop: select() waits to the microsecond
+        if has_fine_timers(loop):  # pkwbus's own loop waits to the microsecond
             await asyncio.sleep(wait)
             return
         coarse = math.floor(wait / LOOP_TIMER_RESOLUTION) * LOOP_TIMER_RESOLUTION

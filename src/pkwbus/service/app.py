@@ -1,7 +1,8 @@
 """The composition root of `pkwbus run`: lines, HTTP server, signals, shutdown.
 
-SIGTERM or SIGINT: stop taking new jobs, let every line finish the exchange
-in flight, close the ports, stop the HTTP server, exit 0.
+SIGTERM, SIGINT or SIGHUP: stop taking new jobs, let every line finish the
+exchange in flight, close the ports, stop the HTTP server, exit 0. SIGHUP
+does not reload the configuration: a new configuration takes a restart.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import resource
 import signal
 import socket
 from collections.abc import Iterator
@@ -16,12 +18,12 @@ from collections.abc import Iterator
 import uvicorn
 from fastapi import FastAPI
 
+from pkwbus.service.http import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
 
 log = logging.getLogger(__name__)
 
-
-MAX_HTTP_CONNECTIONS = 256
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 
 class ListenError(Exception):
@@ -52,21 +54,51 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-async def serve(runtime: Runtime, app: FastAPI, sock: socket.socket) -> None:
-    """Run until SIGTERM/SIGINT, then shut down in order."""
+def raise_open_files_limit(needed: int) -> None:
+    """Lift the soft limit of open files towards the hard one, so ``needed`` fit."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY or soft >= needed:
+        return
+    target = needed if hard == resource.RLIM_INFINITY else min(needed, hard)
+    if target > soft:
+        with contextlib.suppress(ValueError, OSError):
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    if soft < needed:
+        log.warning(
+            "open files are limited to %d (ulimit -n): fewer than the %d HTTP connections "
+            "api.max_connections allows plus the ports; lower api.max_connections",
+            soft,
+            needed - SPARE_DESCRIPTORS,
+        )
+
+
+# Descriptors besides HTTP connections: ports, the audit database, the listener, logs.
+SPARE_DESCRIPTORS = 64
+
+
+async def serve(
+    runtime: Runtime, app: FastAPI, sock: socket.socket, *, max_connections: int = 1000
+) -> None:
+    """Run until SIGTERM, SIGINT or SIGHUP, then shut down in order."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(sig, stop.set)
-    # The loop waits with select() (link.eventloop), which handles file descriptors
-    # below 1024: a bounded number of HTTP connections keeps the process far below.
+    received: list[str] = []
+
+    def on_signal(sig: signal.Signals) -> None:
+        received.append(sig.name)
+        stop.set()
+
+    for sig in STOP_SIGNALS:
+        loop.add_signal_handler(sig, on_signal, sig)
+    raise_open_files_limit(max_connections + SPARE_DESCRIPTORS)
     config = uvicorn.Config(
         app,
         log_config=None,
         access_log=False,
         lifespan="off",
         timeout_graceful_shutdown=2,
-        limit_concurrency=MAX_HTTP_CONNECTIONS,
+        http=bounded_protocol(ConnectionLimit(max_connections)),
     )
     server = _Server(config)
     await runtime.start()
@@ -74,7 +106,8 @@ async def serve(runtime: Runtime, app: FastAPI, sock: socket.socket) -> None:
     stop_task = asyncio.create_task(stop.wait(), name="signal")
     try:
         await asyncio.wait({server_task, stop_task}, return_when=asyncio.FIRST_COMPLETED)
-        log.info("stopping: finishing the exchanges in flight")
+        by = f" ({received[0]})" if received else ""
+        log.info("stopping%s: finishing the exchanges in flight", by)
     finally:
         await runtime.stop()
         server.should_exit = True
@@ -85,6 +118,6 @@ async def serve(runtime: Runtime, app: FastAPI, sock: socket.socket) -> None:
         except Exception as exc:  # the service is stopping anyway: say so, no traceback
             log.warning("HTTP server: %s", exc or type(exc).__name__)
         stop_task.cancel()
-        for sig in (signal.SIGTERM, signal.SIGINT):
+        for sig in STOP_SIGNALS:
             loop.remove_signal_handler(sig)
     log.info("stopped")

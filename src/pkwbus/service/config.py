@@ -92,6 +92,9 @@ _NAME = r"^[A-Za-z0-9_.-]+$"
 _NAME_MAX = 64
 
 
+MAX_HTTP_CONNECTIONS = 10_000
+
+
 class ConfigError(Exception):
     """The configuration cannot be used; ``problems`` has one line per problem."""
 
@@ -768,6 +771,9 @@ def _env_name(value: object) -> str:
 
 class Api(_Model):
     write_token_env: Annotated[str, PlainValidator(_env_name)] = DEFAULT_TOKEN_ENV
+    # HTTP connections open at once; more are closed at once (logged), so a flood of
+    # clients cannot take the descriptors the serial ports need.
+    max_connections: int = Field(default=1000, ge=1, le=MAX_HTTP_CONNECTIONS)
 
 
 def _audit_path(value: object) -> Path:
