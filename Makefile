@@ -5,10 +5,12 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: test test-long lint typecheck pytest run bench fuzz clean
 
-$(STAMP): pyproject.toml
+# The runtime dependencies at the exact versions of constraints.txt (the
+# image's); the test tools, which it does not list, resolve freely.
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test]'
 	touch $(STAMP)
 
 lint: $(STAMP)
@@ -32,7 +34,7 @@ run: $(STAMP)
 	$(BIN)/pkwbus run --config config/demo.yaml
 
 bench: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[bench]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[bench]'
 	command -v socat >/dev/null || { echo "make bench needs socat (apt-get install -y socat)"; exit 2; }
 	$(BIN)/python bench/run_all.py
 

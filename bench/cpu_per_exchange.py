@@ -70,7 +70,11 @@ async def service_path(port: str, n: int) -> dict[str, float]:
         drives.append(DriveSpec(name, target, polls))
     line = make_line(port, "fc", BAUDRATE, timeout=0.5)
     sched = LineScheduler(
-        "bench", line, drives, events=metrics.for_line("bench", names), poll_deadline=1.0
+        "bench",
+        line,
+        drives,
+        events=metrics.for_line("bench", {d.name: d.target.dialect for d in drives}),
+        poll_deadline=1.0,
     )
 
     def done() -> float:

@@ -56,12 +56,13 @@ def check_deploy() -> ModuleType:
 
 
 def complete(text: str) -> bool:
-    """Each drive has a value of 3-41 and a series of the fault counter."""
+    """Each drive has a value of 3-41 and a fault counted (series exist at 0 before)."""
     seen = {
         (sample.name, sample.labels.get("drive"))
         for family in text_string_to_metric_families(text)
         for sample in family.samples
         if sample.labels.get("parameter", "3-41") == "3-41"
+        and (sample.name != "pkwbus_pkw_faults_total" or sample.value > 0)
     }
     wanted = ("pkwbus_parameter_value", "pkwbus_pkw_faults_total")
     return all((name, drive) in seen for name in wanted for drive in DRIVES)

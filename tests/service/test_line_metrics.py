@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import asyncio
+from pathlib import Path
+
+import pytest
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.transaction import Answered, Rejected, Tally, TimedOut
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC
+from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
+from pkwbus.service.build import build_runtime
+from pkwbus.service.config import parse_config
 from pkwbus.service.metrics import ServiceMetrics, outcome_label
+
+FAULTS = "pkwbus_pkw_faults_total"
 
 
 def _job(kind: JobKind) -> Job:
@@ -17,7 +25,7 @@ def _job(kind: JobKind) -> Job:
 
 def test_finished_jobs_count_by_kind_and_outcome() -> None:
     registry = CollectorRegistry()
-    metrics = ServiceMetrics(registry).for_line("l", ["d1"])
+    metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
     response = pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD)
     for _ in range(3):
         metrics.job_finished("d1", _job(JobKind.READ), JobResult(Answered(response), tally=Tally()))
@@ -36,9 +44,111 @@ def test_finished_jobs_count_by_kind_and_outcome() -> None:
     assert jobs("other", "read", "cancelled") == 1  # a drive not configured still counts
 
 
+def test_telegram_error_kinds_start_at_zero() -> None:
+    registry = CollectorRegistry()
+    ServiceMetrics(registry).for_line("l", {"d1": FC})
+    kinds = {
+        sample.labels["kind"]: sample.value
+        for family in registry.collect()
+        for sample in family.samples
+        if sample.name == "pkwbus_telegram_errors_total"
+    }
+    assert kinds == dict.fromkeys(["timeout", "checksum", "length", "address", "unexpected"], 0)
+
+
 def test_outcome_labels() -> None:
     response = pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD)
     assert outcome_label(Answered(response)).value == "ok"
     assert outcome_label(Rejected(None, "", "")).value == "rejected"
     assert outcome_label(Cancelled("")).value == "cancelled"
     assert outcome_label(TimedOut("")).value == "timeout"
+
+
+def _fault_series(registry: CollectorRegistry) -> dict[frozenset[tuple[str, str]], float]:
+    return {
+        frozenset(sample.labels.items()): sample.value
+        for family in registry.collect()
+        for sample in family.samples
+        if sample.name == FAULTS
+    }
+
+
+def _rejected(dialect: Dialect, reply: Reply, fault: int) -> Rejected:
+    """A rejection as the transaction makes it from the drive's telegram."""
+    ak = pkw.response_id(dialect, reply)
+    raw = pkw.encode_response(
+        pkw.Rejection(ak, 100, 0, fault, "", ""), dialect, dialect.default_ind_layout, None
+    )
+    response = pkw.decode_response(raw, dialect, dialect.default_ind_layout)
+    assert isinstance(response, pkw.Rejection)
+    return Rejected(response.fault, response.text, response.short)
+
+
+def _rejections(dialect: Dialect) -> list[Rejected]:
+    answers = [_rejected(dialect, Reply.REJECTED, number) for number in dialect.faults]
+    if any(reply is Reply.NO_RIGHTS for reply, _ in dialect.responses.values()):
+        answers.append(_rejected(dialect, Reply.NO_RIGHTS, 0))
+    return answers
+
+
+@pytest.mark.parametrize("dialect", DIALECTS.values(), ids=lambda d: d.name)
+def test_first_fault_of_each_code_is_a_step_from_zero(dialect: Dialect) -> None:
+    """Every fault a drive's dialect knows has its series at 0 before it happens, with the
+    labels the fault itself brings, so that increase() sees 0 -> 1."""
+    answers = _rejections(dialect)
+    assert len(answers) > len(dialect.faults) / 2
+    for answer in answers:
+        registry = CollectorRegistry()
+        metrics = ServiceMetrics(registry).for_line("l", {"d1": dialect, "d2": dialect})
+        before = _fault_series(registry)
+        assert before, "no fault series before the first fault"
+        assert set(before.values()) == {0.0}
+        metrics.job_finished("d1", _job(JobKind.WRITE), JobResult(answer))
+        after = _fault_series(registry)
+        assert after.keys() == before.keys(), f"{answer}: a new series, not a step from 0"
+        changed = {labels: v for labels, v in after.items() if v != before[labels]}
+        assert len(changed) == 1, answer
+        labels, value = changed.popitem()
+        assert value == 1
+        assert dict(labels)["drive"] == "d1"
+    # one series per drive and per answer, none shared between two answers
+    assert len(before) == 2 * len(answers)
+
+
+def test_a_fault_outside_the_table_still_counts() -> None:
+    registry = CollectorRegistry()
+    metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
+    unknown = _rejected(FC, Reply.REJECTED, 77)
+    before = _fault_series(registry)
+    metrics.job_finished("d1", _job(JobKind.READ), JobResult(unknown))
+    new = _fault_series(registry).keys() - before.keys()
+    assert [dict(labels)["fault_code"] for labels in new] == ["77"]
+
+
+def test_the_service_creates_the_fault_series_of_its_configured_drives(tmp_path: Path) -> None:
+    config = parse_config(
+        f"""\
+audit_db: {tmp_path / "audit.sqlite"}
+lines:
+  - name: hall
+    port: {tmp_path / "no-such-tty"}
+    protocol: uss
+    baudrate: 19200
+    drives:
+      - {{name: fan, address: 1}}
+      - {{name: pump, address: 2, dialect: danfoss-pcv}}
+"""
+    )
+
+    async def series() -> dict[frozenset[tuple[str, str]], float]:
+        runtime = await build_runtime(config)
+        try:
+            return _fault_series(runtime.registry)
+        finally:
+            await runtime.stop()
+
+    found = asyncio.run(series())
+    for drive in config.lines[0].drives:
+        mine = {labels for labels in found if ("drive", drive.name) in labels}
+        assert len(mine) == len(_rejections(drive.pkw_dialect)), drive.name
+    assert set(found.values()) == {0.0}

@@ -323,6 +323,23 @@ class SpontaneousResponse(PkwResponse):
     raw: int
 
 
+# The short text of a "no change rights" answer, which carries no fault number.
+NO_CHANGE_RIGHTS = "no change rights"
+
+
+def rejections(dialect: Dialect) -> list[tuple[int | None, str]]:
+    """Every (fault, short) pair a :class:`Rejection` decoded in ``dialect`` can carry.
+
+    The fault numbers of the dialect's table, and "no change rights" (no
+    number) where the dialect has that answer. A number outside the table is
+    kept with a made-up text (:meth:`Dialect.fault`) and is not listed.
+    """
+    known: list[tuple[int | None, str]] = [(f.number, f.short) for f in dialect.faults.values()]
+    if any(reply is Reply.NO_RIGHTS for reply, _ in dialect.responses.values()):
+        known.append((None, NO_CHANGE_RIGHTS))
+    return known
+
+
 def _pwe(data: bytes) -> tuple[int, int]:
     """(PWE as a double word, PWE low word); a 3-word block has only the low word."""
     if len(data) >= 4:
@@ -361,7 +378,7 @@ def decode_response(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRespo
         return Rejection(ak, pnu, subindex, low, fault.text, fault.short)
     if reply is Reply.NO_RIGHTS:
         text = dialect.response_text(ak)
-        return Rejection(ak, pnu, subindex, None, text, "no change rights")
+        return Rejection(ak, pnu, subindex, None, text, NO_CHANGE_RIGHTS)
     if reply is Reply.DESCRIPTION:
         return DescriptionResponse(ak, pnu, subindex, value, bytes(rest))
     if reply is Reply.ARRAY_COUNT:

@@ -59,7 +59,7 @@ async def build_runtime(config: cfg.Config) -> Runtime:
                 specs,
                 retries=line.retries,
                 snapshot=snapshot,
-                events=metrics.for_line(line.name, [d.name for d in line.drives]),
+                events=metrics.for_line(line.name, {d.name: d.pkw_dialect for d in line.drives}),
             )
         )
     drives = {d.name: DriveInfo(line.name, _target(line, d).profile) for line, d in config.drives()}

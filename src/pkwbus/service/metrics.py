@@ -4,7 +4,8 @@ Device values (parameter values, drive and line state, status words) come
 from a custom Collector built from a copy of the snapshot at each scrape, so
 a scrape never causes bus traffic and values that disappear also disappear
 from the output. The service's own counters are ordinary Counters and a
-Histogram, their label values initialised from the configuration.
+Histogram, their label values initialised from the configuration (see
+:class:`LineMetrics`).
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from pkwbus.master.transaction import (
     Rejected,
     Reply,
 )
+from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.pzd import STATUS_BITS, Profile
 
 ERROR_KINDS = [k.value for k in ErrorKind if k is not ErrorKind.PORT]
@@ -58,6 +61,11 @@ _LABEL_OF_TYPE: dict[type[Outcome], JobOutcome] = {
     Rejected: JobOutcome.REJECTED,
     Cancelled: JobOutcome.CANCELLED,
 }
+
+
+def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
+    """The ``fault_code`` and ``fault`` labels of ``pkwbus_pkw_faults_total``."""
+    return ("" if fault is None else str(fault), short)
 
 
 def outcome_label(outcome: Outcome) -> JobOutcome:
@@ -217,16 +225,47 @@ class ServiceMetrics:
             registry=registry,
         )
 
-    def for_line(self, line: str, drives: Iterable[str]) -> LineMetrics:
-        return LineMetrics(self, line, list(drives))
+    def for_line(self, line: str, drives: Mapping[str, Dialect]) -> LineMetrics:
+        """The counters of ``line``; ``drives`` maps each configured drive to its dialect."""
+        return LineMetrics(self, line, drives)
 
 
 class LineMetrics:
-    """The scheduler's events for one line, turned into counter increments."""
+    """The scheduler's events for one line, turned into counter increments.
 
-    def __init__(self, m: ServiceMetrics, line: str, drives: list[str]) -> None:
+    A labelled counter has no series until its first increment, and
+    ``increase()``/``rate()`` cannot see that first step (no earlier sample),
+    so the Prometheus guidance is to create every label set known in advance
+    at 0 ("Avoid missing metrics", Prometheus instrumentation practices).
+    Created here, for each configured drive of the line:
+
+    - ``pkwbus_pkw_faults_total``: every fault number of the drive's dialect
+      table with its short text, and "no change rights" where the dialect
+      has that answer (alert ``PkwbusDriveFaults``, dashboard fault panel).
+      A number outside the table, or a drive not in the configuration, still
+      appears only at its first fault;
+    - ``pkwbus_telegram_errors_total``: every ``kind`` but ``port`` (a port
+      failure puts nothing on the wire and is not counted) (alert
+      ``PkwbusTelegramErrorRateRising``, dashboard error panels);
+    - ``pkwbus_jobs_total``: ``kind`` read/write times every ``outcome``
+      (dashboard outcome panel);
+    - ``pkwbus_telegrams_total``, ``pkwbus_job_retries_total``,
+      ``pkwbus_poll_overruns_total`` per drive, ``pkwbus_line_busy_seconds_total``
+      and ``pkwbus_transaction_duration_seconds`` per line.
+
+    The PROFIBUS DP counters of the interface (restarts by ``reason``,
+    diagnostics by ``flag``) have their labels known in advance too: created
+    the same way once they exist.
+    """
+
+    def __init__(self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect]) -> None:
         self._m = m
         self._line = line
+        self._faults = {
+            (d, *labels): m.faults.labels(line, d, *labels)
+            for d, dialect in drives.items()
+            for labels in (fault_labels(n, short) for n, short in pkw.rejections(dialect))
+        }
         self._busy = m.busy.labels(line)
         self._duration = m.duration.labels(line)
         self._telegrams = {d: m.telegrams.labels(line, d) for d in drives}
@@ -265,8 +304,11 @@ class LineMetrics:
             if unexpected:
                 self._errors[(drive, ErrorKind.UNEXPECTED.value)].inc(unexpected)
         if isinstance(outcome, Rejected):
-            code = "" if outcome.fault is None else str(outcome.fault)
-            self._m.faults.labels(self._line, drive, code, outcome.short).inc()
+            labels = fault_labels(outcome.fault, outcome.short)
+            fault = self._faults.get((drive, *labels))
+            if fault is None:
+                fault = self._m.faults.labels(self._line, drive, *labels)
+            fault.inc()
 
     def overrun(self, drive: str) -> None:
         self._overruns[drive].inc()
