@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from pkwbus import __version__
-from pkwbus.commands import access, describe, scan, service
+from pkwbus.commands import access, describe, ports, scan, service
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.sim import cli as sim_cli
 
@@ -27,6 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_parsers(sub)
     describe.add_parsers(sub)
     service.add_parsers(sub)
+    ports.add_parsers(sub)
     sim_cli.add_parser(sub).set_defaults(func=sim_cli.run)
     return parser
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import logging
 import resource
 import signal
@@ -18,6 +19,7 @@ from collections.abc import Iterator
 import uvicorn
 from fastapi import FastAPI
 
+from pkwbus.service.config import LISTEN_ENV
 from pkwbus.service.http import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
 
@@ -48,7 +50,14 @@ def bind(host: str, port: int) -> socket.socket:
         sock.bind((host, port))
     except OSError as exc:
         sock.close()
-        raise ListenError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        hint = ""
+        if exc.errno == errno.EADDRINUSE:
+            hint = (
+                " (another program, or another pkwbus, listens there: choose another "
+                f"address with --listen HOST:PORT, {LISTEN_ENV} or listen: in the configuration)"
+            )
+        shown = f"[{host}]" if ":" in host else host
+        raise ListenError(f"cannot listen on {shown}:{port}: {exc.strerror or exc}{hint}") from None
     sock.listen(128)
     sock.setblocking(False)
     return sock
