@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import fcntl
 import os
 import struct
@@ -153,7 +154,8 @@ class PtyEnd:
         check_link_free(self.path)
         controller, follower = os.openpty()
         try:
-            _lock(follower)
+            if _OFD_SETLK is not None:
+                _lock(follower)
             tty.setraw(follower)
             os.set_blocking(controller, False)
             self.device = os.ttyname(follower)
@@ -195,10 +197,16 @@ PTY_DIR = "/dev/pts"
 _FLOCK_SIZE = 64
 
 
+# Open-file-description locks are Linux's; elsewhere a pty that exists counts as held.
+_OFD_SETLK: int | None = getattr(fcntl, "F_OFD_SETLK", None)
+
+
 def _lock(fd: int) -> None:
     """Write-lock the whole file behind ``fd`` (OSError EAGAIN/EACCES when another holds it)."""
+    if _OFD_SETLK is None:
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
     flock = struct.pack("h", fcntl.F_WRLCK).ljust(_FLOCK_SIZE, b"\0")
-    fcntl.fcntl(fd, fcntl.F_OFD_SETLK, flock)
+    fcntl.fcntl(fd, _OFD_SETLK, flock)
 
 
 def check_link_free(path: str, own: str = "") -> None:
