@@ -10,7 +10,9 @@ from collections.abc import Iterator
 
 import pytest
 
+from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.cli import main
+from pkwbus.sim import Simulator
 
 
 def simulate(protocol: str, drives: str) -> Iterator[str]:
@@ -185,11 +187,12 @@ def test_describe_reads_the_drives_own_description(
     )
     assert code == 0, err
     info = json.loads(out)
-    # The simulated drive's built-in 3-41: UInt32, conversion -2, limits 0.01-3600 s.
+    # 3-41 as the simulated drive holds it (served with the default catalog): UInt32, conversion -2.
+    held = Simulator("fc", [17], catalog=DEFAULT_CATALOGS["fc"]).drives[17].params.specs[341]
     assert info["data_type"] == {"code": 7, "name": "UInt32"}
-    assert info["conversion_index"] == -2
-    assert info["name"].startswith("3-41")
-    assert (info["min"], info["max"]) == (0.01, 3600)
+    assert info["conversion_index"] == held.conversion == -2
+    assert info["name"] == held.name[:16]
+    assert (info["min"], info["max"]) == (held.minimum, held.maximum)
 
 
 def test_describe_needs_a_dialect_with_ak_4(capsys: pytest.CaptureFixture[str]) -> None:

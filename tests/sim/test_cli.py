@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import pathlib
@@ -10,13 +11,18 @@ import subprocess
 import sys
 import time
 import urllib.request
+from typing import Any
 
 import pytest
 import serial
 
+from pkwbus.catalog import DEFAULT_CATALOGS, load_catalog
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import USS
-from pkwbus.sim.cli import main, parse_addresses, parse_host_port
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.sim.catalogs import UNIT_FACTORS
+from pkwbus.sim.cli import configure, main, parse_addresses, parse_host_port, plan
+from pkwbus.sim.table import TABLES
 from tests.sim.conftest import request_telegram
 
 
@@ -105,3 +111,83 @@ def test_address_and_host_parsing() -> None:
     assert parse_host_port("tcp://127.0.0.1:5020", "tcp://") == ("127.0.0.1", 5020)
     with pytest.raises(ValueError):
         parse_addresses("a")
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser()
+    configure(parser)
+    return parser
+
+
+def read_json(url: str, protocol: str, parameter: str) -> dict[str, Any]:
+    done = subprocess.run(
+        [sys.executable, "-m", "pkwbus", "read", "--port", url, "--protocol", protocol,
+         "--address", "1", parameter, "--json"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    answer: dict[str, Any] = json.loads(done.stdout)
+    return answer
+
+
+def test_without_catalog_the_values_come_in_the_default_catalogs_units() -> None:
+    """`pkwbus read` decodes with the protocol's default catalog: the simulator serves with it."""
+    proc, lines = start("--protocol", "uss", "--listen", "tcp://127.0.0.1:0", "--drives", "1")
+    try:
+        url = lines[-1].split(" on ")[-1]
+        speed = read_json(url, "uss", "r0021")  # the catalog's rpm
+        frequency = read_json(url, "uss", "r0024")  # the catalog's Hz
+    finally:
+        stop(proc)
+    assert (speed["unit"], frequency["unit"]) == ("rpm", "Hz")
+    assert frequency["value"] > 0
+    assert speed["value"] == pytest.approx(frequency["value"] * UNIT_FACTORS["Hz", "rpm"])
+
+
+@pytest.mark.parametrize("protocol", ["fc", "uss"])
+def test_the_catalog_option(protocol: str) -> None:
+    def served(*options: str) -> dict[int, str]:
+        args = make_parser().parse_args(
+            ["--protocol", protocol, "--listen", "tcp://127.0.0.1:0", *options]
+        )
+        return {pnu: s.unit for pnu, s in plan(args).sim.drives[1].params.specs.items()}
+
+    default = load_catalog(DEFAULT_CATALOGS[protocol])
+    units = served()
+    assert all(units[pnu] == spec.unit for pnu, spec in default.parameters.items() if spec.unit)
+    assert served("--catalog", DEFAULT_CATALOGS[protocol]) == units
+    table = {s.pnu: s.unit for s in TABLES[Protocol(protocol)]}
+    assert served("--catalog", "none") == table
+
+
+def test_a_pty_path_in_use_is_refused(tmp_path: pathlib.Path) -> None:
+    link = tmp_path / "ttySIM0"
+    first, _ = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    try:
+        device = os.readlink(link)
+        second = subprocess.run(
+            [sys.executable, "-m", "pkwbus", "simulate", "--pty", str(link), "--drives", "2"],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert second.returncode == 2
+        assert str(link) in second.stderr and second.stderr.count("\n") == 1
+        assert os.readlink(link) == device and first.poll() is None
+        assert read_json(str(link), "fc", "16-13")["unit"] == "Hz"  # the first one still answers
+    finally:
+        code, _ = stop(first)
+    assert code == 0 and not link.exists()
+
+
+def test_a_stale_link_of_a_killed_simulator_is_replaced(tmp_path: pathlib.Path) -> None:
+    link = tmp_path / "ttySIM0"
+    first, _ = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    first.kill()
+    first.wait(timeout=10)
+    assert os.path.islink(link)  # left behind
+    second, lines = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    try:
+        assert lines[-1].endswith(f"{link} -> {os.readlink(link)}")
+        assert read_json(str(link), "fc", "16-13")["unit"] == "Hz"
+    finally:
+        code, _ = stop(second)
+    assert code == 0 and not os.path.lexists(link)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import pathlib
 import time
 
+import pytest
 import serial
 import serial_asyncio
 
@@ -13,6 +15,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import FC, USS
 from pkwbus.protocol.telegram import Deframer, Telegram, fc_lengths
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
+from pkwbus.sim.ends import PathInUseError
 from tests.sim.conftest import request_telegram
 
 QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)
@@ -130,3 +133,38 @@ async def test_pyserial_socket_url_reaches_the_tcp_end() -> None:
     finally:
         await end.close()
     assert sim.stats.as_dict()["responses"] == 2
+
+
+async def test_a_link_in_use_or_not_ours_is_never_replaced(tmp_path: pathlib.Path) -> None:
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.001), seed=1, model=QUIET)
+    link = tmp_path / "ttySIM0"
+    first = await sim.serve_pty(str(link))
+    other_file = tmp_path / "file"
+    other_file.write_text("")
+    elsewhere = tmp_path / "ttyUSB"
+    elsewhere.symlink_to("/dev/null")
+    try:
+        for path in (link, other_file, elsewhere):
+            before = os.readlink(path) if path.is_symlink() else None
+            with pytest.raises(PathInUseError, match=str(path)):
+                await sim.serve_pty(str(path))
+            assert (os.readlink(path) if path.is_symlink() else None) == before
+    finally:
+        await first.close()
+    assert not link.exists() and other_file.exists() and elsewhere.is_symlink()
+
+
+async def test_a_link_to_a_pty_no_simulator_holds_is_stale(tmp_path: pathlib.Path) -> None:
+    """The number of a dead simulator's pty may be in use by another terminal meanwhile."""
+    controller, follower = os.openpty()
+    link = tmp_path / "ttySIM0"
+    link.symlink_to(os.ttyname(follower))
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.001), seed=1, model=QUIET)
+    try:
+        end = await sim.serve_pty(str(link))
+        assert os.readlink(link) == end.device != os.ttyname(follower)
+        await end.close()
+    finally:
+        os.close(controller)
+        os.close(follower)
+    assert not os.path.lexists(link)

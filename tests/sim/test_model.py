@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import pytest
@@ -10,10 +11,14 @@ from pkwbus.catalog import load_catalog
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import Profile
+from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim import ModelConfig, Simulator
-from pkwbus.sim.catalogs import CatalogError
+from pkwbus.sim.catalogs import UNIT_FACTORS, CatalogError
 from pkwbus.sim.model import DriveModel, Limits
+from pkwbus.sim.table import FC_TABLE, TABLES
 from tests.sim.conftest import FakeClock
+
+QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)
 
 
 def test_warnings_and_trips_come_now_and_then_and_clear() -> None:
@@ -68,3 +73,40 @@ def test_catalog_adds_parameters_the_table_lacks() -> None:
 def test_unknown_catalog_is_a_clear_error() -> None:
     with pytest.raises(CatalogError, match="nonesuch"):
         Simulator("fc", [1], catalog="nonesuch")
+
+
+@pytest.mark.parametrize(
+    ("protocol", "catalog", "pnu", "model_unit"),
+    [
+        ("uss", "siemens-g120", 1082, "Hz"),  # maximum speed: the table's Hz, the catalog's rpm
+        ("fc", "danfoss-fc", 120, "kW"),  # motor power: the table's kW, the catalog's W
+    ],
+)
+def test_catalog_settings_start_at_the_tables_value_in_the_catalogs_unit(
+    protocol: str, catalog: str, pnu: int, model_unit: str
+) -> None:
+    table = next(s for s in TABLES[Protocol(protocol)] if s.pnu == pnu)
+    assert table.unit == model_unit and isinstance(table.initial, float)
+    spec = load_catalog(catalog).get(pnu)
+    assert spec is not None and spec.type is not None and spec.unit != model_unit
+    sim = Simulator(protocol, [1], catalog=catalog, seed=1, clock=FakeClock())
+    fmt = ParameterFormat.from_spec(spec)
+    vtype = ValueType(spec.type)
+    assert vtype.width is not None
+    got = decode_value(sim.drives[1].value(pnu), vtype.width, vtype, fmt.scaling)
+    assert float(got) == pytest.approx(table.initial * UNIT_FACTORS[model_unit, spec.unit])
+
+
+def test_the_model_reads_its_limits_in_its_own_units() -> None:
+    """A maximum frequency served in rpm still steers the model in Hz."""
+    factor = UNIT_FACTORS["Hz", "rpm"]
+    specs = tuple(
+        dataclasses.replace(s, unit="rpm", unit_factor=factor, initial=50.0 * factor)
+        if s.pnu == 414
+        else s
+        for s in FC_TABLE
+    )
+    in_hz = Simulator("fc", [1], seed=1, clock=FakeClock(), model=QUIET)
+    in_rpm = Simulator("fc", [1], seed=1, clock=FakeClock(), model=QUIET, specs=specs)
+    assert in_rpm.drives[1].limits() == in_hz.drives[1].limits()
+    assert in_rpm.drives[1].value(1613) == in_hz.drives[1].value(1613)

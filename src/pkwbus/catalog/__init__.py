@@ -1,5 +1,8 @@
 """Parameter catalogs: names, types, scaling, units and limits of drive parameters."""
 
+from types import MappingProxyType
+from typing import Final
+
 from pkwbus.catalog.loader import (
     CONVERSION_INDEXES,
     Catalog,
@@ -12,8 +15,13 @@ from pkwbus.catalog.loader import (
     load_catalog_file,
 )
 
+#: The catalog used for a protocol ("fc", "uss") when none is named: by
+#: ``pkwbus read``/``write``/``describe`` to decode, by ``pkwbus simulate`` to serve.
+DEFAULT_CATALOGS: Final = MappingProxyType({"fc": "danfoss-fc", "uss": "siemens-g120"})
+
 __all__ = [
     "CONVERSION_INDEXES",
+    "DEFAULT_CATALOGS",
     "Catalog",
     "CatalogError",
     "Dialect",

@@ -9,6 +9,7 @@ import json
 import sys
 from typing import Any
 
+from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
@@ -39,7 +40,7 @@ class CommandError(Exception):
         self.fault = fault
 
 
-DEFAULT_CATALOG = {Protocol.FC: "danfoss-fc", Protocol.USS: "siemens-g120"}
+DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in Protocol}
 
 
 def add_line_options(

@@ -12,11 +12,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
-import functools
 import logging
 import math
 import os
 import queue
+import stat
+import sys
 import termios
 import threading
 import time
@@ -153,18 +154,8 @@ class Link:
         """Open now; :class:`PortError` with the reason when the port cannot be opened."""
         loop = asyncio.get_running_loop()
         s = self.settings
-        make = functools.partial(
-            serial.serial_for_url,
-            s.url,
-            baudrate=s.baudrate,
-            parity=PARITIES[s.parity],
-            stopbits=s.stopbits,
-            bytesize=8,
-            timeout=0,
-            write_timeout=0,
-        )
         try:
-            instance = await loop.run_in_executor(None, make)
+            instance = await loop.run_in_executor(None, _open_port, s)
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             reason = _reason(exc).split(f"{s.url}: ", 1)[-1]
             self._failed(f"cannot open {s.url}: {reason}")
@@ -317,12 +308,52 @@ class Link:
             self.on_lost(self.last_error or reason)
 
 
+# Linux device majors of pseudo-terminal followers: BSD-style (3) and Unix98 (136-143),
+# from the kernel's list of devices (Documentation/admin-guide/devices.txt).
+_PTY_FOLLOWER_MAJORS = frozenset({3, *range(136, 144)})
+
+
+def _open_port(s: PortSettings) -> Any:
+    """Open the port (blocking: run in an executor)."""
+    parity = serial.PARITY_NONE if is_pty(s.url) else PARITIES[s.parity]
+    return serial.serial_for_url(
+        s.url,
+        baudrate=s.baudrate,
+        parity=parity,
+        stopbits=s.stopbits,
+        bytesize=8,
+        timeout=0,
+        write_timeout=0,
+    )
+
+
+def is_pty(url: str) -> bool:
+    """Whether ``url`` is (a link to) a Linux pseudo-terminal, such as a simulator's pty.
+
+    A pty has no parity: the Linux pty driver clears PARENB on every
+    tcsetattr, and the C library's tcsetattr reads the settings back and
+    reports EINVAL when none of the requested change took effect. A client
+    asking for parity E therefore succeeds only when it also changes
+    something else (the first one, changing the baud rate) and every later
+    one with the same settings fails. A pty is opened with parity N, the one
+    it keeps; the configured parity still counts in the character time.
+    Real adapters (ttyS, ttyUSB, ttyACM) and URLs get what is configured.
+    """
+    if not sys.platform.startswith("linux") or "://" in url:
+        return False
+    try:
+        st = os.stat(url)
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in _PTY_FOLLOWER_MAJORS
+
+
 def _transport(loop: asyncio.AbstractEventLoop, link: Link, instance: Any) -> asyncio.Transport:
     """Wrap an open port in pyserial-asyncio's transport.
 
     The transport assigns ``timeout = write_timeout = 0``, which the port
-    already has; pyserial would still call tcsetattr again, and Linux ptys
-    refuse that second call above 38400 baud (EINVAL). Skip the no-op.
+    already has; pyserial would still call tcsetattr again (on a pty asked
+    for a parity, an EINVAL: see :func:`is_pty`). Skip the no-op.
     """
     reconfigure = instance._reconfigure_port
     instance._reconfigure_port = lambda force_update=False: None
@@ -401,6 +432,8 @@ def _raw_fd(instance: Any) -> int:
 def _reason(exc: BaseException) -> str:
     """A short reason: the system's words for an errno, else the exception's text."""
     code = getattr(exc, "errno", None)
+    if code is None and isinstance(exc, termios.error) and exc.args:
+        code = exc.args[0]  # termios.error is (errno, text), without an errno attribute
     if isinstance(code, int) and code > 0:
         return os.strerror(code)
     text = str(exc).strip()

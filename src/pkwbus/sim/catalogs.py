@@ -3,7 +3,11 @@
 A parameter both know keeps the built-in table's live reading (the drive
 model's quantity) but takes the catalog's type, scaling, unit and limits, so
 that a master decoding with the same catalog reads the model's value. The
-model's units are converted to the catalog's where they differ.
+model's units are converted to the catalog's where they differ: a live
+reading (r0021 in rpm, not the model's Hz) and a stored setting's initial
+value and limits alike (p1082 in rpm, 1-20 in W). A setting whose units have
+no known conversion keeps its number (it is only a starting value); a live
+reading without one is an error.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ def specs_from_catalog(protocol: Protocol, name: str) -> tuple[ParamSpec, ...]:
 def _merge(known: ParamSpec, entry: ParameterSpec) -> ParamSpec:
     """The built-in parameter with the catalog's type, scaling, unit and limits."""
     vtype = ValueType(entry.type) if entry.type else known.vtype
-    factor = _unit_factor(known.unit, entry.unit) if known.live is not None else 1.0
+    factor = _unit_factor(known.unit, entry.unit, strict=known.live is not None)
     return dataclasses.replace(
         known,
         name=entry.name,
@@ -53,16 +57,18 @@ def _merge(known: ParamSpec, entry: ParameterSpec) -> ParamSpec:
         minimum=entry.min if entry.min is not None else _scaled(known.minimum, factor),
         maximum=entry.max if entry.max is not None else _scaled(known.maximum, factor),
         unit_factor=factor,
-        initial=_initial(entry, known) if known.live is None else known.initial,
+        initial=_initial(entry, known, factor) if known.live is None else known.initial,
     )
 
 
-def _unit_factor(model: str, wanted: str) -> float:
+def _unit_factor(model: str, wanted: str, *, strict: bool) -> float:
     if not model or not wanted or model == wanted:
         return 1.0
     try:
         return UNIT_FACTORS[model, wanted]
     except KeyError:
+        if not strict:
+            return 1.0
         raise CatalogError(
             f"the simulated drive gives {model!r}, the catalog wants {wanted!r}: no conversion"
         ) from None
@@ -72,16 +78,23 @@ def _scaled(limit: float | None, factor: float) -> float | None:
     return None if limit is None else limit * factor
 
 
-def _initial(entry: ParameterSpec, known: ParamSpec) -> float | str | tuple[float, ...]:
+def _initial(
+    entry: ParameterSpec, known: ParamSpec, factor: float
+) -> float | str | tuple[float, ...]:
     if isinstance(known.initial, str) or entry.type == "text":
         return known.initial if isinstance(known.initial, str) else ""
+    if isinstance(known.initial, tuple):
+        return tuple(_initial_number(entry, number * factor) for number in known.initial)
+    return _initial_number(entry, float(known.initial) * factor)
+
+
+def _initial_number(entry: ParameterSpec, number: float) -> float:
     low, high = entry.min, entry.max
-    number = known.initial if isinstance(known.initial, float | int) else 0.0
     if low is not None and number < low:
         return float(low)
     if high is not None and number > high:
         return float(high)
-    return known.initial
+    return number
 
 
 def _spec(entry: ParameterSpec) -> ParamSpec:

@@ -10,9 +10,11 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
+from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming, parse_duration
+from pkwbus.sim.ends import PathInUseError
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
 
@@ -34,13 +36,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--protocol", choices=("fc", "uss"), default="fc")
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--listen", metavar="tcp://HOST:PORT", help="serve raw telegrams on TCP")
-    where.add_argument("--pty", metavar="PATH", help="create a pty, symlinked at PATH")
+    where.add_argument(
+        "--pty",
+        metavar="PATH",
+        help="create a pty, symlinked at PATH; refused (exit 2) while a simulator serves PATH,"
+        " a stale link of a dead one is replaced",
+    )
     parser.add_argument("--drives", default="1", help="addresses: 1,2,5 or 1-3 (default 1)")
     parser.add_argument("--dialect", choices=sorted(DIALECTS))
     parser.add_argument("--ind-layout", choices=[x.value for x in IndLayout])
     parser.add_argument("--pkw-words", default="4", help="USS: 0, 3, 4 or variable")
     parser.add_argument("--pzd-words", type=int, default=2, help="USS: 0-16 (default 2)")
-    parser.add_argument("--catalog", help="parameters from this catalog")
+    parser.add_argument(
+        "--catalog",
+        help="serve parameters with this catalog's types, scaling and units (default: the"
+        " protocol's default catalog, the one pkwbus read decodes with: danfoss-fc for fc,"
+        " siemens-g120 for uss); 'none' for the built-in table alone",
+    )
     parser.add_argument("--seed", type=int)
     timing = parser.add_argument_group("timing")
     timing.add_argument("--response-delay", default="3ms", help="e.g. 3ms (default), 0.01, 1s")
@@ -80,6 +92,12 @@ def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
     return host.strip("[]"), int(port)
 
 
+def catalog_for(protocol: str, name: str | None) -> str | None:
+    """The catalog to serve with: the one named, else the protocol's default; None for 'none'."""
+    name = name or DEFAULT_CATALOGS[protocol]
+    return None if name == "none" else name
+
+
 @dataclass(frozen=True)
 class Plan:
     sim: Simulator
@@ -117,7 +135,7 @@ def plan(args: argparse.Namespace) -> Plan:
         timing=timing,
         faults=faults,
         seed=args.seed,
-        catalog=args.catalog,
+        catalog=catalog_for(args.protocol, args.catalog),
     )
     if not sim.drives:
         raise ValueError("--drives names no drive")
@@ -134,11 +152,14 @@ def plan(args: argparse.Namespace) -> Plan:
 def run(args: argparse.Namespace) -> int:
     try:
         the_plan = plan(args)
-    except (ValueError, ProtocolError) as exc:
+    except (ValueError, ProtocolError, CatalogError) as exc:
         print(f"pkwbus simulate: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
         return asyncio.run(serve(the_plan))
+    except PathInUseError as exc:
+        print(f"pkwbus simulate: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     except OSError as exc:
         print(f"pkwbus simulate: cannot open: {exc}", file=sys.stderr)
         return EXIT_PORT

@@ -103,12 +103,14 @@ class SimDrive:
         return self.model.mav(self.limits())
 
     def limits(self) -> Limits:
-        """Maximum frequency and ramp times as the parameters say now."""
-        number = self.params.number
-        steer = self._steering
-        return Limits(
-            number(steer["max_frequency"]), number(steer["ramp_up"]), number(steer["ramp_down"])
-        )
+        """Maximum frequency and ramp times as the parameters say now, in the model's units."""
+        params = self.params
+
+        def number(role: str) -> float:
+            pnu = self._steering[role]
+            return params.number(pnu) / params.specs[pnu].unit_factor
+
+        return Limits(number("max_frequency"), number("ramp_up"), number("ramp_down"))
 
     def tick(self, now: float) -> None:
         """Advance the model to ``now`` (the limits are read once a telegram)."""

@@ -16,7 +16,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
+import fcntl
 import os
+import struct
 import tty
 from collections.abc import Callable
 
@@ -125,8 +128,20 @@ class TcpEnd:
             await self._server.wait_closed()
 
 
+class PathInUseError(Exception):
+    """The pty's link path is taken: by a live simulator, or by something not ours to replace."""
+
+
 class PtyEnd:
-    """A pseudo-terminal: the follower side is reachable at ``path`` (a symlink)."""
+    """A pseudo-terminal: the follower side is reachable at ``path`` (a symlink).
+
+    While it runs, the end holds a lock on its follower (an open-file-description
+    lock, which no serial client takes or notices). A path that exists is
+    refused (:class:`PathInUseError`) unless it is a stale link left by a
+    simulator that died without removing it: a symlink to a ``/dev/pts/N``
+    that no longer exists, or whose pty no simulator holds locked (the number
+    may have been reused by another terminal).
+    """
 
     def __init__(self, sim: Simulator, link: str) -> None:
         self.sim = sim
@@ -136,14 +151,20 @@ class PtyEnd:
         self._session: Session | None = None
 
     async def start(self) -> None:
+        check_link_free(self.path)
         controller, follower = os.openpty()
+        try:
+            if _OFD_SETLK is not None:
+                _lock(follower)
+            tty.setraw(follower)
+            os.set_blocking(controller, False)
+            self.device = os.ttyname(follower)
+            _publish(self.device, self.path)
+        except BaseException:
+            os.close(controller)
+            os.close(follower)
+            raise
         self._fds = (controller, follower)  # we keep the follower open: no hang-up between users
-        tty.setraw(follower)
-        os.set_blocking(controller, False)
-        self.device = os.ttyname(follower)
-        if os.path.islink(self.path):
-            os.unlink(self.path)
-        os.symlink(self.device, self.path)
         self._session = Session(self.sim, lambda data: _write_all(controller, data))
         asyncio.get_running_loop().add_reader(controller, self._readable)
 
@@ -168,6 +189,78 @@ class PtyEnd:
         self._fds = None
         if os.path.islink(self.path) and os.readlink(self.path) == self.device:
             os.unlink(self.path)
+
+
+PTY_DIR = "/dev/pts"
+# struct flock begins with ``short l_type``; the rest zero: whole file, l_pid 0 (required
+# for open-file-description locks). Room for the largest struct flock of any platform.
+_FLOCK_SIZE = 64
+
+
+# Open-file-description locks are Linux's; elsewhere a pty that exists counts as held.
+_OFD_SETLK: int | None = getattr(fcntl, "F_OFD_SETLK", None)
+
+
+def _lock(fd: int) -> None:
+    """Write-lock the whole file behind ``fd`` (OSError EAGAIN/EACCES when another holds it)."""
+    if _OFD_SETLK is None:
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+    flock = struct.pack("h", fcntl.F_WRLCK).ljust(_FLOCK_SIZE, b"\0")
+    fcntl.fcntl(fd, _OFD_SETLK, flock)
+
+
+def check_link_free(path: str, own: str = "") -> None:
+    """Refuse (PathInUseError) a ``path`` in use; a stale simulator link passes, to be replaced.
+
+    ``own`` is the caller's new pty, which may have the stale link's number.
+    """
+    if not os.path.lexists(path):
+        return
+    if not os.path.islink(path):
+        raise PathInUseError(f"{path} exists and is not a symlink; nothing replaced")
+    target = os.readlink(path)
+    if target == own:
+        return
+    if os.path.dirname(target) != PTY_DIR:
+        raise PathInUseError(f"{path} is a link to {target}, not to a pty; nothing replaced")
+    if _held(target):
+        raise PathInUseError(
+            f"{path} is in use: another simulator serves {target} there; nothing replaced"
+        )
+
+
+def _held(device: str) -> bool:
+    """Whether a running simulator holds the pty ``device`` (its follower locked)."""
+    try:
+        fd = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError:  # gone with its simulator, or another user's terminal: no simulator of ours
+        return False
+    try:
+        _lock(fd)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # releases our probe's lock
+    return False
+
+
+def _publish(device: str, path: str) -> None:
+    """Make ``path`` a symlink to ``device``: created anew, or a stale link replaced in one step."""
+    try:
+        os.symlink(device, path)
+        return
+    except FileExistsError:
+        pass
+    check_link_free(path, own=device)  # still stale (checked again just before the swap)
+    temporary = f"{path}.{os.getpid()}.new"
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(temporary)
+    os.symlink(device, temporary)
+    try:
+        os.replace(temporary, path)
+    except OSError:
+        os.unlink(temporary)
+        raise
 
 
 def _write_all(fd: int, data: bytes) -> None:

@@ -46,7 +46,7 @@ class ParamSpec:
     initial: Initial = 0
     live: str | None = None
     scale: float | None = None  # instead of the conversion index
-    unit_factor: float = 1.0  # live quantity (model units) -> this parameter's unit
+    unit_factor: float = 1.0  # model units (table.py) -> this parameter's unit
 
     @property
     def scaling(self) -> Scaling:
