@@ -28,12 +28,18 @@ class Service:
     """One `pkwbus run` process; its stderr goes to a file (``log``)."""
 
     def __init__(
-        self, tmp: Path, url: str, *, timeout: str = "250ms", extra: tuple[str, ...] = ()
+        self,
+        tmp: Path,
+        url: str,
+        *,
+        timeout: str = "250ms",
+        extra: tuple[str, ...] = (),
+        audit_db: Path | None = None,
     ) -> None:
         self.tmp = tmp
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
-        self.audit_db = tmp / "audit.sqlite"
+        self.audit_db = audit_db or tmp / "audit.sqlite"
         self.config = tmp / "config.yaml"
         line = fc_line("l1", url, [1], ["16-13"], every="30s", timeout=timeout, retries=0)
         self.config.write_text(

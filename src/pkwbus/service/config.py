@@ -768,6 +768,9 @@ def _env_name(value: object) -> str:
 
 class Api(_Model):
     write_token_env: Annotated[str, PlainValidator(_env_name)] = DEFAULT_TOKEN_ENV
+    # A token that may read the audit log (GET /api/v1/audit) but not write; the
+    # write token reads it too.
+    read_token_env: Annotated[str, PlainValidator(_env_name)] | None = None
 
 
 def _audit_path(value: object) -> Path:
@@ -814,6 +817,12 @@ class Config(_Model):
         """The API write token from the environment; None (writes refused) when unset or empty."""
         token = (os.environ if environ is None else environ).get(self.api.write_token_env)
         return token or None
+
+    def read_token(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The audit read token from the environment; None when not configured, unset or empty."""
+        if self.api.read_token_env is None:
+            return None
+        return (os.environ if environ is None else environ).get(self.api.read_token_env) or None
 
     def drives(self) -> Iterator[tuple[Line, Drive]]:
         for line in self.lines:
