@@ -174,6 +174,7 @@ async def service(
     line_timeout: float = 0.1,
     retries: int = 1,
     audit: bool = True,
+    read_token: str | None = None,
 ) -> AsyncIterator[Service]:
     """A running service: simulators, runtime, app and client; stopped on exit."""
     fc = fc_drives() if fc is None else fc
@@ -214,11 +215,14 @@ async def service(
                 f"audit_db: {audit_path}",
                 "api:",
                 "  write_token_env: TEST_PKWBUS_TOKEN",
+                *(["  read_token_env: TEST_PKWBUS_READ_TOKEN"] if read_token else []),
                 "lines:",
                 *blocks,
             ]
         )
         env = {"TEST_PKWBUS_TOKEN": token} if token is not None else {}
+        if read_token is not None:
+            env["TEST_PKWBUS_READ_TOKEN"] = read_token
         config = parse_config(text, environ=env)
         runtime = await build_runtime(config)
         await runtime.start()
@@ -227,7 +231,10 @@ async def service(
         log = AuditLog(config.audit_db) if audit else None
         if log is not None:
             stack.callback(log.close)
-        app = create_app(runtime, audit=log, write_token=config.write_token(env))
+        tokens = {"write_token": config.write_token(env)}
+        if read_token is not None:
+            tokens["read_token"] = config.read_token(env)
+        app = create_app(runtime, audit=log, **tokens)
         client = httpx.AsyncClient(
             transport=httpx.ASGITransport(app=app), base_url="http://pkwbus.test", timeout=30.0
         )

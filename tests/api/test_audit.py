@@ -1,25 +1,32 @@
-"""The audit log: one row per attempt with its outcome, no token, kept across restarts."""
+"""The audit log: one row per attempt with its outcome, no token, kept across restarts;
+requests without a valid token as one counted row per address and minute."""
 
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
 import json
+import sqlite3
 from pathlib import Path
 
 import pytest
 
 from pkwbus.cli import main
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
-from pkwbus.service.audit import AuditEntry, AuditLog, as_dict, token_id
+from pkwbus.service.audit import AuditEntry, AuditError, AuditLog, as_dict
 from tests.api.conftest import AUTH, POLLED_WRITABLES, TOKEN, fc_drives, service
 
 WRONG = "Bearer guess-of-the-token-XYZ"
+NOW = 1_700_000_000.0  # the audit's clock in these tests: every attempt in one minute
 
 
 async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
     """Every kind of attempt once; returns (expected outcome, status) in order."""
     done: list[tuple[str, int]] = []
     async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
+        assert svc.audit is not None
+        svc.audit.clock = lambda: NOW
         drive3 = svc.sim.drives[3]
 
         def clamp(address: int, req: PkwRequest, resp: PkwResponse) -> None:
@@ -46,14 +53,14 @@ async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
                 svc.sim.kill(3)
             r = await svc.put(drive, parameter, body, headers=headers)
             done.append((outcome, r.status_code))
-        r = await svc.client.get("/api/v1/audit", params={"limit": 3})
+        r = await svc.client.get("/api/v1/audit", params={"limit": 3}, headers=AUTH)
         assert r.status_code == 200
         latest = r.json()
         assert [e["outcome"] for e in latest] == ["timeout", "ok", "mismatch"]
-        r = await svc.client.get("/api/v1/audit")
-        assert len(r.json()) == len(steps)
-        for bad in ("0", "-1", "10001", "x"):
-            r = await svc.client.get("/api/v1/audit", params={"limit": bad})
+        r = await svc.client.get("/api/v1/audit", headers=AUTH)
+        assert len(r.json()) == len(steps) - 1  # the two without a valid token share a row
+        for bad in ("0", "-1", "1001", "10001", "x"):
+            r = await svc.client.get("/api/v1/audit", params={"limit": bad}, headers=AUTH)
             assert r.status_code == 422
     return done
 
@@ -69,21 +76,32 @@ async def test_one_row_per_attempt_kept_across_restart(
     log = AuditLog(path)
     try:
         rows = list(reversed(log.latest(100)))
+        same_id = log.token_id(TOKEN)  # the key beside the database: the same id
     finally:
         log.close()
-    assert [r.outcome for r in rows] == [o for o, _ in done]
-    assert [r.id for r in rows] == list(range(1, len(done) + 1))
-    ok, rejected, no_token, wrong, not_writable, *_ = rows
+    # one row per attempt with the token; the two without share one counted row
+    expected = [o for o, _ in done[:3]] + [o for o, _ in done[4:]]
+    assert [r.outcome for r in rows] == expected
+    assert [r.id for r in rows] == list(range(1, len(expected) + 1))
+    ok, rejected, refusals, not_writable, *_ = rows
     assert (ok.old_value, ok.new_value, ok.raw_value, ok.store) == (5, 11.5, 1150, "ram")
     assert (rejected.fault, rejected.raw_value) == (17, 500)
     assert rejected.old_value is not None
-    assert no_token.token_id is None and wrong.token_id is None
-    assert not_writable.token_id == token_id(TOKEN)
+    assert (refusals.count, refusals.token_id, refusals.drive, refusals.parameter) == (
+        2,
+        None,
+        "",
+        "",
+    )
+    assert refusals.detail is not None and "unauthenticated 1" in refusals.detail
+    assert "forbidden 1" in refusals.detail
+    assert all(r.count is None for r in rows if r is not refusals)
+    assert not_writable.token_id == same_id and same_id.startswith("hmac:")
     assert all(r.client == "127.0.0.1" for r in rows)
     assert all(r.time > 0 for r in rows)
-    eeprom = rows[10]
+    eeprom = rows[9]
     assert (eeprom.store, eeprom.raw_value, eeprom.old_value) == ("eeprom", 3000, 5)
-    timeout = rows[11]
+    timeout = rows[10]
     assert timeout.old_value == 5 and timeout.raw_value == 100  # polled before it died
     # neither the token nor a guess at it is kept or logged
     for f in tmp_path.glob("audit.sqlite*"):
@@ -104,11 +122,12 @@ async def test_one_row_per_attempt_kept_across_restart(
     capsys.readouterr()
     assert main(["audit", "--config", str(config), "--json", "--limit", "5"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert [e["outcome"] for e in out] == [o for o, _ in reversed(done)][:5]
+    assert [e["outcome"] for e in out] == list(reversed(expected))[:5]
     assert main(["audit", "--config", str(config)]) == 0
     text = capsys.readouterr().out.splitlines()
-    assert len(text) == len(done)
+    assert len(text) == len(expected)
     assert "fan1 1-20" in text[-2] and "rejected fault 17" in text[-2]
+    assert "2 request(s) refused without a valid token" in text[-3]
     assert TOKEN not in "\n".join(text)
 
 
@@ -187,3 +206,86 @@ def test_rows_left_pending_by_a_killed_service_are_marked_interrupted(tmp_path: 
     log.close()
     assert entries[row].outcome == "interrupted"
     assert "may have applied" in (entries[row].detail or "")
+
+
+def test_the_token_id_is_keyed_with_a_secret_beside_the_database(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "audit.sqlite"
+    key = tmp_path / "audit.sqlite.key"
+    log = AuditLog(path)
+    first = log.token_id(TOKEN)
+    log.close()
+    assert key.stat().st_mode & 0o777 == 0o600
+    secret = bytes.fromhex(key.read_text())
+    assert len(secret) == 32
+    # an HMAC of the token with that secret: derivable with it ...
+    expected = hmac.new(secret, TOKEN.encode(), hashlib.sha256).hexdigest()
+    assert first == "hmac:" + expected[:16]
+    # ... and not without it: no plain hash of the token, no id shared with another site
+    plain = hashlib.sha256(TOKEN.encode()).hexdigest()
+    assert plain[:12] not in first
+    other = AuditLog(tmp_path / "other.sqlite")
+    assert other.token_id(TOKEN) != first
+    other.close()
+    # the same id after a restart
+    log = AuditLog(path)
+    assert log.token_id(TOKEN) == first
+    assert log.token_id(TOKEN + "x") != first
+    log.close()
+
+
+def test_a_look_at_the_audit_creates_no_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "audit.sqlite"
+    log = AuditLog(path)
+    log.record(AuditEntry("c", "fan1", "3-41", 0, "ok", new_value=1.0))
+    log.close()
+    key = tmp_path / "audit.sqlite.key"
+    key.unlink()
+    config = tmp_path / "pkwbus.yaml"
+    config.write_text(
+        f"audit_db: {path}\n"
+        "lines:\n"
+        "  - {name: l1, port: 'socket://127.0.0.1:9', protocol: fc, baudrate: 9600,\n"
+        "     drives: [{name: d1, address: 1}]}\n"
+    )
+    assert main(["audit", "--config", str(config), "--json"]) == 0
+    assert [e["outcome"] for e in json.loads(capsys.readouterr().out)] == ["ok"]
+    look = AuditLog(path, readonly=True)
+    assert look.latest(1)[0].outcome == "ok"
+    look.close()
+    assert not key.exists()
+
+
+def test_a_damaged_key_is_a_clear_error(tmp_path: Path) -> None:
+    path = tmp_path / "audit.sqlite"
+    AuditLog(path).close()
+    (tmp_path / "audit.sqlite.key").write_text("not a key\n")
+    with pytest.raises(AuditError, match=r"key file .* is damaged"):
+        AuditLog(path)
+
+
+OLD_SCHEMA = """
+CREATE TABLE writes (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, time REAL NOT NULL, client TEXT NOT NULL,
+    token_id TEXT, drive TEXT NOT NULL, parameter TEXT NOT NULL,
+    idx INTEGER NOT NULL DEFAULT 0, store TEXT, old_value TEXT, new_value TEXT,
+    raw_value INTEGER, outcome TEXT NOT NULL, fault INTEGER, detail TEXT
+);
+INSERT INTO writes (time, client, drive, parameter, outcome) VALUES (1, 'c', 'fan1', '3-41', 'ok');
+"""
+
+
+def test_a_database_of_the_earlier_layout_is_read_and_extended(tmp_path: Path) -> None:
+    path = tmp_path / "audit.sqlite"
+    with sqlite3.connect(path) as db:
+        db.executescript(OLD_SCHEMA)
+    look = AuditLog(path, readonly=True)
+    assert [(e.outcome, e.count) for e in look.latest(5)] == [("ok", None)]
+    look.close()
+    log = AuditLog(path)
+    log.refused("10.0.0.1", "unauthenticated")
+    assert [(e.outcome, e.count) for e in log.latest(5)] == [("refused", 1), ("ok", None)]
+    log.close()

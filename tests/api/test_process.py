@@ -88,8 +88,10 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
             assert sim.drives[2].value(341) == 1750
             r = await client.put(url, json={"value": 1}, headers={"Authorization": "Bearer no"})
             assert r.status_code == 403
-            r = await client.get("/api/v1/audit", params={"limit": 5})
-            assert [e["outcome"] for e in r.json()] == ["refused", "ok"]
+            r = await client.get(
+                "/api/v1/audit", params={"limit": 5}, headers={"Authorization": f"Bearer {TOKEN}"}
+            )
+            assert [(e["outcome"], e["count"]) for e in r.json()] == [("refused", 1), ("ok", None)]
             r = await client.get("/metrics")
             assert "pkwbus_jobs_total" in r.text
     finally:
@@ -121,8 +123,8 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     assert audit.returncode == 0, err.decode()
     rows = json.loads(out)
     assert [(e["outcome"], e["new_value"], e["raw_value"]) for e in rows] == [
-        ("refused", 1, None),
+        ("refused", None, None),  # without a valid token: counted, not kept
         ("ok", 17.5, 1750),
     ]
     assert rows[1]["old_value"] == 5
-    assert rows[1]["token_id"].startswith("sha256:")
+    assert rows[1]["token_id"].startswith("hmac:")

@@ -69,7 +69,7 @@ async def test_refused_before_sending(
         assert rows[0].drive == drive
         assert rows[0].token_id is not None  # the caller had the right token
         # and the audit stays readable over HTTP
-        r = await svc.client.get("/api/v1/audit")
+        r = await svc.client.get("/api/v1/audit", headers=AUTH)
         assert r.status_code == 200
         assert len(r.json()) == 1
 

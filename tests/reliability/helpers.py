@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import errno
 import os
+import shutil
+import subprocess
 import textwrap
 from collections import Counter, defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
+
+import pytest
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
@@ -149,3 +156,44 @@ async def wait_for(check: Callable[[], bool], timeout: float, step: float = 0.02
 
 def dedent(text: str) -> str:
     return textwrap.dedent(text).lstrip()
+
+
+@contextlib.contextmanager
+def tmpfs(where: Path, size: str, *, readonly: bool = False) -> Iterator[Path]:
+    """A small file system of its own at ``where``, for as long as the block runs;
+    the test is skipped where it cannot be mounted (not root, a container without
+    CAP_SYS_ADMIN)."""
+    where.mkdir(parents=True, exist_ok=True)
+    options = f"size={size},mode=0755" + (",ro" if readonly else "")
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("mounting a small file system needs root")
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+def fill(folder: Path) -> Path:
+    """A file that takes every free byte of ``folder``'s file system."""
+    filler = folder / "filler"
+    fd = os.open(filler, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        for size in (2**16, 2**12, 2**9, 1):
+            while True:
+                try:
+                    os.write(fd, b"\0" * size)
+                except OSError as exc:
+                    if exc.errno != errno.ENOSPC:
+                        raise
+                    break
+    finally:
+        os.close(fd)
+    return filler

@@ -36,11 +36,12 @@ class Service:
         every: str = "30s",
         api: dict[str, Any] | None = None,
         extra: tuple[str, ...] = (),
+        audit_db: Path | None = None,
     ) -> None:
         self.tmp = tmp
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
-        self.audit_db = tmp / "audit.sqlite"
+        self.audit_db = audit_db or tmp / "audit.sqlite"
         self.config = tmp / "config.yaml"
         line = fc_line("l1", url, [1], ["16-13"], every=every, timeout=timeout, retries=0)
         api = {"write_token_env": TOKEN_ENV, **(api or {})}

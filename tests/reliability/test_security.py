@@ -52,7 +52,7 @@ async def test_writes_need_the_token_and_the_token_never_shows(tmp_path: Path) -
             assert response.status_code == 200, response.text
             bodies.append(response.text)
             assert wire.writes[1] == 1
-            bodies.append((await client.get("/api/v1/audit")).text)
+            bodies.append((await client.get("/api/v1/audit", headers=good)).text)
             bodies.append((await client.get("/metrics")).text)
         service.signal(signal.SIGTERM)
         assert await service.wait(5.0) == 0

@@ -93,7 +93,7 @@ async def test_sigkill_during_writes_leaves_the_audit_database_intact(tmp_path: 
                 "/api/v1/drives/l1_d1/parameters/3-41", json={"value": 7}, headers=AUTH
             )
             assert ok.status_code == 200, ok.text
-            latest = (await client.get("/api/v1/audit?limit=1")).json()
+            latest = (await client.get("/api/v1/audit?limit=1", headers=AUTH)).json()
         assert latest[0]["id"] == max(r.id or 0 for r in rows) + 1
         assert latest[0]["outcome"] == "ok"
         service.signal(signal.SIGTERM)

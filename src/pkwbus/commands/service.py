@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import datetime
 import json
 import logging
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.service.config import Config, ConfigError, load_config
 from pkwbus.service.load import check_config_report
+
+if TYPE_CHECKING:
+    from pkwbus.service.audit import AuditLog
 
 log = logging.getLogger("pkwbus")
 
@@ -44,7 +48,12 @@ def load(path: str, listen: str | None = None) -> Config:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    from pkwbus.service.audit import path_problem
+
     config = load(args.file)
+    problem = path_problem(config.audit_db)
+    if problem is not None:
+        raise CommandError(f"invalid configuration:\n  audit_db: {problem}", Exit.BAD_INPUT)
     for line in check_config_report(config):
         print(line)
     return Exit.OK
@@ -56,27 +65,48 @@ def run_service(args: argparse.Namespace) -> int:
 
     config = load(args.config, args.listen)
     setup_logging(args.log_format or config.log_format, debug=args.debug)
+    audit = open_audit(config)
     try:
-        sock = bind(config.listen.host, config.listen.port)
-    except ListenError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    link.run(_serve(config, sock))
+        try:
+            sock = bind(config.listen.host, config.listen.port)
+        except ListenError as exc:
+            raise CommandError(str(exc), Exit.BAD_INPUT) from None
+        link.run(_serve(config, sock, audit))
+    finally:
+        audit.close()
     return Exit.OK
 
 
-async def _serve(config: Config, sock: Any) -> None:
+def open_audit(config: Config) -> AuditLog:
+    """The audit log of a starting service; a place that cannot hold it is a configuration
+    error (exit 2), never an internal one."""
+    from pkwbus.service.audit import AuditError, AuditLog, path_problem
+
+    problem = path_problem(config.audit_db)
+    if problem is not None:
+        raise CommandError(f"audit_db: {problem}", Exit.BAD_INPUT)
+    try:
+        return AuditLog(config.audit_db)
+    except AuditError as exc:
+        raise CommandError(f"audit_db: {exc}", Exit.BAD_INPUT) from None
+
+
+async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
     from pkwbus.service.api import create_app
     from pkwbus.service.app import serve
-    from pkwbus.service.audit import AuditLog
     from pkwbus.service.build import build_runtime
 
     runtime = await build_runtime(config)
-    audit = AuditLog(config.audit_db)
-    interrupted = audit.close_interrupted()
-    if interrupted:
-        log.warning("audit log: %d write(s) were in flight when the service last died", interrupted)
     token = config.write_token()
-    app = create_app(runtime, audit=audit, write_token=token)
+    app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
+    recorder = app.state.recorder
+    interrupted = await recorder.close_interrupted()
+    if interrupted:
+        log.warning(
+            "audit log: %d write(s) had no recorded outcome (the service stopped before"
+            " the answer, or could not store it): marked interrupted",
+            interrupted,
+        )
     host = config.listen.host
     shown = f"[{host}]" if ":" in host else host
     log.info("pkwbus: metrics on http://%s:%d/metrics", shown, config.listen.port)
@@ -84,27 +114,35 @@ async def _serve(config: Config, sock: Any) -> None:
     try:
         await serve(runtime, app, sock, max_connections=config.api.max_connections)
     finally:
-        audit.close()
+        await asyncio.to_thread(recorder.save_late)
 
 
 def run_audit(args: argparse.Namespace) -> int:
-    from pkwbus.service.audit import AuditLog, as_dict
+    from pkwbus.service.audit import AuditError, AuditLog, as_dict
 
     if args.limit < 1:
         raise CommandError("--limit must be at least 1", Exit.BAD_INPUT)
     config = load(args.config)
     if not config.audit_db.exists():
         raise CommandError(f"no audit database at {config.audit_db}", Exit.BAD_INPUT)
-    audit = AuditLog(config.audit_db, readonly=True)
-    try:
-        entries = audit.latest(args.limit)
-    finally:
-        audit.close()
+    if not config.audit_db.is_file():
+        raise CommandError(f"{config.audit_db} is not an audit database file", Exit.BAD_INPUT)
+    try:  # read-only: creates nothing, not even the key file
+        audit = AuditLog(config.audit_db, readonly=True)
+        try:
+            entries = audit.latest(args.limit)
+        finally:
+            audit.close()
+    except AuditError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
     if args.json:
         print(json.dumps([as_dict(e) for e in entries]))
         return Exit.OK
     for e in entries:
         stamp = datetime.datetime.fromtimestamp(e.time).strftime("%Y-%m-%d %H:%M:%S")
+        if e.count is not None:  # the refusals from one address in one minute
+            print(f"{stamp} {e.client} {e.count} request(s) {e.detail or 'refused'}")
+            continue
         where = f"{e.drive} {e.parameter}" + (f"[{e.index}]" if e.index else "")
         change = f"{e.old_value!r} -> {e.new_value!r}"
         fault = f" fault {e.fault}" if e.fault is not None else ""

@@ -1,9 +1,15 @@
-"""HTTP: /metrics, /healthz, /readyz and the JSON API under /api/v1."""
+"""HTTP: /metrics, /healthz, /readyz and the JSON API under /api/v1.
+
+Reading the audit log needs a token: the write token, or the read token named
+by ``api.read_token_env``. An error body quotes at most :data:`MAX_MESSAGE`
+characters of what it complains about.
+"""
 
 from __future__ import annotations
 
 import asyncio
-from typing import Any
+import hmac
+from typing import Any, Literal
 
 from fastapi import FastAPI, Header, Query, Request, Response
 from fastapi.exceptions import RequestValidationError
@@ -15,11 +21,15 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from pkwbus import __version__
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.service.audit import AuditLog, as_dict
-from pkwbus.service.parameters import ApiError, Caller, ParameterService, WriteOrder
+from pkwbus.service.audit import AuditError, AuditLog, as_dict
+from pkwbus.service.metrics import api_metrics
+from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
+from pkwbus.service.recorder import AuditRecorder
 from pkwbus.service.runtime import Runtime
 
 MAX_BODY = 4096
+MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
+MAX_AUDIT_LIMIT = 1000  # rows of one GET /api/v1/audit
 
 
 class ParameterReading(BaseModel):
@@ -51,6 +61,8 @@ class Health(BaseModel):
 class Readiness(BaseModel):
     ready: bool
     lines: dict[str, bool]
+    writes: bool = Field(default=True, description="false while the audit log cannot record")
+    reason: str | None = Field(default=None, description="why writes are unavailable")
 
 
 class WriteBody(BaseModel):
@@ -82,6 +94,9 @@ class WriteResult(ValueBody):
     audit_id: int | None
     old_value: float | int | str | None = None
     verified: bool | None = None
+    audit: Literal["complete", "incomplete"] = Field(
+        default="complete", description="incomplete: the audit row could not be fully stored"
+    )
 
 
 class ErrorBody(BaseModel):
@@ -145,7 +160,11 @@ class BodyLimit:
 
 
 def create_app(
-    runtime: Runtime, *, audit: AuditLog | None = None, write_token: str | None = None
+    runtime: Runtime,
+    *,
+    audit: AuditLog | None = None,
+    write_token: str | None = None,
+    read_token: str | None = None,
 ) -> FastAPI:
     app = FastAPI(
         title="pkwbus",
@@ -153,25 +172,57 @@ def create_app(
         description="PKW parameter channel bus master: drives, values and parameter jobs",
     )
     app.state.runtime = runtime
-    service = ParameterService(runtime, audit, write_token)
+    recorder = AuditRecorder(audit, api_metrics(runtime.registry))
+    app.state.recorder = recorder
+    service = ParameterService(runtime, recorder, write_token)
+    audit_tokens = [t.encode() for t in (write_token, read_token) if t]
 
     @app.exception_handler(ApiError)
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
-        return JSONResponse(exc.body(), status_code=exc.status)
+        return _error_response(exc)
 
     @app.exception_handler(RequestValidationError)
     async def invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         problems = [
-            f"{'.'.join(str(x) for x in e.get('loc', ()))}: {e.get('msg', '')}"
-            for e in exc.errors()
+            f"{'.'.join(_cap(str(x), 40) for x in e.get('loc', ()))}: {e.get('msg', '')}"
+            for e in exc.errors()[:5]
         ]
-        message = "; ".join(problems)
+        message = _cap("; ".join(problems))
+        body: dict[str, Any] = {"error": {"kind": "invalid_request", "message": message}}
         params = request.path_params
         if request.method == "PUT" and "drive" in params and "parameter" in params:
             caller = Caller(_client(request), request.headers.get("authorization"))
-            service.refuse_malformed(params["drive"], params["parameter"], caller, message)
-        body = {"error": {"kind": "invalid_request", "message": message}}
+            try:
+                stored = await service.refuse_malformed(
+                    params["drive"], params["parameter"], caller, message
+                )
+            except ApiError as refused:  # no valid token: that is the answer
+                return _error_response(refused)
+            if not stored:
+                body["audit"] = INCOMPLETE
         return JSONResponse(body, status_code=422)
+
+    async def authorize_audit(request: Request) -> None:
+        """The audit log is for holders of the write or the read token."""
+        scheme, _, given = (request.headers.get("authorization") or "").partition(" ")
+        given = given.strip()
+        if not audit_tokens:
+            refusal = ApiError(
+                403,
+                "forbidden",
+                "reading the audit log needs a token and none is set"
+                " (api.write_token_env, api.read_token_env)",
+            )
+        elif scheme.lower() != "bearer" or not given:
+            refusal = ApiError(
+                401, "unauthenticated", "the audit log needs Authorization: Bearer <token>"
+            )
+        elif not any([hmac.compare_digest(given.encode(), t) for t in audit_tokens]):
+            refusal = ApiError(403, "forbidden", "the token is not the write or the read token")
+        else:
+            return
+        refusal.audit_incomplete = not await recorder.refused(_client(request), refusal.kind)
+        raise refusal
 
     app.add_middleware(BodyLimit, limit=MAX_BODY)
 
@@ -201,11 +252,18 @@ def create_app(
         caller = Caller(_client(request), authorization)
         return await service.write(drive, parameter, order, caller)
 
-    @app.get("/api/v1/audit")
-    async def audit_log(limit: int = Query(default=100, ge=1, le=10000)) -> list[dict[str, Any]]:
+    @app.get("/api/v1/audit", responses=ERRORS)
+    async def audit_log(
+        request: Request, limit: int = Query(default=100, ge=1, le=MAX_AUDIT_LIMIT)
+    ) -> list[dict[str, Any]]:
+        await authorize_audit(request)
         if audit is None:
             return []
-        return [as_dict(e) for e in audit.latest(limit)]
+        try:
+            entries = await asyncio.to_thread(audit.latest, limit)
+        except AuditError as exc:
+            raise ApiError(503, "audit_unavailable", str(exc)) from None
+        return [as_dict(e) for e in entries]
 
     @app.get("/healthz", response_model=Health)
     async def healthz() -> Health:
@@ -214,8 +272,10 @@ def create_app(
     @app.get("/readyz", response_model=Readiness, responses={503: {"model": Readiness}})
     async def readyz() -> Any:
         lines = dict(runtime.snapshot.lines)
-        ready = bool(lines) and all(lines.values())
-        body = Readiness(ready=ready, lines=lines)
+        problem = await recorder.problem()
+        reason = None if problem is None else f"the audit log cannot record: {problem}"
+        ready = bool(lines) and all(lines.values()) and problem is None
+        body = Readiness(ready=ready, lines=lines, writes=problem is None, reason=reason)
         if ready:
             return body
         return JSONResponse(body.model_dump(), status_code=503)
@@ -234,6 +294,19 @@ def create_app(
 
 def _client(request: Request) -> str:
     return request.client.host if request.client else "unknown"
+
+
+def _cap(text: str, limit: int = MAX_MESSAGE) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _error_response(exc: ApiError) -> JSONResponse:
+    body = exc.body()
+    error = body["error"]
+    for key, value in error.items():
+        if isinstance(value, str):
+            error[key] = _cap(value)
+    return JSONResponse(body, status_code=exc.status)
 
 
 def drive_view(runtime: Runtime, name: str) -> DriveView:

@@ -2,20 +2,39 @@
 
 One row per attempt: time, client, token identity (a fingerprint, never the
 token), drive, parameter, index, old value when read, new value, raw value,
-outcome, fault. The database survives restarts and a killed process.
+outcome, fault. Requests refused for want of a valid token are the
+exception: they are counted, one row per source address and minute with the
+number of attempts in ``count`` (their drive and parameter are not kept), so
+a flood of them cannot grow the database.
+
+Every store is committed and synced (``synchronous=FULL``) before the call
+returns: the database survives restarts, a killed process and a power cut.
+A store that fails raises :class:`AuditError` (one line, no traceback).
+
+The token fingerprint is an HMAC-SHA256 of the token keyed with a random
+secret kept beside the database (``<audit_db>.key``, mode 0600, made on the
+first start): the same token has the same id across restarts, and nobody
+without the key can test a guess of the token against it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import hmac
 import json
 import math
+import os
+import secrets
 import sqlite3
+import stat
 import threading
 import time
-from dataclasses import asdict, dataclass
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS writes (
@@ -32,15 +51,68 @@ CREATE TABLE IF NOT EXISTS writes (
     raw_value   INTEGER,
     outcome     TEXT    NOT NULL,
     fault       INTEGER,
-    detail      TEXT
+    detail      TEXT,
+    count       INTEGER
 );
 CREATE INDEX IF NOT EXISTS writes_time ON writes (time);
+CREATE TABLE IF NOT EXISTS probe (id INTEGER PRIMARY KEY CHECK (id = 1), time REAL NOT NULL);
 """
 
+COLUMNS: Final = (
+    "id, time, client, token_id, drive, parameter, idx, store, old_value,"
+    " new_value, raw_value, outcome, fault, detail"
+)
+KEY_BYTES: Final = 32
+TOKEN_ID_HEX: Final = 16  # 64 bits of the HMAC: distinct for any number of tokens in use
+MAX_TEXT: Final = 500  # a detail or value kept in a row, in characters
+MAX_SOURCES_PER_MINUTE: Final = 32  # refusal rows per minute; more addresses share one row
+OTHER_SOURCES: Final = "other addresses"
+INTERRUPTED: Final = (
+    "no outcome was recorded (the service stopped before the answer, or could not"
+    " store it); the drive may have applied the write"
+)
 
-def token_id(token: str) -> str:
-    """A short fingerprint that names a token without revealing it."""
-    return "sha256:" + hashlib.sha256(token.encode()).hexdigest()[:12]
+
+class AuditError(Exception):
+    """The audit log cannot be opened or cannot store: the message is one line."""
+
+
+def key_path(db: Path) -> Path:
+    """Where the token-fingerprint secret of the database ``db`` lives."""
+    return db.with_name(db.name + ".key")
+
+
+def path_problem(db: Path) -> str | None:
+    """Why ``db`` cannot be the audit database on this machine, or None.
+
+    A file there must be a regular, writable file; otherwise the nearest existing
+    directory above it must be writable (the service makes the missing ones).
+    """
+    if str(db) == ":memory:":
+        return None
+    for path, what in ((db, "the audit database"), (key_path(db), "its key file")):
+        try:
+            mode = path.stat().st_mode
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        except OSError as exc:
+            return f"{path}: {exc.strerror or exc}"
+        if stat.S_ISDIR(mode):
+            return f"{path} is a directory, not a file for {what}"
+        if not stat.S_ISREG(mode):
+            return f"{path} is not a regular file (a device or pipe cannot hold {what})"
+        if not os.access(path, os.R_OK | os.W_OK):
+            return f"{path} is not writable (read-only file system or permissions)"
+    parent = db.parent
+    while not parent.exists():
+        if parent.is_symlink() or parent == parent.parent:
+            return f"{db.parent} cannot be created"
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{parent} is not a directory: {db.parent} cannot be created"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"{parent} is not writable (read-only file system or permissions)"
+    return None
 
 
 @dataclass
@@ -59,59 +131,100 @@ class AuditEntry:
     detail: str | None = None
     time: float = 0.0
     id: int | None = None
+    count: int | None = None  # attempts this row stands for; None for one write attempt
+
+
+@dataclass
+class _Tally:
+    """This minute's refusals from one address: the row that counts them, by kind."""
+
+    row: int
+    kinds: Counter[str] = field(default_factory=Counter)
 
 
 class AuditLog:
-    """A small synchronous store; each call is one short transaction."""
+    """A small synchronous store; each call is one short, synced transaction.
 
-    def __init__(self, path: str | Path, *, readonly: bool = False) -> None:
+    Thread-safe: the service calls it from worker threads, off the event loop.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        readonly: bool = False,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self.path = Path(path)
+        self.clock = clock
         self._lock = threading.Lock()
-        if readonly:  # a look at the log: nothing is created or changed
-            uri = f"file:{self.path.resolve()}?mode=ro"
-            self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
-            return
-        if str(path) != ":memory:":
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        self._db.executescript(SCHEMA)
+        self._key: bytes | None = None
+        self._minute: int | None = None
+        self._tallies: dict[str, _Tally] = {}
+        try:
+            if readonly:  # a look at the log: nothing is created or changed
+                uri = f"file:{self.path.resolve()}?mode=ro"
+                self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
+                self._has_count = "count" in self._columns()
+                return
+            memory = str(path) == ":memory:"
+            if not memory:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.executescript(SCHEMA)
+            if "count" not in self._columns():  # a database of an earlier version
+                self._db.execute("ALTER TABLE writes ADD COLUMN count INTEGER")
+            self._has_count = True
+            self._key = secrets.token_bytes(KEY_BYTES) if memory else _load_key(self.path)
+        except (sqlite3.Error, OSError) as exc:
+            with contextlib.suppress(Exception):
+                self._db.close()
+            raise AuditError(f"cannot open the audit log {self.path}: {_reason(exc)}") from None
+
+    def _columns(self) -> set[str]:
+        return {row[1] for row in self._db.execute("PRAGMA table_info(writes)")}
+
+    def token_id(self, token: str) -> str:
+        """The token's fingerprint: HMAC-SHA256 keyed with this installation's secret."""
+        if self._key is None:
+            raise AuditError("a read-only look at the audit log has no key")
+        digest = hmac.new(self._key, token.encode(), hashlib.sha256).hexdigest()
+        return "hmac:" + digest[:TOKEN_ID_HEX]
 
     def close_interrupted(self) -> int:
         """Rows a killed service left 'pending': their outcome is unknown. Returns how many."""
-        with self._lock:
-            cur = self._db.execute(
-                "UPDATE writes SET outcome = 'interrupted', detail = 'the service stopped"
-                " before the answer; the drive may have applied the write'"
-                " WHERE outcome = 'pending'"
-            )
+        cur = self._store(
+            "UPDATE writes SET outcome = 'interrupted', detail = ? WHERE outcome = 'pending'",
+            (INTERRUPTED,),
+        )
         return cur.rowcount
 
     def record(self, entry: AuditEntry) -> int:
-        """Insert an attempt (outcome may be 'pending'); returns its row id."""
-        entry.time = entry.time or time.time()
-        with self._lock:
-            cur = self._db.execute(
-                "INSERT INTO writes (time, client, token_id, drive, parameter, idx, store,"
-                " old_value, new_value, raw_value, outcome, fault, detail)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (
-                    entry.time,
-                    entry.client,
-                    entry.token_id,
-                    entry.drive,
-                    entry.parameter,
-                    entry.index,
-                    entry.store,
-                    _text(entry.old_value),
-                    _text(entry.new_value),
-                    entry.raw_value,
-                    entry.outcome,
-                    entry.fault,
-                    entry.detail,
-                ),
-            )
+        """Insert an attempt (outcome may be 'pending'), committed; returns its row id."""
+        entry.time = entry.time or self.clock()
+        cur = self._store(
+            "INSERT INTO writes (time, client, token_id, drive, parameter, idx, store,"
+            " old_value, new_value, raw_value, outcome, fault, detail, count)"
+            " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (
+                entry.time,
+                entry.client,
+                entry.token_id,
+                entry.drive,
+                entry.parameter,
+                entry.index,
+                entry.store,
+                _text(entry.old_value),
+                _text(entry.new_value),
+                entry.raw_value,
+                entry.outcome,
+                entry.fault,
+                _clip(entry.detail),
+                entry.count,
+            ),
+        )
         row = cur.lastrowid
         assert row is not None
         entry.id = row
@@ -124,23 +237,127 @@ class AuditLog:
         if unknown:
             raise ValueError(f"cannot update {sorted(unknown)}")
         cols = ", ".join(f"{k} = ?" for k in fields)
-        values = [_text(v) if k in ("old_value", "new_value") else v for k, v in fields.items()]
+        values = [
+            _text(v) if k in ("old_value", "new_value") else _clip(v) if k == "detail" else v
+            for k, v in fields.items()
+        ]
+        self._store(f"UPDATE writes SET {cols} WHERE id = ?", (*values, row))
+
+    def refused(self, client: str, kind: str) -> None:
+        """Count a request refused for want of a valid token: one row per address and
+        minute, its ``count`` raised with each further attempt."""
+        now = self.clock()
         with self._lock:
-            self._db.execute(f"UPDATE writes SET {cols} WHERE id = ?", (*values, row))
+            minute = int(now // 60)
+            if minute != self._minute:
+                self._minute, self._tallies = minute, {}
+            if client not in self._tallies and len(self._tallies) >= MAX_SOURCES_PER_MINUTE:
+                client = OTHER_SOURCES
+            tally = self._tallies.get(client)
+            kinds = Counter({kind: 1}) + (tally.kinds if tally else Counter())
+            detail = "refused without a valid token: " + ", ".join(
+                f"{k} {n}" for k, n in sorted(kinds.items())
+            )
+            if tally is None:
+                cur = self._execute_locked(
+                    "INSERT INTO writes (time, client, drive, parameter, outcome, detail, count)"
+                    " VALUES (?, ?, '', '', 'refused', ?, 1)",
+                    (now, client, detail),
+                )
+                assert cur.lastrowid is not None
+                self._tallies[client] = _Tally(cur.lastrowid, kinds)
+            else:
+                self._execute_locked(
+                    "UPDATE writes SET count = count + 1, detail = ? WHERE id = ?",
+                    (detail, tally.row),
+                )
+                tally.kinds = kinds
+
+    def probe(self) -> None:
+        """A small committed store, to learn whether the log can record again."""
+        self._store("INSERT OR REPLACE INTO probe (id, time) VALUES (1, ?)", (self.clock(),))
 
     def latest(self, limit: int = 100) -> list[AuditEntry]:
-        with self._lock:
-            rows = self._db.execute(
-                "SELECT id, time, client, token_id, drive, parameter, idx, store, old_value,"
-                " new_value, raw_value, outcome, fault, detail FROM writes"
-                " ORDER BY id DESC LIMIT ?",
-                (limit,),
-            ).fetchall()
+        count = "count" if self._has_count else "NULL"
+        try:
+            with self._lock:
+                rows = self._db.execute(
+                    f"SELECT {COLUMNS}, {count} FROM writes ORDER BY id DESC LIMIT ?", (limit,)
+                ).fetchall()
+        except sqlite3.Error as exc:
+            raise AuditError(f"cannot read the audit log {self.path}: {_reason(exc)}") from None
         return [_entry(r) for r in rows]
 
     def close(self) -> None:
         with self._lock:
             self._db.close()
+
+    # ----------------------------------------------------------- helpers
+
+    def _store(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
+        with self._lock:
+            return self._execute_locked(sql, args)
+
+    def _execute_locked(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
+        try:
+            return self._db.execute(sql, args)
+        except sqlite3.Error as exc:
+            raise AuditError(_reason(exc)) from None
+
+
+def _load_key(db: Path) -> bytes:
+    """The installation's secret, made on first use (mode 0600, synced)."""
+    path = key_path(db)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+    try:
+        fd = os.open(path, flags, 0o600)
+    except FileExistsError:
+        return _read_key(path)
+    key = secrets.token_bytes(KEY_BYTES)
+    try:
+        os.write(fd, key.hex().encode() + b"\n")
+        os.fsync(fd)
+    except OSError:
+        os.close(fd)
+        path.unlink(missing_ok=True)  # no half-written key for the next start to trip on
+        raise
+    os.close(fd)
+    with contextlib.suppress(OSError):  # the new name survives a power cut too
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    return key
+
+
+def _read_key(path: Path) -> bytes:
+    if not path.is_file():
+        raise OSError(f"{path} is not a regular file")
+    text = path.read_text(errors="replace").strip()
+    try:
+        key = bytes.fromhex(text)
+    except ValueError:
+        key = b""
+    if len(key) != KEY_BYTES:
+        raise OSError(
+            f"the key file {path} is damaged (not {KEY_BYTES * 2} hex digits): restore it,"
+            " or delete it to start new token ids"
+        )
+    return key
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        where = f"{exc.filename}: " if exc.filename else ""
+        return f"{where}{exc.strerror}"
+    return str(exc) or type(exc).__name__
+
+
+def _clip(text: str | None, limit: int = MAX_TEXT) -> str | None:
+    if text is None or len(text) <= limit:
+        return text
+    return text[:limit] + f"... ({len(text)} characters)"
 
 
 def _text(value: Any) -> str | None:
@@ -149,6 +366,8 @@ def _text(value: Any) -> str | None:
         return None
     if isinstance(value, float) and not math.isfinite(value):
         return json.dumps(str(value))
+    if isinstance(value, str):
+        value = _clip(value)
     return json.dumps(value)
 
 
@@ -157,7 +376,8 @@ def _value(text: str | None) -> Any:
 
 
 def _entry(row: tuple[Any, ...]) -> AuditEntry:
-    (id_, t, client, tok, drive, parameter, idx, store, old, new, raw, outcome, fault, detail) = row
+    id_, t, client, tok, drive, parameter, idx, store, old, new, raw, outcome, fault = row[:13]
+    detail, count = row[13:15]
     return AuditEntry(
         client=client,
         drive=drive,
@@ -173,6 +393,7 @@ def _entry(row: tuple[Any, ...]) -> AuditEntry:
         detail=detail,
         time=t,
         id=id_,
+        count=count,
     )
 
 

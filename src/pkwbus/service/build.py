@@ -30,6 +30,7 @@ from pkwbus.service.metrics import (
     ParameterInfo,
     ServiceMetrics,
     SnapshotCollector,
+    api_metrics,
 )
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
@@ -41,6 +42,7 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     prometheus_client.disable_created_metrics()  # type: ignore[no-untyped-call]
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry)
+    api_metrics(registry)  # the API's counters, exported (at zero) from the start
     snapshot = Snapshot()
     schedulers: list[LineScheduler] = []
     entries: list[DriveEntry] = []

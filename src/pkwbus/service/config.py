@@ -774,6 +774,9 @@ class Api(_Model):
     # HTTP connections open at once; more are closed at once (logged), so a flood of
     # clients cannot take the descriptors the serial ports need.
     max_connections: int = Field(default=1000, ge=1, le=MAX_HTTP_CONNECTIONS)
+    # A token that may read the audit log (GET /api/v1/audit) but not write; the
+    # write token reads it too.
+    read_token_env: Annotated[str, PlainValidator(_env_name)] | None = None
 
 
 def _audit_path(value: object) -> Path:
@@ -820,6 +823,12 @@ class Config(_Model):
         """The API write token from the environment; None (writes refused) when unset or empty."""
         token = (os.environ if environ is None else environ).get(self.api.write_token_env)
         return token or None
+
+    def read_token(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The audit read token from the environment; None when not configured, unset or empty."""
+        if self.api.read_token_env is None:
+            return None
+        return (os.environ if environ is None else environ).get(self.api.read_token_env) or None
 
     def drives(self) -> Iterator[tuple[Line, Drive]]:
         for line in self.lines:

@@ -10,6 +10,7 @@ Histogram, their label values initialised from the configuration (see
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
@@ -312,3 +313,42 @@ class LineMetrics:
 
     def overrun(self, drive: str) -> None:
         self._overruns[drive].inc()
+
+
+AUDIT_STAGES = ("attempt", "outcome", "refusals")
+REFUSAL_REASONS = ("unauthenticated", "forbidden", "writes_disabled")
+
+
+class ApiMetrics:
+    """The HTTP API's counters: audit stores that failed, requests refused for want of
+    a valid token. Every label value starts at zero, so an alert sees the series."""
+
+    def __init__(self, registry: CollectorRegistry) -> None:
+        self.audit_errors = Counter(
+            "pkwbus_audit_errors",
+            "Audit log stores that failed, by stage: attempt (the write was refused,"
+            " nothing sent), outcome (the row stays pending), refusals (the tally)",
+            ["stage"],
+            registry=registry,
+        )
+        self.refusals = Counter(
+            "pkwbus_api_refusals",
+            "API requests refused for want of a valid token, by reason",
+            ["reason"],
+            registry=registry,
+        )
+        for stage in AUDIT_STAGES:
+            self.audit_errors.labels(stage)
+        for reason in REFUSAL_REASONS:
+            self.refusals.labels(reason)
+
+
+_API_METRICS: weakref.WeakKeyDictionary[CollectorRegistry, ApiMetrics] = weakref.WeakKeyDictionary()
+
+
+def api_metrics(registry: CollectorRegistry) -> ApiMetrics:
+    """The registry's API counters, made on first use (a registry takes a name once)."""
+    metrics = _API_METRICS.get(registry)
+    if metrics is None:
+        metrics = _API_METRICS[registry] = ApiMetrics(registry)
+    return metrics

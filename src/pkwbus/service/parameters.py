@@ -5,15 +5,16 @@ right (compared in constant time; no token configured = no writes), the
 parameter is in the drive's ``writable`` list, and the value passes the
 type, range and limits of the catalog and the configuration. A value the raw
 number cannot represent exactly (1.234 s on a 0.01 s parameter) is refused,
-never rounded. Every attempt, refused ones included, lands in the audit log;
-once a write is queued it runs to its end and its row is completed even if
-the HTTP client goes away.
+never rounded. Every attempt, refused ones included, lands in the audit log
+(requests without a valid token as a count per address and minute); a write
+is sent only once its row is stored (else 503), and once queued it runs to its
+end and its row is completed even if the HTTP client goes away. A drive or
+parameter name longer than any can be is refused before it is looked up.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import hmac
 from dataclasses import dataclass
 from typing import Any
@@ -24,8 +25,13 @@ from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
-from pkwbus.service.audit import AuditEntry, AuditLog, token_id
+from pkwbus.service.audit import AuditEntry
+from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.runtime import DriveEntry, Runtime
+
+MAX_DRIVE_NAME = 64  # the configuration's limit on names
+MAX_PARAMETER_TEXT = 32  # "P65535[255]" is 11 characters: room for spaces, not for a book
+INCOMPLETE = "incomplete"  # the answer's "audit" when its row could not be (fully) stored
 
 
 class ApiError(Exception):
@@ -34,9 +40,28 @@ class ApiError(Exception):
         self.status = status
         self.kind = kind
         self.extra = extra
+        self.audit_incomplete = False
 
     def body(self) -> dict[str, Any]:
-        return {"error": {"kind": self.kind, "message": str(self), **self.extra}}
+        body: dict[str, Any] = {"error": {"kind": self.kind, "message": str(self), **self.extra}}
+        if self.audit_incomplete:
+            body["audit"] = INCOMPLETE
+        return body
+
+
+def check_names(drive: str, parameter: str) -> None:
+    """Refuse, before any lookup, a name longer than a drive name or parameter can be."""
+    if len(drive) > MAX_DRIVE_NAME:
+        raise ApiError(404, "unknown_drive", f"no drive has a name of {len(drive)} characters")
+    if len(parameter) > MAX_PARAMETER_TEXT:
+        raise ApiError(
+            404, "unknown_parameter", f"no parameter is written in {len(parameter)} characters"
+        )
+
+
+def clip(name: str, limit: int) -> str:
+    """A name as the audit keeps it: at most ``limit`` characters and a mark."""
+    return name if len(name) <= limit else name[:limit] + "..."
 
 
 @dataclass(frozen=True)
@@ -55,15 +80,17 @@ class Caller:
 
 
 class ParameterService:
-    def __init__(self, runtime: Runtime, audit: AuditLog | None, token: str | None) -> None:
+    def __init__(self, runtime: Runtime, recorder: AuditRecorder, token: str | None) -> None:
         self.runtime = runtime
-        self.audit = audit
+        self.recorder = recorder
         self._token = token
+        self._token_id = recorder.token_id(token) if token is not None else None
         self._running: set[asyncio.Future[dict[str, Any]]] = set()
 
     # -------------------------------------------------------------- read
 
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
+        check_names(drive, parameter)
         entry, ref = self._locate(drive, parameter, index)
         fmt = entry.format_of(ref)
         ref = _fit_index(ref, fmt)
@@ -90,17 +117,19 @@ class ParameterService:
     async def write(
         self, drive: str, parameter: str, order: WriteOrder, caller: Caller
     ) -> dict[str, Any]:
+        identity = await self._identify(caller)
         audit = AuditEntry(
             client=caller.client,
-            drive=drive,
-            parameter=parameter,
+            drive=clip(drive, MAX_DRIVE_NAME),
+            parameter=clip(parameter, MAX_PARAMETER_TEXT),
             index=order.index or 0,
             outcome="pending",
+            token_id=identity,
             store=order.store.value,
             new_value=order.value,
         )
         try:
-            audit.token_id = self._authenticate(caller)
+            check_names(drive, parameter)
             entry, ref = self._locate(drive, parameter, order.index)
             audit.parameter, audit.index = ref.name, ref.index or 0
             if not entry.may_write(ref):
@@ -112,18 +141,18 @@ class ParameterService:
         except ApiError as exc:
             audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
             audit.detail = str(exc)
-            self._record(audit)
+            exc.audit_incomplete = not await self.recorder.note(audit)
             raise
         telegram = entry.target.telegram(request).hex(" ")
         if order.dry_run:
             audit.outcome = "dry_run"
-            self._record(audit)
-            return self._write_body(ref, fmt, order, request, telegram, audit, None)
-        row = self._record(audit)
-        # Once queued, the write runs to its end and its audit row is completed even
+            stored = await self.recorder.note(audit)
+            body = self._write_body(ref, fmt, order, request, telegram, audit, None)
+            return body if stored else {**body, "audit": INCOMPLETE}
+        # Once its row is stored the write runs to its end and the row is completed even
         # when the HTTP client goes away: the request may reach the drive regardless.
         task = asyncio.ensure_future(
-            self._perform(entry, ref, fmt, order, request, telegram, audit, row)
+            self._perform(entry, ref, fmt, order, request, telegram, audit)
         )
         self._running.add(task)
         task.add_done_callback(self._finished)
@@ -134,22 +163,32 @@ class ParameterService:
         if not task.cancelled():
             task.exception()  # collected: a client that left is not told, the audit row is
 
-    def refuse_malformed(self, drive: str, parameter: str, caller: Caller, problem: str) -> None:
-        """Audit a write whose body did not validate (nothing was sent)."""
-        identity = None
-        with contextlib.suppress(ApiError):
-            identity = self._authenticate(caller)
-        self._record(
+    async def refuse_malformed(
+        self, drive: str, parameter: str, caller: Caller, problem: str
+    ) -> bool:
+        """Audit a write whose body did not validate (nothing was sent); False when the
+        audit log could not store it. A caller without a valid token gets its refusal."""
+        identity = await self._identify(caller)
+        return await self.recorder.note(
             AuditEntry(
                 client=caller.client,
-                drive=drive,
-                parameter=parameter,
+                drive=clip(drive, MAX_DRIVE_NAME),
+                parameter=clip(parameter, MAX_PARAMETER_TEXT),
                 index=0,
                 outcome="invalid",
                 token_id=identity,
                 detail=problem,
             )
         )
+
+    async def _identify(self, caller: Caller) -> str | None:
+        """The caller's token id; a refusal (counted, audited per address and minute)
+        when the caller has no valid token."""
+        try:
+            return self._authenticate(caller)
+        except ApiError as exc:
+            exc.audit_incomplete = not await self.recorder.refused(caller.client, exc.kind)
+            raise
 
     async def _perform(
         self,
@@ -160,13 +199,19 @@ class ParameterService:
         request: pkw.PkwRequest,
         telegram: str,
         audit: AuditEntry,
-        row: int | None,
     ) -> dict[str, Any]:
         # The old value is the latest polled one: reading it first would cost an
         # exchange and let a poll in between, doubling the write's latency.
         old = self._latest(entry, ref)
         audit.old_value = old
-        self._update(row, old_value=old)
+        try:
+            row = await self.recorder.attempt(audit)  # committed before anything is sent
+        except AuditUnavailable as exc:
+            raise ApiError(
+                503,
+                "audit_unavailable",
+                f"the audit log cannot record the write ({exc}): nothing was sent",
+            ) from None
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )
@@ -181,10 +226,16 @@ class ParameterService:
             else:
                 verified = False
                 outcome, detail = "unverified", "the read-back had no answer"
-        self._update(row, outcome=outcome, fault=fault, detail=detail)
-        self._raise_for(result)
+        stored = await self.recorder.outcome(row, outcome=outcome, fault=fault, detail=detail)
+        try:
+            self._raise_for(result)
+        except ApiError as exc:
+            exc.audit_incomplete = not stored
+            raise
         body = self._write_body(ref, fmt, order, request, telegram, audit, result)
         body.update(old_value=old, verified=verified)
+        if not stored:
+            body["audit"] = INCOMPLETE
         return body
 
     def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
@@ -226,7 +277,7 @@ class ParameterService:
             raise ApiError(422, "invalid_value", str(exc)) from None
         return request
 
-    def _authenticate(self, caller: Caller) -> str:
+    def _authenticate(self, caller: Caller) -> str | None:
         if self._token is None:
             raise ApiError(403, "writes_disabled", "writes are disabled: no write token is set")
         header = caller.authorization or ""
@@ -235,7 +286,7 @@ class ParameterService:
             raise ApiError(401, "unauthenticated", "writes need Authorization: Bearer <token>")
         if not hmac.compare_digest(given.strip().encode(), self._token.encode()):
             raise ApiError(403, "forbidden", "the token is not the write token")
-        return token_id(self._token)
+        return self._token_id
 
     # ----------------------------------------------------------- helpers
 
@@ -312,13 +363,6 @@ class ParameterService:
             "telegram": telegram,
             "audit_id": audit.id,
         }
-
-    def _record(self, entry: AuditEntry) -> int | None:
-        return self.audit.record(entry) if self.audit is not None else None
-
-    def _update(self, row: int | None, **fields: Any) -> None:
-        if self.audit is not None and row is not None:
-            self.audit.update(row, **fields)
 
 
 def _fit_index(ref: ParameterRef, fmt: ParameterFormat) -> ParameterRef:
