@@ -48,6 +48,10 @@ FALLBACK_METRICS = {
     "pkwbus_line_up",
     "pkwbus_line_busy_seconds_total",
     "pkwbus_poll_overruns_total",
+    "pkwbus_dp_slave_state",
+    "pkwbus_dp_restarts_total",
+    "pkwbus_dp_diagnostics_total",
+    "pkwbus_build_info",
 }
 HISTOGRAM_SUFFIXES = ("_bucket", "_sum", "_count")
 

@@ -10,14 +10,16 @@ Histogram, their label values initialised from the configuration (see
 
 from __future__ import annotations
 
+import platform
 import weakref
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
-from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from pkwbus import __version__
 from pkwbus.master.jobs import Cancelled, Job, JobOutcome, JobResult
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.transaction import (
@@ -223,6 +225,31 @@ class ServiceMetrics:
             "pkwbus_poll_overruns",
             "Polls that started later than one interval after due",
             ld,
+            registry=registry,
+        )
+        build = Gauge(
+            "pkwbus_build_info", "pkwbus and Python versions", ["version", "python"],
+            registry=registry,
+        )  # fmt: skip
+        build.labels(__version__, platform.python_version()).set(1)
+        # PROFIBUS DP slaves: the families are there from the start; their series
+        # come with the DP lines of a configuration.
+        self.dp_state = Gauge(
+            "pkwbus_dp_slave_state",
+            "PROFIBUS DP: 1 for the slave's current state",
+            [*ld, "state"],
+            registry=registry,
+        )
+        self.dp_restarts = Counter(
+            "pkwbus_dp_restarts",
+            "PROFIBUS DP: times a slave had to be parametrised again, by reason",
+            [*ld, "reason"],
+            registry=registry,
+        )
+        self.dp_diagnostics = Counter(
+            "pkwbus_dp_diagnostics",
+            "PROFIBUS DP: diagnosis flags seen, by flag",
+            [*ld, "flag"],
             registry=registry,
         )
 
