@@ -7,6 +7,7 @@ import json
 import logging
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from pkwbus import __version__
 from pkwbus.commands import access, describe, ports, scan, service
@@ -14,8 +15,15 @@ from pkwbus.commands.common import CommandError, Exit
 from pkwbus.sim import cli as sim_cli
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with its usage errors in one line, saying where the help is; exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="pkwbus",
         description="RS-485 bus master for the PKW parameter channel (Danfoss FC, Siemens USS)",
     )
@@ -49,7 +57,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(exc.code)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return Exit.INTERRUPTED
     except Exception as exc:
         if args.debug:
             raise
@@ -57,7 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"pkwbus: internal error: {type(exc).__name__}: {exc} (--debug shows more)",
             file=sys.stderr,
         )
-        return 70
+        return Exit.BUG
 
 
 def _report(args: argparse.Namespace, exc: CommandError) -> None:

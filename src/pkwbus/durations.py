@@ -1,10 +1,17 @@
-"""Durations as people write them: ``250ms``, ``1s``, ``5m``, ``1h`` or plain seconds."""
+"""Durations as people write them: ``250ms``, ``1s``, ``5m``, ``1h`` or plain seconds.
+
+Every duration a user gives (configuration file, command line, simulator
+options) has a kind, and each kind its range: the table below is the one
+place that says which. A value outside it, negative or not finite is
+refused with a message naming the range, never clamped and never used.
+"""
 
 from __future__ import annotations
 
 import math
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Final
 
 _DURATION = re.compile(
@@ -21,6 +28,61 @@ _UNITS: Final[Mapping[str | None, float]] = {
 HINT: Final = "write 250ms, 1s, 5m, 1h or plain seconds"
 
 
+@dataclass(frozen=True, slots=True)
+class DurationRange:
+    """What a duration is for (``what``, with its article) and the seconds it may take.
+
+    Both ends are included: a ``low`` of 0 allows 0; above it, 0 is refused.
+    """
+
+    what: str
+    low: float
+    high: float
+
+    def __str__(self) -> str:
+        return f"{_human(self.low)} to {_human(self.high)}"
+
+
+# The ranges of every duration a user can give; README.md, "Configuration", lists them.
+TELEGRAM_TIMEOUT: Final = DurationRange("a telegram timeout", 0.001, 10.0)
+PAUSE: Final = DurationRange("a pause before a request", 0.0001, 1.0)
+INTER_CHAR_TIMEOUT: Final = DurationRange("an inter-character timeout", 0.0001, 1.0)
+RESPONSE_DELAY: Final = DurationRange("a response delay", 0.0, 10.0)
+POLL_INTERVAL: Final = DurationRange("a poll interval", 0.001, 86400.0)
+JOB_DEADLINE: Final = DurationRange("a job deadline", 0.001, 3600.0)
+SIM_LAG: Final = DurationRange("a simulated PKW lag", 0.0, 3600.0)
+SIM_LATE: Final = DurationRange("the delay of a late answer", 0.0, 3600.0)
+STATS_INTERVAL: Final = DurationRange("a stats interval", 0.01, 3600.0)
+
+# Where each kind is given: the table of README.md, "Configuration", row by row.
+RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
+    ("line `timeout`, `--timeout`", TELEGRAM_TIMEOUT),
+    ("line `pause`", PAUSE),
+    ("line `inter_char_timeout`", INTER_CHAR_TIMEOUT),
+    (
+        "line `response_delay`, `sim://...&response_delay=`, `simulate --response-delay`",
+        RESPONSE_DELAY,
+    ),
+    ("poll `every`", POLL_INTERVAL),
+    ("`read`/`write --deadline`", JOB_DEADLINE),
+    ("`simulate --lag` (as a duration)", SIM_LAG),
+    ("`simulate --late-after`", SIM_LATE),
+    ("`simulate --stats-interval`", STATS_INTERVAL),
+)
+
+
+def _human(seconds: float) -> str:
+    """``0.001`` as ``1 ms``, ``86400`` as ``24 h``."""
+    if seconds == 0:
+        return "0"
+    for unit, size in (("h", 3600.0), ("min", 60.0), ("s", 1.0)):
+        if seconds >= size and (seconds / size).is_integer():
+            return f"{seconds / size:g} {unit}"
+    if seconds >= 1:
+        return f"{seconds:g} s"
+    return f"{seconds * 1000:g} ms"
+
+
 def _shown(value: object) -> str:
     """A scalar's repr (shortened); for anything else, what kind of thing it is."""
     if isinstance(value, list | tuple):
@@ -31,8 +93,13 @@ def _shown(value: object) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def parse_duration(value: object, *, allow_zero: bool = False) -> float:
-    """Seconds; above 0 (or at least 0 with ``allow_zero``); ValueError otherwise."""
+def parse_duration(
+    value: object, within: DurationRange | None = None, *, allow_zero: bool = False
+) -> float:
+    """Seconds, within the range of its kind; ValueError with a plain message otherwise.
+
+    Without ``within``: any finite duration above 0 (at least 0 with ``allow_zero``).
+    """
     if isinstance(value, bool) or not isinstance(value, int | float | str):
         raise ValueError(f"{_shown(value)} is not a duration: {HINT}")
     if isinstance(value, str):
@@ -45,7 +112,17 @@ def parse_duration(value: object, *, allow_zero: bool = False) -> float:
             seconds = float(value)
         except OverflowError:
             seconds = math.inf
-    if not math.isfinite(seconds) or seconds < 0 or (seconds == 0 and not allow_zero):
-        floor = "0 or more" if allow_zero else "above 0"
-        raise ValueError(f"{_shown(value)} is not a duration {floor}: {HINT}")
+    if not math.isfinite(seconds):
+        raise ValueError(f"{_shown(value)} is not a finite duration: {HINT}")
+    zero_ok = within.low == 0 if within is not None else allow_zero
+    if seconds < 0 or (seconds == 0 and not zero_ok):
+        floor = "0 or more" if zero_ok else "above 0"
+        where = f": {within.what} is {within}" if within is not None else f": {HINT}"
+        raise ValueError(f"{_shown(value)} is not a duration {floor}{where}")
+    if within is None:
+        return seconds
+    if seconds > within.high:
+        raise ValueError(f"{_shown(value)} is too long for {within.what} ({within})")
+    if seconds < within.low:
+        raise ValueError(f"{_shown(value)} is too short for {within.what} ({within})")
     return seconds

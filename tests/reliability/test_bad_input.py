@@ -9,6 +9,7 @@ import subprocess
 import sys
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -81,14 +82,14 @@ def test_unreadable_files_exit_2(
 ) -> None:
     if os.geteuid() == 0:  # root reads any file: make the read fail as it would for others
         locked = unreadable["permission"]
-        real = Path.read_text
+        real = Path.open
 
-        def read_text(self: Path, *args: object, **kw: object) -> str:
+        def open_(self: Path, *args: Any, **kw: Any) -> Any:
             if self == locked:
                 raise PermissionError(13, "Permission denied", str(self))
-            return real(self, *args, **kw)  # type: ignore[arg-type]
+            return real(self, *args, **kw)
 
-        monkeypatch.setattr(Path, "read_text", read_text)
+        monkeypatch.setattr(Path, "open", open_)
     reasons = {
         "directory": "Is a directory",
         "garbage": "not UTF-8",

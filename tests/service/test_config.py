@@ -481,7 +481,7 @@ def test_bad_durations(text: object) -> None:
 
 
 def test_huge_integer_duration() -> None:
-    with pytest.raises(ValueError, match="above 0"):
+    with pytest.raises(ValueError, match="not a finite duration"):
         parse_duration(10**400)
 
 

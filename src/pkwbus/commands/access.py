@@ -6,7 +6,7 @@ import argparse
 import asyncio
 from typing import Any
 
-from pkwbus import link
+from pkwbus import durations, link
 from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
@@ -16,6 +16,7 @@ from pkwbus.commands.common import (
     add_line_options,
     build_line,
     build_target,
+    duration_option,
     emit_json,
 )
 from pkwbus.link import PortError
@@ -52,7 +53,12 @@ def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("parameter", help="16-13, 1613, r0021, P7841[2]")
     parser.add_argument("--type", default=None, help="u16 i16 u32 i32 f32 text")
     parser.add_argument("--catalog", default=None, help="catalog name, or 'none'")
-    parser.add_argument("--deadline", type=float, default=2.0, help="seconds for the whole job")
+    parser.add_argument(
+        "--deadline",
+        type=duration_option(durations.JOB_DEADLINE),
+        default=2.0,
+        help=f"for the whole job, retries included (default 2s; {durations.JOB_DEADLINE})",
+    )
 
 
 def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterFormat]:

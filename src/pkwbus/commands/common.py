@@ -7,9 +7,12 @@ import datetime
 import enum
 import json
 import sys
+from collections.abc import Callable
 from typing import Any
 
+from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS
+from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
@@ -19,13 +22,15 @@ from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
 
 class Exit(enum.IntEnum):
-    """The exit codes of interface.md."""
+    """The exit codes of ``pkwbus``, as README.md lists them."""
 
     OK = 0
     REJECTED = 1
     BAD_INPUT = 2
     NO_ANSWER = 3
     PORT = 4
+    BUG = 70  # EX_SOFTWARE: an exception pkwbus did not expect
+    INTERRUPTED = 130  # 128 + SIGINT
 
 
 class CommandError(Exception):
@@ -43,17 +48,67 @@ class CommandError(Exception):
 DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in Protocol}
 
 
+def duration_option(within: DurationRange) -> Callable[[str], float]:
+    """An argparse ``type``: a duration in the range of its kind (``250ms``, ``0.1``, ``2s``)."""
+
+    def duration(text: str) -> float:
+        try:
+            return parse_duration(text, within)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return duration
+
+
+def int_option(low: int, high: int) -> Callable[[str], int]:
+    """An argparse ``type``: a whole number ``low``-``high``."""
+
+    def whole_number(text: str) -> int:
+        try:
+            return limits.parse_int(text, low, high)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return whole_number
+
+
+def baudrate_option(text: str) -> int:
+    """An argparse ``type``: one of the standard baud rates."""
+    try:
+        return limits.check_baudrate(int(text))
+    except ValueError:
+        known = " ".join(str(b) for b in limits.BAUDRATES)
+        raise argparse.ArgumentTypeError(
+            f"{text[:40]!r} is not a supported baud rate ({known})"
+        ) from None
+
+
 def add_line_options(
     parser: argparse.ArgumentParser, *, timeout: float = 0.1, retries: int = 2
 ) -> None:
     g = parser.add_argument_group("line")
     g.add_argument("--port", required=True, help="device path or pyserial URL (socket://...)")
     g.add_argument("--protocol", choices=[p.value for p in Protocol], default="fc")
-    g.add_argument("--baudrate", type=int, default=9600)
+    g.add_argument(
+        "--baudrate",
+        type=baudrate_option,
+        default=9600,
+        help=f"one of {' '.join(str(b) for b in limits.BAUDRATES)} (default 9600)",
+    )
     g.add_argument("--parity", choices=["E", "O", "N"], default="E")
     g.add_argument("--stopbits", type=int, choices=[1, 2], default=1)
-    g.add_argument("--timeout", type=float, default=timeout, help="seconds per telegram")
-    g.add_argument("--retries", type=int, default=retries)
+    g.add_argument(
+        "--timeout",
+        type=duration_option(durations.TELEGRAM_TIMEOUT),
+        default=timeout,
+        help=f"per telegram: 100ms, 0.1 (seconds); {durations.TELEGRAM_TIMEOUT}",
+    )
+    g.add_argument(
+        "--retries",
+        type=int_option(0, limits.MAX_RETRIES),
+        default=retries,
+        help=f"repeats after a missing answer, 0-{limits.MAX_RETRIES}",
+    )
     g.add_argument("--echo", action="store_true", help="the adapter hears its own transmission")
     g.add_argument("--trace", action="store_true", help="print every telegram in hex")
     g.add_argument("--json", action="store_true", help="machine-readable output")
@@ -95,13 +150,9 @@ def build_target(args: argparse.Namespace, address: int | None = None) -> DriveT
 
 
 def build_line(args: argparse.Namespace) -> Line:
-    if args.timeout <= 0:
-        raise CommandError("--timeout must be positive", Exit.BAD_INPUT)
-    if args.retries < 0:
-        raise CommandError("--retries must not be negative", Exit.BAD_INPUT)
     try:
         settings = PortSettings(
-            args.port,
+            limits.check_port_url(args.port),
             baudrate=args.baudrate,
             parity=args.parity,
             stopbits=args.stopbits,

@@ -33,19 +33,25 @@ def add_parsers(sub: Any) -> None:
     scan.set_defaults(func=run_scan)
 
 
-def parse_addresses(text: str) -> list[int]:
+def parse_addresses(text: str, low: int, high: int) -> list[int]:
+    """``1-126`` or ``1,2,5-9``, each address ``low``-``high`` (the protocol's range)."""
     found: list[int] = []
     for part in text.split(","):
         part = part.strip()
-        low, sep, high = part.partition("-")
+        first_text, sep, last_text = part.partition("-")
         try:
-            first, last = int(low), int(high) if sep else int(low)
+            first, last = int(first_text), int(last_text) if sep else int(first_text)
         except ValueError:
             raise CommandError(
-                f"{text!r} is not a list of addresses like 1-126 or 1,2,5-9", Exit.BAD_INPUT
+                f"{text[:40]!r} is not a list of addresses like 1-126 or 1,2,5-9", Exit.BAD_INPUT
             ) from None
         if first > last:
             raise CommandError(f"address range {part} runs backwards", Exit.BAD_INPUT)
+        for address in (first, last):
+            if not low <= address <= high:
+                raise CommandError(
+                    f"--addresses: {address} is outside {low}-{high}", Exit.BAD_INPUT
+                )
         found.extend(range(first, last + 1))
     return sorted(set(found))
 
@@ -98,7 +104,10 @@ def _print(entry: dict[str, Any]) -> None:
 def run_scan(args: argparse.Namespace) -> int:
     protocol = Protocol(args.protocol)
     low, high = ADDRESS_RANGE[protocol]
-    addresses = parse_addresses(args.addresses) if args.addresses else list(range(low, high + 1))
+    if args.addresses:
+        addresses = parse_addresses(args.addresses, low, high)
+    else:
+        addresses = list(range(low, high + 1))
     found = link.run(_scan(args, addresses))
     if args.json:
         emit_json(found)

@@ -11,7 +11,8 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from pkwbus import link
-from pkwbus.commands.common import CommandError, Exit
+from pkwbus.commands.common import CommandError, Exit, int_option
+from pkwbus.limits import MAX_AUDIT_LIMIT
 from pkwbus.service.config import Config, ConfigError, load_config
 from pkwbus.service.load import check_config_report
 
@@ -32,7 +33,12 @@ def add_parsers(sub: Any) -> None:
     check.set_defaults(func=run_check)
     audit = sub.add_parser("audit", help="show the latest write attempts")
     audit.add_argument("--config", required=True)
-    audit.add_argument("--limit", type=int, default=50)
+    audit.add_argument(
+        "--limit",
+        type=int_option(1, MAX_AUDIT_LIMIT),
+        default=50,
+        help=f"how many of the latest attempts, 1-{MAX_AUDIT_LIMIT} (default 50)",
+    )
     audit.add_argument("--json", action="store_true")
     audit.set_defaults(func=run_audit)
 

@@ -54,8 +54,10 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from pkwbus import durations
 from pkwbus.catalog import CatalogError, ParameterSpec, available_catalogs, load_catalog
-from pkwbus.durations import parse_duration
+from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -79,7 +81,6 @@ from pkwbus.yamlfile import YamlError, load_yaml
 DEFAULT_LISTEN: Final = "127.0.0.1:9725"
 LISTEN_ENV: Final = "PKWBUS_LISTEN"
 DEFAULT_TOKEN_ENV: Final = "PKWBUS_WRITE_TOKEN"
-BAUDRATES: Final = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 76800, 93750, 115200, 187500)
 PORT_SCHEMES: Final = frozenset({"socket", "rfc2217", "loop", "spy", "alt", "hwgrep", "sim"})
 DIALECTS_BY_PROTOCOL: Final = {
     BusProtocol.FC: ("fc",),
@@ -87,7 +88,7 @@ DIALECTS_BY_PROTOCOL: Final = {
 }
 USS_MAX_ADDRESS: Final = 30  # ADR bits 0-4 give 0-31; drives accept 0-30
 PAUSE_CHARACTERS: Final = 3.5
-MAX_RETRIES: Final = 100
+MAX_CONFIG_BYTES: Final = 1024 * 1024  # a configuration file is read up to this, no further
 _NAME = r"^[A-Za-z0-9_.-]+$"
 _NAME_MAX = 64
 
@@ -164,7 +165,16 @@ def _short(value: object) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-Duration = Annotated[float, PlainValidator(parse_duration)]
+def _duration(within: DurationRange) -> PlainValidator:
+    """A duration of one kind: its range is in :mod:`pkwbus.durations`' table."""
+    return PlainValidator(lambda value: parse_duration(value, within))
+
+
+Interval = Annotated[float, _duration(durations.POLL_INTERVAL)]
+Timeout = Annotated[float, _duration(durations.TELEGRAM_TIMEOUT)]
+Pause = Annotated[float, _duration(durations.PAUSE)]
+CharTimeout = Annotated[float, _duration(durations.INTER_CHAR_TIMEOUT)]
+Delay = Annotated[float, _duration(durations.RESPONSE_DELAY)]
 Number = Annotated[float, PlainValidator(_number)]
 Notation = Annotated[ParameterRef, PlainValidator(_notation)]
 TypeName = Annotated[ValueType, PlainValidator(_value_type)]
@@ -292,7 +302,7 @@ class Poll(ParameterOverrides):
     """One polled parameter: ``{parameter: "16-13", every: 1s}`` plus optional overrides."""
 
     parameter: Notation
-    every: Duration
+    every: Interval
     index: StrictInt | None = Field(default=None, ge=0, le=MAX_INDEX)
 
     @model_validator(mode="after")
@@ -491,9 +501,12 @@ def parse_sim_port(url: str) -> SimPort:
         raise ValueError(f"{url!r}: list the simulated drives, e.g. ?drives=1,2,3")
     drives = _address_list(url, options["drives"])
     delay = options.get("response_delay")
-    return SimPort(
-        protocol, drives, None if delay is None else parse_duration(delay, allow_zero=True)
-    )
+    if delay is None:
+        return SimPort(protocol, drives)
+    try:
+        return SimPort(protocol, drives, parse_duration(delay, durations.RESPONSE_DELAY))
+    except ValueError as exc:
+        raise ValueError(f"{url!r}: response_delay {exc}") from None
 
 
 def _sim_options(url: str, query: str) -> dict[str, str]:
@@ -535,6 +548,7 @@ def _check_port(value: str) -> str:
             raise ValueError(f"unknown port URL scheme {scheme!r} (known: {known})")
         if scheme == "sim":
             parse_sim_port(value)
+        check_port_url(value)
     return value
 
 
@@ -547,11 +561,11 @@ class Line(_Model):
     baudrate: StrictInt
     parity: Annotated[Literal["E", "O", "N"], BeforeValidator(_upper)] = "E"
     stopbits: Literal[1, 2] = 1
-    timeout: Duration = 0.1
+    timeout: Timeout = 0.1
     retries: StrictInt = Field(default=2, ge=0, le=MAX_RETRIES)
-    pause: Duration | None = None
-    inter_char_timeout: Duration | None = None
-    response_delay: Duration | None = None
+    pause: Pause | None = None
+    inter_char_timeout: CharTimeout | None = None
+    response_delay: Delay | None = None
     echo: StrictBool = False
     fc_address_format: FcAddressFormat | None = None
     drives: list[Drive] = Field(min_length=1)
@@ -564,10 +578,7 @@ class Line(_Model):
     @field_validator("baudrate")
     @classmethod
     def _baudrate(cls, value: int) -> int:
-        if value not in BAUDRATES:
-            known = " ".join(str(b) for b in BAUDRATES)
-            raise ValueError(f"{value} is not a supported baud rate ({known})")
-        return value
+        return check_baudrate(value)
 
     @model_validator(mode="after")
     def _drives_fit_line(self) -> Self:
@@ -856,12 +867,20 @@ def load_config(
     catalogs: Catalogs | None = None,
 ) -> Config:
     """Read and check a configuration file; :class:`ConfigError` for any problem."""
+    shown = os.fspath(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with Path(path).open("rb") as file:  # a device or a pipe too, but never more than the cap
+            data = file.read(MAX_CONFIG_BYTES + 1)
     except OSError as exc:
-        raise ConfigError([f"{os.fspath(path)}: cannot read: {exc.strerror or exc}"]) from None
+        raise ConfigError([f"{shown}: cannot read: {exc.strerror or exc}"]) from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(
+            [f"{shown}: larger than {MAX_CONFIG_BYTES >> 20} MiB: not a pkwbus configuration"]
+        )
+    try:
+        text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ConfigError([f"{os.fspath(path)}: not UTF-8 text (byte {exc.start})"]) from None
+        raise ConfigError([f"{shown}: not UTF-8 text (byte {exc.start})"]) from None
     return parse_config(text, environ=environ, catalogs=catalogs)
 
 

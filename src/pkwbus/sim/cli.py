@@ -10,10 +10,12 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
+from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
+from pkwbus.durations import DurationRange
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
-from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming, parse_duration
+from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
 from pkwbus.sim.ends import PathInUseError
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
@@ -72,12 +74,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_addresses(text: str) -> list[int]:
-    """``1,2,5`` or ``1-3,7``."""
+    """``1,2,5`` or ``1-3,7``; each address at most the highest of any protocol (126)."""
     out: list[int] = []
     for part in filter(None, (p.strip() for p in text.split(","))):
         low, _, high = part.partition("-")
         if not low.isdigit() or (high and not high.isdigit()):
-            raise ValueError(f"{part!r} is not an address or a range of addresses")
+            raise ValueError(f"{part[:40]!r} is not an address or a range of addresses")
+        for address in (low, high or low):
+            if len(address) > 3 or int(address) > limits.MAX_ADDRESS:
+                raise ValueError(f"address {address[:40]} is outside 0-{limits.MAX_ADDRESS}")
         out += range(int(low), int(high or low) + 1)
     return out
 
@@ -89,6 +94,8 @@ def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
     host, sep, port = rest.rpartition(":")
     if not sep or not port.isdigit() or not host:
         raise ValueError(f"{text!r}: write {scheme}HOST:PORT")
+    if len(port) > 5 or int(port) > limits.MAX_TCP_PORT:
+        raise ValueError(f"{text!r}: the port must be 0-{limits.MAX_TCP_PORT} (0: any free port)")
     return host.strip("[]"), int(port)
 
 
@@ -96,6 +103,41 @@ def catalog_for(protocol: str, name: str | None) -> str | None:
     """The catalog to serve with: the one named, else the protocol's default; None for 'none'."""
     name = name or DEFAULT_CATALOGS[protocol]
     return None if name == "none" else name
+
+
+def _duration(option: str, text: str, within: DurationRange) -> float:
+    try:
+        return durations.parse_duration(text, within)
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
+
+
+def _lag(text: str) -> tuple[int, float]:
+    """``--lag``: N telegrams, or a duration."""
+    lag = text.strip()
+    if not lag.isdigit():
+        return 0, _duration("--lag", lag, durations.SIM_LAG)
+    try:
+        return limits.parse_int(lag, 0, limits.MAX_LAG_TELEGRAMS), 0.0
+    except ValueError as exc:
+        raise ValueError(f"--lag: {exc} (telegrams) or a duration") from None
+
+
+def _pkw_words(text: str) -> int | None:
+    if text in ("variable", "127"):
+        return None
+    if text not in ("0", "3", "4"):
+        raise ValueError(f"--pkw-words: {text[:40]!r} is not 0, 3, 4 or variable")
+    return int(text)
+
+
+def _baudrate(value: int | None) -> int | None:
+    if value is None:
+        return None
+    try:
+        return limits.check_baudrate(value)
+    except ValueError as exc:
+        raise ValueError(f"--baudrate: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -110,12 +152,10 @@ class Plan:
 
 def plan(args: argparse.Namespace) -> Plan:
     """Everything the options say, checked before anything opens. ValueError on bad input."""
-    lag = args.lag.strip()
-    lag_telegrams = int(lag) if lag.isdigit() else 0
-    lag_seconds = 0.0 if lag.isdigit() else parse_duration(lag)
+    lag_telegrams, lag_seconds = _lag(args.lag)
     timing = SimTiming(
-        response_delay=parse_duration(args.response_delay),
-        baudrate=args.baudrate,
+        response_delay=_duration("--response-delay", args.response_delay, durations.RESPONSE_DELAY),
+        baudrate=_baudrate(args.baudrate),
         wire_timing=args.wire_timing,
         lag_telegrams=lag_telegrams,
         lag_seconds=lag_seconds,
@@ -123,8 +163,9 @@ def plan(args: argparse.Namespace) -> Plan:
     )
     probabilities = {name: getattr(args, name) for name in FAULT_OPTIONS}
     dead = frozenset(parse_addresses(args.dead))
-    faults = SimFaults(**probabilities, late_seconds=parse_duration(args.late_after), dead=dead)
-    pkw_words = None if args.pkw_words in ("variable", "127") else int(args.pkw_words)
+    late = _duration("--late-after", args.late_after, durations.SIM_LATE)
+    faults = SimFaults(**probabilities, late_seconds=late, dead=dead)
+    pkw_words = _pkw_words(args.pkw_words)
     sim = Simulator(
         args.protocol,
         parse_addresses(args.drives),
@@ -144,7 +185,7 @@ def plan(args: argparse.Namespace) -> Plan:
         parse_host_port(args.listen, "tcp://") if args.listen else None,
         args.pty,
         args.stats_file,
-        parse_duration(args.stats_interval),
+        _duration("--stats-interval", args.stats_interval, durations.STATS_INTERVAL),
         parse_host_port(args.stats_listen) if args.stats_listen else None,
     )
 

@@ -1,0 +1,62 @@
+"""The ranges of the whole numbers a user gives: command line, configuration, simulator.
+
+Durations have their own table in :mod:`pkwbus.durations`. Bus addresses and
+PKW/PZD lengths depend on the protocol and dialect; they are checked where
+the drive is built (:meth:`pkwbus.master.target.DriveTarget.create`), with
+:data:`MAX_ADDRESS` only as the bound no protocol goes beyond.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+# The standard RS-485 rates FC and USS drives are set to, 1200 baud up to 187.5 kbaud.
+BAUDRATES: Final = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 76800, 93750, 115200, 187500)
+MAX_RETRIES: Final = 100  # repeats of one request after a missing or bad answer
+MAX_ADDRESS: Final = 126  # the highest bus address of any protocol (FC 1-126, USS 0-30)
+MAX_AUDIT_LIMIT: Final = 10_000  # audit entries one request shows, as GET /api/v1/audit
+MAX_LAG_TELEGRAMS: Final = 1000  # simulated PKW lag, counted in telegrams
+MAX_TCP_PORT: Final = 65535
+
+
+def check_int(value: int, low: int, high: int) -> int:
+    """``value`` when it is ``low``-``high``; ValueError naming the range otherwise."""
+    if not low <= value <= high:
+        raise ValueError(f"{value} is outside {low}-{high}")
+    return value
+
+
+def parse_int(text: str, low: int, high: int) -> int:
+    """The whole number written ``text``, ``low``-``high``; ValueError with a plain message."""
+    try:
+        value = int(text) if len(text) <= 40 else None
+    except ValueError:
+        value = None
+    if value is None:
+        shown = text if len(text) <= 40 else text[:37] + "..."
+        raise ValueError(f"{shown!r} is not a whole number {low}-{high}")
+    return check_int(value, low, high)
+
+
+def check_baudrate(value: int) -> int:
+    """``value`` when it is one of :data:`BAUDRATES`; ValueError listing them otherwise."""
+    if value not in BAUDRATES:
+        known = " ".join(str(b) for b in BAUDRATES)
+        raise ValueError(f"{value} is not a supported baud rate ({known})")
+    return value
+
+
+def check_port_url(url: str) -> str:
+    """A ``socket://`` or ``rfc2217://`` port needs HOST:PORT with a TCP port 1-65535.
+
+    Other ports (device paths, ``loop://``, ...) pass unchanged.
+    """
+    scheme, sep, rest = url.partition("://")
+    if not sep or scheme.lower() not in ("socket", "rfc2217"):
+        return url
+    host, colon, port = rest.split("?", 1)[0].split("/", 1)[0].rpartition(":")
+    if not host or not colon or not port.isdigit() or len(port) > 5:
+        raise ValueError(f"{url[:60]!r}: write {scheme}://HOST:PORT")
+    if not 1 <= int(port) <= MAX_TCP_PORT:
+        raise ValueError(f"{url[:60]!r}: the TCP port must be 1-{MAX_TCP_PORT}")
+    return url
