@@ -155,7 +155,7 @@ def run_write(args: argparse.Namespace) -> int:
             req = pkw.write_text(target.dialect, ref.pnu, encode_text(args.value), ref.index or 0)
             raw: int | None = None
         else:
-            raw, width = fmt.encode(args.value)
+            raw, width = fmt.encode(args.value, str(ref))
             req = pkw.write(target.dialect, ref.pnu, raw, width, index=ref.index, store=store)
         target.telegram(req)
     except LocalProtocolError as exc:

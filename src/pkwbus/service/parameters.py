@@ -23,7 +23,7 @@ from pkwbus.master.transaction import Answered, LineFailed, Rejected
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
+from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter
 from pkwbus.service.audit import AuditEntry, AuditLog, token_id
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -219,7 +219,7 @@ class ParameterService:
                 raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
             if isinstance(order.value, str):
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
-            raw, width = fmt.encode(order.value, Rounding.EXACT)
+            raw, width = fmt.encode(order.value, str(ref))
             request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
             entry.target.telegram(request)
         except LocalProtocolError as exc:
