@@ -40,6 +40,7 @@ CASES: list[tuple[str, str, str, Any, int, str]] = [
     ("f32_underflow", "pump1", "p1120", {"value": 1e-50}, 422, "invalid_value"),
     ("f32_subnormal", "pump1", "p1120", {"value": 1e-40}, 422, "invalid_value"),
     ("f32_inexact", "pump1", "p1120", {"value": 16777217}, 422, "invalid_value"),
+    ("siemens_on_fc", "fan1", "p0341", {"value": 10}, 422, "wrong_notation"),
 ]
 
 

@@ -227,3 +227,17 @@ def test_f32_underflow_is_refused(capsys: pytest.CaptureFixture[str], uss_port: 
         code, _, err = run(capsys, "write", *base, "p1120", value)
         assert code == 2
         assert f"{value} is below the smallest f32" in err and "nearest 0 or 1.1754944e-38" in err
+
+
+def test_one_name_per_drive(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    base = ["--port", sim_port, "--address", "17"]
+    for written in ("341", "0341", "03-41"):
+        code, out, err = run(capsys, "read", *base, written, "--json")
+        assert code == 0, err
+        assert json.loads(out)["parameter"] == "3-41"
+    for written in ("p0341", "r341"):
+        code, _, err = run(
+            capsys, "write", "--port", "/nonexistent/tty", "--address", "1", written, "1"
+        )
+        assert code == 2
+        assert "Siemens notation" in err and "write 3-41" in err

@@ -19,6 +19,7 @@ from pkwbus.protocol.params import (
     Rounding,
     Scaling,
     ValueType,
+    canonical,
     check_limits,
     decode_text,
     decode_value,
@@ -211,6 +212,37 @@ def test_f32_round_trip(number: float) -> None:
     raw = encode_value(number, ValueType.F32)
     assert raw == int.from_bytes(struct.pack(">f", number), "big")
     assert decode_value(raw, Width.DWORD, ValueType.F32) == number
+
+
+# ------------------------------------------------------ one name per drive
+
+
+@pytest.mark.parametrize("text", ["3-41", "03-41", "341", "0341", "00341"])
+def test_a_danfoss_drive_has_one_name_per_parameter(text: str) -> None:
+    assert canonical(parse_parameter(text), danfoss=True) == ParameterRef(341, None, "3-41")
+    assert str(canonical(parse_parameter(text + "[2]"), danfoss=True)) == "3-41[2]"
+
+
+@pytest.mark.parametrize("text", ["p0341", "P341", "r0341[2]"])
+def test_siemens_notation_on_a_danfoss_drive_names_the_fc_form(text: str) -> None:
+    ref = parse_parameter(text)
+    with pytest.raises(ParameterNotationError, match=r"Siemens.*write 3-41"):
+        canonical(ref, danfoss=True)
+
+
+@pytest.mark.parametrize(
+    ("text", "prefix", "name"),
+    [
+        ("r21", "r", "r0021"),
+        ("P1082", "p", "p1082"),
+        ("1082", "p", "p1082"),
+        ("p0021", "r", "r0021"),  # the drive's catalog or configuration decides
+        ("p2000", "", "2000"),  # neither knows it: the plain number
+        ("20-00", "", "2000"),
+    ],
+)
+def test_other_drives_name_it_with_the_known_prefix(text: str, prefix: str, name: str) -> None:
+    assert canonical(parse_parameter(text), danfoss=False, prefix=prefix).name == name
 
 
 # ------------------------------------------------------------ exact values

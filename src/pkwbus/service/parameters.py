@@ -5,7 +5,9 @@ right (compared in constant time; no token configured = no writes), the
 parameter is in the drive's ``writable`` list, and the value passes the
 type, range and limits of the catalog and the configuration. A value the raw
 number cannot represent exactly (1.234 s on a 0.01 s parameter) is refused,
-never rounded. Every attempt, refused ones included, lands in the audit log;
+never rounded. A parameter goes by the drive's one name for it (``341`` is
+``3-41`` on an FC drive, where ``p0341`` is refused) in the allow-list check,
+the answer and the audit. Every attempt, refused ones included, lands in the audit log;
 once a write is queued it runs to its end and its row is completed even if
 the HTTP client goes away.
 """
@@ -23,7 +25,12 @@ from pkwbus.master.transaction import Answered, LineFailed, Rejected
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter
+from pkwbus.protocol.params import (
+    ParameterNotationError,
+    ParameterRef,
+    encode_text,
+    parse_parameter,
+)
 from pkwbus.service.audit import AuditEntry, AuditLog, token_id
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -250,6 +257,10 @@ class ParameterService:
             entry.target.dialect.check_pnu(ref.pnu)
         except LocalProtocolError as exc:
             raise ApiError(404, "unknown_parameter", str(exc)) from None
+        try:  # one name per drive: 341 and 0341 are 3-41 on an FC drive, p0341 is refused
+            ref = entry.canonical(ref)
+        except ParameterNotationError as exc:
+            raise ApiError(422, "wrong_notation", str(exc)) from None
         if index is not None:
             if ref.index is not None and ref.index != index:
                 raise ApiError(

@@ -38,6 +38,9 @@ class DriveEntry:
         default=lambda ref: ParameterFormat()
     )
     units: dict[str, str] = field(default_factory=dict)
+    # The drive's one name for a parameter (3-41 for 341); LocalProtocolError for a
+    # notation the drive does not use.
+    canonical: Callable[[ParameterRef], ParameterRef] = field(default=lambda ref: ref)
 
     def unit_of(self, parameter: str) -> str:
         return self.units.get(parameter, "")
