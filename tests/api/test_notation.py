@@ -1,7 +1,8 @@
-"""One name per parameter on each drive."""
+"""One name per parameter on each drive, and old values that are not stale."""
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import httpx
@@ -56,3 +57,43 @@ async def test_a_siemens_drive_names_parameters_as_its_catalog(tmp_path: Path) -
         assert r.status_code == 200 and r.json()["parameter"] == "r0021"
         assert svc.audit is not None
         assert {row.parameter for row in svc.audit.latest(10)} == {"p1120"}
+
+
+async def test_the_old_value_is_the_one_the_drive_last_confirmed(tmp_path: Path) -> None:
+    # 3-41 polled once at start (then hourly), 3-42 never polled
+    fc = fc_drives(polls=[("16-13", "50ms"), ("3-41", "1h")])
+    async with service(tmp_path, fc=fc) as svc:
+        polled = svc.sim.drives[1].value(341) / 100
+        for parameter, first in (("3-41", polled), ("3-42", None)):
+            for value in (11.5, 12.5):
+                r = await svc.put("fan1", parameter, {"value": value})
+                assert r.status_code == 200, r.text
+                assert r.json()["old_value"] == first
+                first = value
+        assert svc.audit is not None
+        rows = list(reversed(svc.audit.latest(10)))
+        assert [(r.parameter, r.old_value, r.new_value) for r in rows] == [
+            ("3-41", polled, 11.5),
+            ("3-41", 11.5, 12.5),
+            ("3-42", None, 11.5),
+            ("3-42", 11.5, 12.5),
+        ]
+        # the polled parameter shows the value the drive acknowledged
+        reading = svc.runtime.snapshot.readings["fan1", "3-41", 0]
+        assert (reading.value, reading.raw) == (12.5, 1250)
+        assert (
+            await gauge(svc.client, "pkwbus_parameter_value", drive="fan1", parameter="3-41")
+            == 12.5
+        )
+
+        # writes queued together: each one's old value is the one before it
+        values = [21.0, 22.0, 23.0]
+        results = await asyncio.gather(*(svc.put("fan2", "3-42", {"value": v}) for v in values))
+        assert all(r.status_code == 200 for r in results)
+        chain = {r.json()["old_value"]: r.json()["value"] for r in results}
+        rows = [r for r in svc.audit.latest(10) if r.drive == "fan2"]
+        assert {row.old_value: row.new_value for row in rows} == chain
+        old = None  # never polled: nothing known before the first
+        for _ in values:
+            old = chain[old]
+        assert old == svc.sim.drives[2].value(342) / 100

@@ -169,14 +169,19 @@ class ParameterService:
         audit: AuditEntry,
         row: int | None,
     ) -> dict[str, Any]:
-        # The old value is the latest polled one: reading it first would cost an
-        # exchange and let a poll in between, doubling the write's latency.
+        # The old value is the latest the drive confirmed (polled, read, or echoed by
+        # an earlier write): reading it first would cost an exchange and double the
+        # write's latency. Kept at once; the line then reports the latest one just
+        # before the write's answer, which a write queued behind another needs.
         old = self._latest(entry, ref)
         audit.old_value = old
         self._update(row, old_value=old)
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )
+        if result.previous is not None and result.previous.value != old:
+            old = audit.old_value = result.previous.value
+            self._update(row, old_value=old)
         outcome, fault, detail = _audit_outcome(result)
         verified: bool | None = None
         if outcome == "ok" and order.verify:
@@ -195,10 +200,7 @@ class ParameterService:
         return body
 
     def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
-        key = entry.polled_as(ref)
-        if key is None:
-            return None
-        reading = self.runtime.snapshot.readings.get((entry.name, *key))
+        reading = self.runtime.snapshot.latest.get((entry.name, ref.pnu, ref.index or 0))
         return reading.value if reading is not None else None
 
     async def _try_read(

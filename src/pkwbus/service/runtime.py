@@ -45,13 +45,6 @@ class DriveEntry:
     def unit_of(self, parameter: str) -> str:
         return self.units.get(parameter, "")
 
-    def polled_as(self, ref: ParameterRef) -> tuple[str, int] | None:
-        """The snapshot key (parameter as configured, index) when ``ref`` is polled."""
-        for poll in self.polls:
-            if poll.request.pnu == ref.pnu and poll.index == (ref.index or 0):
-                return poll.parameter, poll.index
-        return None
-
 
 class Runtime:
     def __init__(
