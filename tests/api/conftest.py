@@ -130,7 +130,7 @@ def line_yaml(
     return "\n".join(lines)
 
 
-# A write's old value is the latest polled one: tests of old values poll these.
+# A write's old value is the latest the drive confirmed: tests of old values poll these.
 POLLED_WRITABLES = [("16-13", "50ms"), ("3-41", "50ms"), ("1-20", "50ms")]
 
 

@@ -37,6 +37,10 @@ CASES: list[tuple[str, str, str, Any, int, str]] = [
     ("fc_cannot_encode", "fan1", "5000", {"value": 10}, 404, "unknown_parameter"),
     ("f32_range", "pump1", "p1120", {"value": 1e39}, 422, "invalid_value"),
     ("below_f32_min", "pump1", "p1120", {"value": -1.0}, 422, "invalid_value"),
+    ("f32_underflow", "pump1", "p1120", {"value": 1e-50}, 422, "invalid_value"),
+    ("f32_subnormal", "pump1", "p1120", {"value": 1e-40}, 422, "invalid_value"),
+    ("f32_inexact", "pump1", "p1120", {"value": 16777217}, 422, "invalid_value"),
+    ("siemens_on_fc", "fan1", "p0341", {"value": 10}, 422, "wrong_notation"),
 ]
 
 
@@ -84,3 +88,32 @@ async def test_a_valid_value_at_the_resolution_goes_through(tmp_path: Path) -> N
             assert r.status_code == 200, r.text
             assert r.json()["raw"] == raw
             assert svc.sim.drives[1].value(341) == raw
+
+
+async def test_a_refusal_names_the_nearest_values(tmp_path: Path) -> None:
+    async with service(tmp_path, uss=USS_DRIVES) as svc:
+        for drive, parameter, value, message in (
+            (
+                "fan1",
+                "3-41",
+                1.234,
+                "1.234 is not a multiple of 0.01 for 3-41: nearest 1.23 or 1.24",
+            ),
+            (
+                "fan1",
+                "3-41",
+                12.345,
+                "12.345 is not a multiple of 0.01 for 3-41: nearest 12.34 or 12.35",
+            ),
+            (
+                "pump1",
+                "p1120",
+                1e-50,
+                "1e-50 is below the smallest f32 (it would become 0) for p1120: "
+                "nearest 0 or 1.1754944e-38",
+            ),
+        ):
+            r = await svc.put(drive, parameter, {"value": value})
+            assert r.status_code == 422
+            assert r.json()["error"]["message"] == message
+        assert svc.recorder.writes() == []

@@ -210,3 +210,37 @@ def test_describe_needs_a_dialect_with_ak_4(capsys: pytest.CaptureFixture[str]) 
         "p1082",
     )
     assert code == 2 and "no description request" in err
+
+
+def test_a_value_off_the_step_is_refused_not_rounded(
+    capsys: pytest.CaptureFixture[str], sim_port: str
+) -> None:
+    base = ["--port", sim_port, "--address", "101"]
+    assert run(capsys, "write", *base, "3-41", "12.34")[0] == 0
+    code, out, err = run(capsys, "write", *base, "3-41", "12.345")
+    assert code == 2, out
+    assert err.strip().endswith("12.345 is not a multiple of 0.01 for 3-41: nearest 12.34 or 12.35")
+    code, out, _ = run(capsys, "read", *base, "3-41", "--json")
+    assert json.loads(out)["raw"] == 1234  # nothing was written
+
+
+def test_f32_underflow_is_refused(capsys: pytest.CaptureFixture[str], uss_port: str) -> None:
+    base = ["--port", uss_port, "--protocol", "uss", "--address", "3"]
+    for value in ("1e-50", "1e-40"):
+        code, _, err = run(capsys, "write", *base, "p1120", value)
+        assert code == 2
+        assert f"{value} is below the smallest f32" in err and "nearest 0 or 1.1754944e-38" in err
+
+
+def test_one_name_per_drive(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:
+    base = ["--port", sim_port, "--address", "17"]
+    for written in ("341", "0341", "03-41"):
+        code, out, err = run(capsys, "read", *base, written, "--json")
+        assert code == 0, err
+        assert json.loads(out)["parameter"] == "3-41"
+    for written in ("p0341", "r341"):
+        code, _, err = run(
+            capsys, "write", "--port", "/nonexistent/tty", "--address", "1", written, "1"
+        )
+        assert code == 2
+        assert "Siemens notation" in err and "write 3-41" in err

@@ -4,22 +4,26 @@ from __future__ import annotations
 
 import math
 import struct
+from decimal import Decimal
 from fractions import Fraction
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
+    UNSCALED,
     ParameterNotationError,
     ParameterRef,
     Rounding,
     Scaling,
     ValueType,
+    canonical,
     check_limits,
     decode_text,
     decode_value,
+    encode_exact,
     encode_text,
     encode_value,
     parse_parameter,
@@ -150,7 +154,7 @@ def test_rounding_is_explicit() -> None:
     ramp = Scaling.conversion(-2)
     assert encode_value(10.005, ValueType.U32, ramp) == 1001  # half away from zero
     assert encode_value(-10.005, ValueType.I32, ramp) == (-1001) & 0xFFFFFFFF
-    with pytest.raises(LocalProtocolError, match=r"resolution 0\.01"):
+    with pytest.raises(LocalProtocolError, match=r"not a multiple of 0\.01: nearest 10 or 10\.01"):
         encode_value(10.004, ValueType.U32, ramp, Rounding.EXACT)
     assert encode_value(10.01, ValueType.U32, ramp, Rounding.EXACT) == 1001
 
@@ -208,3 +212,133 @@ def test_f32_round_trip(number: float) -> None:
     raw = encode_value(number, ValueType.F32)
     assert raw == int.from_bytes(struct.pack(">f", number), "big")
     assert decode_value(raw, Width.DWORD, ValueType.F32) == number
+
+
+# ------------------------------------------------------ one name per drive
+
+
+@pytest.mark.parametrize("text", ["3-41", "03-41", "341", "0341", "00341"])
+def test_a_danfoss_drive_has_one_name_per_parameter(text: str) -> None:
+    assert canonical(parse_parameter(text), danfoss=True) == ParameterRef(341, None, "3-41")
+    assert str(canonical(parse_parameter(text + "[2]"), danfoss=True)) == "3-41[2]"
+
+
+@pytest.mark.parametrize("text", ["p0341", "P341", "r0341[2]"])
+def test_siemens_notation_on_a_danfoss_drive_names_the_fc_form(text: str) -> None:
+    ref = parse_parameter(text)
+    with pytest.raises(ParameterNotationError, match=r"Siemens.*write 3-41"):
+        canonical(ref, danfoss=True)
+
+
+@pytest.mark.parametrize(
+    ("text", "prefix", "name"),
+    [
+        ("r21", "r", "r0021"),
+        ("P1082", "p", "p1082"),
+        ("1082", "p", "p1082"),
+        ("p0021", "r", "r0021"),  # the drive's catalog or configuration decides
+        ("p2000", "", "2000"),  # neither knows it: the plain number
+        ("20-00", "", "2000"),
+    ],
+)
+def test_other_drives_name_it_with_the_known_prefix(text: str, prefix: str, name: str) -> None:
+    assert canonical(parse_parameter(text), danfoss=False, prefix=prefix).name == name
+
+
+# ------------------------------------------------------------ exact values
+
+
+def _refusal(*args: object, **kwargs: object) -> str:
+    with pytest.raises(LocalProtocolError) as caught:
+        encode_exact(*args, **kwargs)  # type: ignore[arg-type]
+    return str(caught.value)
+
+
+def test_a_value_off_the_step_names_the_nearest_steps() -> None:
+    ramp = Scaling.conversion(-2)
+    message = _refusal("12.345", ValueType.U32, ramp, parameter="3-41")
+    assert message == "12.345 is not a multiple of 0.01 for 3-41: nearest 12.34 or 12.35"
+    assert encode_exact("12.34", ValueType.U32, ramp) == 1234
+    assert encode_exact(12.34, ValueType.U32, ramp) == 1234
+    # a neighbour outside the type or the limits is not offered
+    assert _refusal("655.355", ValueType.U16, ramp).endswith("nearest 655.35")
+    assert _refusal("1.005", ValueType.U16, ramp, maximum=1.005).endswith("nearest 1")
+
+
+@pytest.mark.parametrize("value", [1e-50, "1e-50", -1e-50, 1e-45, "1.234e-44", 1e-40])
+def test_f32_refuses_underflow_and_subnormals(value: float | str) -> None:
+    message = _refusal(value, ValueType.F32, parameter="p1120")
+    assert "below the smallest f32" in message and "for p1120" in message
+    assert message.endswith(("nearest 0 or 1.1754944e-38", "nearest 0 or -1.1754944e-38"))
+
+
+@pytest.mark.parametrize(
+    ("value", "nearest"),
+    [
+        ("0.30000001", "nearest 0.29999998 or 0.3"),
+        ("16777217", "nearest 16777216 or 16777218"),
+        ("0.10000000149", "nearest 0.099999994 or 0.1"),
+    ],
+)
+def test_f32_refuses_what_it_cannot_hold(value: str, nearest: str) -> None:
+    assert _refusal(value, ValueType.F32).endswith(nearest)
+
+
+@pytest.mark.parametrize(
+    "value", [0.1, "0.1", 50.0, "25.5", "1.2e-38", "3.4028235e38", 0, 0.10000000149011612]
+)
+def test_f32_takes_what_it_holds(value: float | str) -> None:
+    raw = encode_exact(value, ValueType.F32)
+    assert raw == int.from_bytes(struct.pack(">f", float(value)), "big")
+
+
+@settings(deadline=None)
+@given(st.floats(width=32, allow_nan=False, allow_infinity=False))
+def test_a_single_as_pkwbus_reads_it_can_be_written_back(number: float) -> None:
+    bits = int.from_bytes(struct.pack(">f", number), "big")
+    if number != 0 and abs(number) < 2.0**-126:
+        with pytest.raises(LocalProtocolError, match="below the smallest f32"):
+            encode_exact(repr(number), ValueType.F32)
+        return
+    assert encode_exact(repr(number), ValueType.F32) == (bits if number else 0)
+    assert encode_exact(number, ValueType.F32) == (bits if number else 0)
+
+
+def _single(text: str) -> int:
+    return int.from_bytes(struct.pack(">f", float(text)), "big")
+
+
+@settings(deadline=None)
+@given(
+    st.decimals(allow_nan=False, allow_infinity=False, min_value=-1e6, max_value=1e6, places=4),
+    st.sampled_from([ValueType.F32, ValueType.I32]),
+    st.sampled_from([-3, -2, -1, 0, 1, 67]),
+)
+def test_a_refusal_names_values_that_are_taken(
+    number: Decimal, vtype: ValueType, conversion: int
+) -> None:
+    scaling = Scaling.conversion(conversion) if vtype is not ValueType.F32 else UNSCALED
+    text = str(number)
+    try:
+        raw = encode_exact(text, vtype, scaling)
+    except LocalProtocolError as exc:
+        named = str(exc).partition("nearest ")[2].split(" or ")
+        assert len(named) == 2, exc
+        for near in named:
+            if not near.startswith("~"):  # 1/60 steps have no exact decimal to offer
+                encode_exact(near, vtype, scaling)
+        if vtype is ValueType.F32:  # the two singles either side of the number
+            low, high = sorted(
+                Fraction(struct.unpack(">f", struct.pack(">f", float(n)))[0]) for n in named
+            )
+            assert low < Fraction(number) < high
+        else:  # the two steps either side
+            for n in named:
+                if not n.startswith("~"):
+                    assert abs(Fraction(n) - Fraction(number)) < scaling.factor
+        return
+    if vtype is ValueType.F32:  # the single nearest the number
+        assert raw == _single(text)
+    else:
+        signed = raw - (1 << 32) if raw >> 31 else raw
+        assert signed * scaling.factor == Fraction(number)

@@ -56,6 +56,8 @@ class ParameterSpec(BaseModel):
     verified: bool = True
     note: str = ""
     source: str = ""
+    # Siemens r (read-only) or p (settable), from the key ("r0021"); empty otherwise.
+    prefix: Literal["", "r", "p"] = ""
 
     @model_validator(mode="after")
     def _check(self) -> Self:
@@ -208,10 +210,14 @@ def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
         raise CatalogError(f"{where}: {exc}") from None
     if not isinstance(entry, dict):
         raise CatalogError(f"{where}: expected a mapping of fields (name, type, ...)")
-    if "pnu" in entry:
-        raise CatalogError(f"{where}.pnu: the PNU comes from the key; remove this field")
+    for derived in ("pnu", "prefix"):
+        if derived in entry:
+            raise CatalogError(f"{where}.{derived}: it comes from the key; remove this field")
+    prefix = _SIEMENS_KEY.fullmatch(_key_text(key).strip())
     try:
-        return ParameterSpec.model_validate({**entry, "pnu": pnu})
+        return ParameterSpec.model_validate(
+            {**entry, "pnu": pnu, "prefix": prefix[0][0].lower() if prefix else ""}
+        )
     except ValidationError as exc:
         raise CatalogError(_format_errors(origin, place, exc)) from None
 

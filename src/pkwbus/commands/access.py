@@ -7,7 +7,7 @@ import asyncio
 from typing import Any
 
 from pkwbus import durations, link
-from pkwbus.catalog import CatalogError, load_catalog
+from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
     CommandError,
@@ -32,7 +32,13 @@ from pkwbus.master.transaction import (
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text, parse_parameter, parse_type
+from pkwbus.protocol.params import (
+    ParameterRef,
+    canonical,
+    encode_text,
+    parse_parameter,
+    parse_type,
+)
 from pkwbus.protocol.telegram import Protocol
 
 
@@ -50,7 +56,7 @@ def add_parsers(sub: Any) -> None:
 def _common(parser: argparse.ArgumentParser) -> None:
     add_line_options(parser)
     add_drive_options(parser)
-    parser.add_argument("parameter", help="16-13, 1613, r0021, P7841[2]")
+    parser.add_argument("parameter", help="16-13 (FC), r0021, p1082[2] (USS), or the plain number")
     parser.add_argument("--type", default=None, help="u16 i16 u32 i32 f32 text")
     parser.add_argument("--catalog", default=None, help="catalog name, or 'none'")
     parser.add_argument(
@@ -69,18 +75,29 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
         vtype = parse_type(args.type) if args.type else None
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return target, ref, _format(args, ref).with_type(vtype)
+    spec = _spec(args, ref)
+    try:
+        ref = drive_name(ref, target, spec)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    return target, ref, ParameterFormat.from_spec(spec).with_type(vtype)
 
 
-def _format(args: argparse.Namespace, ref: ParameterRef) -> ParameterFormat:
+def drive_name(ref: ParameterRef, target: DriveTarget, spec: ParameterSpec | None) -> ParameterRef:
+    """The drive's one name for ``ref`` (3-41 on an FC drive, r/p refused there);
+    elsewhere the catalog's r/p, else the one given on the command line."""
+    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    return canonical(ref, danfoss=target.dialect.danfoss_numbers, prefix=prefix)
+
+
+def _spec(args: argparse.Namespace, ref: ParameterRef) -> ParameterSpec | None:
     name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
     if name == "none":
-        return ParameterFormat()
+        return None
     try:
-        spec = load_catalog(name).get(ref.pnu)
+        return load_catalog(name).get(ref.pnu)
     except CatalogError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return ParameterFormat.from_spec(spec)
 
 
 async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRequest) -> Outcome:
@@ -161,7 +178,7 @@ def run_write(args: argparse.Namespace) -> int:
             req = pkw.write_text(target.dialect, ref.pnu, encode_text(args.value), ref.index or 0)
             raw: int | None = None
         else:
-            raw, width = fmt.encode(args.value)
+            raw, width = fmt.encode(args.value, str(ref))
             req = pkw.write(target.dialect, ref.pnu, raw, width, index=ref.index, store=store)
         target.telegram(req)
     except LocalProtocolError as exc:

@@ -12,6 +12,7 @@ import asyncio
 from typing import Any
 
 from pkwbus import link
+from pkwbus.commands.access import drive_name
 from pkwbus.commands.common import (
     CommandError,
     Exit,
@@ -120,6 +121,7 @@ def run_describe(args: argparse.Namespace) -> int:
                 f"the {target.dialect.name} dialect has no description request (AK 4)"
             )
         target.dialect.check_pnu(ref.pnu)
+        ref = drive_name(ref, target, None)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     found = link.run(_elements(args, target, ref.pnu))

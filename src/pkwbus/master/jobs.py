@@ -6,6 +6,7 @@ import asyncio
 import enum
 from dataclasses import dataclass, field
 
+from pkwbus.master.snapshot import Reading
 from pkwbus.master.transaction import Outcome, Tally
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
@@ -42,12 +43,17 @@ class Cancelled(Outcome):
 
 @dataclass(frozen=True, slots=True)
 class JobResult:
-    """What a job came to: its outcome, and the value when it carried one."""
+    """What a job came to: its outcome, and the value when it carried one.
+
+    ``previous``: for a job that ran, the parameter's latest confirmed value just
+    before its answer (a write's old value), None when none was known.
+    """
 
     outcome: Outcome
     raw: int | None = None
     value: Value | None = None
     tally: Tally | None = None
+    previous: Reading | None = None
 
 
 @dataclass(eq=False)

@@ -18,7 +18,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 from pkwbus.link import LinkState, PortError
@@ -329,17 +329,44 @@ class LineScheduler:
         d.active = None
         d.lagging = False
         result = self._result(outcome, active, d)
+        reading, previous = self._remember(d, active.tx.request, result)
         if active.job is not None:
-            self._finish_job(active.job, result)
+            if reading is not None:
+                self._show_confirmed(d, active.job, reading)
+            self._finish_job(active.job, replace(result, previous=previous))
             return
         poll = active.poll
         assert poll is not None
         self.events.job_finished(d.name, _poll_job(d.name, poll.spec, active), result)
-        if result.value is not None:
-            key = (d.name, poll.spec.parameter, poll.spec.index)
-            self.snapshot.readings[key] = Reading(result.value, result.raw, time.time())
+        if reading is not None:
+            self.snapshot.readings[d.name, poll.spec.parameter, poll.spec.index] = reading
         poll.due = max(poll.due + poll.spec.every, now)
         d.push_poll(poll)
+
+    def _remember(
+        self, d: _Drive, request: pkw.PkwRequest, result: JobResult
+    ) -> tuple[Reading | None, Reading | None]:
+        """(the value the drive just confirmed, the latest one before it).
+
+        An answer that carries the parameter's value - a poll, a read, or a write
+        the drive acknowledged by echoing the value it now holds - makes that value
+        the parameter's latest, so that the next write's old value is not stale.
+        """
+        key = (d.name, request.pnu, request.subindex)
+        previous = self.snapshot.latest.get(key)
+        if result.value is None:
+            return None, previous
+        reading = Reading(result.value, result.raw, time.time())
+        self.snapshot.latest[key] = reading
+        return reading, previous
+
+    def _show_confirmed(self, d: _Drive, job: Job, reading: Reading) -> None:
+        """A polled parameter shows what a read or an acknowledged write confirmed,
+        when the job decoded it as the poll does."""
+        for spec in d.spec.polls:
+            same = spec.request.pnu == job.request.pnu
+            if same and spec.request.subindex == job.request.subindex and spec.fmt == job.fmt:
+                self.snapshot.readings[d.name, spec.parameter, spec.index] = reading
 
     def _result(self, outcome: Outcome, active: _Active, d: _Drive) -> JobResult:
         tally = active.tx.tally

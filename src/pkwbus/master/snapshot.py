@@ -26,13 +26,19 @@ class DriveState:
 
 
 ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index
+ValueKey = tuple[str, int, int]  # drive, PNU, index
 
 
 @dataclass
 class Snapshot:
+    """``readings``: the polled parameters (metrics, /api/v1/drives). ``latest``: the
+    latest value each drive confirmed of any parameter, polled, read or written; a
+    write counts once the drive's answer echoes the value it now holds."""
+
     readings: dict[ReadingKey, Reading] = field(default_factory=dict)
     drives: dict[str, DriveState] = field(default_factory=dict)
     lines: dict[str, bool] = field(default_factory=dict)
+    latest: dict[ValueKey, Reading] = field(default_factory=dict)
 
     def copy(self) -> Snapshot:
-        return Snapshot(dict(self.readings), dict(self.drives), dict(self.lines))
+        return Snapshot(dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest))

@@ -9,13 +9,11 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
     UNSCALED,
-    Rounding,
     Scaling,
     ValueType,
-    check_limits,
     decode_text,
     decode_value,
-    encode_value,
+    encode_exact,
 )
 
 Value = int | float | str
@@ -87,14 +85,26 @@ class ParameterFormat:
             return response.raw, decode_value(response.raw, response.width, vtype, self.scaling)
         raise RemoteProtocolError(f"answer {type(response).__name__} carries no value")
 
-    def encode(self, value: Value, rounding: Rounding = Rounding.NEAREST) -> tuple[int, pkw.Width]:
-        """The raw number and width for writing ``value``; nothing is sent on an error."""
+    def encode(self, value: Value, parameter: str = "") -> tuple[int, pkw.Width]:
+        """The raw number and width for writing ``value``; nothing is sent on an error.
+
+        The one rule for writes, from the command line and the API: within the
+        limits and held exactly (:func:`~pkwbus.protocol.params.encode_exact`),
+        never rounded; the error names ``parameter`` and the nearest values.
+        """
         if self.vtype is None:
             raise LocalProtocolError("the parameter's type is not known: give it a type")
         if self.vtype is ValueType.TEXT:
             raise LocalProtocolError("text parameters cannot be written as a number")
-        check_limits(value, self.minimum, self.maximum, self.unit)
-        raw = encode_value(value, self.vtype, self.scaling, rounding)
+        raw = encode_exact(
+            value,
+            self.vtype,
+            self.scaling,
+            parameter=parameter,
+            minimum=self.minimum,
+            maximum=self.maximum,
+            unit=self.unit,
+        )
         width = self.vtype.width
         assert width is not None
         return raw, width

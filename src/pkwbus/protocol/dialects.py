@@ -118,6 +118,8 @@ class Dialect:
     responses: Mapping[int, tuple[Reply, str]]
     faults: Mapping[int, Fault]
     text_ind_high: tuple[int, int] | None = None  # (read, write) IND high byte for text
+    # Danfoss drives number parameters in groups: PNU 341 is 3-41, never r/p0341.
+    danfoss_numbers: bool = False
     _ak_of: Mapping[Command, int] = field(init=False, repr=False)
     _reply_of: Mapping[int, Reply] = field(init=False, repr=False)
 
@@ -458,6 +460,7 @@ FC = _FcDialect(
     responses=MappingProxyType(_FC_RESPONSES),
     faults=_FC_FAULTS,
     text_ind_high=(0x04, 0x05),
+    danfoss_numbers=True,
 )
 USS = Dialect(
     name="uss",
@@ -488,6 +491,7 @@ DANFOSS_PCV = Dialect(
     requests=MappingProxyType(_PCV_REQUESTS),
     responses=MappingProxyType(_PCV_RESPONSES),
     faults=_PCV_FAULTS,
+    danfoss_numbers=True,
 )
 HITACHI_SJPB = Dialect(
     name="hitachi-sjpb",

@@ -108,7 +108,8 @@ def _drive(
     for entry in drive.poll:
         ref = entry.ref
         index = entry.index if entry.index is not None else ref.index
-        ref = ParameterRef(ref.pnu, index, ref.name)
+        # Labels are the drive's one name for the parameter: "1613" polls 16-13.
+        ref = drive.canonical(ParameterRef(ref.pnu, index, ref.name))
         spec = drive.spec(ref)
         fmt = ParameterFormat.from_spec(spec)
         polls.append(PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt))
@@ -123,6 +124,7 @@ def _drive(
             may_write=drive.may_write,
             format_of=lambda r, d=drive: ParameterFormat.from_spec(d.spec(r)),  # type: ignore[misc]
             units=units,
+            canonical=drive.canonical,
         )
     )
     return DriveSpec(drive.name, target, tuple(polls))

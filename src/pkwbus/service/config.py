@@ -65,8 +65,10 @@ from pkwbus.protocol.params import (
     ParameterRef,
     Scaling,
     ValueType,
+    canonical,
     parse_parameter,
     parse_type,
+    siemens_name,
 )
 from pkwbus.protocol.telegram import (
     FC_PARAMETER,
@@ -391,8 +393,11 @@ class Drive(_Model):
             if spec and spec.array and ref.index is not None and ref.index >= spec.array:
                 problems.append((place, f"{ref}: the catalog gives it {spec.array} elements"))
         for i, ref in enumerate(self.writable):
-            if ref.name[:1] == "r":
+            if ref.prefix == "r":
                 problems.append((f"writable[{i}]", f"{ref} is read-only (r): settable ones are p"))
+            elif self._catalog_prefix(ref.pnu, catalogs) == "r":
+                name = siemens_name("r", ref.pnu)
+                problems.append((f"writable[{i}]", f"{ref} is {name}, read-only (r)"))
         if problems:
             raise _fail(problems)
         return self
@@ -454,6 +459,25 @@ class Drive(_Model):
                 if _key(given) == key:
                     return overrides
         return ParameterOverrides()
+
+    def canonical(self, ref: ParameterRef, catalogs: Catalogs | None = None) -> ParameterRef:
+        """``ref`` under this drive's one name for it, as labels, the API and the audit
+        show it: ``3-41`` on a Danfoss drive (written ``341`` or ``0341``; r/p is a
+        LocalProtocolError), else ``r0021``/``p1082`` with the prefix of the catalog,
+        else of this configuration, else the plain number."""
+        numbers = self.pkw_dialect.danfoss_numbers
+        return canonical(ref, danfoss=numbers, prefix=self._prefix(ref.pnu, catalogs))
+
+    def _prefix(self, pnu: int, catalogs: Catalogs | None) -> str:
+        """The r/p of ``pnu``: the catalog's, else the first this configuration writes."""
+        given = (ref.prefix for _, ref in self.refs() if ref.pnu == pnu and ref.prefix)
+        return self._catalog_prefix(pnu, catalogs) or next(given, "")
+
+    def _catalog_prefix(self, pnu: int, catalogs: Catalogs | None) -> str:
+        if self.catalog is None:
+            return ""
+        spec = (catalogs or builtin_catalogs()).load(self.catalog).get(pnu)
+        return spec.prefix if spec is not None else ""
 
     def may_write(self, ref: ParameterRef) -> bool:
         """Whether ``writable`` lists ``ref`` (an entry without index allows every index)."""
@@ -696,12 +720,24 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
 
 
 def _pnu_problems(drive: Drive, pkw_dialect: Dialect) -> list[Place]:
+    """Numbers the dialect cannot encode; notation the drive does not use (r/p on a
+    Danfoss drive, r0021 and p0021 both)."""
     problems: list[Place] = []
+    prefixes: dict[int, ParameterRef] = {}
     for place, ref in drive.refs():
         try:
             pkw_dialect.check_pnu(ref.pnu)
         except LocalProtocolError as exc:
             problems.append((place, f"{ref}: {exc}"))
+            continue
+        try:
+            canonical(ref, danfoss=pkw_dialect.danfoss_numbers)
+        except LocalProtocolError as exc:
+            problems.append((place, str(exc)))
+            continue
+        first = prefixes.setdefault(ref.pnu, ref) if ref.prefix else ref
+        if first.prefix != ref.prefix:
+            problems.append((place, f"{ref} and {first} name one parameter: write it one way"))
     return problems
 
 

@@ -5,11 +5,14 @@ right (compared in constant time; no token configured = no writes), the
 parameter is in the drive's ``writable`` list, and the value passes the
 type, range and limits of the catalog and the configuration. A value the raw
 number cannot represent exactly (1.234 s on a 0.01 s parameter) is refused,
-never rounded. Every attempt, refused ones included, lands in the audit log
-(requests without a valid token as a count per address and minute); a write
-is sent only once its row is stored (else 503), and once queued it runs to its
-end and its row is completed even if the HTTP client goes away. A drive or
-parameter name longer than any can be is refused before it is looked up.
+never rounded. A parameter goes by the drive's one name for it (``341`` is
+``3-41`` on an FC drive, where ``p0341`` is refused) in the allow-list check,
+the answer and the audit. Every attempt, refused ones included, lands in the
+audit log (requests without a valid token as a count per address and minute);
+a write is sent only once its row is stored (else 503), and once queued it
+runs to its end and its row is completed even if the HTTP client goes away. A
+drive or parameter name longer than any can be is refused before it is looked
+up.
 """
 
 from __future__ import annotations
@@ -24,7 +27,12 @@ from pkwbus.master.transaction import Answered, LineFailed, Rejected
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, Rounding, encode_text, parse_parameter
+from pkwbus.protocol.params import (
+    ParameterNotationError,
+    ParameterRef,
+    encode_text,
+    parse_parameter,
+)
 from pkwbus.service.audit import AuditEntry
 from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.runtime import DriveEntry, Runtime
@@ -200,8 +208,10 @@ class ParameterService:
         telegram: str,
         audit: AuditEntry,
     ) -> dict[str, Any]:
-        # The old value is the latest polled one: reading it first would cost an
-        # exchange and let a poll in between, doubling the write's latency.
+        # The old value is the latest the drive confirmed (polled, read, or echoed by
+        # an earlier write): reading it first would cost an exchange and double the
+        # write's latency. Kept at once; the line then reports the latest one just
+        # before the write's answer, which a write queued behind another needs.
         old = self._latest(entry, ref)
         audit.old_value = old
         try:
@@ -215,6 +225,8 @@ class ParameterService:
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )
+        if result.previous is not None and result.previous.value != old:
+            old = audit.old_value = result.previous.value  # stored with the outcome
         outcome, fault, detail = _audit_outcome(result)
         verified: bool | None = None
         if outcome == "ok" and order.verify:
@@ -226,7 +238,9 @@ class ParameterService:
             else:
                 verified = False
                 outcome, detail = "unverified", "the read-back had no answer"
-        stored = await self.recorder.outcome(row, outcome=outcome, fault=fault, detail=detail)
+        stored = await self.recorder.outcome(
+            row, outcome=outcome, fault=fault, detail=detail, old_value=old
+        )
         try:
             self._raise_for(result)
         except ApiError as exc:
@@ -239,10 +253,7 @@ class ParameterService:
         return body
 
     def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
-        key = entry.polled_as(ref)
-        if key is None:
-            return None
-        reading = self.runtime.snapshot.readings.get((entry.name, *key))
+        reading = self.runtime.snapshot.latest.get((entry.name, ref.pnu, ref.index or 0))
         return reading.value if reading is not None else None
 
     async def _try_read(
@@ -270,7 +281,7 @@ class ParameterService:
                 raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
             if isinstance(order.value, str):
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
-            raw, width = fmt.encode(order.value, Rounding.EXACT)
+            raw, width = fmt.encode(order.value, str(ref))
             request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
             entry.target.telegram(request)
         except LocalProtocolError as exc:
@@ -301,6 +312,10 @@ class ParameterService:
             entry.target.dialect.check_pnu(ref.pnu)
         except LocalProtocolError as exc:
             raise ApiError(404, "unknown_parameter", str(exc)) from None
+        try:  # one name per drive: 341 and 0341 are 3-41 on an FC drive, p0341 is refused
+            ref = entry.canonical(ref)
+        except ParameterNotationError as exc:
+            raise ApiError(422, "wrong_notation", str(exc)) from None
         if index is not None:
             if ref.index is not None and ref.index != index:
                 raise ApiError(

@@ -38,16 +38,12 @@ class DriveEntry:
         default=lambda ref: ParameterFormat()
     )
     units: dict[str, str] = field(default_factory=dict)
+    # The drive's one name for a parameter (3-41 for 341); LocalProtocolError for a
+    # notation the drive does not use.
+    canonical: Callable[[ParameterRef], ParameterRef] = field(default=lambda ref: ref)
 
     def unit_of(self, parameter: str) -> str:
         return self.units.get(parameter, "")
-
-    def polled_as(self, ref: ParameterRef) -> tuple[str, int] | None:
-        """The snapshot key (parameter as configured, index) when ``ref`` is polled."""
-        for poll in self.polls:
-            if poll.request.pnu == ref.pnu and poll.index == (ref.index or 0):
-                return poll.parameter, poll.index
-        return None
 
 
 class Runtime:
