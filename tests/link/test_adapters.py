@@ -77,7 +77,7 @@ def test_the_table_names_the_stable_path_first_and_the_latency_cost(tmp_path: Pa
     ftdi = next(b for b in blocks if "ttyUSB3" in b)
     assert ftdi.splitlines()[0].endswith("usb-FTDI_USB-RS485_Cable_FT1ABCD-if00-port0")
     assert "may change when replugged" in ftdi
-    assert "16 ms" in ftdi and "low_latency: true" in ftdi
+    assert "16 ms" in ftdi and "latency timer to 1 ms" in ftdi
     assert "FT1ABCD" in ftdi and "0403:6001" in ftdi
 
 

@@ -54,7 +54,7 @@ def format_table(adapters: list[Adapter]) -> str:
         if a.latency_timer_ms is not None:
             hint = (
                 f" (each answer may wait up to {a.latency_timer_ms} ms: "
-                "set low_latency: true on its line)"
+                "set its latency timer to 1 ms, e.g. setserial DEVICE low_latency)"
                 if a.latency_timer_ms > FAST_LATENCY_MS
                 else ""
             )

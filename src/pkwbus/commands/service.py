@@ -126,8 +126,6 @@ async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
 def run_audit(args: argparse.Namespace) -> int:
     from pkwbus.service.audit import AuditError, AuditLog, as_dict
 
-    if args.limit < 1:
-        raise CommandError("--limit must be at least 1", Exit.BAD_INPUT)
     config = load(args.config)
     if not config.audit_db.exists():
         raise CommandError(f"no audit database at {config.audit_db}", Exit.BAD_INPUT)

@@ -358,13 +358,41 @@ def _transport(loop: asyncio.AbstractEventLoop, link: Link, instance: Any) -> as
     reconfigure = instance._reconfigure_port
     instance._reconfigure_port = lambda force_update=False: None
     try:
-        transport: asyncio.Transport = serial_asyncio.SerialTransport(
-            loop, _Protocol(link), instance
-        )
+        transport = _SerialTransport(loop, _Protocol(link), instance)
     finally:
         instance._reconfigure_port = reconfigure
+    transport.fd = _raw_fd(instance)
     _closer.wrap(instance, link.settings.url)
     return transport
+
+
+class _SerialTransport(serial_asyncio.SerialTransport):  # type: ignore[misc]
+    """pyserial-asyncio's transport, reading a plain descriptor with read(2).
+
+    pyserial's ``read`` waits with ``select()``, which refuses a descriptor
+    numbered 1024 or above: a port reopened while many HTTP connections are
+    open could get such a number and then never be read. The event loop has
+    already said that the descriptor is readable, so one ``os.read`` is all
+    a read needs.
+    """
+
+    fd = -1
+
+    def _read_ready(self) -> None:
+        if self.fd < 0:
+            super()._read_ready()
+            return
+        try:
+            data = os.read(self.fd, self._max_read_size)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError as exc:
+            self._close(exc=serial.SerialException(_reason(exc)))
+            return
+        if not data:  # end of file: the device or the gateway went away
+            self._close(exc=serial.SerialException("the port was closed at its other end"))
+            return
+        self._protocol.data_received(data)
 
 
 class _Closer:

@@ -87,7 +87,7 @@ SPARE_DESCRIPTORS = 64
 
 
 async def serve(
-    runtime: Runtime, app: FastAPI, sock: socket.socket, *, max_connections: int = 1000
+    runtime: Runtime, app: FastAPI, sock: socket.socket, *, max_connections: int = 500
 ) -> None:
     """Run until SIGTERM, SIGINT or SIGHUP, then shut down in order."""
     loop = asyncio.get_running_loop()
@@ -98,7 +98,9 @@ async def serve(
         received.append(sig.name)
         stop.set()
 
-    for sig in STOP_SIGNALS:
+    # A SIGHUP ignored by whoever started the service (nohup) stays ignored.
+    signals = [s for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN]
+    for sig in signals:
         loop.add_signal_handler(sig, on_signal, sig)
     raise_open_files_limit(max_connections + SPARE_DESCRIPTORS)
     config = uvicorn.Config(
@@ -127,6 +129,6 @@ async def serve(
         except Exception as exc:  # the service is stopping anyway: say so, no traceback
             log.warning("HTTP server: %s", exc or type(exc).__name__)
         stop_task.cancel()
-        for sig in STOP_SIGNALS:
+        for sig in signals:
             loop.remove_signal_handler(sig)
     log.info("stopped")

@@ -95,7 +95,10 @@ _NAME = r"^[A-Za-z0-9_.-]+$"
 _NAME_MAX = 64
 
 
-MAX_HTTP_CONNECTIONS = 10_000
+# HTTP connections at most: with the ports, the audit database and the listener
+# every descriptor stays below 1024, which pyserial's socket:// handler needs (it
+# waits with select()).
+MAX_HTTP_CONNECTIONS = 900
 
 
 class ConfigError(Exception):
@@ -820,7 +823,7 @@ class Api(_Model):
     write_token_env: Annotated[str, PlainValidator(_env_name)] = DEFAULT_TOKEN_ENV
     # HTTP connections open at once; more are closed at once (logged), so a flood of
     # clients cannot take the descriptors the serial ports need.
-    max_connections: int = Field(default=1000, ge=1, le=MAX_HTTP_CONNECTIONS)
+    max_connections: int = Field(default=500, ge=1, le=MAX_HTTP_CONNECTIONS)
     # A token that may read the audit log (GET /api/v1/audit) but not write; the
     # write token reads it too.
     read_token_env: Annotated[str, PlainValidator(_env_name)] | None = None

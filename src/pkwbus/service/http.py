@@ -6,7 +6,10 @@ and a flood of them starves the process (and the serial ports it must
 reopen). Here a connection beyond ``max_connections`` is closed as soon as
 it is accepted, and the refusals are logged once per ``LOG_EVERY`` seconds
 with their count. A connection that sends nothing is closed after uvicorn's
-keep-alive timeout, as one that has finished a request would be.
+keep-alive timeout, as one that has finished a request would be, and one
+that has begun a request must complete its headers within
+``HEADER_TIMEOUT`` seconds: a client sending a byte now and then cannot hold
+a connection for ever.
 """
 
 from __future__ import annotations
@@ -16,11 +19,12 @@ import logging
 
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-__all__ = ["LOG_EVERY", "ConnectionLimit", "bounded_protocol"]
+__all__ = ["HEADER_TIMEOUT", "LOG_EVERY", "ConnectionLimit", "bounded_protocol"]
 
 log = logging.getLogger(__name__)
 
 LOG_EVERY = 10.0
+HEADER_TIMEOUT = 10.0
 
 
 class ConnectionLimit:
@@ -64,12 +68,37 @@ def bounded_protocol(limit: ConnectionLimit) -> type[H11Protocol]:
                 self.timeout_keep_alive, self.timeout_keep_alive_handler
             )
 
+        _headers_due: asyncio.TimerHandle | None = None
+
         def connection_lost(self, exc: Exception | None) -> None:
             if not self._refused:
+                self._headers_arrived()
                 super().connection_lost(exc)
 
         def data_received(self, data: bytes) -> None:
-            if not self._refused:
-                super().data_received(data)
+            if self._refused:
+                return
+            super().data_received(data)
+            if self.cycle is not None and not self.cycle.response_complete:
+                self._headers_arrived()  # a request is being served
+            elif self._headers_due is None and not self.transport.is_closing():
+                self._headers_due = self.loop.call_later(HEADER_TIMEOUT, self._too_slow)
+
+        def on_response_complete(self) -> None:
+            self._headers_arrived()
+            super().on_response_complete()
+
+        def _headers_arrived(self) -> None:
+            if self._headers_due is not None:
+                self._headers_due.cancel()
+                self._headers_due = None
+
+        def _too_slow(self) -> None:
+            self._headers_due = None
+            if not self.transport.is_closing():
+                log.info(
+                    "HTTP: closed a connection whose request headers took over %g s", HEADER_TIMEOUT
+                )
+                self.transport.close()
 
     return BoundedH11Protocol

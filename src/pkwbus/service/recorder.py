@@ -23,11 +23,13 @@ starts failing, so a flood of them cannot flood the log.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import math
 import time
 from collections import OrderedDict
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Final, TypeVar
 
 from pkwbus.service.audit import AuditEntry, AuditError, AuditLog
@@ -64,6 +66,7 @@ class AuditRecorder:
         self._problem: str | None = None
         self._last_probe = -math.inf
         self._unsaved: OrderedDict[int, dict[str, Any]] = OrderedDict()
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix="pkwbus-audit")
 
     def token_id(self, token: str) -> str | None:
         return self.audit.token_id(token) if self.audit is not None else None
@@ -175,15 +178,21 @@ class AuditRecorder:
         return self._problem
 
     def save_late(self) -> None:
-        """At shutdown: store the outcomes still kept, if the log records again."""
-        for row in self._store(list(self._unsaved.items())):
+        """At shutdown: store the outcomes still kept, if the log records again; then
+        let the audit thread end."""
+        saved, _ = self._store(list(self._unsaved.items()))
+        for row in saved:
             self._unsaved.pop(row, None)
+        self._thread.shutdown(wait=True)
 
     # ----------------------------------------------------------- helpers
 
     async def _call(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
-        # SQLite syncs to disk on every commit: never on the event loop, which runs the lines.
-        return await asyncio.to_thread(fn, *args, **kwargs)
+        # SQLite syncs to disk on every commit: never on the event loop, which runs the
+        # lines, and in a thread of its own, so that a flood of refusals to store does not
+        # queue ahead of the ports being opened or anything else the default pool runs.
+        call = functools.partial(fn, *args, **kwargs)
+        return await asyncio.get_running_loop().run_in_executor(self._thread, call)
 
     def _failed(self, stage: str, exc: AuditError) -> bool:
         """Count a failed store and mark the log failing; True when it was not before."""
@@ -198,20 +207,24 @@ class AuditRecorder:
             self._problem = None
             log.warning("audit log records again: writes are accepted")
         if self._unsaved:
-            saved = await self._call(self._store, list(self._unsaved.items()))
+            saved, error = await self._call(self._store, list(self._unsaved.items()))
             for row in saved:
                 self._unsaved.pop(row, None)
+            if error is not None and self._failed("outcome", error):
+                log.error("audit log cannot record: %s; writes are refused until it can", error)
 
-    def _store(self, outcomes: list[tuple[int, dict[str, Any]]]) -> list[int]:
-        """Store kept outcomes in order, until one fails; the rows stored."""
+    def _store(
+        self, outcomes: list[tuple[int, dict[str, Any]]]
+    ) -> tuple[list[int], AuditError | None]:
+        """Store kept outcomes in order, until one fails; the rows stored, the failure."""
         saved: list[int] = []
         if self.audit is None:
-            return saved
+            return saved, None
         for row, fields in outcomes:
             try:
                 self.audit.update(row, **fields)
-            except AuditError:
-                break
+            except AuditError as exc:
+                return saved, exc
             saved.append(row)
             log.info("audit row %d: its outcome is stored now", row)
-        return saved
+        return saved, None
