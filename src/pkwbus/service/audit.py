@@ -9,6 +9,9 @@ a flood of them cannot grow the database.
 
 Every store is committed and synced (``synchronous=FULL``) before the call
 returns: the database survives restarts, a killed process and a power cut.
+The counts of refused requests are committed without a sync of their own
+(they reach the disk with the next synced store or checkpoint): a flood of
+refusals costs no disk flush per request.
 A store that fails raises :class:`AuditError` (one line, no traceback).
 
 The token fingerprint is an HMAC-SHA256 of the token keyed with a random
@@ -259,7 +262,7 @@ class AuditLog:
                 f"{k} {n}" for k, n in sorted(kinds.items())
             )
             if tally is None:
-                cur = self._execute_locked(
+                cur = self._unsynced_locked(
                     "INSERT INTO writes (time, client, drive, parameter, outcome, detail, count)"
                     " VALUES (?, ?, '', '', 'refused', ?, 1)",
                     (now, client, detail),
@@ -267,7 +270,7 @@ class AuditLog:
                 assert cur.lastrowid is not None
                 self._tallies[client] = _Tally(cur.lastrowid, kinds)
             else:
-                self._execute_locked(
+                self._unsynced_locked(
                     "UPDATE writes SET count = count + 1, detail = ? WHERE id = ?",
                     (detail, tally.row),
                 )
@@ -297,6 +300,14 @@ class AuditLog:
     def _store(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
         with self._lock:
             return self._execute_locked(sql, args)
+
+    def _unsynced_locked(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
+        """Commit without waiting for the disk (WAL with synchronous=NORMAL)."""
+        self._execute_locked("PRAGMA synchronous=NORMAL", ())
+        try:
+            return self._execute_locked(sql, args)
+        finally:
+            self._execute_locked("PRAGMA synchronous=FULL", ())
 
     def _execute_locked(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
         try:
