@@ -5,6 +5,7 @@ little, and the audit log is read with a token and in bounded pages."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 from pathlib import Path
 
@@ -12,6 +13,8 @@ import httpx
 import pytest
 
 from pkwbus.service.audit import MAX_SOURCES_PER_MINUTE, OTHER_SOURCES, AuditLog
+from pkwbus.service.parameters import MAX_READS_PER_DRIVE
+from pkwbus.sim import SimTiming
 from tests.api.conftest import AUTH, TOKEN, Service, service
 from tests.api.test_audit_store import metric
 
@@ -166,3 +169,16 @@ def test_refusals_are_committed_without_a_disk_flush_each(tmp_path: Path) -> Non
     finally:
         look.close()
     assert row.count == 3
+
+
+async def test_on_demand_reads_of_one_drive_are_bounded(tmp_path: Path) -> None:
+    """Reads need no token and go ahead of polls: beyond a few waiting, 429."""
+    async with service(tmp_path, timing=SimTiming(response_delay=0.05)) as svc:
+        path = "/api/v1/drives/fan1/parameters/3-41"
+        answers = await asyncio.gather(*(svc.client.get(path) for _ in range(12)))
+        codes = [r.status_code for r in answers]
+        assert codes.count(200) >= MAX_READS_PER_DRIVE and 429 in codes, codes
+        assert set(codes) <= {200, 429}
+        busy = next(r for r in answers if r.status_code == 429)
+        assert busy.json()["error"]["kind"] == "busy"
+        assert (await svc.client.get(path)).status_code == 200  # room again once answered

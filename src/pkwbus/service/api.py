@@ -104,7 +104,7 @@ class ErrorBody(BaseModel):
 
 
 ERRORS: dict[int | str, dict[str, object]] = {
-    code: {"model": ErrorBody} for code in (401, 403, 404, 409, 413, 422, 503, 504)
+    code: {"model": ErrorBody} for code in (401, 403, 404, 409, 413, 422, 429, 503, 504)
 }
 
 

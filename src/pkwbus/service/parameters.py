@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,6 +38,7 @@ from pkwbus.service.audit import AuditEntry
 from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.runtime import DriveEntry, Runtime
 
+MAX_READS_PER_DRIVE = 4  # on-demand reads of one drive waiting at once
 MAX_DRIVE_NAME = 64  # the configuration's limit on names
 MAX_PARAMETER_TEXT = 32  # "P65535[255]" is 11 characters: room for spaces, not for a book
 INCOMPLETE = "incomplete"  # the answer's "audit" when its row could not be (fully) stored
@@ -94,6 +96,7 @@ class ParameterService:
         self._token = token
         self._token_id = recorder.token_id(token) if token is not None else None
         self._running: set[asyncio.Future[dict[str, Any]]] = set()
+        self._reads: Counter[str] = Counter()
 
     # -------------------------------------------------------------- read
 
@@ -103,9 +106,22 @@ class ParameterService:
         fmt = entry.format_of(ref)
         ref = _fit_index(ref, fmt)
         request = self._read_request(entry, ref, fmt)
-        result = await self.runtime.submit(
-            drive, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
-        )
+        # On-demand reads go ahead of polls and need no token: a bound per drive keeps
+        # a flood of them from starving the drive's polls.
+        if self._reads[entry.name] >= MAX_READS_PER_DRIVE:
+            raise ApiError(
+                429,
+                "busy",
+                f"{MAX_READS_PER_DRIVE} reads of {entry.name} are already waiting:"
+                " ask again when they are answered",
+            )
+        self._reads[entry.name] += 1
+        try:
+            result = await self.runtime.submit(
+                entry.name, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
+            )
+        finally:
+            self._reads[entry.name] -= 1
         self._raise_for(result)
         return self._value_body(ref, fmt, result)
 
