@@ -18,6 +18,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import connection_flood
 import cpu_per_exchange
 import dead_drive
 import line_efficiency
@@ -71,6 +72,15 @@ def plan(quick: bool) -> Plan:
             "126 FC drives × 20 parameters per line, each polled every second (full line load); "
             "1 line and 8 lines in one process, one simulator process per line.",
             lambda: scale.run((1, 8), 126, 4.0 if q else 10.0),
+        ),
+        (
+            "7. Connection flood",
+            "`pkwbus run` in its own process on a simulated line at full load; another "
+            "process opens idle connections and sends parallel GETs; polls/s from /metrics "
+            "over a connection opened before the flood.",
+            lambda: connection_flood.measure(
+                2000 if q else 5000, 500 if q else 2000, 2.0 if q else 5.0
+            ),
         ),
     ]
 

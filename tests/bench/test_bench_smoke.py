@@ -12,6 +12,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[2] / "bench"
 MODULES = [
+    "connection_flood",
     "cpu_per_exchange",
     "dead_drive",
     "line_efficiency",
@@ -74,3 +75,10 @@ def test_write_latency_and_scale_smallest() -> None:
     assert all(r["errors"] == 0 for r in rows)
     row = load("scale").measure(1, 3, 0.3)
     assert row["size_kb"] > 0
+
+
+def test_connection_flood_smallest() -> None:
+    r = load("connection_flood").run(idle=50, parallel=20, seconds=0.5)
+    assert r["alive"] and r["tracebacks"] == 0
+    assert r["quiet_polls_per_s"] > 0 and r["flood_polls_per_s"] > 0
+    assert sum(r["parallel_answers"].values()) == 20
