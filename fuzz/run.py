@@ -20,7 +20,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-TARGETS = ("deframer", "pkw", "notation", "catalog")
+TARGETS = ("deframer", "pkw", "notation", "catalog", "fdl")
 EXTRA_ARGS = {"catalog": ["-max_len=4096"]}
 
 _STAT = re.compile(r"stat::number_of_executed_units:\s*(\d+)")

@@ -1,0 +1,369 @@
+"""The master's view of one DP-V0 slave, as a state machine without I/O.
+
+Feed it the time and what came back; it says which request to send next.
+Start-up (EN 50170 vol. 2 part 3, "master-slave start-up"; Felser PROFIBUS
+manual, "telegram sequence"): Slave_Diag, Set_Prm, Chk_Cfg, Slave_Diag until
+ready, then cyclic Data_Exchange. An RS answer, a diagnosis asking for
+parameters, a diagnosis fault or a watchdog that must have run out send the
+slave back to a fresh start (FCB reset). A slave whose diagnosis names
+another master is never parametrised: it stays ``locked`` and only its
+diagnosis is read again now and then. A request that gets no valid answer is
+repeated with the same FCB up to ``retries`` times; then the slave is offline
+and is probed again every ``probe_interval`` seconds.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from pkwbus.protocol import fdl
+from pkwbus.protocol.dp_services import (
+    Diagnosis,
+    Parameters,
+    Service,
+    check_cfg,
+    decode_diagnosis,
+    io_lengths,
+    request,
+)
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.fdl import DataFrame, Status
+
+
+class SlaveState(enum.StrEnum):
+    """The ``state`` label of pkwbus_dp_slave_state."""
+
+    OFFLINE = "offline"
+    WAIT_PRM = "wait_prm"
+    WAIT_CFG = "wait_cfg"
+    DATA_EXCHANGE = "data_exchange"
+    LOCKED = "locked"
+
+
+class RestartReason(enum.StrEnum):
+    """The ``reason`` label of pkwbus_dp_restarts_total."""
+
+    RS = "rs"
+    WATCHDOG = "watchdog"
+    PRM_REQUIRED = "prm_required"
+    DIAG = "diag"
+
+
+class FailureKind(enum.StrEnum):
+    TIMEOUT = "timeout"
+    GARBLED = "garbled"
+    REFUSED = "refused"
+    UNEXPECTED = "unexpected"
+
+
+class _Step(enum.Enum):
+    DIAG = "first diagnosis"
+    PRM = "Set_Prm"
+    CFG = "Chk_Cfg"
+    DIAG_READY = "diagnosis until ready"
+    EXCHANGE = "Data_Exchange"
+    DIAG_EXCHANGE = "diagnosis in data exchange"
+
+
+_AFTER_PRM = frozenset({_Step.CFG, _Step.DIAG_READY, _Step.EXCHANGE, _Step.DIAG_EXCHANGE})
+_FAULTS = frozenset({"cfg_fault", "prm_fault", "not_supported"})
+
+
+# ------------------------------------------------------------------ inputs
+
+
+@dataclass(frozen=True, slots=True)
+class NoAnswer:
+    """Nothing came back within the slot time."""
+
+
+@dataclass(frozen=True, slots=True)
+class Garbled:
+    """Something came back that was not a valid frame (a framing error event)."""
+
+    detail: str = ""
+
+
+Answer = fdl.Frame | NoAnswer | Garbled
+
+
+# ------------------------------------------------------------------ events
+
+
+@dataclass(frozen=True, slots=True)
+class StateChanged:
+    old: SlaveState
+    new: SlaveState
+
+
+@dataclass(frozen=True, slots=True)
+class Restarted:
+    reason: RestartReason
+
+
+@dataclass(frozen=True, slots=True)
+class Inputs:
+    """A Data_Exchange answer: the slave's inputs (the PPO-read)."""
+
+    data: bytes
+    diagnosis_pending: bool
+
+
+@dataclass(frozen=True, slots=True)
+class DiagnosisRead:
+    diagnosis: Diagnosis
+
+
+@dataclass(frozen=True, slots=True)
+class Failed:
+    """One request that got no usable answer."""
+
+    kind: FailureKind
+    detail: str
+
+
+Event = StateChanged | Restarted | Inputs | DiagnosisRead | Failed
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveSetup:
+    """What the master needs to bring one slave into data exchange."""
+
+    address: int
+    master: int
+    parameters: Parameters
+    cfg: bytes
+    retries: int = 1
+    probe_interval: float = 1.0  # seconds between probes of an offline or locked slave
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.address <= 125:
+            raise LocalProtocolError(f"slave address {self.address} is outside 0-125")
+        if not 0 <= self.master <= 125 or self.master == self.address:
+            raise LocalProtocolError(f"master address {self.master} is not usable")
+        if not 0 <= self.retries <= 8:
+            raise LocalProtocolError(f"retry limit {self.retries} is outside 0-8")
+        if self.probe_interval < 0:
+            raise LocalProtocolError("probe interval below 0")
+        check_cfg(self.cfg)
+        self.parameters.encode()
+
+    @property
+    def inputs(self) -> int:
+        return io_lengths(self.cfg)[0]
+
+    @property
+    def outputs(self) -> int:
+        return io_lengths(self.cfg)[1]
+
+
+class DpSlave:
+    """One slave's start-up and data exchange: ``poll(now)`` to send, ``feed(answer, now)``."""
+
+    def __init__(self, setup: SlaveSetup) -> None:
+        self.setup = setup
+        self.state = SlaveState.OFFLINE
+        self.diagnosis: Diagnosis | None = None
+        self._step = _Step.DIAG
+        self._fcb = True
+        self._fcv = False
+        self._pending: DataFrame | None = None
+        self._tries = 0
+        self._due = float("-inf")
+        self._last_answer: float | None = None
+        self._events: list[Event] = []
+
+    # ----------------------------------------------------------- sending
+
+    @property
+    def waiting(self) -> bool:
+        """A request is out and its answer (or timeout) has not been fed."""
+        return self._pending is not None
+
+    def poll(self, now: float, outputs: bytes | None = None) -> DataFrame | None:
+        """The request to send now (a repeat while one is unanswered), or None if none is due.
+
+        ``outputs`` are the Data_Exchange outputs (the PPO-write); all zero when None.
+        """
+        if self._pending is not None:
+            return self._pending
+        if now < self._due:
+            return None
+        if self._step in _AFTER_PRM and self._watchdog_expired(now):
+            self._restart(RestartReason.WATCHDOG, now)
+        frame = self._build(outputs)
+        self._pending = frame
+        return frame
+
+    def take_events(self) -> list[Event]:
+        """Events produced by :meth:`poll` (a watchdog restart) since the last call."""
+        events, self._events = self._events, []
+        return events
+
+    def _watchdog_expired(self, now: float) -> bool:
+        seconds = self.setup.parameters.watchdog_seconds
+        return (
+            seconds is not None
+            and self._last_answer is not None
+            and now - self._last_answer >= seconds
+        )
+
+    def _build(self, outputs: bytes | None) -> DataFrame:
+        setup = self.setup
+        data = b""
+        service: Service | None
+        if self._step in (_Step.DIAG, _Step.DIAG_READY, _Step.DIAG_EXCHANGE):
+            service = Service.SLAVE_DIAG
+        elif self._step is _Step.PRM:
+            service, data = Service.SET_PRM, setup.parameters.encode()
+        elif self._step is _Step.CFG:
+            service, data = Service.CHK_CFG, setup.cfg
+        else:
+            service = None
+            data = bytes(setup.outputs) if outputs is None else outputs
+            if len(data) != setup.outputs:
+                raise LocalProtocolError(
+                    f"{len(data)} output bytes for a configuration of {setup.outputs}"
+                )
+        return request(service, setup.address, setup.master, data, fcb=self._fcb, fcv=self._fcv)
+
+    # --------------------------------------------------------- receiving
+
+    def feed(self, answer: Answer, now: float) -> list[Event]:
+        """Account for the answer to the pending request (or its absence); the events since
+        the last call (a watchdog restart found by :meth:`poll` included)."""
+        if self._pending is None:
+            raise LocalProtocolError("an answer fed with no request out")
+        if isinstance(answer, NoAnswer):
+            self._fail(FailureKind.TIMEOUT, "no answer", now)
+        elif isinstance(answer, Garbled):
+            self._fail(FailureKind.GARBLED, answer.detail, now)
+        else:
+            self._on_frame(answer, now)
+        events, self._events = self._events, []
+        return events
+
+    def _on_frame(self, frame: fdl.Frame, now: float) -> None:
+        setup = self.setup
+        status: Status | None
+        if isinstance(frame, fdl.ShortAck):
+            status, data = Status.OK, b""
+        elif (
+            isinstance(frame, DataFrame)
+            and frame.sa == setup.address
+            and frame.da == setup.master
+            and not frame.control.is_request
+        ):
+            status, data = frame.control.status, frame.data
+        else:
+            self._fail(FailureKind.UNEXPECTED, f"{frame} is not this slave's answer", now)
+            return
+        if status is Status.RS:
+            self._answered(now)
+            self._restart(RestartReason.RS, now)
+            return
+        if status is None or status in (Status.UE, Status.RR, Status.RDL, Status.RDH):
+            self._fail(FailureKind.REFUSED, f"answer FC {frame}", now)
+            return
+        step = self._step
+        if step in (_Step.PRM, _Step.CFG):
+            if data or status is not Status.OK:
+                self._fail(FailureKind.UNEXPECTED, "data in answer to Set_Prm/Chk_Cfg", now)
+                return
+            self._answered(now)
+            if step is _Step.PRM:
+                self._go(_Step.CFG, SlaveState.WAIT_CFG)
+            else:
+                self._go(_Step.DIAG_READY, SlaveState.WAIT_CFG)
+            return
+        if step is _Step.EXCHANGE:
+            self._on_exchange(status, data, now)
+            return
+        try:
+            diagnosis = decode_diagnosis(data)
+        except RemoteProtocolError as exc:
+            self._fail(FailureKind.UNEXPECTED, str(exc), now)
+            return
+        self._answered(now)
+        self.diagnosis = diagnosis
+        self._events.append(DiagnosisRead(diagnosis))
+        self._on_diagnosis(diagnosis, now)
+
+    def _on_exchange(self, status: Status, data: bytes, now: float) -> None:
+        expected = self.setup.inputs
+        if len(data) != expected:
+            what = f"{len(data)} input bytes, configured {expected}"
+            self._fail(FailureKind.UNEXPECTED, what, now)
+            return
+        self._answered(now)
+        pending = status in (Status.DH, Status.RDH)
+        self._events.append(Inputs(data, pending))
+        if pending:
+            self._step = _Step.DIAG_EXCHANGE
+
+    def _on_diagnosis(self, diag: Diagnosis, now: float) -> None:
+        step = self._step
+        if diag.owned_by_other(self.setup.master):
+            self._lock(now)
+            return
+        if step is _Step.DIAG:
+            self._go(_Step.PRM, SlaveState.WAIT_PRM)
+        elif "prm_required" in diag.flags:
+            self._restart(RestartReason.PRM_REQUIRED, now)
+        elif diag.flags & _FAULTS:
+            self._restart(RestartReason.DIAG, now, wait=True)
+        elif step is _Step.DIAG_READY:
+            if diag.ready:
+                self._go(_Step.EXCHANGE, SlaveState.DATA_EXCHANGE)
+        elif "not_ready" in diag.flags:
+            self._restart(RestartReason.DIAG, now, wait=True)
+        elif "stat_diag" not in diag.flags:
+            self._step = _Step.EXCHANGE  # diagnosis fetched, back to data exchange
+
+    # ----------------------------------------------------------- helpers
+
+    def _answered(self, now: float) -> None:
+        """A request completed: FCB toggles, FCV on from now."""
+        self._pending = None
+        self._tries = 0
+        self._fcb = not self._fcb
+        self._fcv = True
+        self._last_answer = now
+
+    def _fail(self, kind: FailureKind, detail: str, now: float) -> None:
+        self._events.append(Failed(kind, detail))
+        self._tries += 1
+        if self._tries <= self.setup.retries:
+            return  # the pending request goes again, same FCB
+        if kind is FailureKind.TIMEOUT or self.state is SlaveState.OFFLINE:
+            self._fresh(now + self.setup.probe_interval)
+            self._set_state(SlaveState.OFFLINE)
+        else:
+            self._restart(RestartReason.DIAG, now, wait=True)
+
+    def _restart(self, reason: RestartReason, now: float, *, wait: bool = False) -> None:
+        self._events.append(Restarted(reason))
+        self._fresh(now + self.setup.probe_interval if wait else now)
+        self._set_state(SlaveState.WAIT_PRM)
+
+    def _lock(self, now: float) -> None:
+        self._fresh(now + self.setup.probe_interval)
+        self._set_state(SlaveState.LOCKED)
+
+    def _fresh(self, due: float) -> None:
+        self._step = _Step.DIAG
+        self._pending = None
+        self._tries = 0
+        self._fcb, self._fcv = True, False
+        self._due = due
+        self._last_answer = None
+
+    def _go(self, step: _Step, state: SlaveState) -> None:
+        self._step = step
+        self._set_state(state)
+
+    def _set_state(self, state: SlaveState) -> None:
+        if state is not self.state:
+            self._events.append(StateChanged(self.state, state))
+            self.state = state
