@@ -12,6 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pkwbus.catalog import ParameterSpec
+from pkwbus.link import PortSettings
+from pkwbus.master.line import Line as MasterLine
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.params import ParameterRef, Scaling, ValueType
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
@@ -190,7 +192,10 @@ def test_defaults_are_filled_in() -> None:
     assert line.address_format is FcAddressFormat.RANGE_1_126
     assert line.bits_per_character == 11
     assert line.pause_seconds == pytest.approx(3.5 * 11 / 19200)
-    assert line.inter_char_seconds == line.pause_seconds
+    # What the line's receiver really waits for a gap, not the start pause.
+    receiver = MasterLine(PortSettings("loop://", baudrate=line.baudrate), Protocol.FC)
+    assert line.inter_char_seconds == receiver.inter_char_timeout
+    assert line.inter_char_seconds > line.pause_seconds
     assert line.response_delay_seconds is None
     (drive,) = line.drives
     assert drive.protocol is Protocol.FC

@@ -84,7 +84,7 @@ def _line(line: cfg.Line, port: str) -> Line:
         settings,
         Protocol(line.protocol),
         timeout=line.timeout,
-        inter_char_timeout=line.inter_char_timeout,
+        inter_char_timeout=line.inter_char_seconds,
     )
 
 

@@ -58,6 +58,7 @@ from pkwbus import durations
 from pkwbus.catalog import CatalogError, ParameterSpec, available_catalogs, load_catalog
 from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
+from pkwbus.protocol import timing
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -89,7 +90,6 @@ DIALECTS_BY_PROTOCOL: Final = {
     BusProtocol.USS: ("uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"),
 }
 USS_MAX_ADDRESS: Final = 30  # ADR bits 0-4 give 0-31; drives accept 0-30
-PAUSE_CHARACTERS: Final = 3.5
 MAX_CONFIG_BYTES: Final = 1024 * 1024  # a configuration file is read up to this, no further
 _NAME = r"^[A-Za-z0-9_.-]+$"
 _NAME_MAX = 64
@@ -666,23 +666,22 @@ class Line(_Model):
     @property
     def bits_per_character(self) -> int:
         """Start bit, 8 data bits, parity bit unless N, stop bits: 11 with the default 8E1."""
-        return 1 + 8 + (0 if self.parity == "N" else 1) + self.stopbits
+        return timing.char_bits(self.parity, self.stopbits)
 
     @property
     def character_time(self) -> float:
-        return self.bits_per_character / self.baudrate
+        return timing.char_time(self.baudrate, self.parity, self.stopbits)
 
     @property
     def pause_seconds(self) -> float:
         """Pause before each request: as configured, else 3.5 character times."""
-        return self.pause if self.pause is not None else PAUSE_CHARACTERS * self.character_time
+        return timing.start_pause(self.character_time, self.pause)
 
     @property
     def inter_char_seconds(self) -> float:
-        """A gap longer than this ends a telegram: as configured, else the pause."""
-        if self.inter_char_timeout is not None:
-            return self.inter_char_timeout
-        return self.pause_seconds
+        """A gap longer than this ends a telegram: as configured, else 20 character
+        times but at least 5 ms (what the line's receiver waits)."""
+        return timing.inter_char_gap(self.character_time, self.inter_char_timeout)
 
     @property
     def response_delay_seconds(self) -> float | None:
