@@ -342,6 +342,7 @@ EXPECTED: dict[str, str] = {
     ),
     "scale_and_conversion": "lines[0].drives[0].poll[0].conversion: give scale or conversion",
     "sim_missing_drive": "lines[0].port: simulates no drive at address 1",
+    "sim_mixed_shapes": "lines[0].drives[1]: the simulated drives of a sim:// port share one",
     "sim_no_drives": "lines[0].port: 'sim://fc': list the simulated drives",
     "sim_protocol_mismatch": "lines[0].port: simulates protocol uss but the line's is fc",
     "sim_unknown_option": "lines[0].port: 'sim://fc?drives=1&lag=2': unknown option 'lag'",

@@ -633,7 +633,22 @@ class Line(_Model):
             if missing:
                 listed = ",".join(str(a) for a in missing)
                 problems.append(("port", f"simulates no drive at address {listed}"))
+            problems += self._sim_shape_problems()
         return problems
+
+    def _sim_shape_problems(self) -> list[Place]:
+        """One simulator answers every drive of a ``sim://`` line with one telegram shape."""
+        first = self.drives[0]
+        for i, drive in enumerate(self.drives[1:], start=1):
+            if _sim_shape(self.protocol, drive) != _sim_shape(self.protocol, first):
+                return [
+                    (
+                        f"drives[{i}]",
+                        f"the simulated drives of a sim:// port share one dialect, IND layout "
+                        f"and PKW/PZD lengths: {drive.name} differs from {first.name}",
+                    )
+                ]
+        return []
 
     def _address_problems(self) -> list[Place]:
         problems: list[Place] = []
@@ -690,6 +705,15 @@ class Line(_Model):
             return self.response_delay
         sim = self.sim
         return sim.response_delay if sim is not None else None
+
+
+def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
+    """The dialect, IND layout and lengths a simulator would need for ``drive``."""
+    name = drive.dialect or DIALECTS_BY_PROTOCOL[protocol][0]
+    layout = drive.ind_layout or dialect(name).default_ind_layout
+    if protocol is BusProtocol.FC:
+        return (name, layout)
+    return (name, layout, drive.pkw_words, drive.pzd_words)
 
 
 def _drive_problems(line: Line, drive: Drive) -> list[Place]:
