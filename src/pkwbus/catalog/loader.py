@@ -19,6 +19,7 @@ from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from pkwbus.problems import plain
 from pkwbus.yamlfile import YamlError, load_yaml
 
 ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
@@ -188,7 +189,7 @@ def _format_errors(origin: str, place: str, exc: ValidationError) -> str:
     for error in exc.errors():
         parts = [place] if place else []
         path = ".".join(parts + [str(part) for part in error["loc"]])
-        message = str(error["msg"]).removeprefix("Value error, ")
+        message = plain(error)
         lines.append(f"{origin}: {path}: {message}" if path else f"{origin}: {message}")
     return "\n".join(lines)
 

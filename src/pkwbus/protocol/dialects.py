@@ -53,7 +53,6 @@ class Reply(enum.Enum):
 
 
 VALUE_REPLIES = frozenset({Reply.WORD, Reply.DWORD, Reply.ARRAY_WORD, Reply.ARRAY_DWORD})
-DWORD_REPLIES = frozenset({Reply.DWORD, Reply.ARRAY_DWORD})
 NEGATIVE_REPLIES = frozenset({Reply.REJECTED, Reply.NO_RIGHTS})
 
 WRITE_COMMANDS = frozenset(
@@ -76,7 +75,6 @@ DWORD_COMMANDS = frozenset(
         Command.WRITE_ARRAY_DWORD_EEPROM,
     }
 )
-READ_COMMANDS = frozenset({Command.READ, Command.READ_ARRAY})
 
 
 class IndLayout(enum.StrEnum):
@@ -97,12 +95,6 @@ class Fault:
     number: int
     text: str
     short: str
-
-
-@dataclass(frozen=True, slots=True)
-class Identifier:
-    ak: int
-    text: str
 
 
 @dataclass(frozen=True)

@@ -129,14 +129,6 @@ def read_description(dialect: Dialect, pnu: int, element: int) -> PkwRequest:
     return request(dialect, Command.READ_DESCRIPTION, pnu, subindex=element)
 
 
-def write_description(dialect: Dialect, pnu: int, element: int, raw: int) -> PkwRequest:
-    return request(dialect, Command.WRITE_DESCRIPTION, pnu, subindex=element, value=raw)
-
-
-def read_array_count(dialect: Dialect, pnu: int) -> PkwRequest:
-    return request(dialect, Command.READ_ARRAY_COUNT, pnu)
-
-
 def read_text(dialect: Dialect, pnu: int, index: int = 0) -> PkwRequest:
     return request(dialect, Command.TEXT, pnu, subindex=index)
 
