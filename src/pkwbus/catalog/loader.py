@@ -26,7 +26,8 @@ ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
 Dialect = Literal["fc", "uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"]
 
 #: Danfoss conversion indexes: 10**index for -7..6, plus the special indexes
-#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) [protocol.md section 6].
+#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) (Danfoss FC 300 Design
+#: Manual, conversion index).
 CONVERSION_INDEXES: frozenset[int] = frozenset(range(-7, 7)) | {67, 74, 75, 100}
 
 MAX_PNU = 65535
