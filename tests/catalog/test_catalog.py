@@ -247,6 +247,12 @@ def test_unknown_entry_field_names_the_entry(tmp_path: Path) -> None:
     assert "pydantic" not in message
 
 
+def test_catalog_problems_are_worded_like_the_configs(tmp_path: Path) -> None:
+    message = load_error(tmp_path, '"16-13": {name: Frequency, array: many}\n')
+    assert "parameters.\"16-13\".array: must be a whole number, not 'many'" in message
+    assert "Input should be" not in message
+
+
 def test_unknown_top_level_field(tmp_path: Path) -> None:
     message = load_error(
         tmp_path, "", header=HEADER.replace("dialect: fc", "dialect: fc\nvendor: x")

@@ -281,9 +281,9 @@ def test_write_identifiers(
 def test_siemens_reads_use_6_with_an_index_and_1_without() -> None:
     assert pkw.read(USS, 21).ak == 1
     assert pkw.read(USS, 21, 0).ak == 6
-    assert pkw.read_array_count(USS, 947).ak == 9
+    assert pkw.request(USS, Command.READ_ARRAY_COUNT, 947).ak == 9
     assert pkw.read_description(USS, 21, 6).ak == 4
-    assert pkw.write_description(USS, 21, 6, 0).ak == 5
+    assert pkw.request(USS, Command.WRITE_DESCRIPTION, 21, subindex=6, value=0).ak == 5
     assert pkw.read_text(USS, 21).ak == 15
     assert pkw.none_request(USS).ak == 0
 

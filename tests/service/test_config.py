@@ -12,6 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pkwbus.catalog import ParameterSpec
+from pkwbus.link import PortSettings
+from pkwbus.master.line import Line as MasterLine
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.params import ParameterRef, Scaling, ValueType
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
@@ -19,6 +21,8 @@ from pkwbus.service.config import (
     Catalogs,
     Config,
     ConfigError,
+    Drive,
+    Line,
     Listen,
     SimPort,
     load_config,
@@ -32,6 +36,10 @@ ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "config" / "demo.yaml"
 EXAMPLE = ROOT / "config" / "example.yaml"
 BAD = Path(__file__).parent / "bad_configs"
+
+
+def drive_named(config: Config, name: str) -> tuple[Line, Drive] | None:
+    return next(((ln, d) for ln, d in config.drives() if d.name == name), None)
 
 
 class FakeCatalog:
@@ -104,14 +112,14 @@ def test_demo_loads_with_its_defaults() -> None:
     assert uss_line.sim == SimPort(Protocol.USS, (1, 2), 0.005)
     names = [d.name for _, d in config.drives()]
     assert names == ["supply_fan", "exhaust_fan", "pump_3", "conveyor", "mixer"]
-    _, fan = config.drive("supply_fan") or pytest.fail("no supply_fan")
+    _, fan = drive_named(config, "supply_fan") or pytest.fail("no supply_fan")
     assert [str(p.ref) for p in fan.poll] == [
         "16-13", "16-14", "16-10", "16-30", "16-90", "16-92", "15-30[0]",
     ]  # fmt: skip
     assert [p.every for p in fan.poll] == [1, 1, 2, 2, 5, 5, 30]
     assert fan.may_write(ParameterRef(341, None, "341"))
     assert not fan.may_write(ParameterRef(1613, None, "16-13"))
-    _, conveyor = config.drive("conveyor") or pytest.fail("no conveyor")
+    _, conveyor = drive_named(config, "conveyor") or pytest.fail("no conveyor")
     assert conveyor.pkw_dialect.name == "uss"
     assert conveyor.shape == BlockShape(4, 2)
     assert conveyor.poll[-1].ref == ParameterRef(947, 0, "r0947")
@@ -137,7 +145,7 @@ def test_demo_loads_with_the_builtin_catalogs() -> None:
 
 def test_specs_from_the_builtin_catalogs_with_overrides() -> None:
     config = load_config(EXAMPLE, environ={})
-    _, fan = config.drive("supply_fan") or pytest.fail("no supply_fan")
+    _, fan = drive_named(config, "supply_fan") or pytest.fail("no supply_fan")
     ramp = fan.spec(ParameterRef(341, None, "3-41"))
     assert ramp is not None
     assert (ramp.name, ramp.type, ramp.conversion) == ("Ramp 1 Ramp Up Time", "u32", -2)
@@ -190,7 +198,10 @@ def test_defaults_are_filled_in() -> None:
     assert line.address_format is FcAddressFormat.RANGE_1_126
     assert line.bits_per_character == 11
     assert line.pause_seconds == pytest.approx(3.5 * 11 / 19200)
-    assert line.inter_char_seconds == line.pause_seconds
+    # What the line's receiver really waits for a gap, not the start pause.
+    receiver = MasterLine(PortSettings("loop://", baudrate=line.baudrate), Protocol.FC)
+    assert line.inter_char_seconds == receiver.inter_char_timeout
+    assert line.inter_char_seconds > line.pause_seconds
     assert line.response_delay_seconds is None
     (drive,) = line.drives
     assert drive.protocol is Protocol.FC
@@ -337,6 +348,7 @@ EXPECTED: dict[str, str] = {
     ),
     "scale_and_conversion": "lines[0].drives[0].poll[0].conversion: give scale or conversion",
     "sim_missing_drive": "lines[0].port: simulates no drive at address 1",
+    "sim_mixed_shapes": "lines[0].drives[1]: the simulated drives of a sim:// port share one",
     "sim_no_drives": "lines[0].port: 'sim://fc': list the simulated drives",
     "sim_protocol_mismatch": "lines[0].port: simulates protocol uss but the line's is fc",
     "sim_unknown_option": "lines[0].port: 'sim://fc?drives=1&lag=2': unknown option 'lag'",

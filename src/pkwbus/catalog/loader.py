@@ -19,13 +19,15 @@ from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from pkwbus.problems import plain
 from pkwbus.yamlfile import YamlError, load_yaml
 
 ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
 Dialect = Literal["fc", "uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"]
 
 #: Danfoss conversion indexes: 10**index for -7..6, plus the special indexes
-#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) [protocol.md section 6].
+#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) (Danfoss FC 300 Design
+#: Manual, conversion index).
 CONVERSION_INDEXES: frozenset[int] = frozenset(range(-7, 7)) | {67, 74, 75, 100}
 
 MAX_PNU = 65535
@@ -188,7 +190,7 @@ def _format_errors(origin: str, place: str, exc: ValidationError) -> str:
     for error in exc.errors():
         parts = [place] if place else []
         path = ".".join(parts + [str(part) for part in error["loc"]])
-        message = str(error["msg"]).removeprefix("Value error, ")
+        message = plain(error)
         lines.append(f"{origin}: {path}: {message}" if path else f"{origin}: {message}")
     return "\n".join(lines)
 

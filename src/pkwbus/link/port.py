@@ -31,12 +31,11 @@ import serial_asyncio
 
 from pkwbus.link.backoff import Backoff
 from pkwbus.link.eventloop import has_fine_timers
+from pkwbus.protocol import timing
 
 log = logging.getLogger(__name__)
 
-PARITY_BITS = {"E": 1, "O": 1, "N": 0}
 PARITIES = {"E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "N": serial.PARITY_NONE}
-START_PAUSE_CHARS = 3.5
 # On a loop with an epoll selector waits last whole milliseconds, rounded up: a
 # pause of 0.3 ms would last about 1 ms. There the part of a pause below this is
 # waited out by a helper thread (``time.sleep`` has microsecond resolution);
@@ -56,7 +55,10 @@ class LinkState(enum.Enum):
 
 @dataclass(frozen=True, slots=True)
 class PortSettings:
-    """How to open the port. ``pause`` None = 3.5 character times at ``baudrate``."""
+    """How to open the port. ``pause`` None = 3.5 character times at ``baudrate``.
+
+    The timing helpers are :mod:`pkwbus.protocol.timing`'s, for these settings.
+    """
 
     url: str
     baudrate: int = 9600
@@ -68,28 +70,28 @@ class PortSettings:
     reopen_cap: float = 30.0
 
     def __post_init__(self) -> None:
-        if self.parity not in PARITIES:
-            raise ValueError(f"parity {self.parity!r} is not E, O or N")
-        if self.stopbits not in (1, 2):
-            raise ValueError(f"stop bits {self.stopbits} is not 1 or 2")
-        if self.baudrate <= 0:
-            raise ValueError(f"baud rate {self.baudrate} is not positive")
+        timing.char_time(self.baudrate, self.parity, self.stopbits)  # ValueError when wrong
 
     @property
     def char_bits(self) -> int:
         """Bits per character: start, 8 data, parity, stop (11 for 8E1)."""
-        return 1 + 8 + PARITY_BITS[self.parity] + self.stopbits
+        return timing.char_bits(self.parity, self.stopbits)
 
     @property
     def char_time(self) -> float:
-        return self.char_bits / self.baudrate
+        return timing.char_time(self.baudrate, self.parity, self.stopbits)
 
     @property
     def start_pause(self) -> float:
-        return self.pause if self.pause is not None else START_PAUSE_CHARS * self.char_time
+        return timing.start_pause(self.char_time, self.pause)
+
+    @property
+    def inter_char_gap(self) -> float:
+        """The default silence that ends a telegram (20 characters, at least 5 ms)."""
+        return timing.inter_char_gap(self.char_time)
 
     def wire_time(self, nbytes: int) -> float:
-        return nbytes * self.char_time
+        return timing.wire_time(nbytes, self.char_time)
 
 
 Receiver = Callable[[bytes], None]

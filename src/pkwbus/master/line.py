@@ -37,9 +37,6 @@ log = logging.getLogger(__name__)
 
 TraceHook = Callable[[str, bytes], None]
 
-# How many character times of silence inside a telegram end it.
-INTER_CHAR_GAP_CHARS = 20.0
-
 
 class Line:
     """A line: one port, one exchange at a time."""
@@ -57,9 +54,7 @@ class Line:
         self.protocol = protocol
         self.timeout = timeout
         self.inter_char_timeout = (
-            inter_char_timeout
-            if inter_char_timeout is not None
-            else max(0.005, INTER_CHAR_GAP_CHARS * settings.char_time)
+            inter_char_timeout if inter_char_timeout is not None else settings.inter_char_gap
         )
         self.trace = trace
         self.link = link or Link(settings)

@@ -1,4 +1,7 @@
-"""One PKW job on the wire under seed 003's rule, as a state machine without I/O.
+"""One PKW job on the wire as a state machine without I/O.
+
+The rule is the SINAMICS G120 CU240B-2/CU240E-2 Operating Instructions'
+(section 6.3, "Communication via PROFIBUS").
 
 The same request bytes go out again until the matching answer arrives or
 the deadline passes. A non-matching answer (AK 0, a stale answer, another

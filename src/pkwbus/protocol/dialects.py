@@ -1,9 +1,12 @@
 """The PKW dialects of the manuals: identifiers, fault numbers and texts, IND and PNU layout.
 
-Every table is data, worded as the seed pages word it (``shared/seeds``):
-fc (seeds 000/001, FC 101 fault list), uss and profidrive (seed 003,
-SINAMICS/MICROMASTER identifier and fault lists), danfoss-pcv (seed 002),
-hitachi-sjpb (seed 004).
+Every table is data, worded as the manuals word it: fc (Danfoss VLT Design
+Manual, section 8.4.7 "The PKE Field", and the FC 101 Design Guide's fault
+list), uss and profidrive (Siemens SINAMICS G120 CU240B-2/CU240E-2 Operating
+Instructions 07/2010, section 6.3 "Communication via PROFIBUS", and the
+SINAMICS/MICROMASTER identifier and fault lists), danfoss-pcv (Danfoss
+PROFIBUS manual, section 5.3.4 "RC Content"), hitachi-sjpb (Hitachi SJ-PB(T)
+User Manual, chapter 5 "Operating", request/response handling).
 """
 
 from __future__ import annotations
@@ -53,7 +56,6 @@ class Reply(enum.Enum):
 
 
 VALUE_REPLIES = frozenset({Reply.WORD, Reply.DWORD, Reply.ARRAY_WORD, Reply.ARRAY_DWORD})
-DWORD_REPLIES = frozenset({Reply.DWORD, Reply.ARRAY_DWORD})
 NEGATIVE_REPLIES = frozenset({Reply.REJECTED, Reply.NO_RIGHTS})
 
 WRITE_COMMANDS = frozenset(
@@ -76,7 +78,6 @@ DWORD_COMMANDS = frozenset(
         Command.WRITE_ARRAY_DWORD_EEPROM,
     }
 )
-READ_COMMANDS = frozenset({Command.READ, Command.READ_ARRAY})
 
 
 class IndLayout(enum.StrEnum):
@@ -97,12 +98,6 @@ class Fault:
     number: int
     text: str
     short: str
-
-
-@dataclass(frozen=True, slots=True)
-class Identifier:
-    ak: int
-    text: str
 
 
 @dataclass(frozen=True)
@@ -192,7 +187,7 @@ class Dialect:
         return reply in _POSITIVE[command]
 
 
-# Positive acknowledgements per request (seed 004's table, widened where the
+# Positive acknowledgements per request (Hitachi SJ-PB(T) User Manual, chapter 5, widened where the
 # manuals say drives answer otherwise: a read of a 32-bit parameter may come
 # back as a word, SINAMICS treats 1=6, 2=7, 3=8).
 _WORD_ACK = frozenset({Reply.WORD, Reply.ARRAY_WORD})
@@ -226,7 +221,7 @@ _FC_REQUESTS = {
     1: (Command.READ, "Read parameter value"),
     2: (Command.WRITE_WORD, "Write parameter value in RAM (word)"),
     3: (Command.WRITE_DWORD, "Write parameter value in RAM (double word)"),
-    4: (Command.READ_DESCRIPTION, "Read description"),  # FC 300 [D6]
+    4: (Command.READ_DESCRIPTION, "Read description"),  # Danfoss FC 300 Design Manual
     13: (Command.WRITE_DWORD_EEPROM, "Write parameter value in RAM and EEprom (double word)"),
     14: (Command.WRITE_WORD_EEPROM, "Write parameter value in RAM and EEprom (word)"),
     15: (Command.TEXT, "Read/write text"),
@@ -243,12 +238,12 @@ _FC_RESPONSES = {
     0: (Reply.NONE, "No response"),
     1: (Reply.WORD, "Parameter value transferred (word)"),
     2: (Reply.DWORD, "Parameter value transferred (double word)"),
-    3: (Reply.DESCRIPTION, "Description transferred"),  # FC 300 [D6]
+    3: (Reply.DESCRIPTION, "Description transferred"),  # Danfoss FC 300 Design Manual
     7: (Reply.REJECTED, "Command cannot be performed"),
     15: (Reply.TEXT, "text transferred"),
 }
 # Seeds 000/001 print the fault numbers in hex (11, 82, 83 = 17, 130, 131);
-# 9, 11, 15, 18 and 132 come from the FC 101 list [D4].
+# 9, 11, 15, 18 and 132 come from the Danfoss FC 101 Design Guide's fault codes.
 _FC_FAULTS = _faults(
     [
         (0, "The parameter number used does not exit", "illegal parameter number"),
@@ -400,7 +395,7 @@ _PCV_FAULTS = _faults(
 
 # ------------------------------------------------------------ Hitachi SJ-PB
 
-# Requests 4, 5 and 8 and responses 3, 5, 9 and 10 carry the seed's note
+# Requests 4, 5 and 8 and responses 3, 5, 9 and 10 carry the Hitachi SJ-PB(T) User Manual's note
 # "Not supported by the SJ-PB(T) option board": the dialect does not have them.
 _HITACHI_REQUESTS = {
     0: (Command.NONE, "No request"),

@@ -153,7 +153,8 @@ _BOUNDS = {
 }
 
 
-# Data type numbers of description element 1: Danfoss [D5, D6] and PROFIdrive
+# Data type numbers of description element 1: Danfoss (FC 202 Design Manual, PKW
+# and data types; FC 300 Design Manual) and PROFIdrive
 # share them. Types without a ValueType travel as the nearest one.
 DATA_TYPES: Final = {
     1: ("Boolean", ValueType.U16),

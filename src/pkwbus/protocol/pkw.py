@@ -2,7 +2,8 @@
 
 Requests are built for a dialect (which request identifiers it has, how wide
 its PNU is, whether it has a page index) and an IND layout; responses are
-decoded with the same two, and :func:`matches` applies seed 003's rule: the
+decoded with the same two, and :func:`matches` applies the rule of the
+SINAMICS G120 CU240B-2/CU240E-2 Operating Instructions, section 6.3: the
 response identifier fits, PNU and IND are the request's, and a change is
 echoed in PWE.
 """
@@ -24,7 +25,8 @@ from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 
 PAGE_SIZE = 2000
 _PNU_MASK_11 = 0x7FF
-# Bits of the page index byte for a + 2b + 4c + 8d + 16e + 32f (CU240S [S3]).
+# Bits of the page index byte for a + 2b + 4c + 8d + 16e + 32f (SINAMICS CU240S
+# operating instructions, USS page index).
 _PAGE_BITS = (0x80, 0x10, 0x20, 0x40, 0x04, 0x08)
 
 
@@ -127,14 +129,6 @@ _WRITE_COMMAND = {
 
 def read_description(dialect: Dialect, pnu: int, element: int) -> PkwRequest:
     return request(dialect, Command.READ_DESCRIPTION, pnu, subindex=element)
-
-
-def write_description(dialect: Dialect, pnu: int, element: int, raw: int) -> PkwRequest:
-    return request(dialect, Command.WRITE_DESCRIPTION, pnu, subindex=element, value=raw)
-
-
-def read_array_count(dialect: Dialect, pnu: int) -> PkwRequest:
-    return request(dialect, Command.READ_ARRAY_COUNT, pnu)
 
 
 def read_text(dialect: Dialect, pnu: int, index: int = 0) -> PkwRequest:

@@ -59,7 +59,7 @@ def frame(adr: int, data: bytes) -> bytes:
 
 
 class FcAddressFormat(enum.StrEnum):
-    """The two ADR formats of the FC protocol (seed D2)."""
+    """The two ADR formats of the FC protocol (Danfoss FC 102 manual, telegram structure)."""
 
     RANGE_1_31 = "1-31"
     RANGE_1_126 = "1-126"

@@ -84,7 +84,7 @@ def _line(line: cfg.Line, port: str) -> Line:
         settings,
         Protocol(line.protocol),
         timeout=line.timeout,
-        inter_char_timeout=line.inter_char_timeout,
+        inter_char_timeout=line.inter_char_seconds,
     )
 
 
@@ -157,15 +157,14 @@ def _info(
 
 async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[], Awaitable[None]]]:
     catalogs = {d.catalog for d in line.drives if d.catalog}
-    shapes = {(d.pkw_words, d.pzd_words, d.layout, d.pkw_dialect.name) for d in line.drives}
-    pkw_words, pzd_words, layout, dialect = next(iter(shapes))
+    first = line.drives[0]  # the config checked that the drives share one shape
     simulator = Simulator(
         line.protocol,
         sim.drives,
-        dialect=dialect,
-        ind_layout=layout,
-        pkw_words=pkw_words,
-        pzd_words=pzd_words,
+        dialect=first.pkw_dialect.name,
+        ind_layout=first.layout,
+        pkw_words=first.pkw_words,
+        pzd_words=first.pzd_words,
         timing=SimTiming(
             response_delay=sim.response_delay
             if sim.response_delay is not None

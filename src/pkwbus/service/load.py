@@ -20,6 +20,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Final
 
+from pkwbus.protocol import timing
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
 
@@ -58,7 +59,7 @@ def exchange_seconds(line: Line, drive: Drive) -> float:
     delay = line.response_delay_seconds
     if delay is None:
         delay = DEFAULT_RESPONSE_DELAY
-    wire = 2 * telegram_bytes(line, drive) * line.character_time
+    wire = timing.wire_time(2 * telegram_bytes(line, drive), line.character_time)
     return wire + line.pause_seconds + delay
 
 

@@ -1,4 +1,4 @@
-"""Prometheus metrics with exactly the names and labels of interface.md.
+"""Prometheus metrics with exactly the names and labels the README documents.
 
 Device values (parameter values, drive and line state, status words) come
 from a custom Collector built from a copy of the snapshot at each scrape, so

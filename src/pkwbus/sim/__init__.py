@@ -5,7 +5,7 @@ process, ``serve_tcp`` and ``serve_pty`` put the line on a TCP port or a
 pseudo-terminal. Every answer is built with ``pkwbus.protocol``.
 """
 
-from pkwbus.sim.config import SimFaults, SimTiming, parse_duration
+from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drive import SimDrive
 from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.simulator import Simulator
@@ -20,5 +20,4 @@ __all__ = [
     "SimStats",
     "SimTiming",
     "Simulator",
-    "parse_duration",
 ]

@@ -1,11 +1,11 @@
-"""The simulator's knobs: timing and fault injection, and duration parsing."""
+"""The simulator's knobs: timing and fault injection."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Literal
 
-from pkwbus import durations
+from pkwbus.protocol import timing
 
 LagMode = Literal["none", "stale"]
 LAG_MODES: tuple[LagMode, ...] = ("none", "stale")
@@ -18,7 +18,7 @@ class SimTiming:
 
     ``response_delay``: seconds from the end of a request to the start of the
     answer. ``wire_timing`` with ``baudrate``: the ends also spend the time
-    the request and the answer take on an RS-485 line (11 bits a character).
+    the request and the answer take on an RS-485 line (8E1: 11 bits a character).
     PKW lag: a parameter answer comes only after ``lag_telegrams`` further
     telegrams and ``lag_seconds``; meanwhile the drive answers AK 0
     (``lag_mode="none"``) or repeats its previous answer (``"stale"``).
@@ -49,7 +49,7 @@ class SimTiming:
         """Time ``nbytes`` take on the line (0 without wire timing)."""
         if not self.wire_timing or not self.baudrate:
             return 0.0
-        return nbytes * 11 / self.baudrate
+        return timing.wire_time(nbytes, timing.char_time(self.baudrate))
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,8 +85,3 @@ class SimFaults:
 
     def probabilities(self) -> tuple[tuple[str, float], ...]:
         return tuple((kind, float(getattr(self, kind))) for kind in FAULT_KINDS)
-
-
-def parse_duration(text: str) -> float:
-    """Seconds from ``3ms``, ``1s``, ``5m`` or plain seconds; 0 allowed."""
-    return durations.parse_duration(text, allow_zero=True)

@@ -10,6 +10,9 @@ response delay and the answer's wire time, and write the whole answer at
 that instant: the master gets its last byte when a real line would deliver
 it, never earlier. Requests are answered one at a time, in order (half
 duplex). A late answer (fault) is written later without holding the line.
+
+Raises: :class:`PathInUseError` when a pty's link path is taken;
+:class:`OSError` when a pty or a TCP port cannot be had.
 """
 
 from __future__ import annotations
@@ -22,18 +25,36 @@ import os
 import struct
 import tty
 from collections.abc import Callable
+from typing import Protocol
 
-from pkwbus.protocol.telegram import Telegram
+from pkwbus.protocol.telegram import Deframer, Telegram
+from pkwbus.sim.config import SimTiming
 from pkwbus.sim.faults import Answer
-from pkwbus.sim.simulator import Simulator
+from pkwbus.sim.stats import SimStats
+
+__all__ = ["Answerer", "PathInUseError", "PtyEnd", "Session", "TcpEnd", "check_link_free"]
 
 Write = Callable[[bytes], None]
+
+
+class Answerer(Protocol):
+    """What an end needs of the line it serves (a :class:`pkwbus.sim.Simulator`)."""
+
+    @property
+    def stats(self) -> SimStats: ...
+
+    @property
+    def timing(self) -> SimTiming: ...
+
+    def deframer(self) -> Deframer: ...
+
+    def answer(self, telegram: Telegram, now: float | None = None) -> Answer | None: ...
 
 
 class Session:
     """One conversation on an end: deframes requests and answers them with timing."""
 
-    def __init__(self, sim: Simulator, write: Write) -> None:
+    def __init__(self, sim: Answerer, write: Write) -> None:
         self.sim = sim
         self._write = write
         self._deframer = sim.deframer()
@@ -86,7 +107,7 @@ class Session:
 class TcpEnd:
     """Raw telegram bytes over TCP, like a serial-over-TCP gateway (pyserial ``socket://``)."""
 
-    def __init__(self, sim: Simulator) -> None:
+    def __init__(self, sim: Answerer) -> None:
         self.sim = sim
         self.host = ""
         self.port = 0
@@ -143,7 +164,7 @@ class PtyEnd:
     may have been reused by another terminal).
     """
 
-    def __init__(self, sim: Simulator, link: str) -> None:
+    def __init__(self, sim: Answerer, link: str) -> None:
         self.sim = sim
         self.path = link
         self.device = ""

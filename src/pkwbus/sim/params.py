@@ -30,7 +30,7 @@ ARRAY_COMMANDS = frozenset(
         Command.WRITE_ARRAY_DWORD_EEPROM,
     }
 )
-# Danfoss data type numbers [D5] for description element 1.
+# Danfoss data type numbers (FC 202 Design Manual, PKW and data types) for description element 1.
 TYPE_CODES = {ValueType.I16: 3, ValueType.I32: 4, ValueType.U16: 6, ValueType.U32: 7}
 TYPE_CODES |= {ValueType.TEXT: 9, ValueType.F32: 8}
 

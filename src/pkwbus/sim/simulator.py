@@ -5,7 +5,6 @@ from __future__ import annotations
 import random
 import time
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
 
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.dialects import dialect as get_dialect
@@ -24,13 +23,11 @@ from pkwbus.protocol.telegram import (
 from pkwbus.sim import faults as inject
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drive import SimDrive
+from pkwbus.sim.ends import PtyEnd, TcpEnd
 from pkwbus.sim.faults import Answer
 from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
-
-if TYPE_CHECKING:
-    from pkwbus.sim.ends import PtyEnd, TcpEnd
 
 Clock = Callable[[], float]
 
@@ -117,16 +114,12 @@ class Simulator:
 
     async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
         """Serve the line on TCP (raw telegram bytes); ``.url`` is a pyserial URL."""
-        from pkwbus.sim.ends import TcpEnd
-
         end = TcpEnd(self)
         await end.start(host, port)
         return end
 
     async def serve_pty(self, link: str) -> PtyEnd:
         """Serve the line on a new pseudo-terminal reachable at the symlink ``link``."""
-        from pkwbus.sim.ends import PtyEnd
-
         end = PtyEnd(self, link)
         await end.start()
         return end

@@ -7,8 +7,8 @@ we chose and say so:
 - FC 16-10 Power [kW]: i32 with conversion -2 (0.01 kW). Some FC guides list
   another index; a catalog will override it.
 - FC 4-14 Motor Speed High Limit [Hz] is the simulated drive's maximum
-  frequency (MAV 0x4000 = 100 % of it). The example telegram of protocol.md
-  writes 1000 to it (100.0 Hz).
+  frequency (MAV 0x4000 = 100 % of it). The example telegram of the Danfoss FC 300
+  Design Manual writes 1000 to it (100.0 Hz).
 - FC 15-30 Alarm Log: Error Code is UInt8 on the drive; here u16.
 - USS p0199 stands in for a text parameter (G120's p0199 is numeric).
 - USS p2000 reference frequency scales MAV; p1082 limits the setpoint.

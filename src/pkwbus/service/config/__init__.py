@@ -1,0 +1,79 @@
+"""The service's configuration file: strict pydantic models of its YAML.
+
+Load it with :func:`load_config`; every problem, whatever its kind (unreadable
+file, YAML syntax, duplicate key, unknown setting, wrong value, a parameter
+the drive's dialect cannot encode), ends in one :class:`ConfigError` whose
+``problems`` name their place::
+
+    lines[0].drives[2].address: 130 is outside 1-126 for protocol fc
+
+Environment:
+
+- the write token is read from the variable named by ``api.write_token_env``
+  (default ``PKWBUS_WRITE_TOKEN``) when asked for, with
+  :meth:`Config.write_token`; it is never stored in the model, so it never
+  shows in a repr, a log line or an error;
+- ``PKWBUS_LISTEN`` (HOST:PORT), when set, replaces the file's ``listen``.
+
+Defaults that depend on the line are filled in once the line is valid: a
+drive's dialect (``fc`` on an FC line, ``uss`` on a USS line), its IND layout
+(the dialect's), its PKW/PZD lengths (USS 4 and 2; FC fixed). The fields keep
+what the file said; the resolved values are the properties
+:attr:`Drive.protocol`, :attr:`Drive.pkw_dialect`, :attr:`Drive.layout` and
+:attr:`Drive.shape`.
+
+The package's modules: :mod:`.base` (the error, the base model, constants),
+:mod:`.fields` (field types), :mod:`.catalogs`, :mod:`.parameters`
+(overrides and polls), :mod:`.drive`, :mod:`.line`, :mod:`.model` (the whole
+file), :mod:`.loading`. Problems are worded by :mod:`pkwbus.problems`, shared
+with the catalogs; ``sim://`` ports are parsed by :mod:`pkwbus.sim.url`.
+"""
+
+from pkwbus.durations import parse_duration
+from pkwbus.service.config.base import (
+    DEFAULT_LISTEN,
+    DEFAULT_TOKEN_ENV,
+    DIALECTS_BY_PROTOCOL,
+    LISTEN_ENV,
+    MAX_CONFIG_BYTES,
+    MAX_HTTP_CONNECTIONS,
+    PORT_SCHEMES,
+    USS_MAX_ADDRESS,
+    ConfigError,
+)
+from pkwbus.service.config.catalogs import CatalogLike, Catalogs, builtin_catalogs
+from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.line import Line
+from pkwbus.service.config.loading import load_config, parse_config
+from pkwbus.service.config.model import Api, Config, Listen, parse_listen
+from pkwbus.service.config.parameters import OVERRIDE_FIELDS, ParameterOverrides, Poll
+from pkwbus.sim.url import SimPort, parse_sim_port
+
+__all__ = [
+    "DEFAULT_LISTEN",
+    "DEFAULT_TOKEN_ENV",
+    "DIALECTS_BY_PROTOCOL",
+    "LISTEN_ENV",
+    "MAX_CONFIG_BYTES",
+    "MAX_HTTP_CONNECTIONS",
+    "OVERRIDE_FIELDS",
+    "PORT_SCHEMES",
+    "USS_MAX_ADDRESS",
+    "Api",
+    "CatalogLike",
+    "Catalogs",
+    "Config",
+    "ConfigError",
+    "Drive",
+    "Line",
+    "Listen",
+    "ParameterOverrides",
+    "Poll",
+    "SimPort",
+    "builtin_catalogs",
+    "load_config",
+    "parse_config",
+    "parse_duration",
+    "parse_listen",
+    "parse_sim_port",
+]

@@ -1,0 +1,60 @@
+"""What every part of the configuration shares: its error, its base model, a problem's place.
+
+Raises nothing itself; :class:`ConfigError` is what the loading functions raise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Final
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+)
+from pydantic_core import PydanticCustomError
+
+from pkwbus.protocol.telegram import Protocol as BusProtocol
+
+__all__ = ["ConfigError", "Model", "Place", "fail"]
+
+
+DEFAULT_LISTEN: Final = "127.0.0.1:9725"
+LISTEN_ENV: Final = "PKWBUS_LISTEN"
+DEFAULT_TOKEN_ENV: Final = "PKWBUS_WRITE_TOKEN"
+PORT_SCHEMES: Final = frozenset({"socket", "rfc2217", "loop", "spy", "alt", "hwgrep", "sim"})
+DIALECTS_BY_PROTOCOL: Final = {
+    BusProtocol.FC: ("fc",),
+    BusProtocol.USS: ("uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"),
+}
+USS_MAX_ADDRESS: Final = 30  # ADR bits 0-4 give 0-31; drives accept 0-30
+MAX_CONFIG_BYTES: Final = 1024 * 1024  # a configuration file is read up to this, no further
+
+
+# HTTP connections at most: with the ports, the audit database and the listener
+# every descriptor stays below 1024, which pyserial's socket:// handler needs (it
+# waits with select()).
+MAX_HTTP_CONNECTIONS = 900
+
+
+class ConfigError(Exception):
+    """The configuration cannot be used; ``problems`` has one line per problem."""
+
+    def __init__(self, problems: Sequence[str]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+Place = tuple[str, str]  # (place relative to the model that found it, message)
+
+
+def fail(problems: Sequence[Place]) -> PydanticCustomError:
+    """One validation error carrying several problems, each with its own place."""
+    summary = "; ".join(f"{p}: {m}" if p else m for p, m in problems)
+    return PydanticCustomError(
+        "pkwbus_problems", "{summary}", {"summary": summary, "problems": list(problems)}
+    )
+
+
+class Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)

@@ -1,0 +1,102 @@
+"""The configuration's field types: durations of each kind, numbers, parameter notation,
+type names, PKW lengths, names. Each validator raises ValueError with a plain message."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+)
+
+from pkwbus import durations
+from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.problems import short
+from pkwbus.protocol.params import (
+    ParameterRef,
+    ValueType,
+    parse_parameter,
+    parse_type,
+)
+
+__all__ = [
+    "CharTimeout",
+    "Delay",
+    "Interval",
+    "Name",
+    "Notation",
+    "Number",
+    "Pause",
+    "PkwWords",
+    "Timeout",
+    "TypeName",
+    "upper",
+]
+
+
+_NAME = r"^[A-Za-z0-9_.-]+$"
+_NAME_MAX = 64
+
+
+def _number(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{short(value)} is not a number")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ValueError(f"{short(value)} is not a finite number")
+    return number
+
+
+def _notation(value: object) -> ParameterRef:
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = str(value)
+    if not isinstance(value, str):
+        raise ValueError(f"{short(value)} is not a parameter: write it as 16-13, 1613 or r0021")
+    return parse_parameter(value)
+
+
+def _value_type(value: object) -> ValueType:
+    if not isinstance(value, str):
+        raise ValueError(f"{short(value)} is not a type name")
+    return parse_type(value)
+
+
+def _pkw_words(value: object) -> int | None:
+    """0, 3 or 4 fixed words; ``variable`` or 127: None."""
+    if value == "variable" or (value == 127 and not isinstance(value, bool)):
+        return None
+    if isinstance(value, int) and not isinstance(value, bool) and value in (0, 3, 4):
+        return value
+    raise ValueError(f"{short(value)} is not a PKW length: use 0, 3, 4 or variable (127)")
+
+
+def upper(value: object) -> object:
+    return value.upper() if isinstance(value, str) else value
+
+
+def _duration(within: DurationRange) -> PlainValidator:
+    """A duration of one kind: its range is in :mod:`pkwbus.durations`' table."""
+    return PlainValidator(lambda value: parse_duration(value, within))
+
+
+Interval = Annotated[float, _duration(durations.POLL_INTERVAL)]
+Timeout = Annotated[float, _duration(durations.TELEGRAM_TIMEOUT)]
+Pause = Annotated[float, _duration(durations.PAUSE)]
+CharTimeout = Annotated[float, _duration(durations.INTER_CHAR_TIMEOUT)]
+Delay = Annotated[float, _duration(durations.RESPONSE_DELAY)]
+Number = Annotated[float, PlainValidator(_number)]
+Notation = Annotated[ParameterRef, PlainValidator(_notation)]
+TypeName = Annotated[ValueType, PlainValidator(_value_type)]
+PkwWords = Annotated[int | None, PlainValidator(_pkw_words)]
+Name = Annotated[str, Field(pattern=_NAME, min_length=1, max_length=_NAME_MAX, strict=True)]
+
+
+class Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)

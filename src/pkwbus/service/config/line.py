@@ -1,0 +1,242 @@
+"""One RS-485 line: its port, framing and timing, and the drives on it."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Self
+
+from pydantic import (
+    BeforeValidator,
+    Field,
+    StrictBool,
+    StrictInt,
+    field_validator,
+    model_validator,
+)
+
+from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
+from pkwbus.protocol import timing
+from pkwbus.protocol.dialects import Dialect, dialect
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import (
+    ParameterRef,
+    canonical,
+)
+from pkwbus.protocol.telegram import FcAddressFormat
+from pkwbus.protocol.telegram import Protocol as BusProtocol
+from pkwbus.service.config.base import (
+    DIALECTS_BY_PROTOCOL,
+    PORT_SCHEMES,
+    USS_MAX_ADDRESS,
+    Model,
+    Place,
+    fail,
+)
+from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.fields import CharTimeout, Delay, Name, Pause, Timeout, upper
+from pkwbus.sim.url import SimPort, parse_sim_port
+
+__all__ = ["Line"]
+
+
+def _check_port(value: str) -> str:
+    if not value.strip() or any(ord(c) < 0x20 for c in value):
+        raise ValueError(
+            "must be a device path such as /dev/ttyUSB0 or a URL such as socket://host:port"
+        )
+    if "://" in value:
+        scheme = value.split("://", 1)[0].lower()
+        if scheme not in PORT_SCHEMES:
+            known = ", ".join(f"{s}://" for s in sorted(PORT_SCHEMES))
+            raise ValueError(f"unknown port URL scheme {scheme!r} (known: {known})")
+        if scheme == "sim":
+            parse_sim_port(value)
+        check_port_url(value)
+    return value
+
+
+class Line(Model):
+    """One RS-485 line: its port, framing and timing, and the drives on it."""
+
+    name: Name
+    port: Annotated[str, Field(strict=True)]
+    protocol: BusProtocol
+    baudrate: StrictInt
+    parity: Annotated[Literal["E", "O", "N"], BeforeValidator(upper)] = "E"
+    stopbits: Literal[1, 2] = 1
+    timeout: Timeout = 0.1
+    retries: StrictInt = Field(default=2, ge=0, le=MAX_RETRIES)
+    pause: Pause | None = None
+    inter_char_timeout: CharTimeout | None = None
+    response_delay: Delay | None = None
+    echo: StrictBool = False
+    fc_address_format: FcAddressFormat | None = None
+    drives: list[Drive] = Field(min_length=1)
+
+    @field_validator("port")
+    @classmethod
+    def _port(cls, value: str) -> str:
+        return _check_port(value)
+
+    @field_validator("baudrate")
+    @classmethod
+    def _baudrate(cls, value: int) -> int:
+        return check_baudrate(value)
+
+    @model_validator(mode="after")
+    def _drives_fit_line(self) -> Self:
+        problems = self._line_problems()
+        for i, drive in enumerate(self.drives):
+            problems += [(f"drives[{i}].{p}", m) for p, m in _drive_problems(self, drive)]
+        problems += self._address_problems()
+        if problems:
+            raise fail(problems)
+        for drive in self.drives:
+            drive._protocol = self.protocol
+        return self
+
+    def _line_problems(self) -> list[Place]:
+        problems: list[Place] = []
+        if self.protocol is BusProtocol.USS and self.fc_address_format is not None:
+            problems.append(("fc_address_format", "applies to protocol fc only"))
+        sim = self.sim
+        if sim is not None:
+            if sim.protocol is not self.protocol:
+                problems.append(
+                    ("port", f"simulates protocol {sim.protocol} but the line's is {self.protocol}")
+                )
+            missing = sorted({d.address for d in self.drives} - set(sim.drives))
+            if missing:
+                listed = ",".join(str(a) for a in missing)
+                problems.append(("port", f"simulates no drive at address {listed}"))
+            problems += self._sim_shape_problems()
+        return problems
+
+    def _sim_shape_problems(self) -> list[Place]:
+        """One simulator answers every drive of a ``sim://`` line with one telegram shape."""
+        first = self.drives[0]
+        for i, drive in enumerate(self.drives[1:], start=1):
+            if _sim_shape(self.protocol, drive) != _sim_shape(self.protocol, first):
+                return [
+                    (
+                        f"drives[{i}]",
+                        f"the simulated drives of a sim:// port share one dialect, IND layout "
+                        f"and PKW/PZD lengths: {drive.name} differs from {first.name}",
+                    )
+                ]
+        return []
+
+    def _address_problems(self) -> list[Place]:
+        problems: list[Place] = []
+        seen: dict[int, str] = {}
+        for i, drive in enumerate(self.drives):
+            first = seen.setdefault(drive.address, drive.name)
+            if first != drive.name:
+                problems.append(
+                    (f"drives[{i}].address", f"address {drive.address} is already used by {first}")
+                )
+        return problems
+
+    @property
+    def address_format(self) -> FcAddressFormat:
+        return self.fc_address_format or FcAddressFormat.RANGE_1_126
+
+    @property
+    def address_range(self) -> tuple[int, int]:
+        if self.protocol is BusProtocol.USS:
+            return (0, USS_MAX_ADDRESS)
+        return (1, 31) if self.address_format is FcAddressFormat.RANGE_1_31 else (1, 126)
+
+    @property
+    def sim(self) -> SimPort | None:
+        """The simulated drives this line asks for, None for a real port."""
+        if not self.port.lower().startswith("sim://"):
+            return None
+        return parse_sim_port(self.port)
+
+    @property
+    def bits_per_character(self) -> int:
+        """Start bit, 8 data bits, parity bit unless N, stop bits: 11 with the default 8E1."""
+        return timing.char_bits(self.parity, self.stopbits)
+
+    @property
+    def character_time(self) -> float:
+        return timing.char_time(self.baudrate, self.parity, self.stopbits)
+
+    @property
+    def pause_seconds(self) -> float:
+        """Pause before each request: as configured, else 3.5 character times."""
+        return timing.start_pause(self.character_time, self.pause)
+
+    @property
+    def inter_char_seconds(self) -> float:
+        """A gap longer than this ends a telegram: as configured, else 20 character
+        times but at least 5 ms (what the line's receiver waits)."""
+        return timing.inter_char_gap(self.character_time, self.inter_char_timeout)
+
+    @property
+    def response_delay_seconds(self) -> float | None:
+        """The expected response delay: configured, else the simulator's, else None."""
+        if self.response_delay is not None:
+            return self.response_delay
+        sim = self.sim
+        return sim.response_delay if sim is not None else None
+
+
+def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
+    """The dialect, IND layout and lengths a simulator would need for ``drive``."""
+    name = drive.dialect or DIALECTS_BY_PROTOCOL[protocol][0]
+    layout = drive.ind_layout or dialect(name).default_ind_layout
+    if protocol is BusProtocol.FC:
+        return (name, layout)
+    return (name, layout, drive.pkw_words, drive.pzd_words)
+
+
+def _drive_problems(line: Line, drive: Drive) -> list[Place]:
+    problems: list[Place] = []
+    low, high = line.address_range
+    if not low <= drive.address <= high:
+        where = f"protocol {line.protocol}"
+        if line.fc_address_format is FcAddressFormat.RANGE_1_31:
+            where += " with fc_address_format 1-31"
+        problems.append(("address", f"{drive.address} is outside {low}-{high} for {where}"))
+    allowed = DIALECTS_BY_PROTOCOL[line.protocol]
+    if drive.dialect is not None and drive.dialect not in allowed:
+        problems.append(
+            (
+                "dialect",
+                f"{drive.dialect} is not for protocol {line.protocol} (use {', '.join(allowed)})",
+            )
+        )
+        return problems
+    if line.protocol is BusProtocol.FC:
+        for key in ("pkw_words", "pzd_words"):
+            if key in drive.model_fields_set:
+                problems.append(
+                    (key, "applies to protocol uss only: FC telegrams have a fixed shape")
+                )
+    elif drive.pkw_words == 0 and (drive.poll or drive.writable):
+        problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
+    problems += _pnu_problems(drive, dialect(drive.dialect or allowed[0]))
+    return problems
+
+
+def _pnu_problems(drive: Drive, pkw_dialect: Dialect) -> list[Place]:
+    """Numbers the dialect cannot encode; notation the drive does not use (r/p on a
+    Danfoss drive, r0021 and p0021 both)."""
+    problems: list[Place] = []
+    prefixes: dict[int, ParameterRef] = {}
+    for place, ref in drive.refs():
+        try:
+            pkw_dialect.check_pnu(ref.pnu)
+        except LocalProtocolError as exc:
+            problems.append((place, f"{ref}: {exc}"))
+            continue
+        try:
+            canonical(ref, danfoss=pkw_dialect.danfoss_numbers)
+        except LocalProtocolError as exc:
+            problems.append((place, str(exc)))
+            continue
+        first = prefixes.setdefault(ref.pnu, ref) if ref.prefix else ref
+        if first.prefix != ref.prefix:
+            problems.append((place, f"{ref} and {first} name one parameter: write it one way"))
+    return problems

@@ -1,0 +1,180 @@
+"""The whole file: where the API listens, its tokens, the audit log, the lines."""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import re
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Annotated, Literal, Self
+
+from pydantic import (
+    Field,
+    PlainValidator,
+    StrictInt,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from pkwbus.problems import plain, short
+from pkwbus.service.config.base import (
+    DEFAULT_LISTEN,
+    DEFAULT_TOKEN_ENV,
+    MAX_HTTP_CONNECTIONS,
+    ConfigError,
+    Model,
+    Place,
+    fail,
+)
+from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.line import Line
+
+__all__ = ["Api", "Config", "Listen", "parse_listen"]
+
+
+class Listen(Model):
+    """Where the HTTP server listens: written ``HOST:PORT`` or ``[IPv6]:PORT``."""
+
+    host: str
+    port: StrictInt = Field(ge=1, le=65535)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_text(cls, value: object) -> object:
+        if isinstance(value, str):
+            host, port = parse_listen(value)
+            return {"host": host, "port": port}
+        if isinstance(value, Listen | dict):
+            return value
+        raise ValueError(f"{short(value)} is not HOST:PORT (e.g. 127.0.0.1:9725 or [::1]:9725)")
+
+    @field_validator("host")
+    @classmethod
+    def _host(cls, value: str) -> str:
+        return _check_host(value)
+
+    def __str__(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{host}:{self.port}"
+
+
+_HOSTNAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.-]{0,252}$")
+_LISTEN_HINT = "write HOST:PORT, e.g. 127.0.0.1:9725, 0.0.0.0:9725 or [::1]:9725"
+
+
+def _check_host(host: str) -> str:
+    """A host name, an IPv4 address or a bare IPv6 address."""
+    if ":" in host:
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise ValueError(f"{host!r} is not an IPv6 address") from None
+    elif not _HOSTNAME.match(host):
+        raise ValueError(f"{host!r} is not a host name or address: {_LISTEN_HINT}")
+    return host
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port); ValueError otherwise."""
+    head, sep, port_text = text.strip().rpartition(":")
+    if not sep or not head:
+        raise ValueError(f"{short(text)} is not HOST:PORT: {_LISTEN_HINT}")
+    bracketed = head.startswith("[") and head.endswith("]")
+    if ":" in head and not bracketed:
+        raise ValueError(f"{short(text)}: write an IPv6 address in brackets, e.g. [::1]:9725")
+    try:
+        host = _check_host(head[1:-1] if bracketed else head)
+        if bracketed and ":" not in host:
+            raise ValueError(f"{host!r} is not an IPv6 address")
+    except ValueError as exc:
+        raise ValueError(f"{short(text)}: {exc}") from None
+    if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
+        raise ValueError(f"{short(text)}: port must be a number 1-65535")
+    return host, int(port_text)
+
+
+_ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,127}$")
+
+
+def _env_name(value: object) -> str:
+    if not isinstance(value, str) or not _ENV_NAME.match(value):
+        raise ValueError(
+            f"{short(value)} is not an environment variable name (letters, digits and _)"
+        )
+    return value
+
+
+class Api(Model):
+    write_token_env: Annotated[str, PlainValidator(_env_name)] = DEFAULT_TOKEN_ENV
+    # HTTP connections open at once; more are closed at once (logged), so a flood of
+    # clients cannot take the descriptors the serial ports need.
+    max_connections: int = Field(default=500, ge=1, le=MAX_HTTP_CONNECTIONS)
+    # A token that may read the audit log (GET /api/v1/audit) but not write; the
+    # write token reads it too.
+    read_token_env: Annotated[str, PlainValidator(_env_name)] | None = None
+
+
+def _audit_path(value: object) -> Path:
+    if not isinstance(value, str) or not value.strip() or "\x00" in value:
+        raise ValueError("must be a file path such as var/audit.sqlite")
+    return Path(value)
+
+
+class Config(Model):
+    """The whole file."""
+
+    listen: Listen = Listen.model_validate(DEFAULT_LISTEN)
+    api: Api = Api()
+    audit_db: Annotated[Path, PlainValidator(_audit_path)] = Path("var/audit.sqlite")
+    log_format: Literal["text", "json"] = "text"
+    lines: list[Line] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> Self:
+        problems: list[Place] = []
+        lines: dict[str, int] = {}
+        drives: dict[str, str] = {}
+        for i, line in enumerate(self.lines):
+            first_line = lines.setdefault(line.name, i)
+            if first_line != i:
+                problems.append(
+                    (
+                        f"lines[{i}].name",
+                        f"line name {line.name!r} is already used by lines[{first_line}]",
+                    )
+                )
+            for j, drive in enumerate(line.drives):
+                place = f"lines[{i}].drives[{j}]"
+                first = drives.setdefault(drive.name, place)
+                if first != place:
+                    problems.append(
+                        (f"{place}.name", f"drive name {drive.name!r} is already used at {first}")
+                    )
+        if problems:
+            raise fail(problems)
+        return self
+
+    def write_token(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The API write token from the environment; None (writes refused) when unset or empty."""
+        token = (os.environ if environ is None else environ).get(self.api.write_token_env)
+        return token or None
+
+    def read_token(self, environ: Mapping[str, str] | None = None) -> str | None:
+        """The audit read token from the environment; None when not configured, unset or empty."""
+        if self.api.read_token_env is None:
+            return None
+        return (os.environ if environ is None else environ).get(self.api.read_token_env) or None
+
+    def drives(self) -> Iterator[tuple[Line, Drive]]:
+        for line in self.lines:
+            for drive in line.drives:
+                yield line, drive
+
+    def with_listen(self, text: str) -> Config:
+        """The same config listening elsewhere (``--listen``); ConfigError when malformed."""
+        try:
+            return self.model_copy(update={"listen": Listen.model_validate(text)})
+        except ValidationError as exc:
+            raise ConfigError([f"--listen: {plain(e, Config)}" for e in exc.errors()]) from None
