@@ -579,6 +579,23 @@ def _check_port(value: str) -> str:
     return value
 
 
+def _rs485_delay(value: object) -> float:
+    """An RTS delay: the kernel takes whole milliseconds, so 0.5ms would silently be 0."""
+    seconds = parse_duration(value, durations.RS485_DELAY)
+    if abs(seconds * 1000 - round(seconds * 1000)) > 1e-9:
+        raise ValueError(f"{_short(value)}: the kernel counts RS-485 delays in whole milliseconds")
+    return seconds
+
+
+class Rs485(_Model):
+    """Kernel RS-485 mode of a native UART: the driver switches RTS around each transmission."""
+
+    rts_level_for_tx: StrictBool = True
+    rts_level_for_rx: StrictBool = False
+    delay_before_tx: Annotated[float, PlainValidator(_rs485_delay)] = 0.0
+    delay_before_rx: Annotated[float, PlainValidator(_rs485_delay)] = 0.0
+
+
 class Line(_Model):
     """One RS-485 line: its port, framing and timing, and the drives on it."""
 
@@ -595,12 +612,22 @@ class Line(_Model):
     response_delay: Delay | None = None
     echo: StrictBool = False
     fc_address_format: FcAddressFormat | None = None
+    low_latency: StrictBool = False  # ask the adapter's driver for 1 ms latency
+    rs485: Rs485 | None = None  # kernel RS-485 mode (native UARTs)
     drives: list[Drive] = Field(min_length=1)
 
     @field_validator("port")
     @classmethod
     def _port(cls, value: str) -> str:
         return _check_port(value)
+
+    @field_validator("rs485")
+    @classmethod
+    def _rs485_on_a_device(cls, value: Rs485 | None, info: ValidationInfo) -> Rs485 | None:
+        port = info.data.get("port")
+        if value is not None and isinstance(port, str) and "://" in port:
+            raise ValueError(f"applies to a serial device such as /dev/ttyS1, not {_short(port)}")
+        return value
 
     @field_validator("baudrate")
     @classmethod
