@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import FileResponse, JSONResponse
 from fastapi.security import HTTPBearer
+from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
@@ -32,6 +34,8 @@ from pkwbus.service.runtime import Runtime
 MAX_BODY = 4096
 MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
 MAX_AUDIT_LIMIT = 1000  # rows of one GET /api/v1/audit
+# The status page at / and its script and style: package data, nothing from elsewhere.
+STATIC = Path(__file__).parent / "static"
 
 # Declares the token in the OpenAPI schema (the Authorize button of /docs); the
 # endpoints check it themselves, so that every refusal is counted and audited.
@@ -293,6 +297,12 @@ def create_app(
     async def metrics() -> Response:
         payload = await asyncio.to_thread(generate_latest, runtime.registry)
         return Response(payload, media_type=CONTENT_TYPE_LATEST)
+
+    app.mount("/assets/status", StaticFiles(directory=STATIC), name="status-assets")
+
+    @app.get("/", include_in_schema=False)
+    async def status_page() -> FileResponse:
+        return FileResponse(STATIC / "status.html", media_type="text/html")
 
     @app.get("/api/v1/drives", response_model=list[DriveView])
     async def drives() -> list[DriveView]:
