@@ -3,7 +3,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: test test-long lint typecheck pytest run bench fuzz clean
+.PHONY: test test-long lint typecheck pytest run bench fuzz clean status-page
 
 # The runtime dependencies at the exact versions of constraints.txt (the
 # image's); the test tools, which it does not list, resolve freely.
@@ -29,6 +29,11 @@ test: lint typecheck pytest
 # after make test.
 test-long: $(STAMP)
 	$(BIN)/python -m pytest -q -m long
+
+# docs/status-page.png: the status page in headless chromium (deploy/browser-setup).
+status-page: $(STAMP)
+	PKWBUS_STATUS_SCREENSHOT=docs/status-page.png $(BIN)/python -m pytest -q -s \
+		tests/api/test_status_page.py -k browser
 
 run: $(STAMP)
 	$(BIN)/pkwbus run --config config/demo.yaml

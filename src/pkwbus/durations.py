@@ -53,6 +53,8 @@ JOB_DEADLINE: Final = DurationRange("a job deadline", 0.001, 3600.0)
 SIM_LAG: Final = DurationRange("a simulated PKW lag", 0.0, 3600.0)
 SIM_LATE: Final = DurationRange("the delay of a late answer", 0.0, 3600.0)
 STATS_INTERVAL: Final = DurationRange("a stats interval", 0.01, 3600.0)
+# The kernel caps the RTS delays of RS-485 mode at 100 ms (serial_rs485, RS485_MAX_RTS_DELAY).
+RS485_DELAY: Final = DurationRange("an RS-485 RTS delay", 0.0, 0.1)
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -68,6 +70,7 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("`simulate --lag` (as a duration)", SIM_LAG),
     ("`simulate --late-after`", SIM_LATE),
     ("`simulate --stats-interval`", STATS_INTERVAL),
+    ("line `rs485` `delay_before_tx`, `delay_before_rx` (whole milliseconds)", RS485_DELAY),
 )
 
 

@@ -125,9 +125,10 @@ async def test_one_row_per_attempt_kept_across_restart(
     assert [e["outcome"] for e in out] == list(reversed(expected))[:5]
     assert main(["audit", "--config", str(config)]) == 0
     text = capsys.readouterr().out.splitlines()
-    assert len(text) == len(expected)
-    assert "fan1 1-20" in text[-2] and "rejected fault 17" in text[-2]
-    assert "2 request(s) refused without a valid token" in text[-3]
+    assert text[0].split()[:4] == ["TIME", "DRIVE", "PARAMETER", "CHANGE"]
+    assert len(text) == 1 + len(expected)
+    assert text[-2].split()[1:3] == ["fan1", "1-20"] and "rejected fault 17" in text[-2]
+    assert "2 request(s)" in text[-3] and "refused" in text[-3]
     assert TOKEN not in "\n".join(text)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from pkwbus.protocol.telegram import Protocol
@@ -11,17 +13,20 @@ from pkwbus.service.load import (
     config_load,
     exchange_seconds,
     line_load,
+    port_warnings,
     telegram_bytes,
 )
 from tests.service.test_config import DEMO, FAKE, parse
 
+BY_ID = "/dev/serial/by-id/usb-FTDI_USB-RS485_Cable_FT1ABCDE-if00-port0"
 
-def fc_line(polls: str, baud: int = 9600, extra: str = "") -> Config:
+
+def fc_line(polls: str, baud: int = 9600, extra: str = "", port: str = BY_ID) -> Config:
     return parse(
         f"""
 lines:
   - name: l1
-    port: /dev/ttyUSB0
+    port: {port}
     protocol: fc
     baudrate: {baud}
 {extra}    drives:
@@ -176,3 +181,35 @@ lines:
     assert check_config_report(config, catalogs=FAKE)[-1] == (
         "NOTE lines[0].drives[0]: drive a has no catalog: 16-13 are exported as raw numbers"
     )
+
+
+POLL_ONE = '[{parameter: "16-13", every: 1s}]'
+
+
+@pytest.mark.parametrize("port", ["/dev/ttyUSB0", "/dev/ttyACM3"])
+def test_kernel_numbered_port_gets_a_warning_naming_by_id(port: str, tmp_path: Path) -> None:
+    config = fc_line(POLL_ONE, port=port)
+    report = check_config_report(config, catalogs=FAKE, dev=tmp_path)
+    warnings = [r for r in report if r.startswith("WARN")]
+    assert warnings == [
+        f"WARN line l1: port {port} is numbered by the kernel in the order it finds adapters"
+        " and may name another adapter after a replug or a reboot: use its"
+        " /dev/serial/by-id/... name (pkwbus ports lists them)"
+    ]
+
+
+def test_the_warning_names_the_by_id_link_of_this_machine(tmp_path: Path) -> None:
+    links = tmp_path / "serial" / "by-id"
+    links.mkdir(parents=True)
+    (links / "usb-FTDI_FT232R_A10K1234-if00-port0").symlink_to("/dev/ttyUSB0")
+    (links / "usb-other-if00-port0").symlink_to("/dev/ttyUSB1")
+    (warning,) = port_warnings(fc_line(POLL_ONE, port="/dev/ttyUSB0").lines[0], dev=tmp_path)
+    assert warning.endswith(f": use {links}/usb-FTDI_FT232R_A10K1234-if00-port0")
+
+
+@pytest.mark.parametrize(
+    "port", [BY_ID, "/dev/ttyS0", "/dev/ttyAMA0", "socket://gw:4001", "sim://fc?drives=1"]
+)
+def test_stable_ports_get_no_warning(port: str, tmp_path: Path) -> None:
+    report = check_config_report(fc_line(POLL_ONE, port=port), catalogs=FAKE, dev=tmp_path)
+    assert not [r for r in report if r.startswith("WARN")]

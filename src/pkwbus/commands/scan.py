@@ -1,11 +1,22 @@
-"""`pkwbus scan`: which addresses answer, with their status words decoded."""
+"""`pkwbus scan`: which addresses answer, with their status words decoded.
+
+With ``--baudrates auto`` (or a list such as ``19200,9600``) it is the
+commissioning scan: every baud rate, fastest first, with each parity of
+``--parities`` (E, O, N), the response timeout grown by the wire time of an
+answer at that rate. A drive is reported at the first setting it answers
+at and not asked again at slower ones. An FC drive is also asked its type
+(15-40 FC Type, Danfoss FC protocol); a drive that does not say has none.
+"""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import asyncio
+import sys
+import time
+from typing import Any, TextIO
 
-from pkwbus import link
+from pkwbus import durations, limits, link
 from pkwbus.commands.common import (
     CommandError,
     Exit,
@@ -16,13 +27,22 @@ from pkwbus.commands.common import (
     emit_json,
 )
 from pkwbus.link import PortError
+from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, Failure, Reply
-from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.master.transaction import Answered, ErrorKind, Failure, PkwTransaction, Reply
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.telegram import Protocol, split_block
 
 ADDRESS_RANGE = {Protocol.FC: (1, 126), Protocol.USS: (0, 30)}
+# The rates drives of these protocols take (Danfoss FC parameter 8-32; USS), fastest first.
+AUTO_BAUDRATES = tuple(sorted((b for b in limits.BAUDRATES if b <= 115200), reverse=True))
+PARITIES = ("E", "O", "N")
+FC_TYPE_PNU = 1540  # 15-40 FC Type, text
+TYPE_TIMEOUT = 0.2  # seconds for the type's answer, on top of its wire time
 
 
 def add_parsers(sub: Any) -> None:
@@ -30,6 +50,16 @@ def add_parsers(sub: Any) -> None:
     add_line_options(scan, timeout=0.05, retries=0)
     add_drive_options(scan, address=False)
     scan.add_argument("--addresses", default=None, help="e.g. 1-126 or 1,2,5-9")
+    scan.add_argument(
+        "--baudrates",
+        default=None,
+        help="try several rates, fastest first: 'auto' (115200 down to 1200) or 19200,9600",
+    )
+    scan.add_argument(
+        "--parities",
+        default="E,O,N",
+        help="the parities tried at each rate with --baudrates (default E,O,N)",
+    )
     scan.set_defaults(func=run_scan)
 
 
@@ -56,32 +86,122 @@ def parse_addresses(text: str, low: int, high: int) -> list[int]:
     return sorted(set(found))
 
 
-async def _scan(args: argparse.Namespace, addresses: list[int]) -> list[dict[str, Any]]:
-    line = build_line(args)
-    targets = [build_target(args, a) for a in addresses]
-    try:
-        await line.open()
-    except PortError as exc:
-        raise CommandError(str(exc), Exit.PORT) from None
-    found: list[dict[str, Any]] = []
-    try:
-        for target in targets:
-            for _ in range(args.retries + 1):
-                result = await line.exchange(target, target.probe())
-                if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
-                    raise CommandError(result.detail, Exit.NO_ANSWER)
-                if isinstance(result, Reply):
-                    found.append(_describe(target.address, target, result))
-                    if not args.json:
-                        _print(found[-1])
-                    break
-    finally:
-        await line.close()
-    return found
+def parse_baudrates(text: str) -> list[int]:
+    """``auto`` or a comma list of standard rates, tried fastest first."""
+    if text.strip().lower() == "auto":
+        return list(AUTO_BAUDRATES)
+    rates: list[int] = []
+    for part in text.split(","):
+        try:
+            rate = limits.check_baudrate(int(part.strip()))
+        except ValueError:
+            known = " ".join(str(b) for b in limits.BAUDRATES)
+            raise CommandError(
+                f"--baudrates: {part.strip()[:40]!r} is not a supported baud rate ({known})"
+                " or auto",
+                Exit.BAD_INPUT,
+            ) from None
+        rates.append(rate)
+    return sorted(set(rates), reverse=True)
 
 
-def _describe(address: int, target: DriveTarget, reply: Reply) -> dict[str, Any]:
-    entry: dict[str, Any] = {"address": address, "status_word": None, "status": {}}
+def parse_parities(text: str) -> list[str]:
+    found: list[str] = []
+    for part in text.upper().split(","):
+        if part.strip() not in PARITIES:
+            raise CommandError(
+                f"--parities: {part.strip()[:40]!r} is not E, O or N", Exit.BAD_INPUT
+            )
+        found.append(part.strip())
+    return list(dict.fromkeys(found))
+
+
+class Progress:
+    """One line on a terminal, rewritten in place; nothing when it is not one."""
+
+    def __init__(self, stream: TextIO, enabled: bool) -> None:
+        self.stream = stream
+        self.enabled = enabled
+        self.shown = False
+
+    def show(self, text: str) -> None:
+        if self.enabled:
+            self.stream.write(f"\r\x1b[K{text}")
+            self.stream.flush()
+            self.shown = True
+
+    def clear(self) -> None:
+        if self.shown:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+            self.shown = False
+
+
+def _framing(parity: str, stopbits: int) -> str:
+    return f"8{parity}{stopbits}"
+
+
+async def _scan(
+    args: argparse.Namespace,
+    addresses: list[int],
+    settings: list[tuple[int, str]],
+    progress: Progress,
+) -> list[dict[str, Any]]:
+    found: dict[int, dict[str, Any]] = {}
+    for step, (baudrate, parity) in enumerate(settings, 1):
+        remaining = [a for a in addresses if a not in found]
+        if not remaining:
+            break
+        at = argparse.Namespace(**{**vars(args), "baudrate": baudrate, "parity": parity})
+        line = build_line(at)
+        # A slow rate needs the time an answer (as long as the probe) takes on the wire.
+        answer = len(build_target(at, remaining[0]).probe())
+        line.timeout = min(
+            args.timeout + line.link.settings.wire_time(answer), durations.TELEGRAM_TIMEOUT.high
+        )
+        try:
+            await line.open()
+        except PortError as exc:
+            raise CommandError(str(exc), Exit.PORT) from None
+        where = f"{baudrate} baud {_framing(parity, args.stopbits)}"
+        try:
+            for i, address in enumerate(remaining, 1):
+                progress.show(
+                    f"{where} ({step}/{len(settings)}): address {address}"
+                    f" ({i}/{len(remaining)}), {len(found)} found"
+                )
+                entry = await _probe(args, line, build_target(at, address))
+                if entry is None:
+                    continue
+                entry.update(
+                    baudrate=baudrate, parity=parity, stopbits=args.stopbits, protocol=args.protocol
+                )
+                found[address] = entry
+                if not args.json:
+                    progress.clear()
+                    print(_describe_line(entry), flush=True)
+        finally:
+            await line.close()
+    progress.clear()
+    return sorted(found.values(), key=lambda e: int(e["address"]))
+
+
+async def _probe(
+    args: argparse.Namespace, line: Line, target: DriveTarget
+) -> dict[str, Any] | None:
+    for _ in range(args.retries + 1):
+        result = await line.exchange(target, target.probe())
+        if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
+            raise CommandError(result.detail, Exit.NO_ANSWER)
+        if isinstance(result, Reply):
+            entry = _status(target, result)
+            entry["type"] = await _drive_type(line, target)
+            return entry
+    return None
+
+
+def _status(target: DriveTarget, reply: Reply) -> dict[str, Any]:
+    entry: dict[str, Any] = {"address": target.address, "status_word": None, "status": {}}
     try:
         block = split_block(reply.data, target.response_shape(len(reply.data)))
     except RemoteProtocolError:
@@ -92,13 +212,59 @@ def _describe(address: int, target: DriveTarget, reply: Reply) -> dict[str, Any]
     return entry
 
 
-def _print(entry: dict[str, Any]) -> None:
+async def _drive_type(line: Line, target: DriveTarget) -> str | None:
+    """What an FC drive says its type is (15-40), None when it does not say."""
+    if target.protocol is not Protocol.FC:
+        return None
+    try:
+        req = pkw.read_text(target.dialect, FC_TYPE_PNU, 0)
+        target.telegram(req)
+    except LocalProtocolError:
+        return None
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + line.timeout + TYPE_TIMEOUT
+    outcome = await line.run(PkwTransaction(target, req, retries=1, deadline=deadline))
+    if not isinstance(outcome, Answered):
+        return None
+    try:
+        _, value = (
+            ParameterFormat.from_spec(None).with_type(ValueType.TEXT).value_of(outcome.response)
+        )
+    except RemoteProtocolError:
+        return None
+    text = str(value).strip()
+    return text or None
+
+
+def _describe_line(entry: dict[str, Any]) -> str:
+    where = (
+        f"address {entry['address']}: {entry['baudrate']} baud"
+        f" {_framing(entry['parity'], entry['stopbits'])} {entry['protocol']}"
+    )
+    if entry["type"]:
+        where += f" {entry['type']}"
     word = entry["status_word"]
     if word is None:
-        print(f"address {entry['address']}: answers (no status word)")
-        return
+        return f"{where}, answers (no status word)"
     on = " ".join(name for name, value in entry["status"].items() if value) or "-"
-    print(f"address {entry['address']}: STW {word:#06x} {on}")
+    return f"{where}, STW {word:#06x} {on}"
+
+
+def summary(
+    found: list[dict[str, Any]], addresses: int, settings: list[tuple[int, str]], seconds: float
+) -> str:
+    tried = f"{addresses} address{'es' if addresses != 1 else ''}"
+    if len(settings) > 1:
+        tried += f" x {len(settings)} settings"
+    if not found:
+        return f"no drive answered ({tried}, {seconds:.1f} s)"
+    groups: dict[str, int] = {}
+    for e in found:
+        key = f"{e['baudrate']} baud {_framing(e['parity'], e['stopbits'])}"
+        groups[key] = groups.get(key, 0) + 1
+    at = ", ".join(f"{n} at {key}" for key, n in groups.items())
+    drives = "drive" if len(found) == 1 else "drives"
+    return f"{len(found)} {drives} found: {at} ({tried}, {seconds:.1f} s)"
 
 
 def run_scan(args: argparse.Namespace) -> int:
@@ -108,9 +274,22 @@ def run_scan(args: argparse.Namespace) -> int:
         addresses = parse_addresses(args.addresses, low, high)
     else:
         addresses = list(range(low, high + 1))
-    found = link.run(_scan(args, addresses))
+    if args.baudrates is not None:
+        parities = parse_parities(args.parities)
+        settings = [(b, p) for b in parse_baudrates(args.baudrates) for p in parities]
+    else:
+        settings = [(args.baudrate, args.parity)]
+    progress = Progress(sys.stderr, enabled=not args.json and sys.stderr.isatty())
+    started = time.monotonic()
+    try:
+        found = link.run(_scan(args, addresses, settings, progress))
+    finally:
+        progress.clear()
+    text = summary(found, len(addresses), settings, time.monotonic() - started)
     if args.json:
         emit_json(found)
-    elif not found:
-        print(f"no drive answered on {len(addresses)} addresses")
-    return Exit.OK
+        if not found:
+            print(text, file=sys.stderr)
+    else:
+        print(text, file=sys.stdout if found else sys.stderr)
+    return Exit.OK if found else Exit.NO_ANSWER

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import datetime
 import json
 import logging
 import sys
@@ -124,6 +123,7 @@ async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
 
 
 def run_audit(args: argparse.Namespace) -> int:
+    from pkwbus.commands.audit_table import table, units_from
     from pkwbus.service.audit import AuditError, AuditLog, as_dict
 
     config = load(args.config)
@@ -139,18 +139,14 @@ def run_audit(args: argparse.Namespace) -> int:
             audit.close()
     except AuditError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    unit_of = units_from(config)
     if args.json:
-        print(json.dumps([as_dict(e) for e in entries]))
+        rows = [as_dict(e) | {"unit": unit_of(e.drive, e.parameter) or None} for e in entries]
+        print(json.dumps(rows))
         return Exit.OK
-    for e in entries:
-        stamp = datetime.datetime.fromtimestamp(e.time).strftime("%Y-%m-%d %H:%M:%S")
-        if e.count is not None:  # the refusals from one address in one minute
-            print(f"{stamp} {e.client} {e.count} request(s) {e.detail or 'refused'}")
-            continue
-        where = f"{e.drive} {e.parameter}" + (f"[{e.index}]" if e.index else "")
-        change = f"{e.old_value!r} -> {e.new_value!r}"
-        fault = f" fault {e.fault}" if e.fault is not None else ""
-        print(f"{stamp} {e.client} {where} {change} {e.outcome}{fault} {e.detail or ''}".rstrip())
     if not entries:
         print("no write attempts recorded", file=sys.stderr)
+        return Exit.OK
+    for text in table(entries, unit_of):
+        print(text)
     return Exit.OK

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-__all__ = ["Adapter", "PortInfo", "describe", "list_adapters", "unstable_name"]
+__all__ = ["Adapter", "PortInfo", "by_id_names", "describe", "list_adapters", "unstable_name"]
 
 DEV = Path("/dev")
 SYS = Path("/sys")
@@ -107,6 +107,11 @@ def unstable_name(device: str) -> bool:
     """Whether ``device`` is a kernel-numbered USB tty that may change on replug."""
     name = os.path.basename(device)
     return device.startswith("/dev/") and name.startswith(("ttyUSB", "ttyACM"))
+
+
+def by_id_names(device: str, *, dev: Path = DEV) -> list[str]:
+    """The ``/dev/serial/by-id`` links to ``device`` on this machine, sorted; empty if none."""
+    return sorted(_links(dev / "serial" / "by-id").get(os.path.realpath(device), []))
 
 
 def _links(folder: Path) -> dict[str, list[str]]:

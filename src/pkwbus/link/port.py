@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import serial
+import serial.rs485
 import serial_asyncio
 
 from pkwbus.link.backoff import Backoff
@@ -54,10 +55,26 @@ class LinkState(enum.Enum):
 
 
 @dataclass(frozen=True, slots=True)
+class Rs485Mode:
+    """Kernel RS-485 mode (pyserial's ``RS485Settings``): RTS levels and delays in seconds."""
+
+    rts_level_for_tx: bool = True
+    rts_level_for_rx: bool = False
+    delay_before_tx: float = 0.0
+    delay_before_rx: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class PortSettings:
     """How to open the port. ``pause`` None = 3.5 character times at ``baudrate``.
 
     The timing helpers are :mod:`pkwbus.protocol.timing`'s, for these settings.
+
+    ``low_latency`` asks the adapter's driver to pass on received bytes at once
+    (an FTDI adapter otherwise holds them up to its 16 ms latency timer); a
+    driver that cannot is warned of once and the line runs anyway. ``rs485``
+    puts a native UART in kernel RS-485 mode; a driver that refuses it fails
+    the open.
     """
 
     url: str
@@ -68,6 +85,8 @@ class PortSettings:
     echo: bool = False
     reopen_initial: float = 0.5
     reopen_cap: float = 30.0
+    low_latency: bool = False
+    rs485: Rs485Mode | None = None
 
     def __post_init__(self) -> None:
         timing.char_time(self.baudrate, self.parity, self.stopbits)  # ValueError when wrong
@@ -318,7 +337,7 @@ _PTY_FOLLOWER_MAJORS = frozenset({3, *range(136, 144)})
 def _open_port(s: PortSettings) -> Any:
     """Open the port (blocking: run in an executor)."""
     parity = serial.PARITY_NONE if is_pty(s.url) else PARITIES[s.parity]
-    return serial.serial_for_url(
+    port = serial.serial_for_url(
         s.url,
         baudrate=s.baudrate,
         parity=parity,
@@ -327,6 +346,58 @@ def _open_port(s: PortSettings) -> Any:
         timeout=0,
         write_timeout=0,
     )
+    try:
+        apply_adapter_settings(port, s)
+    except BaseException:
+        port.close()
+        raise
+    return port
+
+
+# Ports whose driver refused low latency: warned of once each, not at every reopen.
+_low_latency_refused: set[str] = set()
+_ADAPTER_ERRORS = (ValueError, OSError, AttributeError, NotImplementedError, termios.error)
+
+
+def apply_adapter_settings(port: Any, s: PortSettings) -> None:
+    """Kernel RS-485 mode and low latency on an open ``port``, as ``s`` asks.
+
+    RS-485 mode refused: ``serial.SerialException`` naming the setting (the
+    line would drive RTS wrongly and talk to nobody). Low latency refused (a
+    pty, a ``socket://`` URL, a driver without it): one warning per port.
+    """
+    if s.rs485 is not None:
+        mode = serial.rs485.RS485Settings(
+            rts_level_for_tx=s.rs485.rts_level_for_tx,
+            rts_level_for_rx=s.rs485.rts_level_for_rx,
+            delay_before_tx=s.rs485.delay_before_tx,
+            delay_before_rx=s.rs485.delay_before_rx,
+        )
+        try:
+            port.rs485_mode = mode
+        except _ADAPTER_ERRORS as exc:
+            reason = _reason(_underlying(exc))
+            raise serial.SerialException(
+                f"rs485: the driver refuses kernel RS-485 mode ({reason})"
+            ) from None
+    if s.low_latency:
+        try:
+            port.set_low_latency_mode(True)
+        except _ADAPTER_ERRORS as exc:
+            if s.url not in _low_latency_refused:
+                _low_latency_refused.add(s.url)
+                reason = (
+                    "it has no such setting"
+                    if isinstance(exc, AttributeError)
+                    else _reason(_underlying(exc))
+                )
+                log.warning(
+                    "low_latency: %s does not take it (%s); the line runs at its own latency",
+                    s.url,
+                    reason,
+                )
+        else:
+            _low_latency_refused.discard(s.url)
 
 
 def is_pty(url: str) -> bool:
@@ -457,6 +528,12 @@ def _raw_fd(instance: Any) -> int:
     except (AttributeError, OSError, ValueError, serial.SerialException):
         return -1
     return fd if isinstance(fd, int) else -1
+
+
+def _underlying(exc: BaseException) -> BaseException:
+    """The OSError that pyserial wrapped in a ValueError, whose errno says more."""
+    inner = exc.__cause__ or exc.__context__
+    return inner if isinstance(inner, OSError | termios.error) else exc
 
 
 def _reason(exc: BaseException) -> str:

@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+from pathlib import Path
 from typing import Any, Literal
 
-from fastapi import FastAPI, Header, Query, Request, Response
+from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.security import HTTPBearer
+from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -30,6 +34,16 @@ from pkwbus.service.runtime import Runtime
 MAX_BODY = 4096
 MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
 MAX_AUDIT_LIMIT = 1000  # rows of one GET /api/v1/audit
+# The status page at / and its script and style: package data, nothing from elsewhere.
+STATIC = Path(__file__).parent / "static"
+
+# Declares the token in the OpenAPI schema (the Authorize button of /docs); the
+# endpoints check it themselves, so that every refusal is counted and audited.
+BEARER = HTTPBearer(
+    auto_error=False,
+    scheme_name="token",
+    description="the write token (writes, the audit log) or the read token (the audit log)",
+)
 
 
 class ParameterReading(BaseModel):
@@ -166,7 +180,9 @@ def create_app(
     write_token: str | None = None,
     read_token: str | None = None,
 ) -> FastAPI:
-    app = FastAPI(
+    # /docs and /redoc with Swagger UI and ReDoc served from the package, no CDN.
+    app = FastAPIOffline(
+        static_url="/assets/docs",
         title="pkwbus",
         version=__version__,
         description="PKW parameter channel bus master: drives, values and parameter jobs",
@@ -240,19 +256,16 @@ def create_app(
         "/api/v1/drives/{drive}/parameters/{parameter}",
         response_model=WriteResult,
         responses=ERRORS,
+        dependencies=[Security(BEARER)],
     )
     async def write_parameter(
-        drive: str,
-        parameter: str,
-        body: WriteBody,
-        request: Request,
-        authorization: str | None = Header(default=None),
+        drive: str, parameter: str, body: WriteBody, request: Request
     ) -> dict[str, Any]:
         order = WriteOrder(body.value, body.index, body.store, body.verify, body.dry_run)
-        caller = Caller(_client(request), authorization)
+        caller = Caller(_client(request), request.headers.get("authorization"))
         return await service.write(drive, parameter, order, caller)
 
-    @app.get("/api/v1/audit", responses=ERRORS)
+    @app.get("/api/v1/audit", responses=ERRORS, dependencies=[Security(BEARER)])
     async def audit_log(
         request: Request, limit: int = Query(default=100, ge=1, le=MAX_AUDIT_LIMIT)
     ) -> list[dict[str, Any]]:
@@ -284,6 +297,12 @@ def create_app(
     async def metrics() -> Response:
         payload = await asyncio.to_thread(generate_latest, runtime.registry)
         return Response(payload, media_type=CONTENT_TYPE_LATEST)
+
+    app.mount("/assets/status", StaticFiles(directory=STATIC), name="status-assets")
+
+    @app.get("/", include_in_schema=False)
+    async def status_page() -> FileResponse:
+        return FileResponse(STATIC / "status.html", media_type="text/html")
 
     @app.get("/api/v1/drives", response_model=list[DriveView])
     async def drives() -> list[DriveView]:

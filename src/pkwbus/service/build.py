@@ -16,6 +16,7 @@ from prometheus_client import CollectorRegistry
 
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
+from pkwbus.link.port import Rs485Mode
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.snapshot import Snapshot
@@ -79,6 +80,8 @@ def _line(line: cfg.Line, port: str) -> Line:
         stopbits=line.stopbits,
         pause=line.pause,
         echo=line.echo,
+        low_latency=line.low_latency,
+        rs485=Rs485Mode(**line.rs485.model_dump()) if line.rs485 is not None else None,
     )
     return Line(
         settings,

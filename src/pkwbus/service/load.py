@@ -18,8 +18,10 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Final
 
+from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol import timing
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
@@ -138,15 +140,34 @@ def _drive_notes(place: str, drive: Drive, catalogs: Catalogs) -> Iterable[str]:
             yield f"{place}.poll[{k}]: {entry.ref} is not in catalog {drive.catalog}: {how}"
 
 
-def check_config_report(config: Config, catalogs: Catalogs | None = None) -> list[str]:
+def port_warnings(line: Line, *, dev: Path = DEV) -> list[str]:
+    """A kernel-numbered USB port (``/dev/ttyUSB0``): recommend its stable by-id name."""
+    if not unstable_name(line.port):
+        return []
+    stable = by_id_names(line.port, dev=dev)
+    use = (
+        f"use {stable[0]}"
+        if stable
+        else "use its /dev/serial/by-id/... name (pkwbus ports lists them)"
+    )
+    return [
+        f"line {line.name}: port {line.port} is numbered by the kernel in the order it finds "
+        f"adapters and may name another adapter after a replug or a reboot: {use}"
+    ]
+
+
+def check_config_report(
+    config: Config, catalogs: Catalogs | None = None, *, dev: Path = DEV
+) -> list[str]:
     """What ``pkwbus check-config`` prints for a valid configuration, line by line."""
     report = [f"listen {config.listen}, audit log {config.audit_db}"]
-    for load in config_load(config):
+    for line, load in zip(config.lines, config_load(config), strict=True):
         report.append(
             f"line {load.line}: {load.protocol} at {load.baudrate} baud, {load.drives} drives, "
             f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "
             f"(capacity {load.capacity:.0f} exchanges/s)"
         )
         report.extend(f"WARN {w}" for w in load.warnings)
+        report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
     report.extend(f"NOTE {n}" for n in catalog_notes(config, catalogs))
     return report

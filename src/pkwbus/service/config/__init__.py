@@ -43,7 +43,7 @@ from pkwbus.service.config.base import (
 )
 from pkwbus.service.config.catalogs import CatalogLike, Catalogs, builtin_catalogs
 from pkwbus.service.config.drive import Drive
-from pkwbus.service.config.line import Line
+from pkwbus.service.config.line import Line, Rs485
 from pkwbus.service.config.loading import load_config, parse_config
 from pkwbus.service.config.model import Api, Config, Listen, parse_listen
 from pkwbus.service.config.parameters import OVERRIDE_FIELDS, ParameterOverrides, Poll
@@ -69,6 +69,7 @@ __all__ = [
     "Listen",
     "ParameterOverrides",
     "Poll",
+    "Rs485",
     "SimPort",
     "builtin_catalogs",
     "load_config",

@@ -91,6 +91,17 @@ Timeout = Annotated[float, _duration(durations.TELEGRAM_TIMEOUT)]
 Pause = Annotated[float, _duration(durations.PAUSE)]
 CharTimeout = Annotated[float, _duration(durations.INTER_CHAR_TIMEOUT)]
 Delay = Annotated[float, _duration(durations.RESPONSE_DELAY)]
+
+
+def _rs485_delay(value: object) -> float:
+    """An RTS delay: the kernel takes whole milliseconds, so 0.5ms would silently be 0."""
+    seconds = parse_duration(value, durations.RS485_DELAY)
+    if abs(seconds * 1000 - round(seconds * 1000)) > 1e-9:
+        raise ValueError(f"{short(value)}: the kernel counts RS-485 delays in whole milliseconds")
+    return seconds
+
+
+Rs485Delay = Annotated[float, PlainValidator(_rs485_delay)]
 Number = Annotated[float, PlainValidator(_number)]
 Notation = Annotated[ParameterRef, PlainValidator(_notation)]
 TypeName = Annotated[ValueType, PlainValidator(_value_type)]

@@ -9,11 +9,13 @@ from pydantic import (
     Field,
     StrictBool,
     StrictInt,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
 
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
+from pkwbus.problems import short
 from pkwbus.protocol import timing
 from pkwbus.protocol.dialects import Dialect, dialect
 from pkwbus.protocol.errors import LocalProtocolError
@@ -32,10 +34,18 @@ from pkwbus.service.config.base import (
     fail,
 )
 from pkwbus.service.config.drive import Drive
-from pkwbus.service.config.fields import CharTimeout, Delay, Name, Pause, Timeout, upper
+from pkwbus.service.config.fields import (
+    CharTimeout,
+    Delay,
+    Name,
+    Pause,
+    Rs485Delay,
+    Timeout,
+    upper,
+)
 from pkwbus.sim.url import SimPort, parse_sim_port
 
-__all__ = ["Line"]
+__all__ = ["Line", "Rs485"]
 
 
 def _check_port(value: str) -> str:
@@ -54,6 +64,15 @@ def _check_port(value: str) -> str:
     return value
 
 
+class Rs485(Model):
+    """Kernel RS-485 mode of a native UART: the driver switches RTS around each transmission."""
+
+    rts_level_for_tx: StrictBool = True
+    rts_level_for_rx: StrictBool = False
+    delay_before_tx: Rs485Delay = 0.0
+    delay_before_rx: Rs485Delay = 0.0
+
+
 class Line(Model):
     """One RS-485 line: its port, framing and timing, and the drives on it."""
 
@@ -70,12 +89,22 @@ class Line(Model):
     response_delay: Delay | None = None
     echo: StrictBool = False
     fc_address_format: FcAddressFormat | None = None
+    low_latency: StrictBool = False  # ask the adapter's driver for 1 ms latency
+    rs485: Rs485 | None = None  # kernel RS-485 mode (native UARTs)
     drives: list[Drive] = Field(min_length=1)
 
     @field_validator("port")
     @classmethod
     def _port(cls, value: str) -> str:
         return _check_port(value)
+
+    @field_validator("rs485")
+    @classmethod
+    def _rs485_on_a_device(cls, value: Rs485 | None, info: ValidationInfo) -> Rs485 | None:
+        port = info.data.get("port")
+        if value is not None and isinstance(port, str) and "://" in port:
+            raise ValueError(f"applies to a serial device such as /dev/ttyS1, not {short(port)}")
+        return value
 
     @field_validator("baudrate")
     @classmethod

@@ -1,0 +1,94 @@
+// The status page: polls the JSON API every 2 s and redraws. No libraries, no
+// network access beyond this server, text only through textContent.
+"use strict";
+
+const PERIOD_MS = 2000;
+const ALARM_BITS = new Set(["trip", "error", "trip_lock", "warning", "fault", "alarm",
+  "voltage_exceeded", "torque_exceeded", "timer_exceeded"]);
+// A value is stale when it is older than this many seconds (3 refreshes of a slow poll).
+const STALE_SECONDS = 30;
+
+function el(tag, attrs, ...children) {
+  const node = document.createElement(tag);
+  for (const [key, value] of Object.entries(attrs || {})) {
+    if (key === "class") node.className = value;
+    else node.setAttribute(key, value);
+  }
+  for (const child of children) {
+    node.append(child instanceof Node ? child : document.createTextNode(String(child)));
+  }
+  return node;
+}
+
+function age(seconds) {
+  if (seconds < 60) return `${Math.max(0, Math.round(seconds))} s`;
+  if (seconds < 3600) return `${Math.round(seconds / 60)} min`;
+  return `${(seconds / 3600).toFixed(1)} h`;
+}
+
+function words(name) {
+  return name.replace(/_/g, " ");
+}
+
+function drawLines(ready, drives) {
+  const body = document.querySelector("#lines tbody");
+  const rows = [];
+  for (const [name, open] of Object.entries(ready.lines || {})) {
+    const mine = drives.filter((d) => d.line === name);
+    const up = mine.filter((d) => d.up).length;
+    rows.push(el("tr", { "data-line": name },
+      el("td", {}, name),
+      el("td", { class: open ? "" : "bad" }, open ? "open" : "closed"),
+      el("td", { class: "num" + (up < mine.length ? " bad" : "") }, `${up} / ${mine.length}`)));
+  }
+  body.replaceChildren(...rows);
+}
+
+function drawDrive(drive, now) {
+  const bits = Object.entries(drive.status || {}).filter(([, on]) => on)
+    .map(([name]) => el("span", { class: ALARM_BITS.has(name) ? "alarm" : "" }, words(name)));
+  const rows = drive.values.map((v) => {
+    const seconds = now - v.timestamp;
+    const value = v.unit ? `${v.value} ${v.unit}` : `${v.value}`;
+    const name = v.index ? `${v.parameter}[${v.index}]` : v.parameter;
+    return el("tr", { class: seconds > STALE_SECONDS || !drive.up ? "stale" : "", "data-parameter": name },
+      el("td", {}, name), el("td", { class: "num value" }, value),
+      el("td", { class: "num age" }, age(seconds)));
+  });
+  const word = drive.status_word === null ? "no status word"
+    : `status word 0x${drive.status_word.toString(16).padStart(4, "0")}`;
+  return el("div", { class: `drive ${drive.up ? "up" : "down"}`, "data-drive": drive.name },
+    el("h3", {}, `${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
+      ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
+    el("div", { class: "bits" }, ...bits),
+    el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"),
+      el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
+}
+
+async function getJson(path) {
+  const response = await fetch(path, { cache: "no-store" });
+  if (!response.ok && response.status !== 503) throw new Error(`${path}: ${response.status}`);
+  return response.json();
+}
+
+async function refresh() {
+  const problem = document.getElementById("problem");
+  try {
+    const [drives, ready] = await Promise.all([getJson("/api/v1/drives"), getJson("/readyz")]);
+    const now = Date.now() / 1000;
+    drawLines(ready, drives);
+    document.getElementById("drives").replaceChildren(
+      el("h2", {}, "Drives"), ...drives.map((d) => drawDrive(d, now)));
+    problem.hidden = ready.writes !== false;
+    problem.textContent = ready.reason || "";
+    document.getElementById("updated").textContent =
+      `updated ${new Date().toLocaleTimeString()}`;
+  } catch (error) {
+    problem.hidden = false;
+    problem.textContent = `no answer from pkwbus (${error.message}): showing the last data`;
+  } finally {
+    setTimeout(refresh, PERIOD_MS);
+  }
+}
+
+refresh();

@@ -1,0 +1,154 @@
+"""The status page at / in a real headless browser (Debian's chromium, driven by Playwright):
+it loads with no internet, shows the simulated drives' values, and follows their changes.
+
+.ci/run installs chromium (deploy/browser-setup); without it, or without Playwright,
+the test is skipped with the reason.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import shutil
+import socket
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import uvicorn
+
+from pkwbus.service.api import create_app
+from tests.api.conftest import service
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+]  # fmt: skip
+DRIVES = [
+    {"name": "fan1", "address": 1, "catalog": "danfoss-fc",
+     "poll": [("3-41", "100ms"), ("16-13", "200ms")], "writable": ["3-41"]},
+    {"name": "fan2", "address": 2, "catalog": "danfoss-fc",
+     "poll": [("3-41", "100ms")], "writable": []},
+]  # fmt: skip
+
+
+class Served:
+    """The service with simulated FC drives, served by uvicorn in a thread of its own."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.ready = threading.Event()
+        self.stop = threading.Event()
+        self.url = ""
+        self.svc: Any = None
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="service", daemon=True)
+
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._main())
+        except BaseException as exc:  # reported to the test
+            self.error = exc
+            self.ready.set()
+
+    async def _main(self) -> None:
+        async with service(self.tmp_path, fc=DRIVES) as svc:
+            self.svc, self.loop = svc, asyncio.get_running_loop()
+            app = create_app(svc.runtime, audit=svc.audit)
+            sock = socket.socket()
+            sock.bind(("127.0.0.1", 0))
+            host, port = sock.getsockname()
+            config = uvicorn.Config(app, log_config=None, lifespan="off", log_level="error")
+            server = uvicorn.Server(config)
+            task = asyncio.create_task(server.serve(sockets=[sock]))
+            while not server.started:
+                await asyncio.sleep(0.01)
+            self.url = f"http://{host}:{port}"
+            self.ready.set()
+            while not self.stop.is_set():
+                await asyncio.sleep(0.05)
+            server.should_exit = True
+            await task
+
+    def set_value(self, address: int, pnu: int, raw: int) -> None:
+        assert self.loop is not None
+        drive = self.svc.sim.drives[address]
+        self.loop.call_soon_threadsafe(drive.set_value, pnu, raw)
+
+
+@pytest.fixture
+def served(tmp_path: Path) -> Iterator[Served]:
+    running = Served(tmp_path)
+    running.thread.start()
+    assert running.ready.wait(60), "the service did not start"
+    if running.error is not None:
+        raise running.error
+    try:
+        yield running
+    finally:
+        running.stop.set()
+        running.thread.join(30)
+
+
+def test_status_page_in_a_browser(served: Served, tmp_path: Path) -> None:
+    sync_api = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no chromium at {CHROMIUM} (deploy/browser-setup installs it)")
+    elsewhere: list[str] = []
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1100, "height": 800})
+
+            def only_here(route: Any) -> None:  # no internet: anything else is refused
+                if route.request.url.startswith(served.url):
+                    route.continue_()
+                else:
+                    elsewhere.append(route.request.url)
+                    route.abort()
+
+            page.route("**/*", only_here)
+            page.goto(served.url + "/")
+            fan1 = page.locator('[data-drive="fan1"]')
+            ramp = fan1.locator('[data-parameter="3-41"] .value')
+            sync_api.expect(ramp).to_have_text(re.compile(r"^\d+(\.\d+)? s$"), timeout=20_000)
+            sync_api.expect(fan1.locator(".state")).to_have_text("up")
+            sync_api.expect(fan1.locator('[data-parameter="16-13"] .value')).to_have_text(
+                re.compile(r" Hz$")
+            )
+            sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
+            sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
+            sync_api.expect(fan1.locator(".bits")).to_contain_text("running")
+
+            served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
+            sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)
+
+            shot = tmp_path / "status-page.png"
+            page.screenshot(path=str(shot), full_page=True)
+            print(f"\nstatus page screenshot: {shot}")
+            wanted = os.environ.get("PKWBUS_STATUS_SCREENSHOT")  # make status-page
+            if wanted:
+                shutil.copyfile(shot, wanted)
+                print(f"copied to {wanted}")
+        finally:
+            browser.close()
+    assert elsewhere == []
+
+
+async def test_status_page_and_assets_are_served_locally(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        page = await svc.client.get("/")
+        assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+        assets = re.findall(r"""(?:src|href)="([^"]+)""", page.text)
+        assert {"/assets/status/status.js", "/assets/status/status.css"} <= set(assets)
+        for asset in assets:
+            assert asset.startswith("/"), asset  # nothing from another host
+            assert (await svc.client.get(asset)).status_code == 200, asset
+        script = (await svc.client.get("/assets/status/status.js")).text
+        assert "http://" not in script and "https://" not in script
+        assert "/api/v1/drives" in script
