@@ -375,7 +375,19 @@ def pip_mounts(state: Path) -> list[str]:
     return mounts
 
 
+def image_id(ref: str) -> str:
+    out = podman("image", "inspect", "--format", "{{.Id}}", ref, check=False)
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def drop_replaced(ref: str, before: str) -> None:
+    """Remove the image a rebuild untagged, so runs do not pile up old images."""
+    if before and image_id(ref) != before:
+        podman("rmi", before, check=False)
+
+
 def build(state: Path) -> None:
+    before = image_id(IMAGE)
     args = [
         "build",
         "--format",
@@ -393,6 +405,7 @@ def build(state: Path) -> None:
     proc = podman(*args, check=False, timeout=900)
     if proc.returncode != 0:
         raise CheckFailed("podman build failed:\n" + (proc.stdout + proc.stderr)[-4000:])
+    drop_replaced(IMAGE, before)
 
 
 # --- the image ------------------------------------------------------------------------
@@ -1103,7 +1116,9 @@ def prometheus_image(state: Path) -> None:
         'ENTRYPOINT ["/bin/prometheus"]\n'
         'CMD ["--config.file=/etc/prometheus/prometheus.yml", "--storage.tsdb.path=/prometheus"]\n'
     )
+    before = image_id(PROM_IMAGE)
     podman("build", "--format", "docker", "--pull=never", "-t", PROM_IMAGE, str(ctx), timeout=300)
+    drop_replaced(PROM_IMAGE, before)
 
 
 def check_compose(state: Path) -> None:
