@@ -265,6 +265,17 @@ def check_kubernetes() -> None:
             problem(f"{K8S}/kustomization.yaml: resource {res} does not exist")
             continue
         docs += [(K8S / res, d) for d in load_yaml_docs(K8S / res)]
+    # The gateways' ConfigMaps come from files through configMapGenerator.
+    for gen in kustomization.get("configMapGenerator", []):
+        data = {}
+        for spec in gen.get("files", []):
+            key, _, src = spec.rpartition("=")
+            if not (K8S / src).is_file():
+                problem(f"{K8S}/kustomization.yaml: configMapGenerator {gen['name']}: no {src}")
+                continue
+            data[key or Path(src).name] = (K8S / src).read_text()
+        cm = {"kind": "ConfigMap", "metadata": {"name": gen["name"]}, "data": data}
+        docs.append((K8S / "kustomization.yaml", cm))
     by_kind: dict[str, dict[str, dict[str, Any]]] = {}
     for _, d in docs:
         by_kind.setdefault(d["kind"], {})[d["metadata"]["name"]] = d
