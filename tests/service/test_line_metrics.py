@@ -152,3 +152,12 @@ lines:
         mine = {labels for labels in found if ("drive", drive.name) in labels}
         assert len(mine) == len(_rejections(drive.pkw_dialect)), drive.name
     assert set(found.values()) == {0.0}
+
+
+def test_every_fault_series_has_a_fault_code_prometheus_keeps() -> None:
+    """An empty label value is no label to Prometheus: "no change rights" has no fault
+    number, and its series still carries a fault_code a legend can show."""
+    registry = CollectorRegistry()
+    ServiceMetrics(registry).for_line("l", {d.name: d for d in DIALECTS.values()})
+    codes = {dict(labels)["fault_code"] for labels in _fault_series(registry)}
+    assert codes and "" not in codes

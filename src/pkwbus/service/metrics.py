@@ -66,9 +66,14 @@ _LABEL_OF_TYPE: dict[type[Outcome], JobOutcome] = {
 }
 
 
+# The fault_code of an answer that carries no fault number ("no change rights"):
+# an empty label value would be no label at all to Prometheus, and a blank legend.
+NO_FAULT_NUMBER = "-"
+
+
 def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
     """The ``fault_code`` and ``fault`` labels of ``pkwbus_pkw_faults_total``."""
-    return ("" if fault is None else str(fault), short)
+    return (NO_FAULT_NUMBER if fault is None else str(fault), short)
 
 
 def outcome_label(outcome: Outcome) -> JobOutcome:
