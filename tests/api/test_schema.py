@@ -32,6 +32,9 @@ from tests.api.conftest import AUTH, USS_DRIVES, service
 BUDGET = 45.0  # seconds for the whole run, checked as it goes
 DRIVES = [None, "fan1", "fan2", "pump1"]
 PARAMETERS = [None, "3-41", "3-42", "1-20", "16-13", "15-30", "15-30[3]", "p1120", "r0021"]
+# Values every writable parameter here holds exactly (writes refuse what they would
+# round), so that some generated writes can succeed; None keeps the generated value.
+VALUES = [None, 5, 10, 20.5]
 
 
 class Running:
@@ -149,8 +152,11 @@ def make_check(
         drive=st.sampled_from(DRIVES),
         parameter=st.sampled_from(PARAMETERS),
         authed=st.booleans(),
+        value=st.sampled_from(VALUES),
     )
-    def check(case: Any, drive: str | None, parameter: str | None, authed: bool) -> None:
+    def check(
+        case: Any, drive: str | None, parameter: str | None, authed: bool, value: float | None
+    ) -> None:
         if time.monotonic() > deadline:
             return
         if case.path_parameters is not None:
@@ -158,6 +164,8 @@ def make_check(
                 case.path_parameters["drive"] = drive
             if parameter and "parameter" in case.path_parameters:
                 case.path_parameters["parameter"] = parameter
+        if value is not None and isinstance(case.body, dict) and "value" in case.body:
+            case.body["value"] = value
         headers = {"Authorization": f"Bearer {AUTH_TOKEN}"} if authed else None
         response = case.call(base_url=url, session=session, headers=headers, timeout=30)
         seen.setdefault(name, set()).add(response.status_code)
