@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import enum
 import json
 import sys
 from collections.abc import Callable
@@ -13,6 +12,7 @@ from typing import Any
 from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
@@ -20,17 +20,19 @@ from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
-
-class Exit(enum.IntEnum):
-    """The exit codes of ``pkwbus``, as README.md lists them."""
-
-    OK = 0
-    REJECTED = 1
-    BAD_INPUT = 2
-    NO_ANSWER = 3
-    PORT = 4
-    BUG = 70  # EX_SOFTWARE: an exception pkwbus did not expect
-    INTERRUPTED = 130  # 128 + SIGINT
+__all__ = [
+    "DEFAULT_CATALOG",
+    "CommandError",
+    "Exit",
+    "add_drive_options",
+    "add_line_options",
+    "baudrate_option",
+    "build_line",
+    "build_target",
+    "duration_option",
+    "emit_json",
+    "int_option",
+]
 
 
 class CommandError(Exception):
