@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Self
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import (
     BeforeValidator,
@@ -82,6 +82,20 @@ class Line(Model):
     def _baudrate(cls, value: int) -> int:
         return check_baudrate(value)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _drives_on_this_protocol(cls, data: Any) -> Any:
+        """Each drive learns the line's protocol before it is validated (a drive that
+        names one itself is told it is the line's setting)."""
+        if not isinstance(data, dict) or not isinstance(data.get("drives"), list):
+            return data
+        given = data.get("protocol")
+        if not isinstance(given, str) or given not in {p.value for p in BusProtocol}:
+            return data  # the line's own error says what is wrong with it
+        protocol = BusProtocol(given)
+        drives = [{"protocol": protocol, **d} if isinstance(d, dict) else d for d in data["drives"]]
+        return {**data, "drives": drives}
+
     @model_validator(mode="after")
     def _drives_fit_line(self) -> Self:
         problems = self._line_problems()
@@ -90,8 +104,6 @@ class Line(Model):
         problems += self._address_problems()
         if problems:
             raise fail(problems)
-        for drive in self.drives:
-            drive._protocol = self.protocol
         return self
 
     def _line_problems(self) -> list[Place]:
