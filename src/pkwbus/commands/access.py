@@ -146,10 +146,7 @@ def _report(
 def run_read(args: argparse.Namespace) -> int:
     target, ref, fmt = _resolve(args)
     try:
-        if fmt.is_text:
-            req = pkw.read_text(target.dialect, ref.pnu, ref.index or 0)
-        else:
-            req = pkw.read(target.dialect, ref.pnu, ref.index)
+        req = pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None

@@ -16,6 +16,7 @@ from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import buses
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
@@ -128,12 +129,10 @@ def add_drive_options(parser: argparse.ArgumentParser, *, address: bool = True) 
 
 
 def _pkw_words(text: str) -> int | None:
-    if text in ("127", "variable"):
-        return None
     try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not 0, 3, 4 or 127") from None
+        return buses.pkw_words(text, text=True)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def build_target(args: argparse.Namespace, address: int | None = None) -> DriveTarget:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pkwbus import link
+from pkwbus import limits, link
 from pkwbus.commands.common import (
     CommandError,
     Exit,
@@ -18,11 +18,16 @@ from pkwbus.commands.common import (
 from pkwbus.link import PortError
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, Failure, Reply
+from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.protocol.telegram import Protocol, split_block
+from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
-ADDRESS_RANGE = {Protocol.FC: (1, 126), Protocol.USS: (0, 30)}
+__all__ = [
+    "add_parsers",
+    "parse_addresses",
+    "run_scan",
+]
 
 
 def add_parsers(sub: Any) -> None:
@@ -35,25 +40,13 @@ def add_parsers(sub: Any) -> None:
 
 def parse_addresses(text: str, low: int, high: int) -> list[int]:
     """``1-126`` or ``1,2,5-9``, each address ``low``-``high`` (the protocol's range)."""
-    found: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        first_text, sep, last_text = part.partition("-")
-        try:
-            first, last = int(first_text), int(last_text) if sep else int(first_text)
-        except ValueError:
-            raise CommandError(
-                f"{text[:40]!r} is not a list of addresses like 1-126 or 1,2,5-9", Exit.BAD_INPUT
-            ) from None
-        if first > last:
-            raise CommandError(f"address range {part} runs backwards", Exit.BAD_INPUT)
-        for address in (first, last):
-            if not low <= address <= high:
-                raise CommandError(
-                    f"--addresses: {address} is outside {low}-{high}", Exit.BAD_INPUT
-                )
-        found.extend(range(first, last + 1))
-    return sorted(set(found))
+    try:
+        found = limits.parse_addresses(text, low, high)
+    except ValueError as exc:
+        raise CommandError(f"--addresses: {exc}", Exit.BAD_INPUT) from None
+    if not found:
+        raise CommandError("--addresses: no address given", Exit.BAD_INPUT)
+    return found
 
 
 async def _scan(args: argparse.Namespace, addresses: list[int]) -> list[dict[str, Any]]:
@@ -86,9 +79,9 @@ def _describe(address: int, target: DriveTarget, reply: Reply) -> dict[str, Any]
         block = split_block(reply.data, target.response_shape(len(reply.data)))
     except RemoteProtocolError:
         return entry
-    if block.pzd:
-        entry["status_word"] = block.pzd[0]
-        entry["status"] = status_bits(block.pzd[0], target.profile)
+    if block.status_word is not None:
+        entry["status_word"] = block.status_word
+        entry["status"] = status_bits(block.status_word, target.profile)
     return entry
 
 
@@ -103,7 +96,7 @@ def _print(entry: dict[str, Any]) -> None:
 
 def run_scan(args: argparse.Namespace) -> int:
     protocol = Protocol(args.protocol)
-    low, high = ADDRESS_RANGE[protocol]
+    low, high = address_range(protocol, FcAddressFormat(args.address_format))
     if args.addresses:
         addresses = parse_addresses(args.addresses, low, high)
     else:

@@ -119,8 +119,8 @@ class PkwTransaction:
         target = self.target
         try:
             block = split_block(reply.data, target.response_shape(len(reply.data)))
-            if block.pzd:
-                self.tally.status_word = block.pzd[0]
+            if block.status_word is not None:
+                self.tally.status_word = block.status_word
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
             return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))

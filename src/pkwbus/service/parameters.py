@@ -143,9 +143,7 @@ class ParameterService:
     ) -> pkw.PkwRequest:
         d = entry.target.dialect
         try:
-            if fmt.is_text:
-                return pkw.read_text(d, ref.pnu, ref.index or 0)
-            return pkw.read(d, ref.pnu, ref.index)
+            return pkw.read_parameter(d, ref.pnu, ref.index, text=fmt.is_text)
         except LocalProtocolError as exc:
             raise ApiError(404, "not_encodable", str(exc)) from None
 

@@ -15,6 +15,7 @@ from pydantic import (
 )
 
 from pkwbus.catalog import ParameterSpec
+from pkwbus.protocol.buses import default_dialect
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.params import (
     ParameterRef,
@@ -23,7 +24,7 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
 from pkwbus.protocol.telegram import Protocol as BusProtocol
-from pkwbus.service.config.base import DIALECTS_BY_PROTOCOL, Model, Place, fail
+from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
 from pkwbus.service.config.fields import Name, Notation, PkwWords
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
@@ -134,7 +135,7 @@ class Drive(Model):
     @property
     def pkw_dialect(self) -> Dialect:
         """The dialect, given or the protocol's default."""
-        return dialect(self.dialect or DIALECTS_BY_PROTOCOL[self.protocol][0])
+        return dialect(self.dialect or default_dialect(self.protocol))
 
     @property
     def layout(self) -> IndLayout:

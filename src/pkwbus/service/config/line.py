@@ -15,6 +15,7 @@ from pydantic import (
 
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.protocol import timing
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, address_range, default_dialect
 from pkwbus.protocol.dialects import Dialect, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -23,14 +24,7 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import FcAddressFormat
 from pkwbus.protocol.telegram import Protocol as BusProtocol
-from pkwbus.service.config.base import (
-    DIALECTS_BY_PROTOCOL,
-    PORT_SCHEMES,
-    USS_MAX_ADDRESS,
-    Model,
-    Place,
-    fail,
-)
+from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import CharTimeout, Delay, Name, Pause, Timeout, upper
 from pkwbus.sim.url import SimPort, parse_sim_port
@@ -154,9 +148,7 @@ class Line(Model):
 
     @property
     def address_range(self) -> tuple[int, int]:
-        if self.protocol is BusProtocol.USS:
-            return (0, USS_MAX_ADDRESS)
-        return (1, 31) if self.address_format is FcAddressFormat.RANGE_1_31 else (1, 126)
+        return address_range(self.protocol, self.address_format)
 
     @property
     def sim(self) -> SimPort | None:
@@ -196,7 +188,7 @@ class Line(Model):
 
 def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
     """The dialect, IND layout and lengths a simulator would need for ``drive``."""
-    name = drive.dialect or DIALECTS_BY_PROTOCOL[protocol][0]
+    name = drive.dialect or default_dialect(protocol)
     layout = drive.ind_layout or dialect(name).default_ind_layout
     if protocol is BusProtocol.FC:
         return (name, layout)
@@ -228,7 +220,7 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
                 )
     elif drive.pkw_words == 0 and (drive.poll or drive.writable):
         problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
-    problems += _pnu_problems(drive, dialect(drive.dialect or allowed[0]))
+    problems += _pnu_problems(drive, drive.pkw_dialect)
     return problems
 
 
