@@ -10,6 +10,20 @@ from __future__ import annotations
 
 from typing import Final
 
+__all__ = [
+    "BAUDRATES",
+    "MAX_ADDRESS",
+    "MAX_AUDIT_LIMIT",
+    "MAX_LAG_TELEGRAMS",
+    "MAX_RETRIES",
+    "MAX_TCP_PORT",
+    "check_baudrate",
+    "check_int",
+    "check_port_url",
+    "parse_addresses",
+    "parse_int",
+]
+
 # The standard RS-485 rates FC and USS drives are set to, 1200 baud up to 187.5 kbaud.
 BAUDRATES: Final = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 76800, 93750, 115200, 187500)
 MAX_RETRIES: Final = 100  # repeats of one request after a missing or bad answer
@@ -36,6 +50,27 @@ def parse_int(text: str, low: int, high: int) -> int:
         shown = text if len(text) <= 40 else text[:37] + "..."
         raise ValueError(f"{shown!r} is not a whole number {low}-{high}")
     return check_int(value, low, high)
+
+
+def parse_addresses(text: str, low: int, high: int) -> list[int]:
+    """``1,2,5`` or ``1-3,7`` as the sorted addresses, each ``low``-``high``.
+
+    Empty items are skipped (``""`` is no address). ValueError for an item that
+    is not a number or a range, a range that runs backwards, or an address
+    outside ``low``-``high`` (checked before any range is expanded).
+    """
+    found: set[int] = set()
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        first, sep, last = (x.strip() for x in part.partition("-"))
+        if not first.isdigit() or (sep and not last.isdigit()):
+            raise ValueError(f"{part[:40]!r} is not an address or a range like 1-3")
+        for address in (first, last or first):
+            if len(address) > 3 or not low <= int(address) <= high:
+                raise ValueError(f"address {address[:40]} is outside {low}-{high}")
+        if int(first) > int(last or first):
+            raise ValueError(f"address range {part} runs backwards")
+        found.update(range(int(first), int(last or first) + 1))
+    return sorted(found)
 
 
 def check_baudrate(value: int) -> int:

@@ -128,7 +128,7 @@ def _known_keys(loc: Sequence[int | str], root: type[BaseModel]) -> list[str]:
             if inner is None:
                 return []
             model = inner
-    return list(model.model_fields)
+    return [name for name, info in model.model_fields.items() if not info.exclude]
 
 
 def _model_in(annotation: object) -> type[BaseModel] | None:

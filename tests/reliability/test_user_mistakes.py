@@ -154,7 +154,7 @@ MISTAKES: dict[str, tuple[str, str]] = {
     ),
     "scan addresses exhaust memory": (
         "scan --port {silent} --addresses 1-99999999999999",
-        "--addresses: 99999999999999 is outside 1-126",
+        "--addresses: address 99999999999999 is outside 1-126",
     ),
     "gateway port out of range": (
         "read --port socket://127.0.0.1:99999 --address 1 16-13",
@@ -198,7 +198,7 @@ MISTAKES: dict[str, tuple[str, str]] = {
     ),
     "simulate pkw words": (
         "simulate --listen tcp://127.0.0.1:0 --pkw-words many",
-        "--pkw-words: 'many' is not 0, 3, 4 or variable",
+        "--pkw-words: 'many' is not a PKW length",
     ),
     "check-config reads /dev/zero": (
         "check-config /dev/zero",

@@ -360,6 +360,9 @@ EXPECTED: dict[str, str] = {
     ),
     "unknown_dialect": "lines[0].drives[0].dialect: unknown dialect 'abb'",
     "unknown_drive_key": "lines[0].drives[0].pol: is not a known setting; did you mean poll?",
+    "protocol_on_drive": (
+        "lines[0].drives[0].protocol: is the line's setting: give the protocol once, on the line"
+    ),
     "unknown_scheme": "lines[0].port: unknown port URL scheme 'tcp'",
     "unknown_top_key": "lisen: is not a known setting; did you mean listen?",
     "wrong_dialect": "lines[0].drives[0].dialect: uss is not for protocol fc (use fc)",

@@ -9,12 +9,13 @@ import pytest
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.outcomes import metric_label
 from pkwbus.master.transaction import Answered, Rejected, Tally, TimedOut
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
-from pkwbus.service.metrics import ServiceMetrics, outcome_label
+from pkwbus.service.metrics import ServiceMetrics
 
 FAULTS = "pkwbus_pkw_faults_total"
 
@@ -58,10 +59,10 @@ def test_telegram_error_kinds_start_at_zero() -> None:
 
 def test_outcome_labels() -> None:
     response = pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD)
-    assert outcome_label(Answered(response)).value == "ok"
-    assert outcome_label(Rejected(None, "", "")).value == "rejected"
-    assert outcome_label(Cancelled("")).value == "cancelled"
-    assert outcome_label(TimedOut("")).value == "timeout"
+    assert metric_label(Answered(response)).value == "ok"
+    assert metric_label(Rejected(None, "", "")).value == "rejected"
+    assert metric_label(Cancelled("")).value == "cancelled"
+    assert metric_label(TimedOut("")).value == "timeout"
 
 
 def _fault_series(registry: CollectorRegistry) -> dict[frozenset[tuple[str, str]], float]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import math
 import os
-import re
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
@@ -20,17 +19,28 @@ from typing import Any, Literal, Self
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pkwbus.problems import plain
+from pkwbus.protocol.notation import MAX_PNU, ParameterRef, parse_parameter
+from pkwbus.protocol.value_types import CONVERSION_FACTORS, Scaling
 from pkwbus.yamlfile import YamlError, load_yaml
+
+__all__ = [
+    "CONVERSION_INDEXES",
+    "Catalog",
+    "CatalogError",
+    "Dialect",
+    "ParameterSpec",
+    "ValueType",
+    "available_catalogs",
+    "load_catalog",
+    "load_catalog_file",
+]
 
 ValueType = Literal["u16", "i16", "u32", "i32", "f32", "text"]
 Dialect = Literal["fc", "uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"]
 
-#: Danfoss conversion indexes: 10**index for -7..6, plus the special indexes
-#: 67 (1/60), 74 (3600), 75 (3 600 000) and 100 (1) (Danfoss FC 300 Design
-#: Manual, conversion index).
-CONVERSION_INDEXES: frozenset[int] = frozenset(range(-7, 7)) | {67, 74, 75, 100}
+#: Danfoss conversion indexes (the protocol's table of their factors).
+CONVERSION_INDEXES: frozenset[int] = frozenset(CONVERSION_FACTORS)
 
-MAX_PNU = 65535
 _DATA_PACKAGE = "pkwbus.catalog"
 _DATA_DIR = "data"
 _SUFFIX = ".yaml"
@@ -90,8 +100,8 @@ class ParameterSpec(BaseModel):
 
 
 def _check_scaling(spec: ParameterSpec) -> None:
-    if spec.conversion is not None and spec.conversion not in CONVERSION_INDEXES:
-        raise ValueError(f"conversion index {spec.conversion} is not one of -7..6, 67, 74, 75, 100")
+    if spec.conversion is not None:
+        Scaling.conversion(spec.conversion)  # a LocalProtocolError (ValueError) naming them
     if spec.conversion is not None and spec.scale is not None:
         raise ValueError("give either conversion or scale, not both")
     if spec.scale is not None and (spec.scale == 0 or not math.isfinite(spec.scale)):
@@ -140,32 +150,17 @@ def _source_problem(spec: ParameterSpec, sources: Mapping[str, str]) -> str | No
 
 # --- parameter keys ---------------------------------------------------------
 
-_DANFOSS_KEY = re.compile(r"([0-9]{1,2})-([0-9]{2})")
-_PLAIN_KEY = re.compile(r"[0-9]{1,5}")
-_SIEMENS_KEY = re.compile(r"[rRpP]([0-9]{1,5})")
+
+def _key_ref(text: str) -> ParameterRef:
+    """A catalog key in the notation everything else uses: "16-13", "1613", "r0021"."""
+    if "[" in text:
+        raise ValueError(f"{text!r}: a catalog key names a parameter, not an index")
+    return parse_parameter(text)  # ParameterNotationError is a ValueError
 
 
 def _parse_key(text: str) -> int:
-    """PNU of a catalog key: "16-13" -> 1613, "1613" -> 1613, "r0021"/"p1082" -> 21/1082.
-
-    Kept as one small function so that the shared notation parser from
-    pkwbus.protocol.params can replace it later.
-    """
-    key = text.strip()
-    if "[" in key:
-        raise ValueError(f"{text!r}: a catalog key names a parameter, not an index")
-    match = _DANFOSS_KEY.fullmatch(key)
-    if match:
-        return int(match[1]) * 100 + int(match[2])
-    match = _PLAIN_KEY.fullmatch(key) or _SIEMENS_KEY.fullmatch(key)
-    if match is None:
-        raise ValueError(
-            f"{text!r} is not a parameter number: write it as '16-13', '1613', 'r0021' or 'p1082'"
-        )
-    pnu = int(match[1] if match.lastindex else match[0])
-    if pnu > MAX_PNU:
-        raise ValueError(f"{text!r}: PNU {pnu} is above {MAX_PNU}")
-    return pnu
+    """PNU of a catalog key: "16-13" -> 1613, "1613" -> 1613, "r0021"/"p1082" -> 21/1082."""
+    return _key_ref(text).pnu
 
 
 # --- YAML -------------------------------------------------------------------
@@ -207,7 +202,7 @@ def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
     place = f'parameters."{_key_text(key)}"'
     where = f"{origin}: {place}"
     try:
-        pnu = _parse_key(_key_text(key))
+        ref = _key_ref(_key_text(key))
     except ValueError as exc:
         raise CatalogError(f"{where}: {exc}") from None
     if not isinstance(entry, dict):
@@ -215,11 +210,8 @@ def _parse_entry(key: object, entry: object, origin: str) -> ParameterSpec:
     for derived in ("pnu", "prefix"):
         if derived in entry:
             raise CatalogError(f"{where}.{derived}: it comes from the key; remove this field")
-    prefix = _SIEMENS_KEY.fullmatch(_key_text(key).strip())
     try:
-        return ParameterSpec.model_validate(
-            {**entry, "pnu": pnu, "prefix": prefix[0][0].lower() if prefix else ""}
-        )
+        return ParameterSpec.model_validate({**entry, "pnu": ref.pnu, "prefix": ref.prefix})
     except ValidationError as exc:
         raise CatalogError(_format_errors(origin, place, exc)) from None
 

@@ -20,15 +20,9 @@ from pkwbus.commands.common import (
     emit_json,
 )
 from pkwbus.link import PortError
+from pkwbus.master.outcomes import Answered, Outcome, command_failure
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import (
-    Answered,
-    LineFailed,
-    Outcome,
-    PkwTransaction,
-    Rejected,
-    TimedOut,
-)
+from pkwbus.master.transaction import PkwTransaction
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -40,6 +34,8 @@ from pkwbus.protocol.params import (
     parse_type,
 )
 from pkwbus.protocol.telegram import Protocol
+
+__all__ = ["add_parsers", "drive_name", "run_read", "run_write"]
 
 
 def add_parsers(sub: Any) -> None:
@@ -115,14 +111,10 @@ async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRe
 
 
 def _finish(outcome: Outcome) -> pkw.PkwResponse:
-    if isinstance(outcome, Rejected):
-        code = "" if outcome.fault is None else f"fault {outcome.fault}: "
-        raise CommandError(
-            f"{code}{outcome.text}", Exit.REJECTED, kind="rejected", fault=outcome.fault
-        )
-    if isinstance(outcome, TimedOut | LineFailed):
-        raise CommandError(f"no valid answer: {outcome.reason}", Exit.NO_ANSWER, kind="timeout")
-    assert isinstance(outcome, Answered)
+    failure = command_failure(outcome)
+    if failure is not None:
+        raise CommandError(failure.message, failure.code, kind=failure.kind, fault=failure.fault)
+    assert isinstance(outcome, Answered)  # the one outcome without a failure
     return outcome.response
 
 
@@ -154,10 +146,7 @@ def _report(
 def run_read(args: argparse.Namespace) -> int:
     target, ref, fmt = _resolve(args)
     try:
-        if fmt.is_text:
-            req = pkw.read_text(target.dialect, ref.pnu, ref.index or 0)
-        else:
-            req = pkw.read(target.dialect, ref.pnu, ref.index)
+        req = pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import enum
 import json
 import sys
 from collections.abc import Callable
@@ -13,24 +12,28 @@ from typing import Any
 from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import buses
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
-
-class Exit(enum.IntEnum):
-    """The exit codes of ``pkwbus``, as README.md lists them."""
-
-    OK = 0
-    REJECTED = 1
-    BAD_INPUT = 2
-    NO_ANSWER = 3
-    PORT = 4
-    BUG = 70  # EX_SOFTWARE: an exception pkwbus did not expect
-    INTERRUPTED = 130  # 128 + SIGINT
+__all__ = [
+    "DEFAULT_CATALOG",
+    "CommandError",
+    "Exit",
+    "add_drive_options",
+    "add_line_options",
+    "baudrate_option",
+    "build_line",
+    "build_target",
+    "duration_option",
+    "emit_json",
+    "int_option",
+]
 
 
 class CommandError(Exception):
@@ -126,12 +129,10 @@ def add_drive_options(parser: argparse.ArgumentParser, *, address: bool = True) 
 
 
 def _pkw_words(text: str) -> int | None:
-    if text in ("127", "variable"):
-        return None
     try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not 0, 3, 4 or 127") from None
+        return buses.pkw_words(text, text=True)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def build_target(args: argparse.Namespace, address: int | None = None) -> DriveTarget:

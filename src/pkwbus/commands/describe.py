@@ -24,8 +24,9 @@ from pkwbus.commands.common import (
 )
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
+from pkwbus.master.outcomes import Answered, Rejected, command_failure
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, LineFailed, PkwTransaction, TimedOut
+from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError
@@ -38,6 +39,8 @@ from pkwbus.protocol.params import (
     decode_value,
     parse_parameter,
 )
+
+__all__ = ["ELEMENTS", "add_parsers", "describe", "run_describe"]
 
 ELEMENTS = (1, 2, 4, 6, 7, 8)
 
@@ -75,11 +78,14 @@ async def _element(
     outcome = await line.run(
         PkwTransaction(target, request, retries=args.retries, deadline=deadline)
     )
-    if isinstance(outcome, TimedOut | LineFailed):
-        raise CommandError(f"no valid answer: {outcome.reason}", Exit.NO_ANSWER)
-    if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):
-        return outcome.response
-    return None  # rejected: this element is not available
+    if isinstance(outcome, Answered):
+        response = outcome.response
+        return response if isinstance(response, pkw.DescriptionResponse) else None
+    if isinstance(outcome, Rejected):
+        return None  # this element is not available
+    failure = command_failure(outcome)
+    assert failure is not None  # only an answer has none
+    raise CommandError(failure.message, failure.code)
 
 
 def describe(found: dict[int, pkw.DescriptionResponse | None]) -> dict[str, Any]:

@@ -32,12 +32,14 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, PkwTransaction, Reply
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.protocol.telegram import Protocol, split_block
+from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
-ADDRESS_RANGE = {Protocol.FC: (1, 126), Protocol.USS: (0, 30)}
+__all__ = ["add_parsers", "parse_addresses", "run_scan"]
+
 # The rates drives of these protocols take (Danfoss FC parameter 8-32; USS), fastest first.
 AUTO_BAUDRATES = tuple(sorted((b for b in limits.BAUDRATES if b <= 115200), reverse=True))
 PARITIES = ("E", "O", "N")
@@ -65,25 +67,13 @@ def add_parsers(sub: Any) -> None:
 
 def parse_addresses(text: str, low: int, high: int) -> list[int]:
     """``1-126`` or ``1,2,5-9``, each address ``low``-``high`` (the protocol's range)."""
-    found: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        first_text, sep, last_text = part.partition("-")
-        try:
-            first, last = int(first_text), int(last_text) if sep else int(first_text)
-        except ValueError:
-            raise CommandError(
-                f"{text[:40]!r} is not a list of addresses like 1-126 or 1,2,5-9", Exit.BAD_INPUT
-            ) from None
-        if first > last:
-            raise CommandError(f"address range {part} runs backwards", Exit.BAD_INPUT)
-        for address in (first, last):
-            if not low <= address <= high:
-                raise CommandError(
-                    f"--addresses: {address} is outside {low}-{high}", Exit.BAD_INPUT
-                )
-        found.extend(range(first, last + 1))
-    return sorted(set(found))
+    try:
+        found = limits.parse_addresses(text, low, high)
+    except ValueError as exc:
+        raise CommandError(f"--addresses: {exc}", Exit.BAD_INPUT) from None
+    if not found:
+        raise CommandError("--addresses: no address given", Exit.BAD_INPUT)
+    return found
 
 
 def parse_baudrates(text: str) -> list[int]:
@@ -206,9 +196,9 @@ def _status(target: DriveTarget, reply: Reply) -> dict[str, Any]:
         block = split_block(reply.data, target.response_shape(len(reply.data)))
     except RemoteProtocolError:
         return entry
-    if block.pzd:
-        entry["status_word"] = block.pzd[0]
-        entry["status"] = status_bits(block.pzd[0], target.profile)
+    if block.status_word is not None:
+        entry["status_word"] = block.status_word
+        entry["status"] = status_bits(block.status_word, target.profile)
     return entry
 
 
@@ -269,7 +259,7 @@ def summary(
 
 def run_scan(args: argparse.Namespace) -> int:
     protocol = Protocol(args.protocol)
-    low, high = ADDRESS_RANGE[protocol]
+    low, high = address_range(protocol, FcAddressFormat(args.address_format))
     if args.addresses:
         addresses = parse_addresses(args.addresses, low, high)
     else:

@@ -6,10 +6,13 @@ import asyncio
 import enum
 from dataclasses import dataclass, field
 
+from pkwbus.master.outcomes import Cancelled, JobOutcome, Outcome
 from pkwbus.master.snapshot import Reading
-from pkwbus.master.transaction import Outcome, Tally
+from pkwbus.master.transaction import Tally
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
+
+__all__ = ["Cancelled", "Job", "JobKind", "JobOutcome", "JobResult", "Priority"]
 
 
 class JobKind(enum.StrEnum):
@@ -23,22 +26,6 @@ class Priority(enum.IntEnum):
     WRITE = 0
     READ = 1
     POLL = 2
-
-
-class JobOutcome(enum.StrEnum):
-    """The ``outcome`` label of ``pkwbus_jobs_total``."""
-
-    OK = "ok"
-    REJECTED = "rejected"
-    TIMEOUT = "timeout"
-    CANCELLED = "cancelled"
-
-
-@dataclass(frozen=True, slots=True)
-class Cancelled(Outcome):
-    """The job never finished: the service stopped or the job was withdrawn."""
-
-    reason: str
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,6 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import (
+    DIALECTS_BY_PROTOCOL,
+    address_range,
+    default_dialect,
+    dialect_fits,
+)
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pzd import MONITORING_CTW, Profile
@@ -19,6 +25,10 @@ from pkwbus.protocol.telegram import (
     frame,
     uss_adr,
 )
+
+__all__ = [
+    "DriveTarget",
+]
 
 
 @dataclass(frozen=True)
@@ -38,8 +48,9 @@ class DriveTarget:
         if self.protocol is Protocol.FC:
             adr = fc_adr(self.address, self.fc_format)
         else:
-            if not 0 <= self.address <= 30:
-                raise LocalProtocolError(f"USS address {self.address} is outside 0-30")
+            low, high = address_range(self.protocol)
+            if not low <= self.address <= high:
+                raise LocalProtocolError(f"USS address {self.address} is outside {low}-{high}")
             adr = uss_adr(self.address)
         object.__setattr__(self, "adr", adr)
         # PZD: control word with bit 10 = 0 (never take control), reference 0.
@@ -59,15 +70,11 @@ class DriveTarget:
         fc_format: FcAddressFormat | str = FcAddressFormat.RANGE_1_126,
     ) -> DriveTarget:
         proto = Protocol(protocol)
-        d = dialect(dialect_name or proto.value)
-        if proto is Protocol.FC:
-            if d.name != "fc":
-                raise LocalProtocolError(f"an FC line speaks the fc dialect, not {d.name}")
-            shape = FC_PARAMETER
-        else:
-            if d.name == "fc":
-                raise LocalProtocolError("a USS line cannot speak the fc dialect")
-            shape = BlockShape(pkw_words, pzd_words)
+        d = dialect(dialect_name or default_dialect(proto))
+        if not dialect_fits(proto, d.name):
+            known = ", ".join(DIALECTS_BY_PROTOCOL[proto])
+            raise LocalProtocolError(f"the {d.name} dialect is not for protocol {proto} ({known})")
+        shape = FC_PARAMETER if proto is Protocol.FC else BlockShape(pkw_words, pzd_words)
         layout = IndLayout(ind_layout) if ind_layout is not None else d.default_ind_layout
         return cls(proto, address, d, layout, shape, FcAddressFormat(fc_format))
 

@@ -15,10 +15,25 @@ import enum
 from collections import Counter
 from dataclasses import dataclass, field
 
+from pkwbus.master.outcomes import Answered, LineFailed, Outcome, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.telegram import split_block
+
+__all__ = [
+    "Answered",
+    "ErrorKind",
+    "ExchangeResult",
+    "Failure",
+    "LineFailed",
+    "Outcome",
+    "PkwTransaction",
+    "Rejected",
+    "Reply",
+    "Tally",
+    "TimedOut",
+]
 
 
 class ErrorKind(enum.StrEnum):
@@ -48,42 +63,6 @@ class Failure:
 
 
 ExchangeResult = Reply | Failure
-
-
-# ------------------------------------------------------------------ outcomes
-
-
-@dataclass(frozen=True, slots=True)
-class Outcome:
-    """Base of a finished job's result."""
-
-
-@dataclass(frozen=True, slots=True)
-class Answered(Outcome):
-    """The drive answered the request: a value, a text, a description, a count."""
-
-    response: pkw.PkwResponse
-
-
-@dataclass(frozen=True, slots=True)
-class Rejected(Outcome):
-    fault: int | None
-    text: str
-    short: str
-
-
-@dataclass(frozen=True, slots=True)
-class TimedOut(Outcome):
-    """No matching answer: retries used up or the deadline passed."""
-
-    reason: str
-
-
-@dataclass(frozen=True, slots=True)
-class LineFailed(Outcome):
-    """The port is not there."""
-
-    reason: str
 
 
 @dataclass
@@ -140,8 +119,8 @@ class PkwTransaction:
         target = self.target
         try:
             block = split_block(reply.data, target.response_shape(len(reply.data)))
-            if block.pzd:
-                self.tally.status_word = block.pzd[0]
+            if block.status_word is not None:
+                self.tally.status_word = block.status_word
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
             return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))

@@ -23,6 +23,41 @@ from pkwbus.protocol.dialects import (
 )
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 
+__all__ = [
+    "NO_CHANGE_RIGHTS",
+    "PAGE_SIZE",
+    "ArrayCountResponse",
+    "DescriptionResponse",
+    "NoResponse",
+    "PkwRequest",
+    "PkwResponse",
+    "Rejection",
+    "SpontaneousResponse",
+    "Store",
+    "TextResponse",
+    "ValueResponse",
+    "Width",
+    "decode_pke_ind",
+    "decode_request",
+    "decode_response",
+    "encode_pke_ind",
+    "encode_request",
+    "encode_response",
+    "matches",
+    "none_request",
+    "page_index",
+    "page_multiple",
+    "read",
+    "read_description",
+    "read_parameter",
+    "read_text",
+    "rejections",
+    "request",
+    "response_id",
+    "write",
+    "write_text",
+]
+
 PAGE_SIZE = 2000
 _PNU_MASK_11 = 0x7FF
 # Bits of the page index byte for a + 2b + 4c + 8d + 16e + 32f (SINAMICS CU240S
@@ -133,6 +168,13 @@ def read_description(dialect: Dialect, pnu: int, element: int) -> PkwRequest:
 
 def read_text(dialect: Dialect, pnu: int, index: int = 0) -> PkwRequest:
     return request(dialect, Command.TEXT, pnu, subindex=index)
+
+
+def read_parameter(dialect: Dialect, pnu: int, index: int | None, *, text: bool) -> PkwRequest:
+    """The read of one parameter: its text (AK 15) for a text parameter, else its value."""
+    if text:
+        return read_text(dialect, pnu, index or 0)
+    return read(dialect, pnu, index)
 
 
 def write_text(dialect: Dialect, pnu: int, text: bytes, index: int = 0) -> PkwRequest:

@@ -14,6 +14,45 @@ from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 
+__all__ = [
+    "FC_BROADCAST_1_31",
+    "FC_FORMAT_1_126",
+    "FC_PARAMETER",
+    "FC_PROCESS",
+    "MAX_LGE",
+    "MAX_TELEGRAM",
+    "PCD_WORDS_FC",
+    "STX",
+    "USS_BROADCAST",
+    "USS_DEFAULT",
+    "USS_MIRROR",
+    "USS_SPECIAL",
+    "Address",
+    "BadChecksum",
+    "BadLength",
+    "Block",
+    "BlockShape",
+    "Deframer",
+    "DeframerEvent",
+    "FcAddressFormat",
+    "FramingError",
+    "Protocol",
+    "Skipped",
+    "Telegram",
+    "Truncated",
+    "bcc",
+    "decode_adr",
+    "decode_fc_adr",
+    "decode_uss_adr",
+    "encode_block",
+    "fc_adr",
+    "fc_lengths",
+    "frame",
+    "split_block",
+    "uss_adr",
+    "uss_lengths",
+]
+
 STX: Final = 0x02
 MAX_TELEGRAM: Final = 256  # bytes, STX to BCC
 MAX_LGE: Final = MAX_TELEGRAM - 2
@@ -171,6 +210,11 @@ class Block:
 
     pkw: bytes
     pzd: tuple[int, ...]
+
+    @property
+    def status_word(self) -> int | None:
+        """A reply's status word: its first process data word; None without PZD."""
+        return self.pzd[0] if self.pzd else None
 
 
 def encode_block(pkw: bytes, pzd: Sequence[int]) -> bytes:

@@ -36,6 +36,11 @@ from pkwbus.service.metrics import (
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
 
+__all__ = [
+    "DEFAULT_SIM_DELAY",
+    "build_runtime",
+]
+
 DEFAULT_SIM_DELAY = 0.003
 
 
@@ -134,9 +139,7 @@ def _drive(
 
 
 def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterFormat) -> pkw.PkwRequest:
-    if fmt.is_text:
-        return pkw.read_text(target.dialect, ref.pnu, ref.index or 0)
-    return pkw.read(target.dialect, ref.pnu, ref.index)
+    return pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
 
 
 def _info(

@@ -20,20 +20,28 @@ from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
 from pkwbus import __version__
-from pkwbus.master.jobs import Cancelled, Job, JobOutcome, JobResult
+from pkwbus.master.jobs import Job, JobResult
+from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.snapshot import Snapshot
-from pkwbus.master.transaction import (
-    Answered,
-    ErrorKind,
-    ExchangeResult,
-    Failure,
-    Outcome,
-    Rejected,
-    Reply,
-)
+from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.pzd import STATUS_BITS, Profile
+
+__all__ = [
+    "AUDIT_STAGES",
+    "DURATION_BUCKETS",
+    "ERROR_KINDS",
+    "REFUSAL_REASONS",
+    "ApiMetrics",
+    "DriveInfo",
+    "LineMetrics",
+    "ParameterInfo",
+    "ServiceMetrics",
+    "SnapshotCollector",
+    "api_metrics",
+    "fault_labels",
+]
 
 ERROR_KINDS = [k.value for k in ErrorKind if k is not ErrorKind.PORT]
 DURATION_BUCKETS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5, 1.0, 2.0)
@@ -59,13 +67,6 @@ class DriveInfo:
     profile: Profile
 
 
-_LABEL_OF_TYPE: dict[type[Outcome], JobOutcome] = {
-    Answered: JobOutcome.OK,
-    Rejected: JobOutcome.REJECTED,
-    Cancelled: JobOutcome.CANCELLED,
-}
-
-
 # The fault_code of an answer that carries no fault number ("no change rights"):
 # an empty label value would be no label at all to Prometheus, and a blank legend.
 NO_FAULT_NUMBER = "-"
@@ -74,19 +75,6 @@ NO_FAULT_NUMBER = "-"
 def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
     """The ``fault_code`` and ``fault`` labels of ``pkwbus_pkw_faults_total``."""
     return (NO_FAULT_NUMBER if fault is None else str(fault), short)
-
-
-def outcome_label(outcome: Outcome) -> JobOutcome:
-    label = _LABEL_OF_TYPE.get(type(outcome))
-    if label is not None:
-        return label
-    if isinstance(outcome, Answered):
-        return JobOutcome.OK
-    if isinstance(outcome, Rejected):
-        return JobOutcome.REJECTED
-    if isinstance(outcome, Cancelled):
-        return JobOutcome.CANCELLED
-    return JobOutcome.TIMEOUT
 
 
 class SnapshotCollector(Collector):
@@ -324,7 +312,7 @@ class LineMetrics:
 
     def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
         outcome = result.outcome
-        key = (drive, job.kind.value, outcome_label(outcome))
+        key = (drive, job.kind.value, metric_label(outcome))
         child = self._jobs.get(key)
         if child is None:
             child = self._jobs[key] = self._m.jobs.labels(self._line, drive, key[1], key[2].value)

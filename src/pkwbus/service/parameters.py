@@ -23,8 +23,8 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from pkwbus.master.jobs import Cancelled, JobKind, JobResult
-from pkwbus.master.transaction import Answered, LineFailed, Rejected
+from pkwbus.master.jobs import JobKind, JobResult
+from pkwbus.master.outcomes import Answered, audit_outcome, http_failure
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
@@ -37,6 +37,19 @@ from pkwbus.protocol.params import (
 from pkwbus.service.audit import AuditEntry
 from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.runtime import DriveEntry, Runtime
+
+__all__ = [
+    "INCOMPLETE",
+    "MAX_DRIVE_NAME",
+    "MAX_PARAMETER_TEXT",
+    "MAX_READS_PER_DRIVE",
+    "ApiError",
+    "Caller",
+    "ParameterService",
+    "WriteOrder",
+    "check_names",
+    "clip",
+]
 
 MAX_READS_PER_DRIVE = 4  # on-demand reads of one drive waiting at once
 MAX_DRIVE_NAME = 64  # the configuration's limit on names
@@ -130,9 +143,7 @@ class ParameterService:
     ) -> pkw.PkwRequest:
         d = entry.target.dialect
         try:
-            if fmt.is_text:
-                return pkw.read_text(d, ref.pnu, ref.index or 0)
-            return pkw.read(d, ref.pnu, ref.index)
+            return pkw.read_parameter(d, ref.pnu, ref.index, text=fmt.is_text)
         except LocalProtocolError as exc:
             raise ApiError(404, "not_encodable", str(exc)) from None
 
@@ -243,7 +254,8 @@ class ParameterService:
         )
         if result.previous is not None and result.previous.value != old:
             old = audit.old_value = result.previous.value  # stored with the outcome
-        outcome, fault, detail = _audit_outcome(result)
+        audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)
+        outcome, fault, detail = audited.outcome, audited.fault, audited.detail
         verified: bool | None = None
         if outcome == "ok" and order.verify:
             back = await self._try_read(entry, ref, fmt)
@@ -343,22 +355,9 @@ class ParameterService:
         return entry, ref
 
     def _raise_for(self, result: JobResult) -> None:
-        outcome = result.outcome
-        if isinstance(outcome, Answered):
-            return
-        if isinstance(outcome, Rejected):
-            raise ApiError(
-                409,
-                "rejected",
-                f"the drive rejected the request: {outcome.text}",
-                fault=outcome.fault,
-                text=outcome.text,
-            )
-        if isinstance(outcome, Cancelled):
-            raise ApiError(503, "cancelled", outcome.reason)
-        reason = getattr(outcome, "reason", "no answer")
-        kind = "line_error" if isinstance(outcome, LineFailed) else "timeout"
-        raise ApiError(504, kind, f"no valid answer: {reason}")
+        failure = http_failure(result.outcome)
+        if failure is not None:
+            raise ApiError(failure.status, failure.kind, failure.message, **failure.extra)
 
     def _value_body(
         self, ref: ParameterRef, fmt: ParameterFormat, result: JobResult
@@ -408,19 +407,3 @@ def _fit_index(ref: ParameterRef, fmt: ParameterFormat) -> ParameterRef:
             422, "invalid_index", f"{ref.name} has {fmt.array} elements: index {ref.index}"
         )
     return ref
-
-
-def _audit_outcome(result: JobResult) -> tuple[str, int | None, str | None]:
-    outcome = result.outcome
-    if isinstance(outcome, Answered):
-        return "ok", None, None
-    if isinstance(outcome, Rejected):
-        return "rejected", outcome.fault, outcome.text
-    sent = result.tally.telegrams if result.tally else 0
-    note = f"; the request went out {sent} times and may have been applied" if sent else ""
-    reason = getattr(outcome, "reason", "")
-    if isinstance(outcome, Cancelled):
-        return "cancelled", None, reason + note
-    if not sent:
-        return "not_sent", None, reason  # refused by the line before it went out
-    return "timeout", None, reason + note

@@ -13,12 +13,29 @@ from typing import Any
 from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
 from pkwbus.durations import DurationRange
+from pkwbus.protocol import buses
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
 from pkwbus.sim.ends import PathInUseError
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
+
+__all__ = [
+    "EXIT_PORT",
+    "EXIT_USAGE",
+    "FAULT_OPTIONS",
+    "Plan",
+    "add_parser",
+    "catalog_for",
+    "configure",
+    "main",
+    "parse_addresses",
+    "parse_host_port",
+    "plan",
+    "run",
+    "serve",
+]
 
 EXIT_USAGE = 2
 EXIT_PORT = 4
@@ -75,16 +92,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def parse_addresses(text: str) -> list[int]:
     """``1,2,5`` or ``1-3,7``; each address at most the highest of any protocol (126)."""
-    out: list[int] = []
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        low, _, high = part.partition("-")
-        if not low.isdigit() or (high and not high.isdigit()):
-            raise ValueError(f"{part[:40]!r} is not an address or a range of addresses")
-        for address in (low, high or low):
-            if len(address) > 3 or int(address) > limits.MAX_ADDRESS:
-                raise ValueError(f"address {address[:40]} is outside 0-{limits.MAX_ADDRESS}")
-        out += range(int(low), int(high or low) + 1)
-    return out
+    return limits.parse_addresses(text, 0, limits.MAX_ADDRESS)
 
 
 def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
@@ -124,11 +132,10 @@ def _lag(text: str) -> tuple[int, float]:
 
 
 def _pkw_words(text: str) -> int | None:
-    if text in ("variable", "127"):
-        return None
-    if text not in ("0", "3", "4"):
-        raise ValueError(f"--pkw-words: {text[:40]!r} is not 0, 3, 4 or variable")
-    return int(text)
+    try:
+        return buses.pkw_words(text, text=True)
+    except ValueError as exc:
+        raise ValueError(f"--pkw-words: {exc}") from None
 
 
 def _baudrate(value: int | None) -> int | None:

@@ -6,6 +6,7 @@ import random
 import time
 from collections.abc import Callable, Iterable
 
+from pkwbus.protocol.buses import address_range, default_dialect
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.dialects import dialect as get_dialect
 from pkwbus.protocol.errors import RemoteProtocolError
@@ -28,6 +29,11 @@ from pkwbus.sim.faults import Answer
 from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
+
+__all__ = [
+    "Clock",
+    "Simulator",
+]
 
 Clock = Callable[[], float]
 
@@ -53,7 +59,7 @@ class Simulator:
         specs: tuple[ParamSpec, ...] | None = None,
     ) -> None:
         self.protocol = Protocol(protocol)
-        self.dialect = get_dialect(dialect or self.protocol.value)
+        self.dialect = get_dialect(dialect or default_dialect(self.protocol))
         self.layout = ind_layout or self.dialect.default_ind_layout
         if self.protocol is Protocol.FC:
             self.shape = BlockShape(None, PCD_WORDS_FC)
@@ -80,8 +86,7 @@ class Simulator:
             self.drives[address].model.now = clock()
 
     def _check_address(self, address: int) -> None:
-        top = 126 if self.protocol is Protocol.FC else 30
-        low = 1 if self.protocol is Protocol.FC else 0
+        low, top = address_range(self.protocol)
         if not low <= address <= top:
             raise ValueError(
                 f"{self.protocol.value} drive address {address} is outside {low}-{top}"

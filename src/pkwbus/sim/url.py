@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlsplit
 
-from pkwbus import durations
+from pkwbus import durations, limits
 from pkwbus.durations import parse_duration
 from pkwbus.protocol.telegram import Protocol
 
@@ -62,12 +62,10 @@ def _sim_options(url: str, query: str) -> dict[str, str]:
 
 
 def _address_list(url: str, text: str) -> tuple[int, ...]:
-    addresses: list[int] = []
-    for item in text.split(","):
-        low, _, high = item.strip().partition("-")
-        if not low.isdigit() or not (high or low).isdigit() or len(item) > 7:
-            raise ValueError(f"{url!r}: drives must be addresses like 1,2,5-7, not {item!r}")
-        addresses.extend(range(int(low), int(high or low) + 1))
-    if any(a > 126 for a in addresses) or not addresses:
-        raise ValueError(f"{url!r}: simulated drive addresses must be 0-126")
+    try:
+        addresses = limits.parse_addresses(text, 0, limits.MAX_ADDRESS)
+    except ValueError as exc:
+        raise ValueError(f"{url!r}: drives must be addresses like 1,2,5-7: {exc}") from None
+    if not addresses:
+        raise ValueError(f"{url!r}: drives must be addresses like 1,2,5-7, not {text!r}")
     return tuple(addresses)

@@ -14,20 +14,28 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from pkwbus.protocol.telegram import Protocol as BusProtocol
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS
 
-__all__ = ["ConfigError", "Model", "Place", "fail"]
+__all__ = [
+    "DEFAULT_LISTEN",
+    "DEFAULT_TOKEN_ENV",
+    "DIALECTS_BY_PROTOCOL",
+    "LISTEN_ENV",
+    "MAX_CONFIG_BYTES",
+    "MAX_HTTP_CONNECTIONS",
+    "PORT_SCHEMES",
+    "USS_MAX_ADDRESS",
+    "ConfigError",
+    "Model",
+    "Place",
+    "fail",
+]
 
 
 DEFAULT_LISTEN: Final = "127.0.0.1:9725"
 LISTEN_ENV: Final = "PKWBUS_LISTEN"
 DEFAULT_TOKEN_ENV: Final = "PKWBUS_WRITE_TOKEN"
 PORT_SCHEMES: Final = frozenset({"socket", "rfc2217", "loop", "spy", "alt", "hwgrep", "sim"})
-DIALECTS_BY_PROTOCOL: Final = {
-    BusProtocol.FC: ("fc",),
-    BusProtocol.USS: ("uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"),
-}
-USS_MAX_ADDRESS: Final = 30  # ADR bits 0-4 give 0-31; drives accept 0-30
 MAX_CONFIG_BYTES: Final = 1024 * 1024  # a configuration file is read up to this, no further
 
 

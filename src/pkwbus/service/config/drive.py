@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from typing import Self
+from typing import Annotated, Self
 
 from pydantic import (
     Field,
-    PrivateAttr,
+    PlainValidator,
     StrictInt,
     ValidationInfo,
     field_validator,
@@ -15,6 +15,7 @@ from pydantic import (
 )
 
 from pkwbus.catalog import ParameterSpec
+from pkwbus.protocol.buses import default_dialect
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.params import (
     ParameterRef,
@@ -23,12 +24,19 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
 from pkwbus.protocol.telegram import Protocol as BusProtocol
-from pkwbus.service.config.base import DIALECTS_BY_PROTOCOL, Model, Place, fail
+from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
 from pkwbus.service.config.fields import Name, Notation, PkwWords
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
 
 __all__ = ["Drive", "duplicates"]
+
+
+def _line_protocol(value: object) -> BusProtocol:
+    """The protocol the drive's line gives it (never a setting of the drive itself)."""
+    if isinstance(value, BusProtocol):
+        return value
+    raise ValueError("is the line's setting: give the protocol once, on the line")
 
 
 class Drive(Model):
@@ -44,8 +52,10 @@ class Drive(Model):
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)
-
-    _protocol: BusProtocol = PrivateAttr(default=BusProtocol.FC)
+    # Filled in by the Line from its own protocol before the drive is validated.
+    protocol: Annotated[BusProtocol, PlainValidator(_line_protocol)] = Field(
+        default=BusProtocol.FC, exclude=True
+    )
 
     @field_validator("dialect")
     @classmethod
@@ -123,13 +133,9 @@ class Drive(Model):
         return base.overridden(changes) if changes else base
 
     @property
-    def protocol(self) -> BusProtocol:
-        return self._protocol
-
-    @property
     def pkw_dialect(self) -> Dialect:
         """The dialect, given or the protocol's default."""
-        return dialect(self.dialect or DIALECTS_BY_PROTOCOL[self._protocol][0])
+        return dialect(self.dialect or default_dialect(self.protocol))
 
     @property
     def layout(self) -> IndLayout:
@@ -139,7 +145,7 @@ class Drive(Model):
     @property
     def shape(self) -> BlockShape:
         """The data block of a parameter telegram: FC fixed, USS as configured."""
-        if self._protocol is BusProtocol.FC:
+        if self.protocol is BusProtocol.FC:
             return FC_PARAMETER
         return BlockShape(self.pkw_words, self.pzd_words)
 

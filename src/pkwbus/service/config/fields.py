@@ -16,6 +16,7 @@ from pydantic import (
 from pkwbus import durations
 from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.problems import short
+from pkwbus.protocol import buses
 from pkwbus.protocol.params import (
     ParameterRef,
     ValueType,
@@ -68,15 +69,6 @@ def _value_type(value: object) -> ValueType:
     return parse_type(value)
 
 
-def _pkw_words(value: object) -> int | None:
-    """0, 3 or 4 fixed words; ``variable`` or 127: None."""
-    if value == "variable" or (value == 127 and not isinstance(value, bool)):
-        return None
-    if isinstance(value, int) and not isinstance(value, bool) and value in (0, 3, 4):
-        return value
-    raise ValueError(f"{short(value)} is not a PKW length: use 0, 3, 4 or variable (127)")
-
-
 def upper(value: object) -> object:
     return value.upper() if isinstance(value, str) else value
 
@@ -105,7 +97,7 @@ Rs485Delay = Annotated[float, PlainValidator(_rs485_delay)]
 Number = Annotated[float, PlainValidator(_number)]
 Notation = Annotated[ParameterRef, PlainValidator(_notation)]
 TypeName = Annotated[ValueType, PlainValidator(_value_type)]
-PkwWords = Annotated[int | None, PlainValidator(_pkw_words)]
+PkwWords = Annotated[int | None, PlainValidator(buses.pkw_words)]
 Name = Annotated[str, Field(pattern=_NAME, min_length=1, max_length=_NAME_MAX, strict=True)]
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Self
+from typing import Annotated, Any, Literal, Self
 
 from pydantic import (
     BeforeValidator,
@@ -17,6 +17,7 @@ from pydantic import (
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.problems import short
 from pkwbus.protocol import timing
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, address_range, default_dialect
 from pkwbus.protocol.dialects import Dialect, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
@@ -25,14 +26,7 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import FcAddressFormat
 from pkwbus.protocol.telegram import Protocol as BusProtocol
-from pkwbus.service.config.base import (
-    DIALECTS_BY_PROTOCOL,
-    PORT_SCHEMES,
-    USS_MAX_ADDRESS,
-    Model,
-    Place,
-    fail,
-)
+from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import (
     CharTimeout,
@@ -111,6 +105,20 @@ class Line(Model):
     def _baudrate(cls, value: int) -> int:
         return check_baudrate(value)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _drives_on_this_protocol(cls, data: Any) -> Any:
+        """Each drive learns the line's protocol before it is validated (a drive that
+        names one itself is told it is the line's setting)."""
+        if not isinstance(data, dict) or not isinstance(data.get("drives"), list):
+            return data
+        given = data.get("protocol")
+        if not isinstance(given, str) or given not in {p.value for p in BusProtocol}:
+            return data  # the line's own error says what is wrong with it
+        protocol = BusProtocol(given)
+        drives = [{"protocol": protocol, **d} if isinstance(d, dict) else d for d in data["drives"]]
+        return {**data, "drives": drives}
+
     @model_validator(mode="after")
     def _drives_fit_line(self) -> Self:
         problems = self._line_problems()
@@ -119,8 +127,6 @@ class Line(Model):
         problems += self._address_problems()
         if problems:
             raise fail(problems)
-        for drive in self.drives:
-            drive._protocol = self.protocol
         return self
 
     def _line_problems(self) -> list[Place]:
@@ -171,9 +177,7 @@ class Line(Model):
 
     @property
     def address_range(self) -> tuple[int, int]:
-        if self.protocol is BusProtocol.USS:
-            return (0, USS_MAX_ADDRESS)
-        return (1, 31) if self.address_format is FcAddressFormat.RANGE_1_31 else (1, 126)
+        return address_range(self.protocol, self.address_format)
 
     @property
     def sim(self) -> SimPort | None:
@@ -213,7 +217,7 @@ class Line(Model):
 
 def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
     """The dialect, IND layout and lengths a simulator would need for ``drive``."""
-    name = drive.dialect or DIALECTS_BY_PROTOCOL[protocol][0]
+    name = drive.dialect or default_dialect(protocol)
     layout = drive.ind_layout or dialect(name).default_ind_layout
     if protocol is BusProtocol.FC:
         return (name, layout)
@@ -245,7 +249,7 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
                 )
     elif drive.pkw_words == 0 and (drive.poll or drive.writable):
         problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
-    problems += _pnu_problems(drive, dialect(drive.dialect or allowed[0]))
+    problems += _pnu_problems(drive, drive.pkw_dialect)
     return problems
 
 

@@ -1,0 +1,68 @@
+"""What each bus protocol allows: its drive addresses, its PKW lengths, its dialects.
+
+The configuration, the command line, the simulator and the load estimate all
+ask here. FC: addresses 1-126 (ADR format 1-126) or 1-31 (format 1-31),
+Danfoss FC protocol, telegram structure; USS: 0-30 (ADR bits 0-4 give 0-31,
+drives accept 0-30), SINAMICS G120 Operating Instructions, USS.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+from pkwbus.protocol.telegram import FcAddressFormat, Protocol
+
+__all__ = [
+    "DIALECTS_BY_PROTOCOL",
+    "FIXED_PKW_WORDS",
+    "USS_MAX_ADDRESS",
+    "VARIABLE_PKW_WORDS",
+    "address_range",
+    "default_dialect",
+    "dialect_fits",
+    "pkw_words",
+]
+
+USS_MAX_ADDRESS: Final = 30
+FIXED_PKW_WORDS: Final = (0, 3, 4)  # USS PKW lengths with a fixed number of words
+VARIABLE_PKW_WORDS: Final = 127  # the USS code of a variable PKW length
+
+DIALECTS_BY_PROTOCOL: Final = {
+    Protocol.FC: ("fc",),
+    Protocol.USS: ("uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"),
+}
+
+
+def address_range(
+    protocol: Protocol, fc_format: FcAddressFormat = FcAddressFormat.RANGE_1_126
+) -> tuple[int, int]:
+    """The lowest and highest address a drive of ``protocol`` can have."""
+    if protocol is Protocol.USS:
+        return (0, USS_MAX_ADDRESS)
+    return (1, 31) if fc_format is FcAddressFormat.RANGE_1_31 else (1, 126)
+
+
+def default_dialect(protocol: Protocol) -> str:
+    """The dialect a drive speaks when none is given: the protocol's own."""
+    return DIALECTS_BY_PROTOCOL[protocol][0]
+
+
+def dialect_fits(protocol: Protocol, name: str) -> bool:
+    """Whether a drive on a ``protocol`` line can speak the dialect ``name``."""
+    return name in DIALECTS_BY_PROTOCOL[protocol]
+
+
+def pkw_words(value: object, *, text: bool = False) -> int | None:
+    """A PKW length: 0, 3 or 4 fixed words; ``variable`` or 127 is None (variable).
+
+    With ``text``, digits as given on a command line (``"4"``, ``"127"``) are
+    read as their number. ValueError naming the lengths otherwise.
+    """
+    if text and isinstance(value, str) and value.isdigit() and len(value) <= 3:
+        value = int(value)
+    if value == "variable" or (value == VARIABLE_PKW_WORDS and not isinstance(value, bool)):
+        return None
+    if isinstance(value, int) and not isinstance(value, bool) and value in FIXED_PKW_WORDS:
+        return value
+    shown = repr(value[:40]) if isinstance(value, str) else repr(value)
+    raise ValueError(f"{shown} is not a PKW length: use 0, 3, 4 or variable (127)")
