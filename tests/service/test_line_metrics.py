@@ -10,7 +10,14 @@ from prometheus_client import CollectorRegistry
 
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.outcomes import metric_label
-from pkwbus.master.transaction import Answered, Rejected, Tally, TimedOut
+from pkwbus.master.transaction import (
+    Answered,
+    ErrorKind,
+    Failure,
+    Rejected,
+    Tally,
+    TimedOut,
+)
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
 from pkwbus.service.build import build_runtime
@@ -41,20 +48,41 @@ def test_finished_jobs_count_by_kind_and_outcome() -> None:
     assert jobs("d1", "read", "ok") == 3
     assert jobs("d1", "write", "rejected") == 1
     assert jobs("d1", "read", "timeout") == 1
-    assert jobs("d1", "write", "ok") == 0  # initialised from the configuration
+    assert jobs("d1", "write", "ok") is None  # no series before the first such job
     assert jobs("other", "read", "cancelled") == 1  # a drive not configured still counts
 
 
-def test_telegram_error_kinds_start_at_zero() -> None:
+def _exported(registry: CollectorRegistry) -> set[str]:
+    return {sample.name for family in registry.collect() for sample in family.samples}
+
+
+def test_only_the_counters_an_alert_needs_at_zero_exist_before_they_move() -> None:
+    """Faults (alert PkwbusDriveFaults) and the line's busy time exist at 0; the per-drive
+    counters that move at the first poll, or feed rates only, appear at their first step."""
     registry = CollectorRegistry()
-    ServiceMetrics(registry).for_line("l", {"d1": FC})
+    metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
+    exported = _exported(registry)
+    assert {FAULTS, "pkwbus_line_busy_seconds_total"} <= exported
+    quiet = {
+        "pkwbus_telegram_errors_total",
+        "pkwbus_telegrams_total",
+        "pkwbus_jobs_total",
+        "pkwbus_job_retries_total",
+        "pkwbus_poll_overruns_total",
+    }
+    assert not quiet & exported
+    metrics.exchange("d1", Failure(ErrorKind.TIMEOUT), 0.01)
+    metrics.overrun("d1")
     kinds = {
         sample.labels["kind"]: sample.value
         for family in registry.collect()
         for sample in family.samples
         if sample.name == "pkwbus_telegram_errors_total"
     }
-    assert kinds == dict.fromkeys(["timeout", "checksum", "length", "address", "unexpected"], 0)
+    assert kinds == {"timeout": 1}
+    assert (
+        registry.get_sample_value("pkwbus_poll_overruns_total", {"line": "l", "drive": "d1"}) == 1
+    )
 
 
 def test_outcome_labels() -> None:

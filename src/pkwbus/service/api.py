@@ -18,13 +18,13 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.security import HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
-from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import status_bits
+from pkwbus.service import exposition
 from pkwbus.service.audit import AuditError, AuditLog, as_dict
 from pkwbus.service.metrics import api_metrics
 from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
@@ -295,8 +295,8 @@ def create_app(
 
     @app.get("/metrics", include_in_schema=False)
     async def metrics() -> Response:
-        payload = await asyncio.to_thread(generate_latest, runtime.registry)
-        return Response(payload, media_type=CONTENT_TYPE_LATEST)
+        payload = await exposition.render(runtime.registry)
+        return Response(payload, media_type=exposition.CONTENT_TYPE)
 
     app.mount("/assets/status", StaticFiles(directory=STATIC), name="status-assets")
 

@@ -12,7 +12,6 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import prometheus_client
-from prometheus_client import CollectorRegistry
 
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
@@ -26,6 +25,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
+from pkwbus.service.exposition import MetricsRegistry
 from pkwbus.service.metrics import (
     DriveInfo,
     ParameterInfo,
@@ -46,7 +46,7 @@ DEFAULT_SIM_DELAY = 0.003
 
 async def build_runtime(config: cfg.Config) -> Runtime:
     prometheus_client.disable_created_metrics()  # type: ignore[no-untyped-call]
-    registry = CollectorRegistry()
+    registry = MetricsRegistry()
     metrics = ServiceMetrics(registry)
     api_metrics(registry)  # the API's counters, exported (at zero) from the start
     snapshot = Snapshot()

@@ -1,32 +1,33 @@
 """Prometheus metrics with exactly the names and labels the README documents.
 
 Device values (parameter values, drive and line state, status words) come
-from a custom Collector built from a copy of the snapshot at each scrape, so
-a scrape never causes bus traffic and values that disappear also disappear
-from the output. The service's own counters are ordinary Counters and a
-Histogram, their label values initialised from the configuration (see
-:class:`LineMetrics`).
+from :class:`~pkwbus.service.device_metrics.SnapshotCollector`, built from a
+copy of the snapshot at each scrape. The service's own counters are
+:class:`~pkwbus.service.exposition.CounterFamily` series that keep their
+rendered line (see :mod:`pkwbus.service.exposition`), plus a Histogram; which
+label values exist at 0 from the start is said at :class:`LineMetrics`.
 """
 
 from __future__ import annotations
 
 import platform
 import weakref
-from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
-from prometheus_client.core import GaugeMetricFamily, Metric
-from prometheus_client.registry import Collector
 
 from pkwbus import __version__
 from pkwbus.master.jobs import Job, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
-from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.pzd import STATUS_BITS, Profile
+
+# Re-exported: built with the others in pkwbus.service.build.
+from pkwbus.service.device_metrics import DriveInfo as DriveInfo
+from pkwbus.service.device_metrics import ParameterInfo as ParameterInfo
+from pkwbus.service.device_metrics import SnapshotCollector as SnapshotCollector
+from pkwbus.service.exposition import CounterFamily
 
 __all__ = [
     "AUDIT_STAGES",
@@ -47,26 +48,6 @@ ERROR_KINDS = [k.value for k in ErrorKind if k is not ErrorKind.PORT]
 DURATION_BUCKETS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5, 1.0, 2.0)
 
 
-@dataclass(frozen=True)
-class ParameterInfo:
-    """What ``pkwbus_parameter_info`` says of one polled parameter."""
-
-    line: str
-    drive: str
-    parameter: str
-    index: int
-    pnu: int
-    name: str
-    unit: str
-    type: str
-
-
-@dataclass(frozen=True)
-class DriveInfo:
-    line: str
-    profile: Profile
-
-
 # The fault_code of an answer that carries no fault number ("no change rights"):
 # an empty label value would be no label at all to Prometheus, and a blank legend.
 NO_FAULT_NUMBER = "-"
@@ -77,125 +58,33 @@ def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
     return (NO_FAULT_NUMBER if fault is None else str(fault), short)
 
 
-class SnapshotCollector(Collector):
-    """Builds the device-value families from a copy of the snapshot."""
-
-    def __init__(
-        self,
-        snapshot: Snapshot,
-        drives: Mapping[str, DriveInfo],
-        parameters: Iterable[ParameterInfo],
-    ) -> None:
-        self._snapshot = snapshot
-        self._drives = dict(drives)
-        self._parameters = list(parameters)
-        self._line_of = {p.drive: p.line for p in self._parameters}
-        self._line_of.update({name: d.line for name, d in self._drives.items()})
-
-    def describe(self) -> list[Metric]:
-        return list(self._families(Snapshot()))
-
-    def collect(self) -> Iterator[Metric]:
-        return self._families(self._snapshot.copy())
-
-    def _families(self, snap: Snapshot) -> Iterator[Metric]:
-        pv = ("line", "drive", "parameter", "index")
-        value = GaugeMetricFamily(
-            "pkwbus_parameter_value", "Latest value read from the drive, scaled", labels=pv
-        )
-        stamp = GaugeMetricFamily(
-            "pkwbus_parameter_last_update_timestamp_seconds",
-            "When the value was read (Unix time)",
-            labels=pv,
-        )
-        for (drive, parameter, index), reading in snap.readings.items():
-            if isinstance(reading.value, str):
-                continue  # text values appear in the API, not as numbers
-            labels = [self._line_of.get(drive, ""), drive, parameter, str(index)]
-            value.add_metric(labels, float(reading.value))
-            stamp.add_metric(labels, reading.timestamp)
-        yield value
-        yield stamp
-        yield self._info()
-        yield from self._drive_families(snap)
-        line_up = GaugeMetricFamily("pkwbus_line_up", "1 while the port is open", labels=["line"])
-        for line, up in snap.lines.items():
-            line_up.add_metric([line], 1.0 if up else 0.0)
-        yield line_up
-
-    def _info(self) -> GaugeMetricFamily:
-        info = GaugeMetricFamily(
-            "pkwbus_parameter_info",
-            "PNU, name, unit and type of each polled parameter",
-            labels=["line", "drive", "parameter", "index", "pnu", "name", "unit", "type"],
-        )
-        for p in self._parameters:
-            labels = [
-                p.line,
-                p.drive,
-                p.parameter,
-                str(p.index),
-                str(p.pnu),
-                p.name,
-                p.unit,
-                p.type,
-            ]
-            info.add_metric(labels, 1.0)
-        return info
-
-    def _drive_families(self, snap: Snapshot) -> Iterator[Metric]:
-        up = GaugeMetricFamily(
-            "pkwbus_drive_up", "1 while the drive answers, else 0", labels=["line", "drive"]
-        )
-        word = GaugeMetricFamily(
-            "pkwbus_drive_status_word", "Last raw status word", labels=["line", "drive"]
-        )
-        bits = GaugeMetricFamily(
-            "pkwbus_drive_status_bit",
-            "Each named bit of the last status word",
-            labels=["line", "drive", "bit"],
-        )
-        for drive, state in snap.drives.items():
-            info = self._drives.get(drive)
-            line = info.line if info else self._line_of.get(drive, "")
-            up.add_metric([line, drive], 1.0 if state.up else 0.0)
-            if state.status_word is None or info is None:
-                continue
-            word.add_metric([line, drive], float(state.status_word))
-            for bit, name in STATUS_BITS[info.profile].items():
-                bits.add_metric([line, drive, name], float(state.status_word >> bit & 1))
-        yield up
-        yield word
-        yield bits
-
-
 class ServiceMetrics:
     """The service's own counters; one :class:`LineMetrics` per line feeds them."""
 
     def __init__(self, registry: CollectorRegistry) -> None:
         ld = ["line", "drive"]
-        self.faults = Counter(
+        self.faults = CounterFamily(
             "pkwbus_pkw_faults",
             "Drive rejections by fault number and text",
             [*ld, "fault_code", "fault"],
             registry=registry,
         )
-        self.errors = Counter(
+        self.errors = CounterFamily(
             "pkwbus_telegram_errors",
             "Exchanges without a usable answer, by kind",
             [*ld, "kind"],
             registry=registry,
         )
-        self.telegrams = Counter(
+        self.telegrams = CounterFamily(
             "pkwbus_telegrams", "Telegram exchanges attempted", ld, registry=registry
         )
-        self.jobs = Counter(
+        self.jobs = CounterFamily(
             "pkwbus_jobs",
             "Finished jobs by kind and outcome",
             [*ld, "kind", "outcome"],
             registry=registry,
         )
-        self.retries = Counter(
+        self.retries = CounterFamily(
             "pkwbus_job_retries",
             "Telegrams repeated because an answer was missing, bad or not yet there",
             ld,
@@ -208,13 +97,13 @@ class ServiceMetrics:
             buckets=DURATION_BUCKETS,
             registry=registry,
         )
-        self.busy = Counter(
+        self.busy = CounterFamily(
             "pkwbus_line_busy_seconds",
             "Time the line carried a transaction (rate() = utilisation)",
             ["line"],
             registry=registry,
         )
-        self.overruns = Counter(
+        self.overruns = CounterFamily(
             "pkwbus_poll_overruns",
             "Polls that started later than one interval after due",
             ld,
@@ -255,39 +144,39 @@ class LineMetrics:
     """The scheduler's events for one line, turned into counter increments.
 
     A labelled counter has no series until its first increment, and
-    ``increase()``/``rate()`` cannot see that first step (no earlier sample),
-    so the Prometheus guidance is to create every label set known in advance
-    at 0 ("Avoid missing metrics", Prometheus instrumentation practices).
-    Created here, for each configured drive of the line:
+    ``increase()``/``rate()`` cannot see that first step (no earlier sample).
+    Where an alert or a dashboard panel must see a single event, the series
+    exists at 0 from the start ("Avoid missing metrics", Prometheus
+    instrumentation practices):
 
-    - ``pkwbus_pkw_faults_total``: every fault number of the drive's dialect
-      table with its short text, and "no change rights" where the dialect
-      has that answer (alert ``PkwbusDriveFaults``, dashboard fault panel).
-      A number outside the table, or a drive not in the configuration, still
-      appears only at its first fault;
-    - ``pkwbus_telegram_errors_total``: every ``kind`` but ``port`` (a port
-      failure puts nothing on the wire and is not counted) (alert
-      ``PkwbusTelegramErrorRateRising``, dashboard error panels);
-    - ``pkwbus_jobs_total``: ``kind`` read/write times every ``outcome``
-      (dashboard outcome panel);
-    - ``pkwbus_telegrams_total``, ``pkwbus_job_retries_total``,
-      ``pkwbus_poll_overruns_total`` per drive, ``pkwbus_line_busy_seconds_total``
-      and ``pkwbus_transaction_duration_seconds`` per line.
+    - ``pkwbus_pkw_faults_total``: every fault number of each configured
+      drive's dialect table with its short text, and "no change rights"
+      where the dialect has that answer (alert ``PkwbusDriveFaults``,
+      dashboard fault panel). A number outside the table, or a drive not in
+      the configuration, appears at its first fault;
+    - ``pkwbus_line_busy_seconds_total`` and
+      ``pkwbus_transaction_duration_seconds`` per line (alert
+      ``PkwbusLineOverloaded``; one series per line).
 
-    The PROFIBUS DP counters of the interface (restarts by ``reason``,
-    diagnostics by ``flag``) have their labels known in advance too: created
-    the same way once they exist.
+    The other counters appear at their first increment: a zero series for
+    each drive and kind would be most of the scrape (eight lines of 126
+    drives: 20,000 series). ``pkwbus_telegrams_total`` and read jobs move at
+    the first poll; ``pkwbus_telegram_errors_total`` feeds the alert
+    ``PkwbusTelegramErrorRateRising`` as a share sustained over minutes, which
+    the missing first step does not change; ``pkwbus_jobs_total``,
+    ``pkwbus_job_retries_total`` and ``pkwbus_poll_overruns_total`` are
+    dashboard rates.
     """
 
     def __init__(self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect]) -> None:
         self._m = m
         self._line = line
         self._faults = {
-            (d, *labels): m.faults.labels(line, d, *labels)
+            (d, *labels): m.faults.labels(line, d, *labels, zero=True)
             for d, dialect in drives.items()
             for labels in (fault_labels(n, short) for n, short in pkw.rejections(dialect))
         }
-        self._busy = m.busy.labels(line)
+        self._busy = m.busy.labels(line, zero=True)
         self._duration = m.duration.labels(line)
         self._telegrams = {d: m.telegrams.labels(line, d) for d in drives}
         self._retries = {d: m.retries.labels(line, d) for d in drives}

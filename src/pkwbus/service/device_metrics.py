@@ -1,0 +1,221 @@
+"""The device-value families: parameter values, drive and line state, from the snapshot.
+
+Built from a copy of the snapshot at each scrape, so a scrape never causes
+bus traffic and values that disappear also disappear from the output.
+``pkwbus_parameter_info`` does not change while the service runs: its text is
+made once. A value's line is made again only when its reading changed, a
+drive's lines only when its state did (see :mod:`pkwbus.service.exposition`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from itertools import islice
+
+from prometheus_client.core import GaugeMetricFamily, Metric
+from prometheus_client.registry import Collector
+
+from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
+from pkwbus.protocol.pzd import STATUS_BITS, Profile
+from pkwbus.service.exposition import CHUNK, format_value, head, header
+
+__all__ = ["DriveInfo", "ParameterInfo", "SnapshotCollector"]
+
+_PV = ("line", "drive", "parameter", "index")
+_INFO = (*_PV, "pnu", "name", "unit", "type")
+_LD = ("line", "drive")
+
+VALUE = ("pkwbus_parameter_value", "Latest value read from the drive, scaled")
+STAMP = ("pkwbus_parameter_last_update_timestamp_seconds", "When the value was read (Unix time)")
+INFO = ("pkwbus_parameter_info", "PNU, name, unit and type of each polled parameter")
+DRIVE_UP = ("pkwbus_drive_up", "1 while the drive answers, else 0")
+WORD = ("pkwbus_drive_status_word", "Last raw status word")
+BIT = ("pkwbus_drive_status_bit", "Each named bit of the last status word")
+LINE_UP = ("pkwbus_line_up", "1 while the port is open")
+
+
+@dataclass(frozen=True)
+class ParameterInfo:
+    """What ``pkwbus_parameter_info`` says of one polled parameter."""
+
+    line: str
+    drive: str
+    parameter: str
+    index: int
+    pnu: int
+    name: str
+    unit: str
+    type: str
+
+    def labels(self) -> list[str]:
+        return [self.line, self.drive, self.parameter, str(self.index), str(self.pnu),
+                self.name, self.unit, self.type]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class DriveInfo:
+    line: str
+    profile: Profile
+
+
+_DriveKey = tuple[str, bool, int | None]  # line, up, status word
+_Rendered = tuple[Reading, str, str]  # the reading, its value line, its timestamp line
+
+
+class SnapshotCollector(Collector):
+    """Builds the device-value families from a copy of the snapshot."""
+
+    def __init__(
+        self,
+        snapshot: Snapshot,
+        drives: Mapping[str, DriveInfo],
+        parameters: Iterable[ParameterInfo],
+    ) -> None:
+        self._snapshot = snapshot
+        self._drives = dict(drives)
+        self._parameters = list(parameters)
+        self._line_of = {p.drive: p.line for p in self._parameters}
+        self._line_of.update({name: d.line for name, d in self._drives.items()})
+        self._info_text = header(*INFO, "gauge") + "".join(
+            f"{head(INFO[0], dict(zip(_INFO, p.labels(), strict=True)))}1.0\n"
+            for p in self._parameters
+        )
+        self._heads: dict[ReadingKey, tuple[str, str]] = {}
+        for p in self._parameters:
+            self._head((p.drive, p.parameter, p.index))
+        self._readings: dict[ReadingKey, _Rendered] = {}
+        self._drive_lines: dict[str, tuple[_DriveKey, tuple[str, ...]]] = {}
+
+    def _line(self, drive: str) -> str:
+        info = self._drives.get(drive)
+        return info.line if info else self._line_of.get(drive, "")
+
+    # -- collect(): the same series as prometheus_client families ---------------
+
+    def describe(self) -> list[Metric]:
+        return list(self._families(Snapshot()))
+
+    def collect(self) -> Iterator[Metric]:
+        return self._families(self._snapshot.copy())
+
+    def _families(self, snap: Snapshot) -> Iterator[Metric]:
+        value = GaugeMetricFamily(*VALUE, labels=_PV)
+        stamp = GaugeMetricFamily(*STAMP, labels=_PV)
+        for (drive, parameter, index), reading in snap.readings.items():
+            if isinstance(reading.value, str):
+                continue  # text values appear in the API, not as numbers
+            labels = [self._line_of.get(drive, ""), drive, parameter, str(index)]
+            value.add_metric(labels, float(reading.value))
+            stamp.add_metric(labels, reading.timestamp)
+        yield value
+        yield stamp
+        info = GaugeMetricFamily(*INFO, labels=_INFO)
+        for p in self._parameters:
+            info.add_metric(p.labels(), 1.0)
+        yield info
+        up = GaugeMetricFamily(*DRIVE_UP, labels=_LD)
+        word = GaugeMetricFamily(*WORD, labels=_LD)
+        bits = GaugeMetricFamily(*BIT, labels=[*_LD, "bit"])
+        for drive, state in snap.drives.items():
+            drive_info = self._drives.get(drive)
+            line = self._line(drive)
+            up.add_metric([line, drive], 1.0 if state.up else 0.0)
+            if state.status_word is None or drive_info is None:
+                continue
+            word.add_metric([line, drive], float(state.status_word))
+            for bit, name in STATUS_BITS[drive_info.profile].items():
+                bits.add_metric([line, drive, name], float(state.status_word >> bit & 1))
+        yield up
+        yield word
+        yield bits
+        line_up = GaugeMetricFamily(*LINE_UP, labels=["line"])
+        for line_name, is_up in snap.lines.items():
+            line_up.add_metric([line_name], 1.0 if is_up else 0.0)
+        yield line_up
+
+    # -- exposition(): the same text, from cached lines ---------------------------
+
+    def exposition(self) -> Iterator[str]:
+        """The text of the families, in pieces of at most ``CHUNK`` lines."""
+        snap = self._snapshot
+        # Copies (of the dicts, not their entries): the loop runs between pieces.
+        readings = dict(snap.readings)
+        drives = dict(snap.drives)
+        lines = dict(snap.lines)
+        cache = self._readings
+        stamps: list[str] = []
+        yield header(*VALUE, "gauge")
+        entries = iter(readings.items())
+        for _ in range(0, len(readings), CHUNK):
+            values: list[str] = []
+            for key, reading in islice(entries, CHUNK):
+                rendered = cache.get(key)
+                if rendered is None or rendered[0] is not reading:
+                    rendered = self._reading(key, reading)
+                values.append(rendered[1])
+                stamps.append(rendered[2])
+            yield "".join(values)
+        yield header(*STAMP, "gauge")
+        for start in range(0, len(stamps), CHUNK):
+            yield "".join(stamps[start : start + CHUNK])
+        yield self._info_text
+        ups: list[str] = []
+        words: list[str] = []
+        bits: list[str] = []
+        for drive, state in drives.items():
+            up, *rest = self._drive(drive, state)
+            ups.append(up)
+            if rest:
+                words.append(rest[0])
+                bits.extend(rest[1:])
+        yield header(*DRIVE_UP, "gauge") + "".join(ups)
+        yield header(*WORD, "gauge") + "".join(words)
+        yield header(*BIT, "gauge")
+        yield "".join(bits)
+        yield header(*LINE_UP, "gauge") + "".join(
+            f"{head(LINE_UP[0], {'line': name})}{'1.0' if is_up else '0.0'}\n"
+            for name, is_up in lines.items()
+        )
+
+    def _reading(self, key: ReadingKey, reading: Reading) -> _Rendered:
+        rendered = self._readings.get(key)
+        if isinstance(reading.value, str):  # text values appear in the API, not as numbers
+            rendered = self._readings[key] = (reading, "", "")
+            return rendered
+        heads = self._heads.get(key) or self._head(key)
+        value = float(reading.value)  # text values are skipped before
+        if rendered is not None and float(rendered[0].value) == value:
+            value_line = rendered[1]
+        else:
+            value_line = f"{heads[0]}{format_value(value)}\n"
+        rendered = (reading, value_line, f"{heads[1]}{format_value(reading.timestamp)}\n")
+        self._readings[key] = rendered
+        return rendered
+
+    def _head(self, key: ReadingKey) -> tuple[str, str]:
+        drive, parameter, index = key
+        values = (self._line_of.get(drive, ""), drive, parameter, str(index))
+        labels = dict(zip(_PV, values, strict=True))
+        heads = self._heads[key] = (head(VALUE[0], labels), head(STAMP[0], labels))
+        return heads
+
+    def _drive(self, drive: str, state: DriveState) -> tuple[str, ...]:
+        """The drive's up line, then its status word and bit lines if it has a word."""
+        line = self._line(drive)
+        key = (line, state.up, state.status_word)
+        cached = self._drive_lines.get(drive)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        labels = {"line": line, "drive": drive}
+        lines = [f"{head(DRIVE_UP[0], labels)}{'1.0' if state.up else '0.0'}\n"]
+        info = self._drives.get(drive)
+        word = state.status_word
+        if word is not None and info is not None:
+            lines.append(f"{head(WORD[0], labels)}{format_value(float(word))}\n")
+            for bit, name in STATUS_BITS[info.profile].items():
+                value = "1.0" if word >> bit & 1 else "0.0"
+                lines.append(f"{head(BIT[0], {**labels, 'bit': name})}{value}\n")
+        result = tuple(lines)
+        self._drive_lines[drive] = (key, result)
+        return result

@@ -1,0 +1,200 @@
+"""The /metrics renderer: the same text as prometheus_client, valid for promtool, in pieces."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import shutil
+import subprocess
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from prometheus_client import generate_latest
+from prometheus_client.parser import text_string_to_metric_families
+from prometheus_client.utils import floatToGoString
+
+from pkwbus.master.jobs import Job, JobKind, JobResult, Priority
+from pkwbus.master.snapshot import DriveState, Reading, Snapshot
+from pkwbus.master.transaction import ErrorKind, Failure, Rejected, TimedOut
+from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import FC
+from pkwbus.protocol.pzd import Profile
+from pkwbus.service import exposition
+from pkwbus.service.exposition import MetricsRegistry, format_value, render
+from pkwbus.service.metrics import (
+    DriveInfo,
+    LineMetrics,
+    ParameterInfo,
+    ServiceMetrics,
+    SnapshotCollector,
+    api_metrics,
+)
+
+PROMTOOL = shutil.which("promtool") or "/usr/bin/promtool"
+# Label values a configuration may bring: quotes, backslashes, a newline, non-ASCII.
+ODD = 'Motor "A" \\ 1\nÜberlast'
+
+
+class Plant:
+    """A registry as build_runtime makes it: service counters, API counters, snapshot."""
+
+    def __init__(self, lines: int = 2, drives: int = 3, parameters: int = 4) -> None:
+        self.registry = MetricsRegistry()
+        self.snapshot = Snapshot()
+        metrics = ServiceMetrics(self.registry)
+        api_metrics(self.registry)
+        infos: list[ParameterInfo] = []
+        kinds: dict[str, DriveInfo] = {}
+        self.lines: dict[str, LineMetrics] = {}
+        for n in range(lines):
+            line = f"line{n}"
+            names = [f"l{n}d{d}" for d in range(drives)]
+            self.lines[line] = metrics.for_line(line, dict.fromkeys(names, FC))
+            for i, drive in enumerate(names):
+                kinds[drive] = DriveInfo(line, Profile.FC if i % 2 else Profile.PROFIDRIVE)
+                for p in range(parameters):
+                    unit = ODD if p == 1 else "Hz"
+                    infos.append(ParameterInfo(line, drive, f"16-{p:02d}", p % 2, 1600 + p,
+                                               f"Parameter {p}", unit, "u16"))  # fmt: skip
+        self.infos = infos
+        self.registry.register(SnapshotCollector(self.snapshot, kinds, infos))
+
+    def info_text(self) -> str:
+        text = generate_latest(self.registry).decode()
+        start = text.index("# HELP pkwbus_parameter_info")
+        return text[start : text.index("# HELP", start + 1)]
+
+    def poll(self, t: float) -> None:
+        """Every parameter read at ``t`` (values of every kind Prometheus prints)."""
+        special = [0.0, -0.0, 1e-7, 12345678.9, -3.5, math.inf, -math.inf, math.nan, 1e22]
+        for i, p in enumerate(self.infos):
+            value: float | int | str = special[i % len(special)] + (t if i % 3 else 0)
+            if i % 7 == 6:
+                value = "text"  # a text value: in the API, not in the metrics
+            self.snapshot.readings[(p.drive, p.parameter, p.index)] = Reading(value, i, t)
+        for i, p in enumerate(self.infos[::4]):
+            word = None if i % 5 == 4 else (int(t) * 97 + i) & 0xFFFF
+            self.snapshot.drives[p.drive] = DriveState(i % 3 != 2, word, t)
+        for n, line in enumerate(self.lines):
+            self.snapshot.lines[line] = n % 2 == 0
+
+    def traffic(self) -> None:
+        for n, line in enumerate(self.lines.values()):
+            drive = f"l{n}d0"
+            job = Job(drive, pkw.read(FC, 1613), JobKind.READ, Priority.POLL, 0.0)
+            line.exchange(drive, Failure(ErrorKind.TIMEOUT), 0.02)
+            line.job_finished(drive, job, JobResult(Rejected(3, "x", "y")))
+            line.job_finished(drive, job, JobResult(TimedOut("gone")))
+            line.overrun(drive)
+        job = Job("stranger", pkw.read(FC, 1613), JobKind.WRITE, Priority.POLL, 0.0)
+        self.lines["line0"].job_finished("stranger", job, JobResult(Rejected(None, "", "")))
+
+
+def _text(plant: Plant) -> str:
+    return asyncio.run(render(plant.registry)).decode()
+
+
+def _samples(text: str) -> list[tuple[str, tuple[tuple[str, str], ...], str]]:
+    """Every sample: name, labels, value (as text, so that NaN equals NaN)."""
+    return [
+        (s.name, tuple(sorted(s.labels.items())), repr(s.value))
+        for family in text_string_to_metric_families(text)
+        for s in family.samples
+    ]
+
+
+def test_the_text_is_generate_latest_of_the_same_registry() -> None:
+    """Sample by sample (names, labels, values) and byte for byte, after each change:
+    a value, a timestamp, a drive's state, a counter, a new series."""
+    plant = Plant()
+    for step in range(4):
+        plant.poll(1_700_000_000.25 + step)
+        if step >= 2:
+            plant.traffic()
+        text = _text(plant)
+        expected = generate_latest(plant.registry).decode()
+        assert _samples(text) == _samples(expected)
+        assert text == expected
+    assert 'unit="Motor \\"A\\" \\\\ 1\\nÜberlast"' in text
+
+
+def test_unchanged_series_reuse_their_line_and_changed_ones_are_made_again() -> None:
+    plant = Plant(lines=1, drives=1, parameters=1)
+    plant.poll(100.0)
+    first = _text(plant)
+    assert _text(plant) == first
+    plant.snapshot.readings[("l0d0", "16-00", 0)] = Reading(42.5, 425, 101.0)
+    plant.lines["line0"].overrun("l0d0")
+    second = _text(plant)
+    assert (
+        'pkwbus_parameter_value{drive="l0d0",index="0",line="line0",parameter="16-00"} 42.5\n'
+        in second
+    )
+    assert "pkwbus_poll_overruns_total{" not in first
+    assert 'pkwbus_poll_overruns_total{drive="l0d0",line="line0"} 1.0\n' in second
+    assert second == generate_latest(plant.registry).decode()
+
+
+def test_a_value_that_disappears_from_the_snapshot_disappears_from_the_text() -> None:
+    plant = Plant(lines=1, drives=1, parameters=2)
+    plant.poll(100.0)
+    del plant.snapshot.readings[("l0d0", "16-01", 1)]
+    text = _text(plant)
+    assert 'parameter="16-01"' not in text.split("# HELP pkwbus_parameter_info")[0]
+    assert text == generate_latest(plant.registry).decode()
+
+
+def test_promtool_accepts_the_text() -> None:
+    if not shutil.which(PROMTOOL):
+        print(f"promtool not found ({PROMTOOL}): deploy/check installs it")
+        pytest.skip(f"promtool not found at {PROMTOOL}; deploy/check installs it")
+    plant = Plant()
+    plant.poll(1_700_000_000.5)
+    plant.traffic()
+    body = asyncio.run(render(plant.registry))
+    result = subprocess.run(
+        [PROMTOOL, "check", "metrics"], input=body, capture_output=True, timeout=60, check=False
+    )
+    assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
+
+
+def test_the_scrape_returns_to_the_event_loop_while_it_renders() -> None:
+    """A large configuration is rendered in pieces: another task runs in between."""
+    plant = Plant(lines=2, drives=100, parameters=20)
+    plant.poll(1_700_000_000.5)
+    size = len(generate_latest(plant.registry))
+    assert size > 4 * exposition.YIELD_EVERY
+
+    async def scrape() -> tuple[int, bytes]:
+        turns = 0
+        done = False
+
+        async def other() -> None:
+            nonlocal turns
+            while not done:
+                turns += 1
+                await asyncio.sleep(0)
+
+        task = asyncio.create_task(other())
+        await asyncio.sleep(0)
+        start = turns
+        body = await render(plant.registry)
+        done = True
+        await task
+        return turns - start, body
+
+    turns, body = asyncio.run(scrape())
+    # the unchanging parameter_info text is one piece; the rest comes in pieces
+    assert turns >= (size - len(plant.info_text())) // exposition.YIELD_EVERY
+    assert body == generate_latest(plant.registry)
+
+
+def test_the_content_type_is_the_text_format_0_0_4() -> None:
+    assert exposition.CONTENT_TYPE == "text/plain; version=0.0.4; charset=utf-8"
+
+
+@settings(deadline=None, max_examples=500)
+@given(st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**63), 2**63))
+def test_values_are_printed_as_prometheus_client_prints_them(value: float) -> None:
+    assert format_value(value) == floatToGoString(value)
