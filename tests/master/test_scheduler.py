@@ -28,15 +28,15 @@ class Recorder:
     def __init__(self) -> None:
         self.exchanges: list[tuple[str, ExchangeResult]] = []
         self.busy: Counter[str] = Counter()
-        self.done: list[tuple[str, Job, JobResult]] = []
+        self.done: list[tuple[str, JobKind, JobResult]] = []
         self.overruns: Counter[str] = Counter()
 
     def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
         self.exchanges.append((drive, result))
         self.busy[drive] += busy
 
-    def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
-        self.done.append((drive, job, result))
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
+        self.done.append((drive, kind, result))
 
     def overrun(self, drive: str) -> None:
         self.overruns[drive] += 1
@@ -44,8 +44,8 @@ class Recorder:
     def polls_ok(self, drive: str) -> int:
         return sum(
             1
-            for d, job, r in self.done
-            if d == drive and job.priority is Priority.POLL and isinstance(r.outcome, Answered)
+            for d, kind, r in self.done
+            if d == drive and kind is JobKind.READ and isinstance(r.outcome, Answered)
         )
 
 
@@ -186,7 +186,7 @@ async def test_two_lines_one_failing() -> None:
         await asyncio.gather(*tasks)
     assert good_events.polls_ok("d1") >= 10
     assert good.snapshot.lines["line1"] is False  # closed at stop
-    assert bad_line.link.last_error and "cannot open" in bad_line.link.last_error
+    assert bad_line.reconnect.last_error and "cannot open" in bad_line.reconnect.last_error
 
 
 async def test_stop_cancels_queued_jobs_and_returns() -> None:

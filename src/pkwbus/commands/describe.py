@@ -24,8 +24,9 @@ from pkwbus.commands.common import (
 )
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
+from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, LineFailed, PkwTransaction, TimedOut
+from pkwbus.master.transaction import Answered, LineFailed, TimedOut
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError
@@ -72,9 +73,7 @@ async def _element(
 ) -> pkw.DescriptionResponse | None:
     request = pkw.read_description(target.dialect, pnu, element)
     deadline = asyncio.get_running_loop().time() + 2.0
-    outcome = await line.run(
-        PkwTransaction(target, request, retries=args.retries, deadline=deadline)
-    )
+    outcome = await run_job(line, target, request, retries=args.retries, deadline=deadline)
     if isinstance(outcome, TimedOut | LineFailed):
         raise CommandError(f"no valid answer: {outcome.reason}", Exit.NO_ANSWER)
     if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):

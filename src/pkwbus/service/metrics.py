@@ -20,7 +20,7 @@ from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
 from pkwbus import __version__
-from pkwbus.master.jobs import Cancelled, Job, JobOutcome, JobResult
+from pkwbus.master.jobs import Cancelled, JobKind, JobOutcome, JobResult
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.transaction import (
     Answered,
@@ -317,9 +317,9 @@ class LineMetrics:
         else:
             self._errors[(drive, result.kind.value)].inc()
 
-    def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
-        key = (drive, job.kind.value, outcome_label(outcome))
+        key = (drive, kind.value, outcome_label(outcome))
         child = self._jobs.get(key)
         if child is None:
             child = self._jobs[key] = self._m.jobs.labels(self._line, drive, key[1], key[2].value)
