@@ -14,11 +14,14 @@ from pkwbus.master.transaction import PkwTransaction
 
 
 class PollState:
-    __slots__ = ("due", "spec")
+    """A poll and when it is due; its request telegram is built once."""
 
-    def __init__(self, spec: PollSpec, due: float) -> None:
+    __slots__ = ("due", "send", "spec")
+
+    def __init__(self, spec: PollSpec, due: float, send: Send) -> None:
         self.spec = spec
         self.due = due
+        self.send = send
 
 
 @dataclass(eq=False, slots=True)
@@ -56,7 +59,8 @@ class DrivePlan:
         self.seq = itertools.count()
         self.polls: list[tuple[float, int, PollState]] = []
         for p in spec.polls:
-            self.push_poll(PollState(p, 0.0))
+            send = Send(spec.name, spec.target, spec.target.telegram(p.request))
+            self.push_poll(PollState(p, 0.0, send))
 
     def push_poll(self, poll: PollState) -> None:
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))

@@ -301,12 +301,16 @@ class Planner:
             self.events.append(Overrun(d.name))
         # Long enough for the retries and a lagging answer; never the poll's whole
         # interval, which would hold the drive's parameter channel for minutes.
+        deadline = now + self.poll_deadline
         tx = PkwTransaction(
-            d.target, spec.request, retries=self.retries, deadline=now + self.poll_deadline
+            d.target,
+            spec.request,
+            retries=self.retries,
+            deadline=deadline,
+            telegram=poll.send.telegram,
         )
-        send = Send(d.name, d.target, tx.telegram)
-        d.active = Active(tx, Priority.POLL, poll.due, poll, send)
-        return send
+        d.active = Active(tx, Priority.POLL, poll.due, poll, poll.send)
+        return poll.send
 
     def _complete(self, d: DrivePlan, active: Active, outcome: Outcome, now: float) -> None:
         d.active = None

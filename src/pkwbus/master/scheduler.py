@@ -73,6 +73,8 @@ class LineScheduler:
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
+        if self.line.is_open:  # opened by its owner before
+            self.planner.line_up(loop.time())
         try:
             while not self._stopping:
                 try:
