@@ -367,6 +367,25 @@ def test_an_exchange_costs_the_same_with_thousands_of_drives(
 
 # ---------------------------------------------------------------- properties
 
+
+def priority_sent(planner: Planner, send: Send) -> Priority:
+    active = planner._by_name[send.drive].active
+    return Priority.POLL if send.probe or active is None else active.priority
+
+
+def pending(planner: Planner) -> list[Priority]:
+    """What waits on the other drives: a job in flight, queued writes, queued reads."""
+    found = []
+    for d in planner.drives:
+        if d.busy:
+            continue
+        if d.active is not None:
+            found.append(d.active.priority)
+        elif d.writes or d.reads:
+            found.append(Priority.WRITE if d.writes else Priority.READ)
+    return found
+
+
 OPS = st.lists(
     st.one_of(
         st.tuples(st.just("step"), st.sampled_from(["answer", "timeout", "checksum"])),
@@ -418,6 +437,7 @@ def test_the_heap_chooses_what_the_policy_says(ops: list[tuple[object, ...]], ev
                 continue
             if action.drive not in ended:  # (a drive whose transaction ended has a new claim)
                 assert claims[action.drive] == min(live)
+            assert priority_sent(planner, action) <= min(pending(planner), default=Priority.POLL)
             if not action.probe:
                 if action.drive in current:
                     assert current[action.drive] == action.telegram, "one transaction at a time"
