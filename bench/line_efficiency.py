@@ -3,7 +3,7 @@
 The simulated drive runs in another process on a pty with wire timing: it
 answers when a real RS-485 line would deliver the last byte of its answer
 (request bytes x 11 / baud + response delay + answer bytes x 11 / baud after
-the request's first byte). The master runs ``Line.run`` back to back (one
+the request's first byte). The master runs ``run_job`` back to back (one
 FC parameter read after another). The theoretical exchange time is
 
     request bytes x 11 / baud + start pause (3.5 characters)
@@ -30,8 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
 from _measure import markdown_table
 
+from pkwbus.master.scheduler import perform, run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, PkwTransaction
+from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
 
 BAUDRATES = (9600, 19200, 115200)
@@ -40,7 +41,7 @@ GOALS = {9600: 0.98, 115200: 0.95}
 
 
 async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
-    """Completed jobs per second of ``Line.run``, one after another."""
+    """Completed jobs per second of ``run_job``, one after another."""
     line = make_line(port, "fc", baudrate, timeout=0.2)
     target = DriveTarget.create("fc", 1)
     request = pkw.read(target.dialect, 1613)
@@ -48,13 +49,12 @@ async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
     await line.open()
     try:
         for _ in range(3):  # warm-up
-            await line.run(PkwTransaction(target, request, retries=2, deadline=loop.time() + 1))
+            await run_job(line, target, request, deadline=loop.time() + 1)
         done = bad = 0
         start = time.perf_counter()
         while time.perf_counter() - start < seconds:
-            tx = PkwTransaction(target, request, retries=2, deadline=loop.time() + 1)
-            outcome = await line.run(tx)
-            if isinstance(outcome, Answered) and tx.tally.telegrams == 1:
+            job = await perform(line, target, request, deadline=loop.time() + 1)
+            if isinstance(job.outcome, Answered) and job.tally and job.tally.telegrams == 1:
                 done += 1
             else:
                 bad += 1

@@ -4,7 +4,7 @@ Each simulated drive (another process, pty, wire timing at 115200 baud,
 2 ms response delay) answers a PKW request only after ``lag_telegrams``
 further telegrams to it, or after a time, meanwhile with AK 0. Compared:
 the ``LineScheduler`` interleaving the 4 drives (polls always due), and
-strictly sequential handling (``Line.run`` one job after another, drive
+strictly sequential handling (``run_job`` one job after another, drive
 after drive).
 
     .venv/bin/python bench/pkw_lag.py [--seconds 5] [--repeat 3]
@@ -26,9 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.scheduler import LineScheduler
+from pkwbus.master.scheduler import LineScheduler, run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, PkwTransaction
+from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
 
 BAUD = 115200
@@ -66,8 +66,8 @@ async def sequential(port: str, seconds: float) -> float:
         while time.perf_counter() - start < seconds:
             target = targets[i % 4]
             req = pkw.read(target.dialect, PNUS[(i // 4) % len(PNUS)])
-            tx = PkwTransaction(target, req, retries=2, deadline=loop.time() + 2.0)
-            if isinstance(await line.run(tx), Answered):
+            outcome = await run_job(line, target, req, deadline=loop.time() + 2.0)
+            if isinstance(outcome, Answered):
                 done += 1
             i += 1
         rate = done / (time.perf_counter() - start)

@@ -13,8 +13,9 @@ import pytest
 
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
+from pkwbus.master.scheduler import run_job as _run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Outcome, PkwTransaction
+from pkwbus.master.transaction import Outcome
 from pkwbus.protocol import pkw
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming, Simulator
@@ -82,8 +83,7 @@ async def run_job(
     deadline: float = 2.0,
 ) -> Outcome:
     loop = asyncio.get_running_loop()
-    tx = PkwTransaction(target, request, retries=retries, deadline=loop.time() + deadline)
-    return await line.run(tx)
+    return await _run_job(line, target, request, retries=retries, deadline=loop.time() + deadline)
 
 
 __all__ = ["Callable", "SimFaults", "Trace", "make_sim", "open_line", "run_job", "serve"]

@@ -1,24 +1,26 @@
-"""The scheduler over simulated drives: order, health, interleaving, overruns, lines apart."""
+"""The line runner end to end over simulated drives: snapshot, lines apart, errors, outages.
+
+The policy itself (order, fairness, health, interleaving, overruns) is the
+planner's, tested on a fake clock in test_planner.py.
+"""
 
 from __future__ import annotations
 
 import asyncio
-import itertools
 from collections import Counter
 from typing import Any
 
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.health import HealthPolicy
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ExchangeResult, Failure, LineFailed
+from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.protocol import pkw
 from pkwbus.protocol.telegram import Protocol
-from pkwbus.sim import SimFaults, SimTiming
+from pkwbus.sim import SimTiming
 from tests.master.conftest import Trace, make_sim, serve
 
 
@@ -28,15 +30,15 @@ class Recorder:
     def __init__(self) -> None:
         self.exchanges: list[tuple[str, ExchangeResult]] = []
         self.busy: Counter[str] = Counter()
-        self.done: list[tuple[str, Job, JobResult]] = []
+        self.done: list[tuple[str, JobKind, JobResult]] = []
         self.overruns: Counter[str] = Counter()
 
     def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
         self.exchanges.append((drive, result))
         self.busy[drive] += busy
 
-    def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
-        self.done.append((drive, job, result))
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
+        self.done.append((drive, kind, result))
 
     def overrun(self, drive: str) -> None:
         self.overruns[drive] += 1
@@ -44,8 +46,8 @@ class Recorder:
     def polls_ok(self, drive: str) -> int:
         return sum(
             1
-            for d, job, r in self.done
-            if d == drive and job.priority is Priority.POLL and isinstance(r.outcome, Answered)
+            for d, kind, r in self.done
+            if d == drive and kind is JobKind.READ and isinstance(r.outcome, Answered)
         )
 
 
@@ -91,88 +93,6 @@ async def test_polls_reach_the_snapshot_with_the_drives_values() -> None:
     assert s.snapshot.drives["d1"].status_word == sim.drives[1].status_word
 
 
-async def test_a_write_waits_at_most_for_the_exchange_in_flight() -> None:
-    sim = make_sim("fc", [1, 2, 3], timing=SimTiming(response_delay=0.002))
-    specs = drive_specs("fc", [1, 2, 3], [1613, 1614, 1610, 1630], 0.001)  # saturating
-    async with serve(sim, "tcp") as port:
-        s, _events, trace = scheduler(port, "fc", specs)
-        task = asyncio.create_task(s.run())
-        await asyncio.sleep(0.2)
-        loop = asyncio.get_running_loop()
-        target = specs[1].target
-        future: asyncio.Future[JobResult] = loop.create_future()
-        write = pkw.write(target.dialect, 341, 777, pkw.Width.DWORD)
-        sent_before = len(trace.tx)
-        s.submit(Job("d2", write, JobKind.WRITE, Priority.WRITE, loop.time() + 2, future=future))
-        result = await future
-        s.stop()
-        await task
-    assert isinstance(result.outcome, Answered)
-    position = trace.tx.index(target.telegram(write), sent_before)
-    assert position - sent_before <= 1, "the write went out right after the exchange in flight"
-    assert sim.drives[2].value(341) == 777
-
-
-async def test_dead_drive_costs_the_others_almost_nothing() -> None:
-    timing = SimTiming(response_delay=0.002)
-    pnus = [1613, 1614]
-    rates = []
-    for dead in (frozenset(), frozenset({4})):
-        sim = make_sim("fc", [1, 2, 3, 4], timing=timing, faults=SimFaults(dead=dead))
-        async with serve(sim, "tcp") as port:
-            specs = drive_specs("fc", [1, 2, 3, 4], pnus, 0.05)  # well within the line
-            s, events, _ = scheduler(
-                port, "fc", specs, policy=HealthPolicy(down_after=3, probe_initial=1.0)
-            )
-            await run_for(s, 1.5)
-        rates.append(sum(events.polls_ok(f"d{a}") for a in (1, 2, 3)))
-        if dead:
-            assert s.snapshot.drives["d4"].up is False
-    healthy, with_dead = rates
-    assert healthy > 150
-    assert with_dead >= 0.95 * healthy, f"{with_dead} polls against {healthy} with all healthy"
-
-
-async def test_a_drive_that_comes_back_is_polled_again_within_its_backoff() -> None:
-    sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
-    async with serve(sim, "tcp") as port:
-        specs = drive_specs("fc", [1, 2], [1613], 0.02)
-        policy = HealthPolicy(down_after=2, probe_initial=0.2, probe_cap=0.4)
-        s, events, _ = scheduler(port, "fc", specs, policy=policy)
-        task = asyncio.create_task(s.run())
-        await asyncio.sleep(0.5)
-        assert s.snapshot.drives["d2"].up is False
-        sim.revive(2)
-        await asyncio.sleep(0.6)  # one probe interval (cap 0.4 s) and some polls
-        s.stop()
-        await task
-    assert s.snapshot.drives["d2"].up is True
-    assert events.polls_ok("d2") >= 1
-    assert events.overruns["d2"] == 0, "polls of a drive that was away are not overruns"
-
-
-async def test_overruns_are_counted_when_polls_exceed_the_line() -> None:
-    sim = make_sim("fc", [1, 2], timing=SimTiming(response_delay=0.005))
-    async with serve(sim, "tcp") as port:
-        specs = drive_specs("fc", [1, 2], [1613, 1614, 1610, 1630, 1690], 0.005)
-        s, events, _ = scheduler(port, "fc", specs)
-        await run_for(s, 0.5)
-    assert sum(events.overruns.values()) > 0
-
-
-async def test_lagging_drive_gets_other_exchanges_between_its_repeats() -> None:
-    timing = SimTiming(response_delay=0.0, lag_telegrams=3, lag_mode="none")
-    sim = make_sim("uss", [1, 2, 3], timing=timing)
-    async with serve(sim, "tcp") as port:
-        specs = drive_specs("uss", [1, 2, 3], [1120, 1121], 0.001)
-        s, events, trace = scheduler(port, "uss", specs)
-        await run_for(s, 0.4)
-    addresses = [t[2] for t in trace.tx]
-    repeats_back_to_back = sum(1 for a, b in itertools.pairwise(addresses) if a == b)
-    assert repeats_back_to_back < len(addresses) * 0.1
-    assert all(events.polls_ok(f"d{a}") > 0 for a in (1, 2, 3))
-
-
 async def test_two_lines_one_failing() -> None:
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
@@ -186,7 +106,7 @@ async def test_two_lines_one_failing() -> None:
         await asyncio.gather(*tasks)
     assert good_events.polls_ok("d1") >= 10
     assert good.snapshot.lines["line1"] is False  # closed at stop
-    assert bad_line.link.last_error and "cannot open" in bad_line.link.last_error
+    assert bad_line.reconnect.last_error and "cannot open" in bad_line.reconnect.last_error
 
 
 async def test_stop_cancels_queued_jobs_and_returns() -> None:
@@ -208,25 +128,6 @@ async def test_stop_cancels_queued_jobs_and_returns() -> None:
     results = [f.result() for f in futures]
     assert any(isinstance(r.outcome, Cancelled) for r in results)
     assert all(f.done() for f in futures)
-
-
-async def test_a_dying_drives_retries_let_the_others_in_between() -> None:
-    sim = make_sim("fc", [1, 2, 3], timing=SimTiming(response_delay=0.001))
-    async with serve(sim, "tcp") as port:
-        specs = drive_specs("fc", [1, 2, 3], [1613], 0.005)
-        s, events, _ = scheduler(port, "fc", specs, timeout=0.03)
-        task = asyncio.create_task(s.run())
-        await asyncio.sleep(0.2)
-        sim.kill(3)
-        await asyncio.sleep(0.4)
-        s.stop()
-        await task
-    failed = [
-        i for i, (d, r) in enumerate(events.exchanges) if d == "d3" and isinstance(r, Failure)
-    ]
-    assert len(failed) >= 3  # retries, then down
-    followers = [events.exchanges[i + 1][0] for i in failed[:2] if i + 1 < len(events.exchanges)]
-    assert all(f != "d3" for f in followers), "another drive's exchange came between the tries"
 
 
 async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCaptureFixture) -> None:

@@ -14,10 +14,9 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.utils import floatToGoString
 
-from pkwbus.master.jobs import Job, JobKind, JobResult, Priority
+from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.snapshot import DriveState, Reading, Snapshot
 from pkwbus.master.transaction import ErrorKind, Failure, Rejected, TimedOut
-from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import FC
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service import exposition
@@ -82,13 +81,13 @@ class Plant:
     def traffic(self) -> None:
         for n, line in enumerate(self.lines.values()):
             drive = f"l{n}d0"
-            job = Job(drive, pkw.read(FC, 1613), JobKind.READ, Priority.POLL, 0.0)
             line.exchange(drive, Failure(ErrorKind.TIMEOUT), 0.02)
-            line.job_finished(drive, job, JobResult(Rejected(3, "x", "y")))
-            line.job_finished(drive, job, JobResult(TimedOut("gone")))
+            line.job_finished(drive, JobKind.READ, JobResult(Rejected(3, "x", "y")))
+            line.job_finished(drive, JobKind.READ, JobResult(TimedOut("gone")))
             line.overrun(drive)
-        job = Job("stranger", pkw.read(FC, 1613), JobKind.WRITE, Priority.POLL, 0.0)
-        self.lines["line0"].job_finished("stranger", job, JobResult(Rejected(None, "", "")))
+        self.lines["line0"].job_finished(
+            "stranger", JobKind.WRITE, JobResult(Rejected(None, "", ""))
+        )
 
 
 def _text(plant: Plant) -> str:

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.jobs import Cancelled, JobKind, JobResult
 from pkwbus.master.outcomes import metric_label
 from pkwbus.master.transaction import (
     Answered,
@@ -27,19 +27,15 @@ from pkwbus.service.metrics import ServiceMetrics
 FAULTS = "pkwbus_pkw_faults_total"
 
 
-def _job(kind: JobKind) -> Job:
-    return Job("d1", pkw.read(FC, 1613), kind, Priority.POLL, 0.0)
-
-
 def test_finished_jobs_count_by_kind_and_outcome() -> None:
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
     response = pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD)
     for _ in range(3):
-        metrics.job_finished("d1", _job(JobKind.READ), JobResult(Answered(response), tally=Tally()))
-    metrics.job_finished("d1", _job(JobKind.WRITE), JobResult(Rejected(3, "x", "y")))
-    metrics.job_finished("d1", _job(JobKind.READ), JobResult(TimedOut("gone")))
-    metrics.job_finished("other", _job(JobKind.READ), JobResult(Cancelled("stop")))
+        metrics.job_finished("d1", JobKind.READ, JobResult(Answered(response), tally=Tally()))
+    metrics.job_finished("d1", JobKind.WRITE, JobResult(Rejected(3, "x", "y")))
+    metrics.job_finished("d1", JobKind.READ, JobResult(TimedOut("gone")))
+    metrics.job_finished("other", JobKind.READ, JobResult(Cancelled("stop")))
 
     def jobs(drive: str, kind: str, outcome: str) -> float | None:
         labels = {"line": "l", "drive": drive, "kind": kind, "outcome": outcome}
@@ -132,7 +128,7 @@ def test_first_fault_of_each_code_is_a_step_from_zero(dialect: Dialect) -> None:
         before = _fault_series(registry)
         assert before, "no fault series before the first fault"
         assert set(before.values()) == {0.0}
-        metrics.job_finished("d1", _job(JobKind.WRITE), JobResult(answer))
+        metrics.job_finished("d1", JobKind.WRITE, JobResult(answer))
         after = _fault_series(registry)
         assert after.keys() == before.keys(), f"{answer}: a new series, not a step from 0"
         changed = {labels: v for labels, v in after.items() if v != before[labels]}
@@ -149,7 +145,7 @@ def test_a_fault_outside_the_table_still_counts() -> None:
     metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
     unknown = _rejected(FC, Reply.REJECTED, 77)
     before = _fault_series(registry)
-    metrics.job_finished("d1", _job(JobKind.READ), JobResult(unknown))
+    metrics.job_finished("d1", JobKind.READ, JobResult(unknown))
     new = _fault_series(registry).keys() - before.keys()
     assert [dict(labels)["fault_code"] for labels in new] == ["77"]
 

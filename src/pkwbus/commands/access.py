@@ -21,8 +21,8 @@ from pkwbus.commands.common import (
 )
 from pkwbus.link import PortError
 from pkwbus.master.outcomes import Answered, Outcome, command_failure
+from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwTransaction
 from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -103,9 +103,8 @@ async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRe
     except PortError as exc:
         raise CommandError(str(exc), Exit.PORT) from None
     try:
-        loop = asyncio.get_running_loop()
-        tx = PkwTransaction(target, req, retries=args.retries, deadline=loop.time() + args.deadline)
-        return await line.run(tx)
+        deadline = asyncio.get_running_loop().time() + args.deadline
+        return await run_job(line, target, req, retries=args.retries, deadline=deadline)
     finally:
         await line.close()
 

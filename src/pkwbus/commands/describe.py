@@ -25,8 +25,8 @@ from pkwbus.commands.common import (
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.outcomes import Answered, Rejected, command_failure
+from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError
@@ -75,9 +75,7 @@ async def _element(
 ) -> pkw.DescriptionResponse | None:
     request = pkw.read_description(target.dialect, pnu, element)
     deadline = asyncio.get_running_loop().time() + 2.0
-    outcome = await line.run(
-        PkwTransaction(target, request, retries=args.retries, deadline=deadline)
-    )
+    outcome = await run_job(line, target, request, retries=args.retries, deadline=deadline)
     if isinstance(outcome, Answered):
         response = outcome.response
         return response if isinstance(response, pkw.DescriptionResponse) else None

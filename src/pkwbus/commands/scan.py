@@ -28,8 +28,9 @@ from pkwbus.commands.common import (
 )
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
+from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ErrorKind, Failure, PkwTransaction, Reply
+from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
@@ -213,7 +214,7 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
         return None
     loop = asyncio.get_running_loop()
     deadline = loop.time() + line.timeout + TYPE_TIMEOUT
-    outcome = await line.run(PkwTransaction(target, req, retries=1, deadline=deadline))
+    outcome = await run_job(line, target, req, retries=1, deadline=deadline)
     if not isinstance(outcome, Answered):
         return None
     try:

@@ -1,6 +1,15 @@
 """The only layer that touches a serial port: pyserial-asyncio for device paths and URLs."""
 
 from pkwbus.link.eventloop import new_event_loop, run
-from pkwbus.link.port import Link, LinkState, PortError, PortSettings
+from pkwbus.link.port import Link, PortError, PortSettings
+from pkwbus.link.reconnect import LinkState, Reconnect
 
-__all__ = ["Link", "LinkState", "PortError", "PortSettings", "new_event_loop", "run"]
+__all__ = [
+    "Link",
+    "LinkState",
+    "PortError",
+    "PortSettings",
+    "Reconnect",
+    "new_event_loop",
+    "run",
+]

@@ -2,16 +2,16 @@
 
 The link writes one request at a time after the line has been quiet for the
 start pause, discards stale input before each request, optionally strips
-the echo of its own transmission, and hands every received chunk to one
-receiver callback. When the port fails or disappears it reports the error
-and reopens with capped exponential back-off.
+the echo of its own transmission, and hands every received chunk to its
+owner's receiver. When the port disappears it tells its owner once
+(``on_lost``); when and whether to reopen is the owner's decision
+(:class:`pkwbus.link.reconnect.Reconnect`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import enum
 import logging
 import math
 import os
@@ -30,8 +30,8 @@ import serial
 import serial.rs485
 import serial_asyncio
 
-from pkwbus.link.backoff import Backoff
 from pkwbus.link.eventloop import has_fine_timers
+from pkwbus.link.reconnect import LinkState
 from pkwbus.protocol import timing
 
 log = logging.getLogger(__name__)
@@ -46,12 +46,6 @@ LOOP_TIMER_RESOLUTION = 0.001
 
 class PortError(Exception):
     """The port cannot be opened or was lost."""
-
-
-class LinkState(enum.Enum):
-    CLOSED = "closed"
-    OPEN = "open"
-    FAILED = "failed"
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,7 +108,7 @@ class PortSettings:
 
 
 Receiver = Callable[[bytes], None]
-StateListener = Callable[[LinkState, str | None], None]
+LostListener = Callable[[str], None]
 
 
 class _Protocol(asyncio.Protocol):
@@ -129,23 +123,20 @@ class _Protocol(asyncio.Protocol):
 
 
 class Link:
-    """One port. Owned by one line; nothing else touches the port."""
+    """One port. Owned by one line, which gives its callbacks once; nothing else touches it."""
 
     def __init__(
         self,
         settings: PortSettings,
         *,
         receiver: Receiver | None = None,
-        on_state: StateListener | None = None,
+        on_lost: LostListener | None = None,
     ) -> None:
         self.settings = settings
-        self.receiver = receiver
-        self.on_state = on_state
-        self.on_lost: Callable[[str], None] | None = None
+        self._receiver = receiver
+        self._on_lost_cb = on_lost
         self._transport: asyncio.Transport | None = None
         self._state = LinkState.CLOSED
-        self._backoff = Backoff(settings.reopen_initial, settings.reopen_cap)
-        self._next_attempt = 0.0
         self._quiet_at = 0.0
         self._echo = b""
         self._closing = False
@@ -154,16 +145,10 @@ class Link:
         self._pause = settings.start_pause
         self._char_time = settings.char_time
         self._fine_timer: ThreadPoolExecutor | None = None
-        self.last_error: str | None = None
 
     @property
     def state(self) -> LinkState:
         return self._state
-
-    @property
-    def next_attempt(self) -> float:
-        """Loop time of the next reopen attempt (back-off after a failure)."""
-        return self._next_attempt
 
     @property
     def is_open(self) -> bool:
@@ -179,41 +164,15 @@ class Link:
             instance = await loop.run_in_executor(None, _open_port, s)
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             reason = _reason(exc).split(f"{s.url}: ", 1)[-1]
-            self._failed(f"cannot open {s.url}: {reason}")
-            raise PortError(self.last_error) from None
+            self._state = LinkState.FAILED
+            raise PortError(f"cannot open {s.url}: {reason}") from None
         self._closing = False
         _closer.start()
         self._transport = _transport(loop, self, instance)
         self._serial = instance
         self._fd = _raw_fd(instance)
-        self._backoff.reset()
         self._quiet_at = loop.time()
-        self._set_state(LinkState.OPEN, None)
-
-    async def ensure_open(self, deadline: float | None = None) -> None:
-        """Open the port if it is not, waiting out the reopen back-off (never past ``deadline``)."""
-        if self._state is LinkState.OPEN:
-            return
-        loop = asyncio.get_running_loop()
-        wait = self._next_attempt - loop.time()
-        if wait > 0:
-            if deadline is not None and self._next_attempt > deadline:
-                raise PortError(self.last_error or f"{self.settings.url} is not open")
-            await asyncio.sleep(wait)
-        await self.open()
-
-    def _failed(self, message: str) -> None:
-        delay = self._backoff.next_delay()
-        with contextlib.suppress(RuntimeError):
-            self._next_attempt = asyncio.get_running_loop().time() + delay
-        self.last_error = message
-        self._set_state(LinkState.FAILED, message)
-
-    def _set_state(self, state: LinkState, error: str | None) -> None:
-        changed = state is not self._state
-        self._state = state
-        if changed and self.on_state is not None:
-            self.on_state(state, error)
+        self._state = LinkState.OPEN
 
     async def close(self) -> None:
         self._closing = True
@@ -225,16 +184,16 @@ class Link:
         if self._fine_timer is not None:
             self._fine_timer.shutdown(wait=False)
             self._fine_timer = None
-        self._set_state(LinkState.CLOSED, None)
+        self._state = LinkState.CLOSED
 
-    def abort(self, reason: str) -> None:
-        """Give the port up after an unexpected error; it is reopened at back-off."""
+    def abort(self) -> None:
+        """Give the port up at once (an unexpected error); its owner decides when to reopen."""
         transport, self._transport = self._transport, None
         self._serial, self._fd = None, -1
         self._closing = True  # connection_lost of the old transport reports nothing more
         if transport is not None:
             transport.abort()
-        self._failed(reason)
+        self._state = LinkState.FAILED
 
     # ------------------------------------------------------------ traffic
 
@@ -242,13 +201,13 @@ class Link:
         """Write ``data`` once the line has been quiet for the start pause; drop stale input."""
         transport = self._transport
         if transport is None or self._state is not LinkState.OPEN:
-            raise PortError(self.last_error or f"{self.settings.url} is not open")
+            raise PortError(f"{self.settings.url} is not open")
         loop = asyncio.get_running_loop()
         wait = self._quiet_at + self._pause - loop.time()
         if wait > 0:
             await self._pause_for(loop, wait)
             if self._transport is not transport:
-                raise PortError(self.last_error or f"{self.settings.url} was lost")
+                raise PortError(f"{self.settings.url} was lost")
         self._discard_input()
         if self.settings.echo:
             self._echo = data
@@ -305,8 +264,8 @@ class Link:
                 return
         # Another station's bytes: our request has left the wire, the line was busy until now.
         self._quiet_at = now
-        if self.receiver is not None:
-            self.receiver(data)
+        if self._receiver is not None:
+            self._receiver(data)
 
     def _strip_echo(self, data: bytes) -> bytes:
         """Remove the echo of our own request from the start of the input."""
@@ -324,9 +283,9 @@ class Link:
         if self._closing:
             return
         reason = _reason(exc) if exc else "closed by the other end"
-        self._failed(f"lost {self.settings.url}: {reason}")
-        if self.on_lost is not None:
-            self.on_lost(self.last_error or reason)
+        self._state = LinkState.FAILED
+        if self._on_lost_cb is not None:
+            self._on_lost_cb(f"lost {self.settings.url}: {reason}")
 
 
 # Linux device majors of pseudo-terminal followers: BSD-style (3) and Unix98 (136-143),

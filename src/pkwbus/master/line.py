@@ -1,8 +1,11 @@
-"""One RS-485 line: owns its link, runs one exchange at a time.
+"""One RS-485 line: owns its link and its reconnect object, runs one exchange at a time.
 
 An exchange is one request telegram out and one answer (or an error) in.
-A PKW job is a series of exchanges (:class:`PkwTransaction`); the scheduler
-may put other drives' exchanges between its repeats.
+A PKW job is a series of exchanges (:class:`PkwTransaction`), driven by the
+planner (:mod:`pkwbus.master.planner`), which may put other drives'
+exchanges between its repeats. The line is the one owner of its port: it
+opens, aborts and closes it and tells :attr:`Line.reconnect` of each
+change; others listen there.
 """
 
 from __future__ import annotations
@@ -11,14 +14,12 @@ import asyncio
 import logging
 from collections.abc import Callable
 
-from pkwbus.link import Link, PortError, PortSettings
+from pkwbus.link import Link, PortError, PortSettings, Reconnect
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import (
     ErrorKind,
     ExchangeResult,
     Failure,
-    Outcome,
-    PkwTransaction,
     Reply,
 )
 from pkwbus.protocol.telegram import (
@@ -49,7 +50,6 @@ class Line:
         timeout: float = 0.1,
         inter_char_timeout: float | None = None,
         trace: TraceHook | None = None,
-        link: Link | None = None,
     ) -> None:
         self.protocol = protocol
         self.timeout = timeout
@@ -57,9 +57,8 @@ class Line:
             inter_char_timeout if inter_char_timeout is not None else settings.inter_char_gap
         )
         self.trace = trace
-        self.link = link or Link(settings)
-        self.link.receiver = self._on_data
-        self.link.on_lost = self._on_lost
+        self.link = Link(settings, receiver=self._on_data, on_lost=self._on_lost)
+        self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
         lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
         self._deframer = Deframer(lengths)
         self._lock = asyncio.Lock()
@@ -76,11 +75,27 @@ class Line:
 
     # -------------------------------------------------------------- API
 
+    @property
+    def is_open(self) -> bool:
+        return self.link.is_open
+
     async def open(self) -> None:
-        await self.link.open()
+        """Open the port now; :class:`PortError` (and a back-off) when it cannot be opened."""
+        try:
+            await self.link.open()
+        except PortError as exc:
+            self.reconnect.failed(str(exc), asyncio.get_running_loop().time())
+            raise
+        self.reconnect.opened()
 
     async def close(self) -> None:
         await self.link.close()
+        self.reconnect.closed()
+
+    def abort(self, reason: str) -> None:
+        """Give the port up after an unexpected error; it is reopened at back-off."""
+        self.link.abort()
+        self.reconnect.failed(reason, asyncio.get_running_loop().time())
 
     async def exchange(
         self, target: DriveTarget, telegram: bytes, timeout: float | None = None
@@ -89,15 +104,6 @@ class Line:
         async with self._lock:
             return await self._exchange(target.adr, telegram, timeout or self.timeout)
 
-    async def run(self, tx: PkwTransaction) -> Outcome:
-        """Repeat ``tx``'s request until it is finished (no interleaving)."""
-        loop = asyncio.get_running_loop()
-        while True:
-            result = await self.exchange(tx.target, tx.telegram)
-            outcome = tx.feed(result, loop.time())
-            if outcome is not None:
-                return outcome
-
     # --------------------------------------------------------- internals
 
     async def _exchange(self, adr: int, telegram: bytes, timeout: float) -> ExchangeResult:
@@ -105,7 +111,7 @@ class Line:
         link = self.link
         try:
             if not link.is_open:
-                await link.ensure_open(loop.time() + timeout)
+                await self._ensure_open(loop.time() + timeout)
             self._deframer.reset()
             self._pending_error = None
             await link.send(telegram)
@@ -126,6 +132,16 @@ class Line:
             if self._gap_timer is not None:
                 self._cancel_gap_timer()
             self._waiter = None
+
+    async def _ensure_open(self, deadline: float) -> None:
+        """Reopen the port, waiting out the back-off (never past ``deadline``)."""
+        reconnect = self.reconnect
+        wait = reconnect.wait(asyncio.get_running_loop().time())
+        if wait > 0:
+            if reconnect.next_attempt > deadline:
+                raise PortError(reconnect.last_error or f"{self.link.settings.url} is not open")
+            await asyncio.sleep(wait)
+        await self.open()
 
     def _arm(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
         self._deadline = deadline
@@ -153,13 +169,14 @@ class Line:
             waiter.set_result(result)
 
     def _on_lost(self, reason: str) -> None:
+        self.reconnect.failed(reason, asyncio.get_running_loop().time())
         self._resolve(Failure(ErrorKind.PORT, reason))
 
     def _on_timeout(self, waiter: asyncio.Future[ExchangeResult]) -> None:
         if waiter.done():
             return
         if not self.link.is_open:
-            waiter.set_result(Failure(ErrorKind.PORT, self.link.last_error or "port lost"))
+            waiter.set_result(Failure(ErrorKind.PORT, self.reconnect.last_error or "port lost"))
             return
         kind = self._pending_error or ErrorKind.TIMEOUT
         waiter.set_result(Failure(kind, "no answer" if kind is ErrorKind.TIMEOUT else ""))

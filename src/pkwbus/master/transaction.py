@@ -80,11 +80,17 @@ class PkwTransaction:
     """Feed it exchange results; it says when the job is done and how."""
 
     def __init__(
-        self, target: DriveTarget, request: pkw.PkwRequest, *, retries: int, deadline: float
+        self,
+        target: DriveTarget,
+        request: pkw.PkwRequest,
+        *,
+        retries: int,
+        deadline: float,
+        telegram: bytes | None = None,  # ``target.telegram(request)``, when already built
     ) -> None:
         self.target = target
         self.request = request
-        self.telegram = target.telegram(request)
+        self.telegram = telegram if telegram is not None else target.telegram(request)
         self.retries = retries
         self.deadline = deadline
         self.tally = Tally()

@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from pkwbus import __version__
-from pkwbus.master.jobs import Job, JobResult
+from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol import pkw
@@ -199,9 +199,9 @@ class LineMetrics:
         else:
             self._errors[(drive, result.kind.value)].inc()
 
-    def job_finished(self, drive: str, job: Job, result: JobResult) -> None:
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
-        key = (drive, job.kind.value, metric_label(outcome))
+        key = (drive, kind.value, metric_label(outcome))
         child = self._jobs.get(key)
         if child is None:
             child = self._jobs[key] = self._m.jobs.labels(self._line, drive, key[1], key[2].value)

@@ -1,0 +1,156 @@
+"""What the planner's events mean for the snapshot, the job's caller and the metrics.
+
+A finished job or poll is decoded here (the value in the drive's notation,
+or why there is none), the snapshot keeps only values a drive sent, and the
+line's :class:`LineEvents` hear of every exchange, job and overrun.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Protocol
+
+from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult
+from pkwbus.master.plan import (
+    DriveSpec,
+    Event,
+    Finished,
+    HealthChanged,
+    Overrun,
+    PollSpec,
+    StatusWord,
+)
+from pkwbus.master.snapshot import DriveState, Reading, Snapshot
+from pkwbus.master.transaction import Answered, ExchangeResult, Outcome, Tally, TimedOut
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import RemoteProtocolError
+
+log = logging.getLogger("pkwbus.master.scheduler")
+
+
+class LineEvents(Protocol):
+    """What a line reports (the service turns it into metrics)."""
+
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None: ...
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None: ...
+    def overrun(self, drive: str) -> None: ...
+
+
+class NoEvents:
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+        pass
+
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
+        pass
+
+    def overrun(self, drive: str) -> None:
+        pass
+
+
+def job_result(
+    outcome: Outcome, tally: Tally | None, request: pkw.PkwRequest, fmt: ParameterFormat
+) -> JobResult:
+    """The result of a finished job: its value when the answer carries one.
+
+    RemoteProtocolError when the answer carries a value that cannot be decoded.
+    """
+    if not isinstance(outcome, Answered):
+        return JobResult(outcome, tally=tally)
+    if request.is_write and not isinstance(outcome.response, pkw.ValueResponse | pkw.TextResponse):
+        return JobResult(outcome, tally=tally)
+    raw, value = fmt.value_of(outcome.response)
+    return JobResult(outcome, raw, value, tally)
+
+
+class LineRecord:
+    """Applies one line's events to the snapshot, the jobs' futures and the metrics."""
+
+    def __init__(
+        self, line: str, drives: Sequence[DriveSpec], snapshot: Snapshot, events: LineEvents
+    ) -> None:
+        self.line = line
+        self.snapshot = snapshot
+        self.events = events
+        self._polls = {d.name: d.polls for d in drives}
+        snapshot.lines[line] = False
+        for d in drives:
+            snapshot.drives[d.name] = DriveState()
+
+    def apply(self, events: list[Event]) -> None:
+        for event in events:
+            if isinstance(event, Finished):
+                self._finished(event)
+            elif isinstance(event, StatusWord):
+                old = self.snapshot.drives.get(event.drive, DriveState())
+                self.snapshot.drives[event.drive] = DriveState(old.up, event.word, time.time())
+            elif isinstance(event, HealthChanged):
+                self._health(event)
+            elif isinstance(event, Overrun):
+                self.events.overrun(event.drive)
+
+    def _health(self, event: HealthChanged) -> None:
+        ctx = {"line": self.line, "drive": event.drive}
+        if event.reason and event.up:
+            log.warning("drive %s %s", event.drive, event.reason, extra=ctx)
+        elif event.reason:
+            log.warning(
+                "drive %s is down: %s (probing at back-off)", event.drive, event.reason, extra=ctx
+            )
+        old = self.snapshot.drives.get(event.drive, DriveState())
+        self.snapshot.drives[event.drive] = DriveState(
+            event.up, old.status_word, old.status_timestamp
+        )
+
+    def _finished(self, event: Finished) -> None:
+        work, drive = event.work, event.drive
+        result = self._result(event)
+        reading, previous = self._remember(drive, work.request, result)
+        if isinstance(work, PollSpec):
+            self.events.job_finished(drive, JobKind.READ, result)
+            if reading is not None:
+                self.snapshot.readings[drive, work.parameter, work.index] = reading
+            return
+        if reading is not None:
+            self._show_confirmed(drive, work, reading)
+        if event.tally is not None and not isinstance(event.outcome, Cancelled):
+            result = replace(result, previous=previous)  # it ran: a write's old value
+        self.events.job_finished(drive, work.kind, result)
+        work.resolve(result)
+
+    def _result(self, event: Finished) -> JobResult:
+        work = event.work
+        try:
+            return job_result(event.outcome, event.tally, work.request, work.fmt)
+        except RemoteProtocolError as exc:
+            ctx = {"line": self.line, "drive": event.drive}
+            log.warning("%s/%s: %s", self.line, event.drive, exc, extra=ctx)
+            return JobResult(TimedOut(f"unusable answer: {exc}"), tally=event.tally)
+
+    def _remember(
+        self, drive: str, request: pkw.PkwRequest, result: JobResult
+    ) -> tuple[Reading | None, Reading | None]:
+        """(the value the drive just confirmed, the latest one before it).
+
+        An answer that carries the parameter's value - a poll, a read, or a write
+        the drive acknowledged by echoing the value it now holds - makes that value
+        the parameter's latest, so that the next write's old value is not stale.
+        """
+        key = (drive, request.pnu, request.subindex)
+        previous = self.snapshot.latest.get(key)
+        if result.value is None:
+            return None, previous
+        reading = Reading(result.value, result.raw, time.time())
+        self.snapshot.latest[key] = reading
+        return reading, previous
+
+    def _show_confirmed(self, drive: str, job: Job, reading: Reading) -> None:
+        """A polled parameter shows what a read or an acknowledged write confirmed,
+        when the job decoded it as the poll does."""
+        for spec in self._polls.get(drive, ()):
+            same = spec.request.pnu == job.request.pnu
+            if same and spec.request.subindex == job.request.subindex and spec.fmt == job.fmt:
+                self.snapshot.readings[drive, spec.parameter, spec.index] = reading
