@@ -17,6 +17,7 @@ from pkwbus.protocol import buses
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
+from pkwbus.sim.dp_line import DpFaults, DpSimulator
 from pkwbus.sim.ends import PathInUseError
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
@@ -52,7 +53,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--protocol", choices=("fc", "uss"), default="fc")
+    parser.add_argument("--protocol", choices=("fc", "uss", "profibus"), default="fc")
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--listen", metavar="tcp://HOST:PORT", help="serve raw telegrams on TCP")
     where.add_argument(
@@ -73,6 +74,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         " siemens-g120 for uss); 'none' for the built-in table alone",
     )
     parser.add_argument("--seed", type=int)
+    dp = parser.add_argument_group("PROFIBUS DP (--protocol profibus)")
+    dp.add_argument("--ppo", type=int, choices=range(1, 6), default=1, help="PPO type (default 1)")
+    dp.add_argument(
+        "--ident", help="the slaves' ident number, e.g. 0x0402 (default: the dialect's)"
+    )
     timing = parser.add_argument_group("timing")
     timing.add_argument("--response-delay", default="3ms", help="e.g. 3ms (default), 0.01, 1s")
     timing.add_argument("--baudrate", type=int)
@@ -82,6 +88,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     faults = parser.add_argument_group("faults (probability per answer)")
     for name in FAULT_OPTIONS:
         faults.add_argument(f"--{name.replace('_', '-')}", type=float, default=0.0, metavar="P")
+    faults.add_argument("--rs", type=float, default=0.0, metavar="P", help="profibus: answer RS")
+    faults.add_argument(
+        "--restart", type=float, default=0.0, metavar="P", help="profibus: the slave restarts"
+    )
     faults.add_argument("--late-after", default="1s", help="how late a late answer is")
     faults.add_argument("--dead", default="", help="addresses that never answer: 3,4")
     stats = parser.add_argument_group("stats")
@@ -149,7 +159,7 @@ def _baudrate(value: int | None) -> int | None:
 
 @dataclass(frozen=True)
 class Plan:
-    sim: Simulator
+    sim: Simulator | DpSimulator
     listen: tuple[str, int] | None
     pty: str | None
     stats_file: str | None
@@ -172,6 +182,8 @@ def plan(args: argparse.Namespace) -> Plan:
     dead = frozenset(parse_addresses(args.dead))
     late = _duration("--late-after", args.late_after, durations.SIM_LATE)
     faults = SimFaults(**probabilities, late_seconds=late, dead=dead)
+    if args.protocol == "profibus":
+        return _plan(args, _dp_simulator(args, timing, faults))
     pkw_words = _pkw_words(args.pkw_words)
     sim = Simulator(
         args.protocol,
@@ -185,6 +197,34 @@ def plan(args: argparse.Namespace) -> Plan:
         seed=args.seed,
         catalog=catalog_for(args.protocol, args.catalog),
     )
+    return _plan(args, sim)
+
+
+def _dp_simulator(args: argparse.Namespace, timing: SimTiming, faults: SimFaults) -> DpSimulator:
+    unused = [name for name in ("truncate", "wrong_address") if getattr(args, name)]
+    if unused:
+        raise ValueError(f"--{unused[0].replace('_', '-')} is not a PROFIBUS fault")
+    try:
+        ident = None if args.ident is None else int(args.ident, 0)
+    except ValueError:
+        raise ValueError(f"--ident: {args.ident[:20]!r} is not a number such as 0x0402") from None
+    if ident is not None and not 0 <= ident <= 0xFFFF:
+        raise ValueError(f"--ident: {ident:#x} is not 0x0000-0xFFFF")
+    dp_faults = DpFaults(
+        drop=faults.drop, corrupt=faults.corrupt, garbage=faults.garbage, late=faults.late,
+        stale=faults.stale, rs=args.rs, restart=args.restart, late_seconds=faults.late_seconds,
+        dead=faults.dead,
+    )  # fmt: skip
+    catalog = (
+        "default" if args.catalog is None else None if args.catalog == "none" else args.catalog
+    )
+    return DpSimulator(
+        parse_addresses(args.drives), dialect=args.dialect or "profidrive", ppo_number=args.ppo,
+        ident=ident, timing=timing, faults=dp_faults, seed=args.seed, catalog=catalog,
+    )  # fmt: skip
+
+
+def _plan(args: argparse.Namespace, sim: Simulator | DpSimulator) -> Plan:
     if not sim.drives:
         raise ValueError("--drives names no drive")
     return Plan(
@@ -243,10 +283,12 @@ async def serve(p: Plan) -> int:
         tasks.append(
             asyncio.create_task(keep_stats_file(sim.stats, p.stats_file, p.stats_interval))
         )
-    print(
-        f"simulating {sim.protocol.value} drives {drives} ({sim.dialect.name}) on {where}",
-        flush=True,
-    )
+    if isinstance(sim, DpSimulator):
+        what = f"profibus slaves {drives} ({sim.dialect.name}, PPO {sim.ppo.number}, ident"
+        what += f" {sim.ident:#06x})"
+    else:
+        what = f"{sim.protocol.value} drives {drives} ({sim.dialect.name})"
+    print(f"simulating {what} on {where}", flush=True)
     await stop.wait()
     for task in tasks:
         task.cancel()

@@ -79,9 +79,11 @@ class SimDpSlave:
             return None
         if frame.da != self.address:
             return None
+        control = frame.control
+        if control.function is fdl.Function.FDL_STATUS:  # the live list: "a slave is here"
+            return DataFrame(frame.sa, self.address, fdl.response_fc(Status.OK))
         self.tick(now)
         self._last_request = now
-        control = frame.control
         if control.fcv and control.fcb == self._last_fcb and self._last_answer is not None:
             return self._last_answer  # a retry: the previous answer again
         answer = self._answer(frame, now)

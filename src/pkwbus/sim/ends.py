@@ -24,10 +24,9 @@ import fcntl
 import os
 import struct
 import tty
-from collections.abc import Callable
-from typing import Protocol
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
 
-from pkwbus.protocol.telegram import Deframer, Telegram
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.faults import Answer
 from pkwbus.sim.stats import SimStats
@@ -46,9 +45,26 @@ class Answerer(Protocol):
     @property
     def timing(self) -> SimTiming: ...
 
-    def deframer(self) -> Deframer: ...
+    def deframer(self) -> RequestDeframer: ...
 
-    def answer(self, telegram: Telegram, now: float | None = None) -> Answer | None: ...
+    def is_request(self, event: object) -> bool:
+        """Whether a deframer event is a request to answer (else a framing error)."""
+        ...
+
+    def request_size(self, event: object) -> int:
+        """Bytes the request took on the wire."""
+        ...
+
+    def answer(self, request: Any, now: float | None = None) -> Answer | None: ...
+
+
+class RequestDeframer(Protocol):
+    """A streaming deframer: FC/USS telegrams, or PROFIBUS FDL frames."""
+
+    @property
+    def buffered(self) -> int: ...
+
+    def feed(self, data: bytes) -> Sequence[object]: ...
 
 
 class Session:
@@ -58,7 +74,7 @@ class Session:
         self.sim = sim
         self._write = write
         self._deframer = sim.deframer()
-        self._queue: asyncio.Queue[tuple[Telegram, float]] = asyncio.Queue()
+        self._queue: asyncio.Queue[tuple[object, float]] = asyncio.Queue()
         self._loop = asyncio.get_running_loop()
         self._started = 0.0
         self._task = self._loop.create_task(self._answer_in_turn())
@@ -68,7 +84,7 @@ class Session:
         if not self._deframer.buffered:
             self._started = now
         for event in self._deframer.feed(chunk):
-            if isinstance(event, Telegram):
+            if self.sim.is_request(event):
                 self._queue.put_nowait((event, self._started))
                 self._started = now
             else:
@@ -77,11 +93,11 @@ class Session:
     async def _answer_in_turn(self) -> None:
         timing = self.sim.timing
         while True:
-            telegram, started = await self._queue.get()
-            answer = self.sim.answer(telegram)
+            request, started = await self._queue.get()
+            answer = self.sim.answer(request)
             if answer is None:
                 continue
-            wire = timing.wire_seconds(len(telegram.data) + 4) + timing.wire_seconds(
+            wire = timing.wire_seconds(self.sim.request_size(request)) + timing.wire_seconds(
                 len(answer.data)
             )
             delay = started + wire + timing.response_delay - self._loop.time()

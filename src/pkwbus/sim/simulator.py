@@ -135,6 +135,13 @@ class Simulator:
         """A deframer for requests on this line (one per connection)."""
         return Deframer(self.lengths)
 
+    def is_request(self, event: object) -> bool:
+        return isinstance(event, Telegram)
+
+    def request_size(self, event: object) -> int:
+        assert isinstance(event, Telegram)
+        return len(event.data) + 4  # STX, LGE, ADR and BCC around the data
+
     def handle(self, request: bytes) -> bytes | None:
         """One request telegram in, the answer out (None: silence). No timing."""
         events = self.deframer().feed(request)
