@@ -10,6 +10,7 @@ from pkwbus import durations, link
 from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
+    PROFIBUS,
     CommandError,
     Exit,
     add_drive_options,
@@ -19,6 +20,7 @@ from pkwbus.commands.common import (
     duration_option,
     emit_json,
 )
+from pkwbus.commands.dp import add_dp_options
 from pkwbus.link import PortError
 from pkwbus.master.outcomes import Answered, Outcome, command_failure
 from pkwbus.master.scheduler import run_job
@@ -52,6 +54,7 @@ def add_parsers(sub: Any) -> None:
 def _common(parser: argparse.ArgumentParser) -> None:
     add_line_options(parser)
     add_drive_options(parser)
+    add_dp_options(parser)
     parser.add_argument("parameter", help="16-13 (FC), r0021, p1082[2] (USS), or the plain number")
     parser.add_argument("--type", default=None, help="u16 i16 u32 i32 f32 text")
     parser.add_argument("--catalog", default=None, help="catalog name, or 'none'")
@@ -143,6 +146,10 @@ def _report(
 
 
 def run_read(args: argparse.Namespace) -> int:
+    if args.protocol == PROFIBUS:
+        from pkwbus.commands import dp_access
+
+        return dp_access.run_read(args)
     target, ref, fmt = _resolve(args)
     try:
         req = pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
@@ -159,6 +166,10 @@ def run_read(args: argparse.Namespace) -> int:
 
 
 def run_write(args: argparse.Namespace) -> int:
+    if args.protocol == PROFIBUS:
+        from pkwbus.commands import dp_access
+
+        return dp_access.run_write(args)
     target, ref, fmt = _resolve(args)
     store = pkw.Store(args.store)
     try:

@@ -22,7 +22,9 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
 __all__ = [
+    "DEFAULT_BAUDRATE",
     "DEFAULT_CATALOG",
+    "PROFIBUS",
     "CommandError",
     "Exit",
     "add_drive_options",
@@ -47,6 +49,9 @@ class CommandError(Exception):
         self.kind = kind
         self.fault = fault
 
+
+PROFIBUS = "profibus"  # --protocol profibus: pkwbus as DP-V0 master (commands.dp)
+DEFAULT_BAUDRATE = 9600
 
 DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in Protocol}
 
@@ -91,12 +96,13 @@ def add_line_options(
 ) -> None:
     g = parser.add_argument_group("line")
     g.add_argument("--port", required=True, help="device path or pyserial URL (socket://...)")
-    g.add_argument("--protocol", choices=[p.value for p in Protocol], default="fc")
+    g.add_argument("--protocol", choices=[*(p.value for p in Protocol), PROFIBUS], default="fc")
     g.add_argument(
         "--baudrate",
         type=baudrate_option,
-        default=9600,
-        help=f"one of {' '.join(str(b) for b in limits.BAUDRATES)} (default 9600)",
+        default=None,
+        help=f"one of {' '.join(str(b) for b in limits.BAUDRATES)}"
+        f" (default {DEFAULT_BAUDRATE}; 19200 for profibus)",
     )
     g.add_argument("--parity", choices=["E", "O", "N"], default="E")
     g.add_argument("--stopbits", type=int, choices=[1, 2], default=1)
@@ -154,7 +160,7 @@ def build_line(args: argparse.Namespace) -> Line:
     try:
         settings = PortSettings(
             limits.check_port_url(args.port),
-            baudrate=args.baudrate,
+            baudrate=args.baudrate or DEFAULT_BAUDRATE,
             parity=args.parity,
             stopbits=args.stopbits,
             echo=args.echo,

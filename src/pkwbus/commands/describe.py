@@ -14,6 +14,7 @@ from typing import Any
 from pkwbus import link
 from pkwbus.commands.access import drive_name
 from pkwbus.commands.common import (
+    PROFIBUS,
     CommandError,
     Exit,
     add_drive_options,
@@ -22,6 +23,7 @@ from pkwbus.commands.common import (
     build_target,
     emit_json,
 )
+from pkwbus.commands.dp import add_dp_options
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.outcomes import Answered, Rejected, command_failure
@@ -49,6 +51,7 @@ def add_parsers(sub: Any) -> None:
     describe = sub.add_parser("describe", help="read a parameter's description from the drive")
     add_line_options(describe)
     add_drive_options(describe)
+    add_dp_options(describe)
     describe.add_argument("parameter", help="16-13, 1613, r0021")
     describe.set_defaults(func=run_describe)
 
@@ -117,6 +120,10 @@ def describe(found: dict[int, pkw.DescriptionResponse | None]) -> dict[str, Any]
 
 
 def run_describe(args: argparse.Namespace) -> int:
+    if args.protocol == PROFIBUS:
+        from pkwbus.commands import dp_access
+
+        return dp_access.run_describe(args)
     try:
         ref = parse_parameter(args.parameter)
         target = build_target(args)

@@ -18,6 +18,8 @@ from typing import Any, TextIO
 
 from pkwbus import durations, limits, link
 from pkwbus.commands.common import (
+    DEFAULT_BAUDRATE,
+    PROFIBUS,
     CommandError,
     Exit,
     add_drive_options,
@@ -26,6 +28,7 @@ from pkwbus.commands.common import (
     build_target,
     emit_json,
 )
+from pkwbus.commands.dp import add_dp_options
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import run_job
@@ -52,6 +55,7 @@ def add_parsers(sub: Any) -> None:
     scan = sub.add_parser("scan", help="find the addresses that answer")
     add_line_options(scan, timeout=0.05, retries=0)
     add_drive_options(scan, address=False)
+    add_dp_options(scan)
     scan.add_argument("--addresses", default=None, help="e.g. 1-126 or 1,2,5-9")
     scan.add_argument(
         "--baudrates",
@@ -259,6 +263,10 @@ def summary(
 
 
 def run_scan(args: argparse.Namespace) -> int:
+    if args.protocol == PROFIBUS:
+        from pkwbus.commands import dp_scan
+
+        return dp_scan.run_scan(args)
     protocol = Protocol(args.protocol)
     low, high = address_range(protocol, FcAddressFormat(args.address_format))
     if args.addresses:
@@ -269,7 +277,7 @@ def run_scan(args: argparse.Namespace) -> int:
         parities = parse_parities(args.parities)
         settings = [(b, p) for b in parse_baudrates(args.baudrates) for p in parities]
     else:
-        settings = [(args.baudrate, args.parity)]
+        settings = [(args.baudrate or DEFAULT_BAUDRATE, args.parity)]
     progress = Progress(sys.stderr, enabled=not args.json and sys.stderr.isatty())
     started = time.monotonic()
     try:

@@ -1,0 +1,254 @@
+"""`pkwbus read`, `write` and `describe` with ``--protocol profibus``: pkwbus as DP-V0 master.
+
+The slave goes through its start-up (Slave_Diag, Set_Prm, Chk_Cfg, Slave_Diag
+until ready), then the job goes through the PKW part of its PPO until the
+matching answer comes. Set_Prm carries the ident number, the user parameters
+and the module identifiers given, or read from the drive's GSD file. A slave
+owned by another master is never parametrised (exit 3); a line another
+master runs is never used (exit 3). At the end Global_Control Clear goes to
+every slave and the port is closed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from pkwbus import limits
+from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
+from pkwbus.durations import DurationRange
+from pkwbus.link import PortError, PortSettings
+from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
+from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
+from pkwbus.master.outcomes import Outcome
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol import dp_services as dps
+from pkwbus.protocol import dp_timing, gsd, pkw, ppo
+from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol.dp_slave import SlaveSetup
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import ParameterRef, canonical, parse_parameter, parse_type
+from pkwbus.protocol.ppo import PkwSlot, PpoType
+
+__all__ = [
+    "DEFAULT_BAUDRATE",
+    "DpContext",
+    "add_dp_options",
+    "build_context",
+    "dp_line",
+    "resolve",
+    "session",
+]
+
+DEFAULT_BAUDRATE = 19200
+DEFAULT_DIALECT = "profidrive"
+SLOT_TIME = DurationRange("a slot time", 0.0005, 1.0)
+MAX_DP_RETRIES = 8
+DEFAULT_DEADLINE = 2.0  # seconds for one job, the slave's start-up included
+# The catalog each dialect's parameters are named and scaled by, when none is given.
+DP_CATALOGS = {"danfoss-pcv": "danfoss-fc", "profidrive": "siemens-g120", "hitachi-sjpb": None}
+
+
+def add_dp_options(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("PROFIBUS DP (--protocol profibus)")
+    g.add_argument(
+        "--master-address", type=int_option(0, 125), default=2, help="pkwbus's station (2)"
+    )
+    g.add_argument("--ppo", type=int_option(1, 5), default=1, help="PPO type 1-5 (default 1)")
+    which = g.add_mutually_exclusive_group()
+    which.add_argument("--ident", default=None, help="the slave's ident number, e.g. 0x0402")
+    which.add_argument("--gsd", default=None, metavar="FILE", help="the drive's GSD file")
+    g.add_argument("--cfg", default=None, help='configuration identifiers, e.g. "F3 F1"')
+    g.add_argument("--user-prm", default=None, metavar="HEX", help="user parameter bytes")
+    g.add_argument(
+        "--slot-time",
+        type=duration_option(SLOT_TIME),
+        default=None,
+        help="how long an answer may take to start (default: 30ms at 19200, 8ms at 93750)",
+    )
+
+
+@dataclass(frozen=True)
+class DpContext:
+    """What a DP command needs: the dialect, the PPO, the Set_Prm parameters and cfg."""
+
+    dialect: Dialect
+    ppo: PpoType
+    parameters: dps.Parameters
+    cfg: bytes
+    master: int
+    retries: int
+
+    def setup(self, address: int) -> SlaveSetup:
+        try:
+            return SlaveSetup(address, self.master, self.parameters, self.cfg, self.retries)
+        except LocalProtocolError as exc:
+            raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+    def slot(self) -> PkwSlot:
+        return PkwSlot(self.ppo, self.dialect)
+
+
+def _hex_bytes(text: str, what: str) -> bytes:
+    cleaned = text.replace(",", " ").replace("0x", "").replace("0X", "")
+    try:
+        return bytes.fromhex(cleaned)
+    except ValueError:
+        raise CommandError(f"{what}: {text[:40]!r} is not hex bytes", Exit.BAD_INPUT) from None
+
+
+def _from_gsd(path: str, number: int) -> tuple[int, bytes, bytes]:
+    """Ident, user parameters and the PPO's module identifiers from a GSD file."""
+    try:
+        text = Path(path).read_text(encoding="latin-1")
+    except OSError as exc:
+        raise CommandError(f"--gsd: cannot read {path}: {exc.strerror}", Exit.BAD_INPUT) from None
+    try:
+        found = gsd.parse(text)
+    except gsd.GsdError as exc:
+        raise CommandError(f"--gsd {path}: {exc}", Exit.BAD_INPUT) from None
+    wanted = ppo.ppo_type(number)
+    modules = [m for m in found.modules if m.cfg.lstrip(b"\x00") == wanted.cfg]
+    if not modules:
+        modules = [m for m in found.modules if f"ppo{number}" in m.name.casefold().replace(" ", "")]
+    if not modules:
+        known = ", ".join(repr(m.name) for m in found.modules) or "none"
+        raise CommandError(
+            f"--gsd {path}: no module for PPO {number} (modules: {known}); give --cfg",
+            Exit.BAD_INPUT,
+        )
+    module = modules[0]
+    return found.ident, found.prm_for([module]), module.cfg
+
+
+def build_context(args: argparse.Namespace) -> DpContext:
+    """The DP settings of a command; exit 2 for anything unusable, before any port is opened."""
+    if args.parity != "E":
+        raise CommandError("PROFIBUS characters are always 8E1: --parity E", Exit.BAD_INPUT)
+    if args.retries > MAX_DP_RETRIES:
+        raise CommandError(f"--retries: at most {MAX_DP_RETRIES} over PROFIBUS", Exit.BAD_INPUT)
+    try:
+        dia = ppo.dp_dialect(args.dialect or DEFAULT_DIALECT)
+        kind = ppo.ppo_type(args.ppo)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    cfg, user_prm = kind.cfg, b""
+    if args.gsd is not None:
+        ident, user_prm, cfg = _from_gsd(args.gsd, args.ppo)
+    elif args.ident is not None:
+        try:
+            ident = limits.check_int(int(args.ident, 0), 0, 0xFFFF)
+        except ValueError:
+            raise CommandError(
+                f"--ident: {args.ident[:40]!r} is not a 16-bit number such as 0x0402",
+                Exit.BAD_INPUT,
+            ) from None
+    else:
+        raise CommandError(
+            "give the slave's ident number (--ident 0x0402) or its GSD file (--gsd FILE)",
+            Exit.BAD_INPUT,
+        )
+    if args.cfg is not None:
+        cfg = _hex_bytes(args.cfg, "--cfg")
+    if args.user_prm is not None:
+        user_prm = _hex_bytes(args.user_prm, "--user-prm")
+    slot = args.slot_time or dp_timing.default_slot_time(args.baudrate or DEFAULT_BAUDRATE)
+    # The watchdog: several worst-case cycles, at least a second.
+    watchdog = max(1.0, 10 * slot * (args.retries + 1))
+    try:
+        parameters = dps.Parameters(ident, dps.watchdog_factors(watchdog), user_prm=user_prm)
+        parameters.encode()
+        dps.check_cfg(cfg)
+        inputs, outputs = dps.io_lengths(cfg)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    if (inputs, outputs) != (kind.length, kind.length):
+        raise CommandError(
+            f"the configuration {cfg.hex(' ')} sets up {inputs}/{outputs} bytes in/out;"
+            f" PPO {kind.number} has {kind.length}",
+            Exit.BAD_INPUT,
+        )
+    return DpContext(dia, kind, parameters, cfg, args.master_address, args.retries)
+
+
+def dp_line(args: argparse.Namespace) -> DpLine:
+    try:
+        settings = PortSettings(
+            limits.check_port_url(args.port),
+            baudrate=args.baudrate or DEFAULT_BAUDRATE,
+            parity="E",
+            echo=args.echo,
+        )
+        return DpLine(
+            settings,
+            args.master_address,
+            slot_time=args.slot_time,
+            trace=print_trace if args.trace else None,
+        )
+    except ValueError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+
+async def session(
+    args: argparse.Namespace, ctx: DpContext, address: int, jobs: Sequence[pkw.PkwRequest]
+) -> list[Outcome]:
+    """Start the master, run ``jobs`` one after the other on slave ``address``, stop."""
+    if not ctx.ppo.has_pkw:
+        raise CommandError(f"PPO {ctx.ppo.number} has no parameter channel", Exit.BAD_INPUT)
+    line = dp_line(args)
+    master = DpMaster(line, [(ctx.setup(address), ctx.slot())])
+    try:
+        await master.start()
+    except PortError as exc:
+        raise CommandError(str(exc), Exit.PORT) from None
+    except ForeignMaster as exc:
+        raise CommandError(str(exc), Exit.NO_ANSWER, kind="line_error") from None
+    loop = asyncio.get_running_loop()
+    outcomes: list[Outcome] = []
+    try:
+        for request in jobs:
+            deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
+            outcomes.append(await run_dp_job(master, address, request, deadline=deadline))
+    except SlaveLocked as exc:
+        raise CommandError(str(exc), Exit.NO_ANSWER, kind="locked") from None
+    except ForeignMaster as exc:
+        raise CommandError(str(exc), Exit.NO_ANSWER, kind="line_error") from None
+    finally:
+        await master.stop()
+    return outcomes
+
+
+def _spec(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterSpec | None:
+    name = getattr(args, "catalog", None) or DP_CATALOGS.get(dia.name) or "none"
+    if name == "none":
+        return None
+    try:
+        return load_catalog(name).get(ref.pnu)
+    except CatalogError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+
+def resolve(
+    args: argparse.Namespace, ctx: DpContext, *, typed: bool = True
+) -> tuple[ParameterRef, ParameterFormat]:
+    """The parameter named on the command line, in the dialect's notation, and its format."""
+    try:
+        ref = parse_parameter(args.parameter)
+        ctx.dialect.check_pnu(ref.pnu)
+        vtype = parse_type(args.type) if typed and args.type else None
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    spec = _spec(args, ctx.dialect, ref) if typed else None
+    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    try:
+        ref = canonical(ref, danfoss=ctx.dialect.danfoss_numbers, prefix=prefix)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    fmt = ParameterFormat.from_spec(spec).with_type(vtype)
+    if fmt.is_text:
+        raise CommandError("a text parameter does not fit the 4 PKW words of a PPO", Exit.BAD_INPUT)
+    return ref, fmt

@@ -1,0 +1,108 @@
+"""`pkwbus read`, `write` and `describe` over PROFIBUS DP: the same output and exit codes
+as over FC and USS, the job carried by the slave's PPO."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from pkwbus import link
+from pkwbus.commands.access import _finish, _report
+from pkwbus.commands.common import CommandError, Exit, emit_json
+from pkwbus.commands.describe import ELEMENTS, describe
+from pkwbus.commands.dp import DpContext, build_context, resolve, session
+from pkwbus.master.outcomes import Answered, Outcome, Rejected, command_failure
+from pkwbus.protocol import pkw, ppo
+from pkwbus.protocol.dialects import Command
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+
+__all__ = ["run_describe", "run_read", "run_write"]
+
+
+def _outcomes(args: argparse.Namespace, coro: Any) -> list[Outcome]:
+    found: list[Outcome] = link.run(coro)
+    return found
+
+
+def run_read(args: argparse.Namespace) -> int:
+    ctx = build_context(args)
+    ref, fmt = resolve(args, ctx)
+    try:
+        req = pkw.read_parameter(ctx.dialect, ref.pnu, ref.index, text=False)
+        ppo_check(ctx, req)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    (outcome,) = _outcomes(args, session(args, ctx, args.address, [req]))
+    response = _finish(outcome)
+    try:
+        raw, value = fmt.value_of(response)
+    except RemoteProtocolError as exc:
+        raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
+    _report(args, ref, raw, value, fmt)
+    return Exit.OK
+
+
+def run_write(args: argparse.Namespace) -> int:
+    ctx = build_context(args)
+    ref, fmt = resolve(args, ctx)
+    store = pkw.Store(args.store)
+    try:
+        raw, width = fmt.encode(args.value, str(ref))
+        req = pkw.write(ctx.dialect, ref.pnu, raw, width, index=ref.index, store=store)
+        ppo_check(ctx, req)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    (outcome,) = _outcomes(args, session(args, ctx, args.address, [req]))
+    response = _finish(outcome)
+    try:
+        got, value = fmt.value_of(response)
+    except RemoteProtocolError:
+        got, value = raw, args.value
+    _report(args, ref, got, value, fmt, f" written ({store.value})")
+    return Exit.OK
+
+
+def ppo_check(ctx: DpContext, req: pkw.PkwRequest) -> None:
+    """The request fits a PPO-write (LocalProtocolError when not): nothing is sent otherwise."""
+    ppo.encode_ppo_write(ctx.ppo, ctx.dialect, req)
+
+
+def run_describe(args: argparse.Namespace) -> int:
+    ctx = build_context(args)
+    if not ctx.dialect.has(Command.READ_DESCRIPTION):
+        raise CommandError(
+            f"the {ctx.dialect.name} dialect has no description request (AK 4)", Exit.BAD_INPUT
+        )
+    ref, _ = resolve(args, ctx, typed=False)
+    try:
+        jobs = [pkw.read_description(ctx.dialect, ref.pnu, e) for e in ELEMENTS]
+        for req in jobs:
+            ppo_check(ctx, req)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    outcomes = _outcomes(args, session(args, ctx, args.address, jobs))
+    found: dict[int, pkw.DescriptionResponse | None] = {}
+    for element, outcome in zip(ELEMENTS, outcomes, strict=True):
+        if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):
+            found[element] = outcome.response
+        elif isinstance(outcome, Answered | Rejected):
+            found[element] = None
+        else:
+            failure = command_failure(outcome)
+            assert failure is not None
+            raise CommandError(failure.message, failure.code)
+    if all(v is None for v in found.values()):
+        raise CommandError(
+            f"{ref}: the drive describes none of its elements", Exit.REJECTED, kind="rejected"
+        )
+    info = {"parameter": ref.name, "pnu": ref.pnu, **describe(found)}
+    if args.json:
+        emit_json(info)
+        return Exit.OK
+    print(f"{ref.name}: {info.get('name', '(no name)')}")
+    if "data_type" in info:
+        print(f"  data type: {info['data_type']['name']} ({info['data_type']['code']})")
+    for key in ("array_elements", "conversion_index", "unit_index", "min", "max"):
+        if key in info:
+            print(f"  {key.replace('_', ' ')}: {info[key]}")
+    return Exit.OK

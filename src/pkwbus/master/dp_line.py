@@ -1,0 +1,264 @@
+"""One PROFIBUS DP line: the port, 8E1, the bus timing, one request and its answer at a time.
+
+The same port layer as FC and USS lines (:class:`pkwbus.link.Link`: device
+paths, ``socket://`` and ``rfc2217://`` URLs, echo suppression). Before every
+request the line stays idle for TID1 = 37 bit times (which covers TSYN = 33,
+EN 50170 vol. 2 part 4, section 4.4); an answer must start within the slot
+time. The deframer is told of the gap at every request (``flush``), so a
+short acknowledge after noise is found. Before going active the master
+listens for the token-lost time; a token or a request from another address
+means another master runs the line, and pkwbus never shares a line with one
+(:class:`ForeignMaster`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime
+import sys
+from collections.abc import Callable
+
+from pkwbus.link import Link, PortError, PortSettings, Reconnect
+from pkwbus.protocol import dp_timing, fdl
+from pkwbus.protocol.dp_slave import Answer, Garbled, NoAnswer
+from pkwbus.protocol.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
+
+__all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame", "print_trace"]
+
+TraceHook = Callable[[str, str], None]  # direction ("tx"/"rx"), the decoded frame
+
+
+class ForeignMaster(Exception):
+    """Another master is active on the line: pkwbus does not go active."""
+
+
+def _sd(frame: DataFrame) -> str:
+    if frame.body_length == 3:
+        return "SD1"
+    if frame.dsap is None and frame.ssap is None and len(frame.data) == fdl.SD3_DATA:
+        return "SD3"
+    return "SD2"
+
+
+def describe_frame(event: Frame | FramingError) -> str:
+    """One line for a frame: ``SD2 da=8 sa=2 fc=0x5d dsap=61 ssap=62 data=b8 1e``."""
+    if isinstance(event, ShortAck):
+        return "SC"
+    if isinstance(event, Token):
+        return f"SD4 da={event.da} sa={event.sa}"
+    if isinstance(event, DataFrame):
+        text = f"{_sd(event)} da={event.da} sa={event.sa} fc={event.fc:#04x}"
+        if event.dsap is not None:
+            text += f" dsap={event.dsap}"
+        if event.ssap is not None:
+            text += f" ssap={event.ssap}"
+        if event.data:
+            text += f" data={event.data.hex(' ')}"
+        return text
+    if isinstance(event, FramingError):
+        return f"! {event.describe()}"
+    return type(event).__name__
+
+
+def print_trace(direction: str, text: str) -> None:
+    """The ``--trace`` printer: a timestamp, the direction and the decoded frame on stderr."""
+    stamp = datetime.datetime.now().strftime("%H:%M:%S.%f")
+    print(f"{stamp} {direction} {text}", file=sys.stderr)
+
+
+def _foreign(event: Frame, master: int) -> str | None:
+    """What makes ``event`` another master's traffic, or None."""
+    if isinstance(event, Token):
+        return f"a token from station {event.sa} to {event.da}"
+    if isinstance(event, DataFrame) and event.control.is_request and event.sa != master:
+        return f"a request from station {event.sa} to {event.da}"
+    return None
+
+
+class DpLine:
+    """A DP line: one port, one request at a time, answers within the slot time."""
+
+    def __init__(
+        self,
+        settings: PortSettings,
+        master: int,
+        *,
+        slot_time: float | None = None,
+        trace: TraceHook | None = None,
+    ) -> None:
+        baud = settings.baudrate
+        self.master = master
+        self.slot_time = slot_time if slot_time is not None else dp_timing.default_slot_time(baud)
+        if self.slot_time <= 0:
+            raise ValueError(f"slot time {self.slot_time} s is not positive")
+        # The idle time before each request (TID1 >= TSYN), the character always 8E1.
+        pause = dp_timing.bits(max(dp_timing.TID1_BITS, dp_timing.TSYN_BITS), baud)
+        self.settings = PortSettings(
+            settings.url,
+            baudrate=baud,
+            parity="E",
+            stopbits=1,
+            pause=pause,
+            echo=settings.echo,
+            reopen_initial=settings.reopen_initial,
+            reopen_cap=settings.reopen_cap,
+            low_latency=settings.low_latency,
+            rs485=settings.rs485,
+        )
+        self.trace = trace
+        self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost)
+        self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
+        self.foreign: str | None = None  # another master heard, and how
+        self.requests = 0
+        self._deframer = fdl.Deframer()
+        self._lock = asyncio.Lock()
+        self._waiter: asyncio.Future[Answer] | None = None
+        self._garbled: str | None = None
+        self._deadline = 0.0
+        self._timer: asyncio.TimerHandle | None = None
+        self._listening = False
+
+    @property
+    def is_open(self) -> bool:
+        return self.link.is_open
+
+    async def open(self) -> None:
+        try:
+            await self.link.open()
+        except PortError as exc:
+            self.reconnect.failed(str(exc), asyncio.get_running_loop().time())
+            raise
+        self.reconnect.opened()
+
+    async def close(self) -> None:
+        await self.link.close()
+        self.reconnect.closed()
+
+    def token_lost_time(self) -> float:
+        return dp_timing.token_lost_time(self.slot_time, self.master)
+
+    async def listen(self, seconds: float | None = None) -> None:
+        """Listen without sending (the token-lost time by default); :class:`ForeignMaster`
+        when another master is heard."""
+        wait = self.token_lost_time() if seconds is None else seconds
+        self._deframer.reset()
+        self._listening = True
+        try:
+            await asyncio.sleep(wait)
+            self._handle(self._deframer.flush())
+        finally:
+            self._listening = False
+        if self.foreign is not None:
+            raise ForeignMaster(self._refusal())
+
+    def _refusal(self) -> str:
+        return (
+            f"another master is active on {self.settings.url} ({self.foreign});"
+            " pkwbus does not share a PROFIBUS line with another master: nothing was sent"
+        )
+
+    async def exchange(self, frame: DataFrame) -> Answer:
+        """Send a request and wait for its answer: a frame, :class:`NoAnswer` or
+        :class:`Garbled`. :class:`PortError` when the port is gone, :class:`ForeignMaster`
+        when another master is heard."""
+        async with self._lock:
+            return await self._exchange(frame)
+
+    async def _exchange(self, frame: DataFrame) -> Answer:
+        if self.foreign is not None:
+            raise ForeignMaster(self._refusal())
+        loop = asyncio.get_running_loop()
+        raw = fdl.encode(frame)
+        self._handle(self._deframer.flush())  # a gap: what is buffered is complete or noise
+        self._deframer.reset()
+        self._garbled = None
+        waiter: asyncio.Future[Answer] = loop.create_future()
+        self._waiter = waiter
+        try:
+            await self.link.send(raw)
+            self.requests += 1
+            if self.trace:
+                self.trace("tx", describe_frame(frame))
+            self._deadline = loop.time() + self.settings.wire_time(len(raw)) + self.slot_time
+            self._arm(loop)
+            return await waiter
+        finally:
+            self._waiter = None
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+
+    async def broadcast(self, frame: DataFrame) -> None:
+        """Send a frame nobody answers (SDN), then wait TID2 = max TSDR."""
+        async with self._lock:
+            raw = fdl.encode(frame)
+            self._deframer.reset()
+            await self.link.send(raw)
+            self.requests += 1
+            if self.trace:
+                self.trace("tx", describe_frame(frame))
+            baud = self.settings.baudrate
+            tid2 = dp_timing.bits(dp_timing.MAX_TSDR_BITS, baud)
+            await asyncio.sleep(self.settings.wire_time(len(raw)) + tid2)
+
+    # ------------------------------------------------------------ internals
+
+    def _arm(self, loop: asyncio.AbstractEventLoop) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer = loop.call_at(self._deadline, self._on_timer)
+
+    def _on_timer(self) -> None:
+        self._timer = None
+        waiter = self._waiter
+        if waiter is None or waiter.done():
+            return
+        loop = asyncio.get_running_loop()
+        if self._deadline - loop.time() > 1e-4:
+            self._arm(loop)
+            return
+        self._handle(self._deframer.flush())
+        if not waiter.done():
+            waiter.set_result(Garbled(self._garbled) if self._garbled is not None else NoAnswer())
+
+    def _on_data(self, data: bytes) -> None:
+        if self._waiter is None and not self._listening:
+            self._handle(self._deframer.feed(data))  # stray traffic: watched for other masters
+            return
+        self._handle(self._deframer.feed(data))
+        waiter = self._waiter
+        if waiter is not None and not waiter.done() and self._deframer.buffered:
+            # An answer under way: give its remaining bytes a slot time after each chunk.
+            loop = asyncio.get_running_loop()
+            self._deadline = max(self._deadline, loop.time() + self.slot_time)
+
+    def _handle(self, events: list[fdl.DeframerEvent]) -> None:
+        waiter = self._waiter
+        for event in events:
+            if self.trace:
+                self.trace("rx", describe_frame(event))
+            if isinstance(event, FramingError):
+                if not isinstance(event, Skipped):
+                    self._garbled = event.describe()
+                continue
+            why = _foreign(event, self.master)
+            if why is not None:
+                self.foreign = self.foreign or why
+                if waiter is not None and not waiter.done():
+                    waiter.set_exception(ForeignMaster(self._refusal()))
+                continue
+            if waiter is not None and not waiter.done():
+                waiter.set_result(event)
+        if (
+            waiter is not None
+            and not waiter.done()
+            and self._garbled is not None
+            and not self._deframer.buffered
+        ):
+            waiter.set_result(Garbled(self._garbled))
+
+    def _on_lost(self, reason: str) -> None:
+        self.reconnect.failed(reason, asyncio.get_running_loop().time())
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_exception(PortError(reason))

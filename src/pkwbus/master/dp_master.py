@@ -1,0 +1,203 @@
+"""The DP-V0 master of one line: its slaves in turn, one Data_Exchange each per cycle.
+
+Each slave has its start-up state machine (:class:`~pkwbus.protocol.dp_slave.DpSlave`)
+and, when its PPO has a parameter channel, a PKW slot
+(:class:`~pkwbus.protocol.ppo.PkwSlot`) whose request goes in every PPO-write
+until the matching answer comes. Who fills the slots is the caller's: the
+command line submits one job; a service submits, per slave and per cycle,
+what its planner gives (``Planner.next_for``) through the ``feed`` hook.
+Stopping sends Global_Control Clear to every slave, then closes the port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from pkwbus.link import PortError
+from pkwbus.master.dp_line import DpLine, ForeignMaster
+from pkwbus.master.outcomes import Answered, LineFailed, Outcome, Rejected, TimedOut
+from pkwbus.protocol import pkw
+from pkwbus.protocol.dp_services import global_control_clear
+from pkwbus.protocol.dp_slave import (
+    DpSlave,
+    Event,
+    Failed,
+    FailureKind,
+    Inputs,
+    SlaveSetup,
+    SlaveState,
+    StateChanged,
+)
+from pkwbus.protocol.ppo import JobDone, JobExpired, JobResult, PkwSlot
+
+__all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun", "run_dp_job"]
+
+IDLE_STEP = 0.01  # seconds a cycle with nothing due waits before the next
+
+
+class SlaveLocked(Exception):
+    """The slave's diagnosis names another master: it is never parametrised."""
+
+    def __init__(self, address: int, owner: int | None) -> None:
+        self.address = address
+        self.owner = owner
+        super().__init__(
+            f"slave {address} is owned by master {owner}: pkwbus does not parametrise it"
+            " and sent it nothing but diagnosis requests"
+        )
+
+
+@dataclass
+class SlaveRun:
+    """One slave on the line: its state machine and its PKW slot (None: PPO 3/4)."""
+
+    slave: DpSlave
+    slot: PkwSlot | None
+
+    @property
+    def address(self) -> int:
+        return self.slave.setup.address
+
+
+EventHook = Callable[[int, "Event | JobResult"], None]
+Feed = Callable[[SlaveRun, float], None]  # fill an idle slot (a service's planner)
+
+
+class DpMaster:
+    """The slaves of one DP line, cycled in turn over its :class:`DpLine`."""
+
+    def __init__(
+        self,
+        line: DpLine,
+        slaves: Sequence[tuple[SlaveSetup, PkwSlot | None]],
+        *,
+        on_event: EventHook | None = None,
+        feed: Feed | None = None,
+    ) -> None:
+        self.line = line
+        self.runs = {s.address: SlaveRun(DpSlave(s), slot) for s, slot in slaves}
+        self.on_event = on_event
+        self.feed = feed
+        self.cycles = 0
+
+    async def start(self, *, listen: float | None = None) -> None:
+        """Open the port and listen for other masters; :class:`ForeignMaster`, PortError."""
+        await self.line.open()
+        try:
+            await self.line.listen(listen)
+        except ForeignMaster:
+            await self.line.close()
+            raise
+
+    async def stop(self) -> None:
+        """Global_Control Clear to every slave (when the port is still there), then close."""
+        with contextlib.suppress(PortError, ForeignMaster):
+            if self.line.is_open and self.line.foreign is None and self.line.requests:
+                await self.line.broadcast(global_control_clear(self.line.master))
+        await self.line.close()
+
+    async def cycle(self) -> int:
+        """One Data_Exchange (or start-up request) per slave, in turn; the requests sent."""
+        loop = asyncio.get_running_loop()
+        sent = 0
+        for run in self.runs.values():
+            now = loop.time()
+            slot = run.slot
+            if slot is not None:
+                if (expired := slot.expire(now)) is not None:
+                    self._emit(run, expired)
+                if self.feed is not None and not slot.busy:
+                    self.feed(run, now)
+            slave = run.slave
+            exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
+            outputs = slot.outputs() if exchanging and slot is not None else None
+            frame = slave.poll(now, outputs)
+            for event in slave.take_events():
+                self._emit(run, event)
+            if frame is None:
+                continue
+            answer = await self.line.exchange(frame)
+            sent += 1
+            now = loop.time()
+            for event in slave.feed(answer, now):
+                self._emit(run, event)
+                if isinstance(event, Inputs) and slot is not None:
+                    update = slot.feed(event.data, now)
+                    if update.done is not None:
+                        self._emit(run, update.done)
+        self.cycles += 1
+        if not sent:
+            await asyncio.sleep(IDLE_STEP)
+        return sent
+
+    def _emit(self, run: SlaveRun, event: Event | JobResult) -> None:
+        if self.on_event is not None:
+            self.on_event(run.address, event)
+
+
+def outcome_of(result: JobResult) -> Outcome:
+    """What a slot's finished job comes to, as for FC and USS jobs."""
+    if isinstance(result, JobExpired):
+        return TimedOut(f"no matching answer within the deadline ({result.cycles} cycles)")
+    response = result.response
+    if isinstance(response, pkw.Rejection):
+        return Rejected(response.fault, response.text, response.short)
+    return Answered(response)
+
+
+async def run_dp_job(
+    master: DpMaster, address: int, request: pkw.PkwRequest, *, deadline: float
+) -> Outcome:
+    """One job through a slave's start-up and its PKW slot, on a started master.
+
+    :class:`SlaveLocked` when the slave belongs to another master,
+    :class:`ForeignMaster` when another master is heard on the line.
+    """
+    run = master.runs[address]
+    slot = run.slot
+    if slot is None:
+        raise ValueError(f"slave {address} has no parameter channel")
+    loop = asyncio.get_running_loop()
+    slot.submit(request, deadline)
+    result: list[JobResult] = []
+    gone: list[str] = []
+    hook = master.on_event
+
+    def watch(addr: int, event: Event | JobResult) -> None:
+        if hook is not None:
+            hook(addr, event)
+        if addr != address:
+            return
+        if isinstance(event, JobDone | JobExpired):
+            result.append(event)
+        elif isinstance(event, StateChanged) and event.new is SlaveState.LOCKED:
+            gone.append("locked")
+        elif (
+            isinstance(event, Failed)
+            and event.kind is FailureKind.TIMEOUT
+            and run.slave.state is SlaveState.OFFLINE
+            and not run.slave.waiting
+        ):
+            gone.append(f"slave {address} does not answer ({event.detail})")
+
+    master.on_event = watch
+    try:
+        while not result:
+            if gone:
+                if gone[0] == "locked":
+                    diagnosis = run.slave.diagnosis
+                    raise SlaveLocked(address, diagnosis.master if diagnosis else None)
+                return TimedOut(gone[0])
+            if loop.time() >= deadline:
+                expired = slot.expire(loop.time())
+                return outcome_of(expired) if expired else TimedOut("deadline passed")
+            try:
+                await master.cycle()
+            except PortError as exc:
+                return LineFailed(str(exc))
+        return outcome_of(result[0])
+    finally:
+        master.on_event = hook

@@ -1,0 +1,251 @@
+"""`pkwbus read/write/describe/scan --protocol profibus` against simulated DP slaves on a pty
+and on TCP (served from a thread of this process, so the wire can be recorded)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import tempfile
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from pkwbus.cli import main
+from pkwbus.protocol import dp_services as dps
+from pkwbus.protocol import fdl
+from pkwbus.protocol.dp_slave import DpSlave, NoAnswer, SlaveSetup
+from pkwbus.sim import SimTiming
+from pkwbus.sim.dp_line import DpSimulator
+from tests.master.dp_wire import DpWire, FakeMaster, record_dp_wire
+
+
+class Served:
+    """A simulator served on a pty or TCP by an event loop in a thread of its own."""
+
+    def __init__(self, sim: DpSimulator, end: str) -> None:
+        self.sim = sim
+        self.wire: DpWire = record_dp_wire(sim)
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+        self.tmp = tempfile.TemporaryDirectory()
+        self.server: Any = self.call(self._serve(end))
+        self.port: str = self.server.url if end == "tcp" else self.server.path
+
+    async def _serve(self, end: str) -> Any:
+        if end == "tcp":
+            return await self.sim.serve_tcp("127.0.0.1", 0)
+        return await self.sim.serve_pty(str(Path(self.tmp.name) / "ttyDP"))
+
+    def call(self, coro: Any) -> Any:
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(10)
+
+    def close(self) -> None:
+        self.call(self.server.close())
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(5)
+        self.tmp.cleanup()
+
+
+@pytest.fixture(params=["pty", "tcp"])
+def end(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+def serve(end: str, dialect: str = "danfoss-pcv", **kw: Any) -> Served:
+    kw.setdefault("timing", SimTiming(response_delay=0.0))
+    return Served(DpSimulator([8, 9], dialect=dialect, seed=5, **kw), end)
+
+
+@pytest.fixture
+def danfoss(end: str) -> Iterator[Served]:
+    served = serve(end)
+    yield served
+    served.close()
+    served.wire.assert_never_took_control(served.sim.ppo.length, some=False)
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def dp(served: Served, *args: str, ident: bool = True) -> list[str]:
+    ident_args = ["--ident", hex(served.sim.ident)] if ident else []
+    return [
+        "--port", served.port, "--protocol", "profibus", "--dialect", served.sim.dialect.name,
+        "--slot-time", "20ms", *ident_args, *args,
+    ]  # fmt: skip
+
+
+def test_read_and_write_over_dp(capsys: pytest.CaptureFixture[str], danfoss: Served) -> None:
+    code, out, err = run(capsys, "read", *dp(danfoss, "--address", "8", "16-13", "--json"))
+    assert code == 0, err
+    got = json.loads(out)
+    assert got["pnu"] == 1613 and got["raw"] == danfoss.sim.drives[8].value(1613)
+    code, out, err = run(capsys, "write", *dp(danfoss, "--address", "8", "3-41", "12.5"))
+    assert code == 0, err
+    assert danfoss.sim.drives[8].value(341) == 1250
+    code, out, _ = run(capsys, "read", *dp(danfoss, "--address", "8", "15-30[2]", "--json"))
+    assert code == 0 and json.loads(out)["index"] == 2
+    assert danfoss.wire.set_prm()[(8, 2)] >= 1
+    assert sum(s.clears for s in danfoss.sim.slaves.values()) >= 3  # Clear at each stop
+
+
+@pytest.mark.parametrize(
+    ("dialect", "parameter", "pnu", "index"),
+    [("profidrive", "r2110[3]", 2110, 3), ("hitachi-sjpb", "947[1]", 947, 1)],
+)
+def test_other_dialects_array_and_page_index(
+    capsys: pytest.CaptureFixture[str], end: str, dialect: str, parameter: str, pnu: int, index: int
+) -> None:
+    served = serve(end, dialect)
+    try:
+        code, out, err = run(capsys, "read", *dp(served, "--address", "9", parameter, "--json"))
+        assert code == 0, err
+        assert json.loads(out)["raw"] == served.sim.drives[9].value(pnu, index)
+        code, _, err = run(
+            capsys, "write", *dp(served, "--address", "9", "1120", "20.0", "--type", "f32")
+        )
+        assert code == 0, err
+        assert served.sim.drives[9].value(1120) == 0x41A00000
+    finally:
+        served.close()
+    served.wire.assert_never_took_control(served.sim.ppo.length)
+
+
+def test_a_lagging_answer_and_a_rejection(capsys: pytest.CaptureFixture[str], end: str) -> None:
+    served = serve(end, timing=SimTiming(response_delay=0.0, lag_telegrams=3))
+    try:
+        code, out, err = run(capsys, "read", *dp(served, "--address", "8", "3-42", "--json"))
+        assert code == 0, err
+        assert json.loads(out)["raw"] == served.sim.drives[8].value(342)
+        code, out, err = run(capsys, "read", *dp(served, "--address", "8", "999", "--json"))
+        assert code == 1
+        assert json.loads(out)["error"] == {"kind": "rejected", "fault": 0, "text": "Illegal PNU"}
+        assert "fault 0: Illegal PNU" in err
+    finally:
+        served.close()
+    served.wire.assert_never_took_control(served.sim.ppo.length)
+    assert served.sim.drives[8].lagged >= 3
+
+
+def test_describe_over_dp(capsys: pytest.CaptureFixture[str], danfoss: Served) -> None:
+    code, out, err = run(capsys, "describe", *dp(danfoss, "--address", "8", "3-41", "--json"))
+    assert code == 0, err
+    info = json.loads(out)
+    assert info["pnu"] == 341 and info["conversion_index"] == -2
+
+
+def test_a_slave_owned_by_another_master_is_left_alone(
+    capsys: pytest.CaptureFixture[str], danfoss: Served
+) -> None:
+    sim = danfoss.sim
+    prm = dps.Parameters(sim.ident, dps.watchdog_factors(60.0))
+    other = DpSlave(SlaveSetup(8, 1, prm, sim.ppo.cfg))
+    for n in range(4):  # master 1 parametrises slave 8 with lock
+        frame = other.poll(n * 0.01)
+        assert frame is not None
+        raw = sim.handle(fdl.encode(frame))
+        other.feed(NoAnswer() if raw is None else fdl.decode(raw), n * 0.01)
+    assert sim.slaves[8].owner == 1
+    before = sim.drives[8].value(341)
+    code, out, err = run(capsys, "write", *dp(danfoss, "--address", "8", "3-41", "7", "--json"))
+    assert code == 3
+    assert "owned by master 1" in err and json.loads(out)["error"]["kind"] == "locked"
+    assert danfoss.wire.set_prm()[(8, 2)] == 0  # never parametrised by us
+    assert not danfoss.wire.data_exchanges()
+    assert sim.drives[8].value(341) == before and sim.slaves[8].owner == 1
+
+
+def test_scan_is_a_live_list(capsys: pytest.CaptureFixture[str], danfoss: Served) -> None:
+    code, out, err = run(capsys, "read", *dp(danfoss, "--address", "9", "16-13"))
+    assert code == 0, err
+    code, out, err = run(capsys, "scan", *dp(danfoss, "--slot-time", "3ms", "--json", ident=False))
+    assert code == 0, err
+    found = {e["address"]: e for e in json.loads(out)}
+    assert sorted(found) == [8, 9]
+    assert found[8]["station_type"] == "slave" and found[8]["ident"] == danfoss.sim.ident
+    assert found[8]["state"] == "wait_prm" and found[8]["master"] is None
+    assert found[9]["state"] == "data_exchange" and found[9]["master"] == 2
+    assert not [f for f in danfoss.wire.frames if f.dsap == dps.Service.SET_PRM and f.da == 8]
+    code, out, _ = run(capsys, "scan", *dp(danfoss, "--slot-time", "3ms", ident=False))
+    assert code == 0 and "2 found: 2 slaves" in out and "address 8: slave, ident 0x0402" in out
+
+
+def test_trace_prints_decoded_frames(capsys: pytest.CaptureFixture[str], danfoss: Served) -> None:
+    code, _, err = run(capsys, "read", *dp(danfoss, "--address", "8", "16-13", "--trace"))
+    assert code == 0
+    assert "tx SD2 da=8 sa=2 fc=0x6d dsap=60 ssap=62" in err  # the first Slave_Diag
+    assert "rx SC" in err
+    assert "tx SD2 da=127 sa=2 fc=0x46 dsap=58 ssap=62 data=02 00" in err  # Clear
+
+
+def test_another_master_on_the_line_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    fake = FakeMaster()
+    loop = asyncio.new_event_loop()
+    thread = threading.Thread(target=loop.run_forever, daemon=True)
+    thread.start()
+    asyncio.run_coroutine_threadsafe(fake.start(), loop).result(5)
+    try:
+        code, out, err = run(
+            capsys, "read", "--port", fake.url, "--protocol", "profibus", "--ident", "0x0402",
+            "--address", "8", "16-13", "--json",
+        )  # fmt: skip
+    finally:
+        asyncio.run_coroutine_threadsafe(fake.close(), loop).result(5)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(5)
+    assert code == 3
+    assert "another master is active" in err and "nothing was sent" in err
+    assert json.loads(out)["error"]["kind"] == "line_error"
+    assert fake.received == b""
+
+
+GSD_TEXT = """\
+#Profibus_DP
+Vendor_Name = "Test"
+Ident_Number = 0x0402
+User_Prm_Data_Len = 1
+User_Prm_Data = 0x00
+Module = "PPO 1" 0xF3,0xF1
+EndModule
+"""
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([], "--ident 0x0402"),
+        (["--ident", "0x10000"], "16-bit"),
+        (["--ident", "0x0402", "--cfg", "F3"], "PPO 1 has 12"),
+        (["--ident", "0x0402", "--parity", "N"], "8E1"),
+        (["--ident", "0x0402", "--dialect", "fc"], "not used over PROFIBUS"),
+        (["--ident", "0x0402", "--retries", "9"], "at most 8"),
+    ],
+)
+def test_bad_dp_options_exit_2(
+    capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    code, _, err = run(
+        capsys, "read", "--port", "/nonexistent/tty", "--protocol", "profibus",
+        "--address", "8", *args, "16-13",
+    )  # fmt: skip
+    assert code == 2 and message in err
+
+
+def test_gsd_file(capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path: Path) -> None:
+    good = tmp_path / "drive.gsd"
+    good.write_text(GSD_TEXT)
+    args = dp(danfoss, "--address", "8", "--gsd", str(good), "16-13", ident=False)
+    code, _, err = run(capsys, "read", *args)
+    assert code == 0, err
+    bad = tmp_path / "bad.gsd"
+    bad.write_text(GSD_TEXT.replace("Ident_Number = 0x0402", "Ident_Number = zz"))
+    args = dp(danfoss, "--address", "8", "--gsd", str(bad), "16-13", ident=False)
+    code, _, err = run(capsys, "read", *args)
+    assert code == 2 and "GSD line 3" in err

@@ -1,0 +1,196 @@
+"""The DP master over the simulator's real ends (TCP and a pty): start-up, PKW jobs in each
+dialect, lag, rejection, a restart mid-job, a slave owned by another master, another master
+on the line. Every PPO-write on the wire has control word bit 10 = 0."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+import pytest
+
+from pkwbus.link import PortSettings
+from pkwbus.master.dp_line import DpLine, ForeignMaster
+from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
+from pkwbus.master.outcomes import Answered, Outcome, Rejected
+from pkwbus.protocol import dp_services as dps
+from pkwbus.protocol import dp_timing, fdl, pkw, ppo
+from pkwbus.protocol.dp_slave import DpSlave, NoAnswer, SlaveSetup, SlaveState
+from pkwbus.sim import SimTiming
+from pkwbus.sim.dp_line import DpSimulator
+from tests.master.conftest import serve
+from tests.master.dp_wire import DpWire, fake_master, record_dp_wire
+
+MASTER = 2
+SLOT = 0.02
+
+
+def make_sim(addresses: list[int], dialect: str, **kw: Any) -> DpSimulator:
+    kw.setdefault("timing", SimTiming(response_delay=0.0))
+    return DpSimulator(addresses, dialect=dialect, seed=11, **kw)
+
+
+def setup_for(sim: DpSimulator, address: int, master: int = MASTER) -> SlaveSetup:
+    prm = dps.Parameters(sim.ident, dps.watchdog_factors(2.0))
+    return SlaveSetup(address, master, prm, sim.ppo.cfg, retries=2)
+
+
+@asynccontextmanager
+async def dp_master(
+    sim: DpSimulator, end: str, addresses: list[int]
+) -> AsyncIterator[tuple[DpMaster, DpWire]]:
+    wire = record_dp_wire(sim)
+    async with serve(sim, end) as port:  # type: ignore[arg-type]
+        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        slaves = [(setup_for(sim, a), ppo.PkwSlot(sim.ppo, sim.dialect)) for a in addresses]
+        master = DpMaster(line, slaves)
+        await master.start(listen=0.02)
+        try:
+            yield master, wire
+        finally:
+            await master.stop()
+    wire.assert_never_took_control(sim.ppo.length)
+
+
+async def job(
+    master: DpMaster, address: int, request: pkw.PkwRequest, within: float = 3.0
+) -> Outcome:
+    deadline = asyncio.get_running_loop().time() + within
+    return await run_dp_job(master, address, request, deadline=deadline)
+
+
+def value(outcome: Outcome) -> int:
+    assert isinstance(outcome, Answered), outcome
+    assert isinstance(outcome.response, pkw.ValueResponse)
+    return outcome.response.raw
+
+
+# A read, a write, an array element and (profidrive) a parameter above 1999 (page index).
+PLANS: dict[str, dict[str, Any]] = {
+    "danfoss-pcv": {"read": 1613, "write": (341, 1234, pkw.Width.DWORD), "array": (1530, 1)},
+    "profidrive": {"read": 1082, "write": (2000, 0x42200000, pkw.Width.DWORD), "array": (2110, 3)},
+    "hitachi-sjpb": {"read": 1082, "write": (1120, 0x41400000, pkw.Width.DWORD), "array": (947, 1)},
+}
+
+
+@pytest.mark.parametrize("dialect", sorted(PLANS))
+async def test_start_up_read_write_and_array_in_each_dialect(end: str, dialect: str) -> None:
+    sim = make_sim([8], dialect)
+    plan = PLANS[dialect]
+    dia = sim.dialect
+    async with dp_master(sim, end, [8]) as (master, wire):
+        got = value(await job(master, 8, pkw.read(dia, plan["read"])))
+        assert got == sim.drives[8].value(plan["read"])
+        assert master.runs[8].slave.state is SlaveState.DATA_EXCHANGE
+        pnu, raw, width = plan["write"]
+        assert isinstance(await job(master, 8, pkw.write(dia, pnu, raw, width)), Answered)
+        assert sim.drives[8].value(pnu) == raw
+        assert value(await job(master, 8, pkw.read(dia, pnu))) == raw
+        apnu, index = plan["array"]
+        got = value(await job(master, 8, pkw.read(dia, apnu, index)))
+        assert got == sim.drives[8].value(apnu, index)
+    assert wire.set_prm() == {(8, MASTER): 1}  # one start-up, nothing else parametrised
+    assert sim.slaves[8].clears == 1  # Global_Control Clear at stop
+
+
+async def test_the_page_index_reaches_the_drive_in_the_profidrive_dialect(end: str) -> None:
+    sim = make_sim([8], "profidrive")
+    async with dp_master(sim, end, [8]) as (master, wire):
+        got = value(await job(master, 8, pkw.read(sim.dialect, 2000)))
+        assert got == sim.drives[8].value(2000)
+    pkw_of = [f.data[:8] for f in wire.data_exchanges()]
+    # PNU 2000 goes as 2000 - 2000 with the page bit in IND's low byte (PROFIdrive layout).
+    assert any(d[:2] != b"\x00\x00" and d[3] & 0x80 for d in pkw_of), [d.hex() for d in pkw_of]
+
+
+async def test_a_lagging_answer_is_waited_for(end: str) -> None:
+    sim = make_sim([8], "danfoss-pcv", timing=SimTiming(response_delay=0.0, lag_telegrams=4))
+    async with dp_master(sim, end, [8]) as (master, _):
+        outcome = await job(master, 8, pkw.read(sim.dialect, 341))
+        assert value(outcome) == sim.drives[8].value(341)
+    assert sim.drives[8].lagged >= 4
+
+
+async def test_a_rejection_carries_the_dialect_s_fault_text(end: str) -> None:
+    sim = make_sim([8], "danfoss-pcv")
+    async with dp_master(sim, end, [8]) as (master, _):
+        outcome = await job(master, 8, pkw.read(sim.dialect, 999))
+    assert isinstance(outcome, Rejected)
+    assert outcome.fault == 0 and outcome.text == "Illegal PNU"
+
+
+async def test_a_slave_that_restarts_mid_job_still_finishes_the_job(end: str) -> None:
+    sim = make_sim([8], "profidrive", timing=SimTiming(response_delay=0.0, lag_telegrams=3))
+    answer = sim.answer
+    exchanges = 0
+
+    def restart_once(frame: object, now: float | None = None) -> Any:
+        nonlocal exchanges
+        if isinstance(frame, fdl.DataFrame) and frame.dsap is None and frame.data:
+            exchanges += 1
+            if exchanges == 3:  # the job's request is out, its answer lags
+                sim.restart(8)
+        return answer(frame, now)
+
+    sim.answer = restart_once  # type: ignore[method-assign]
+    async with dp_master(sim, end, [8]) as (master, wire):
+        restarts: list[object] = []
+        master.on_event = lambda _a, e: restarts.append(e)
+        raw = 0x41A00000  # 20.0
+        outcome = await job(master, 8, pkw.write(sim.dialect, 1120, raw, pkw.Width.DWORD))
+        assert isinstance(outcome, Answered)
+        assert sim.drives[8].value(1120) == raw
+    assert sim.stats.injected["restart"] == 1
+    assert wire.set_prm()[(8, MASTER)] == 2  # parametrised again after the restart
+
+
+async def test_a_slave_owned_by_another_master_is_never_parametrised(end: str) -> None:
+    sim = make_sim([8], "danfoss-pcv")
+    # Master 1 parametrises the slave with lock first.
+    other = DpSlave(setup_for(sim, 8, master=1))
+    for n in range(4):
+        frame = other.poll(n * 0.01)
+        assert frame is not None
+        raw = sim.handle(fdl.encode(frame))
+        other.feed(NoAnswer() if raw is None else fdl.decode(raw), n * 0.01)
+    assert sim.slaves[8].owner == 1
+    wire = record_dp_wire(sim)
+    async with serve(sim, end) as port:  # type: ignore[arg-type]
+        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        master = DpMaster(line, [(setup_for(sim, 8), ppo.PkwSlot(sim.ppo, sim.dialect))])
+        await master.start(listen=0.02)
+        try:
+            with pytest.raises(SlaveLocked, match="owned by master 1"):
+                await job(master, 8, pkw.write(sim.dialect, 341, 1, pkw.Width.DWORD))
+        finally:
+            await master.stop()
+    assert wire.set_prm()[(8, MASTER)] == 0
+    assert not wire.data_exchanges()
+    assert all(f.dsap in (dps.Service.SLAVE_DIAG, dps.Service.GLOBAL_CONTROL) for f in wire.frames)
+    assert sim.slaves[8].owner == 1
+
+
+async def test_another_master_on_the_line_is_refused_before_anything_is_sent() -> None:
+    async with fake_master() as fake:
+        line = DpLine(PortSettings(fake.url, baudrate=19200), MASTER, slot_time=SLOT)
+        master = DpMaster(line, [])
+        with pytest.raises(ForeignMaster, match=r"another master is active.*station 1"):
+            await master.start()
+        await asyncio.sleep(0.05)
+        assert fake.received == b""
+        assert not line.is_open
+
+
+def test_the_idle_times_and_the_slot_time_follow_the_baud_rate() -> None:
+    line = DpLine(PortSettings("/dev/null", baudrate=19200, parity="N"), MASTER)
+    assert line.settings.parity == "E"
+    assert line.settings.start_pause == pytest.approx(37 / 19200)
+    assert line.slot_time == pytest.approx(0.030)
+    assert DpLine(PortSettings("/dev/null", baudrate=93750), MASTER).slot_time == pytest.approx(
+        0.008
+    )
+    assert line.token_lost_time() == pytest.approx((6 + 2 * MASTER) * 0.030)
+    # A Data_Exchange of PPO 1 (21 bytes each way) at 19200: about 28 ms.
+    assert dp_timing.exchange_time(21, 21, 19200) == pytest.approx((42 * 11 + 81) / 19200)
