@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Final
 
+from pkwbus.hostport import MAX_TCP_PORT, parse_host_port
+
 __all__ = [
     "BAUDRATES",
     "MAX_ADDRESS",
@@ -30,7 +32,6 @@ MAX_RETRIES: Final = 100  # repeats of one request after a missing or bad answer
 MAX_ADDRESS: Final = 126  # the highest bus address of any protocol (FC 1-126, USS 0-30)
 MAX_AUDIT_LIMIT: Final = 10_000  # audit entries one request shows, as GET /api/v1/audit
 MAX_LAG_TELEGRAMS: Final = 1000  # simulated PKW lag, counted in telegrams
-MAX_TCP_PORT: Final = 65535
 
 
 def check_int(value: int, low: int, high: int) -> int:
@@ -82,16 +83,14 @@ def check_baudrate(value: int) -> int:
 
 
 def check_port_url(url: str) -> str:
-    """A ``socket://`` or ``rfc2217://`` port needs HOST:PORT with a TCP port 1-65535.
+    """A ``socket://`` or ``rfc2217://`` port needs HOST:PORT with a TCP port 1-65535
+    (:func:`pkwbus.hostport.parse_host_port`); ValueError otherwise.
 
     Other ports (device paths, ``loop://``, ...) pass unchanged.
     """
     scheme, sep, rest = url.partition("://")
     if not sep or scheme.lower() not in ("socket", "rfc2217"):
         return url
-    host, colon, port = rest.split("?", 1)[0].split("/", 1)[0].rpartition(":")
-    if not host or not colon or not port.isdigit() or len(port) > 5:
-        raise ValueError(f"{url[:60]!r}: write {scheme}://HOST:PORT")
-    if not 1 <= int(port) <= MAX_TCP_PORT:
-        raise ValueError(f"{url[:60]!r}: the TCP port must be 1-{MAX_TCP_PORT}")
+    address = rest.split("?", 1)[0].split("/", 1)[0]
+    parse_host_port(f"{scheme}://{address}", lowest_port=1, scheme=f"{scheme}://")
     return url

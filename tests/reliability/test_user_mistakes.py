@@ -162,11 +162,11 @@ MISTAKES: dict[str, tuple[str, str]] = {
     ),
     "simulate listen port overflows bind": (
         "simulate --listen tcp://127.0.0.1:99999",
-        "'tcp://127.0.0.1:99999': the port must be 0-65535",
+        "'tcp://127.0.0.1:99999': the TCP port must be 0-65535 (0: any free port)",
     ),
     "simulate stats port overflows bind": (
         "simulate --listen tcp://127.0.0.1:0 --stats-listen 127.0.0.1:99999",
-        "'127.0.0.1:99999': the port must be 0-65535",
+        "'127.0.0.1:99999': the TCP port must be 0-65535 (0: any free port)",
     ),
     "simulate drives exhaust memory": (
         "simulate --listen tcp://127.0.0.1:0 --drives 1-99999999999",

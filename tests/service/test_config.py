@@ -306,7 +306,7 @@ EXPECTED: dict[str, str] = {
     "bad_conversion": "lines[0].drives[0].poll[0].conversion: conversion index 9 is not one of",
     "bad_duration": "lines[0].drives[0].poll[0].every: '1 week' is not a duration",
     "bad_listen": "listen: 'localhost' is not HOST:PORT",
-    "bad_listen_port": "listen: '127.0.0.1:70000': port must be a number 1-65535",
+    "bad_listen_port": "listen: '127.0.0.1:70000': the TCP port must be 1-65535",
     "bad_log_format": "log_format: must be 'text' or 'json', not 'xml'",
     "bad_name": "lines[0].drives[0].name: may contain only letters, digits and _ . -",
     "bad_notation": "lines[0].drives[0].poll[0].parameter: '16-1x' is not a parameter",

@@ -14,30 +14,66 @@ The counts of refused requests are committed without a sync of their own
 refusals costs no disk flush per request.
 A store that fails raises :class:`AuditError` (one line, no traceback).
 
+
 The token fingerprint is an HMAC-SHA256 of the token keyed with a random
 secret kept beside the database (``<audit_db>.key``, mode 0600, made on the
 first start): the same token has the same id across restarts, and nobody
 without the key can test a guess of the token against it.
+
+The key is in :mod:`pkwbus.service.audit_key`, the refusal tallies in
+:mod:`pkwbus.service.audit_refusals`, the row and its values in
+:mod:`pkwbus.service.audit_rows`; this module is the store, and re-exports
+their public names. Raises :class:`AuditError` (and :class:`ValueError` from
+:meth:`AuditLog.update` for a column it does not complete).
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import hmac
-import json
-import math
 import os
-import secrets
 import sqlite3
 import stat
 import threading
 import time
-from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Final
+
+from pkwbus.service.audit_key import (
+    KEY_BYTES,
+    TOKEN_ID_HEX,
+    fingerprint,
+    key_path,
+    load_key,
+    new_key,
+)
+from pkwbus.service.audit_refusals import MAX_SOURCES_PER_MINUTE, OTHER_SOURCES, RefusalTallies
+from pkwbus.service.audit_rows import (
+    COLUMNS,
+    MAX_TEXT,
+    AuditEntry,
+    as_dict,
+    clip_text,
+    entry_of_row,
+    stored_value,
+)
+
+__all__ = [
+    "COLUMNS",
+    "INTERRUPTED",
+    "KEY_BYTES",
+    "MAX_SOURCES_PER_MINUTE",
+    "MAX_TEXT",
+    "OTHER_SOURCES",
+    "SCHEMA",
+    "TOKEN_ID_HEX",
+    "AuditEntry",
+    "AuditError",
+    "AuditLog",
+    "as_dict",
+    "key_path",
+    "path_problem",
+]
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS writes (
@@ -61,15 +97,6 @@ CREATE INDEX IF NOT EXISTS writes_time ON writes (time);
 CREATE TABLE IF NOT EXISTS probe (id INTEGER PRIMARY KEY CHECK (id = 1), time REAL NOT NULL);
 """
 
-COLUMNS: Final = (
-    "id, time, client, token_id, drive, parameter, idx, store, old_value,"
-    " new_value, raw_value, outcome, fault, detail"
-)
-KEY_BYTES: Final = 32
-TOKEN_ID_HEX: Final = 16  # 64 bits of the HMAC: distinct for any number of tokens in use
-MAX_TEXT: Final = 500  # a detail or value kept in a row, in characters
-MAX_SOURCES_PER_MINUTE: Final = 32  # refusal rows per minute; more addresses share one row
-OTHER_SOURCES: Final = "other addresses"
 INTERRUPTED: Final = (
     "no outcome was recorded (the service stopped before the answer, or could not"
     " store it); the drive may have applied the write"
@@ -78,11 +105,6 @@ INTERRUPTED: Final = (
 
 class AuditError(Exception):
     """The audit log cannot be opened or cannot store: the message is one line."""
-
-
-def key_path(db: Path) -> Path:
-    """Where the token-fingerprint secret of the database ``db`` lives."""
-    return db.with_name(db.name + ".key")
 
 
 def path_problem(db: Path) -> str | None:
@@ -118,33 +140,6 @@ def path_problem(db: Path) -> str | None:
     return None
 
 
-@dataclass
-class AuditEntry:
-    client: str
-    drive: str
-    parameter: str
-    index: int
-    outcome: str  # ok, rejected, timeout, cancelled, refused, invalid, pending, mismatch
-    token_id: str | None = None
-    store: str | None = None
-    old_value: Any = None
-    new_value: Any = None
-    raw_value: int | None = None
-    fault: int | None = None
-    detail: str | None = None
-    time: float = 0.0
-    id: int | None = None
-    count: int | None = None  # attempts this row stands for; None for one write attempt
-
-
-@dataclass
-class _Tally:
-    """This minute's refusals from one address: the row that counts them, by kind."""
-
-    row: int
-    kinds: Counter[str] = field(default_factory=Counter)
-
-
 class AuditLog:
     """A small synchronous store; each call is one short, synced transaction.
 
@@ -162,8 +157,7 @@ class AuditLog:
         self.clock = clock
         self._lock = threading.Lock()
         self._key: bytes | None = None
-        self._minute: int | None = None
-        self._tallies: dict[str, _Tally] = {}
+        self._refusals = RefusalTallies()
         try:
             if readonly:  # a look at the log: nothing is created or changed
                 uri = f"file:{self.path.resolve()}?mode=ro"
@@ -180,7 +174,7 @@ class AuditLog:
             if "count" not in self._columns():  # a database of an earlier version
                 self._db.execute("ALTER TABLE writes ADD COLUMN count INTEGER")
             self._has_count = True
-            self._key = secrets.token_bytes(KEY_BYTES) if memory else _load_key(self.path)
+            self._key = new_key() if memory else load_key(self.path)
         except (sqlite3.Error, OSError) as exc:
             with contextlib.suppress(Exception):
                 self._db.close()
@@ -193,8 +187,7 @@ class AuditLog:
         """The token's fingerprint: HMAC-SHA256 keyed with this installation's secret."""
         if self._key is None:
             raise AuditError("a read-only look at the audit log has no key")
-        digest = hmac.new(self._key, token.encode(), hashlib.sha256).hexdigest()
-        return "hmac:" + digest[:TOKEN_ID_HEX]
+        return fingerprint(self._key, token)
 
     def close_interrupted(self) -> int:
         """Rows a killed service left 'pending': their outcome is unknown. Returns how many."""
@@ -219,12 +212,12 @@ class AuditLog:
                 entry.parameter,
                 entry.index,
                 entry.store,
-                _text(entry.old_value),
-                _text(entry.new_value),
+                stored_value(entry.old_value),
+                stored_value(entry.new_value),
                 entry.raw_value,
                 entry.outcome,
                 entry.fault,
-                _clip(entry.detail),
+                clip_text(entry.detail),
                 entry.count,
             ),
         )
@@ -240,10 +233,7 @@ class AuditLog:
         if unknown:
             raise ValueError(f"cannot update {sorted(unknown)}")
         cols = ", ".join(f"{k} = ?" for k in fields)
-        values = [
-            _text(v) if k in ("old_value", "new_value") else _clip(v) if k == "detail" else v
-            for k, v in fields.items()
-        ]
+        values = [_column_value(k, v) for k, v in fields.items()]
         self._store(f"UPDATE writes SET {cols} WHERE id = ?", (*values, row))
 
     def refused(self, client: str, kind: str) -> None:
@@ -251,30 +241,21 @@ class AuditLog:
         minute, its ``count`` raised with each further attempt."""
         now = self.clock()
         with self._lock:
-            minute = int(now // 60)
-            if minute != self._minute:
-                self._minute, self._tallies = minute, {}
-            if client not in self._tallies and len(self._tallies) >= MAX_SOURCES_PER_MINUTE:
-                client = OTHER_SOURCES
-            tally = self._tallies.get(client)
-            kinds = Counter({kind: 1}) + (tally.kinds if tally else Counter())
-            detail = "refused without a valid token: " + ", ".join(
-                f"{k} {n}" for k, n in sorted(kinds.items())
-            )
-            if tally is None:
+            refusal = self._refusals.next(now, client, kind)
+            if refusal.row is None:
                 cur = self._unsynced_locked(
                     "INSERT INTO writes (time, client, drive, parameter, outcome, detail, count)"
                     " VALUES (?, ?, '', '', 'refused', ?, 1)",
-                    (now, client, detail),
+                    (now, refusal.client, refusal.detail),
                 )
                 assert cur.lastrowid is not None
-                self._tallies[client] = _Tally(cur.lastrowid, kinds)
+                self._refusals.stored(refusal, cur.lastrowid)
             else:
                 self._unsynced_locked(
                     "UPDATE writes SET count = count + 1, detail = ? WHERE id = ?",
-                    (detail, tally.row),
+                    (refusal.detail, refusal.row),
                 )
-                tally.kinds = kinds
+                self._refusals.stored(refusal, refusal.row)
 
     def probe(self) -> None:
         """A small committed store, to learn whether the log can record again."""
@@ -289,7 +270,7 @@ class AuditLog:
                 ).fetchall()
         except sqlite3.Error as exc:
             raise AuditError(f"cannot read the audit log {self.path}: {_reason(exc)}") from None
-        return [_entry(r) for r in rows]
+        return [entry_of_row(r) for r in rows]
 
     def close(self) -> None:
         with self._lock:
@@ -316,48 +297,6 @@ class AuditLog:
             raise AuditError(_reason(exc)) from None
 
 
-def _load_key(db: Path) -> bytes:
-    """The installation's secret, made on first use (mode 0600, synced)."""
-    path = key_path(db)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
-    try:
-        fd = os.open(path, flags, 0o600)
-    except FileExistsError:
-        return _read_key(path)
-    key = secrets.token_bytes(KEY_BYTES)
-    try:
-        os.write(fd, key.hex().encode() + b"\n")
-        os.fsync(fd)
-    except OSError:
-        os.close(fd)
-        path.unlink(missing_ok=True)  # no half-written key for the next start to trip on
-        raise
-    os.close(fd)
-    with contextlib.suppress(OSError):  # the new name survives a power cut too
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    return key
-
-
-def _read_key(path: Path) -> bytes:
-    if not path.is_file():
-        raise OSError(f"{path} is not a regular file")
-    text = path.read_text(errors="replace").strip()
-    try:
-        key = bytes.fromhex(text)
-    except ValueError:
-        key = b""
-    if len(key) != KEY_BYTES:
-        raise OSError(
-            f"the key file {path} is damaged (not {KEY_BYTES * 2} hex digits): restore it,"
-            " or delete it to start new token ids"
-        )
-    return key
-
-
 def _reason(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         where = f"{exc.filename}: " if exc.filename else ""
@@ -365,48 +304,7 @@ def _reason(exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 
-def _clip(text: str | None, limit: int = MAX_TEXT) -> str | None:
-    if text is None or len(text) <= limit:
-        return text
-    return text[:limit] + f"... ({len(text)} characters)"
-
-
-def _text(value: Any) -> str | None:
-    """JSON of a value; a non-finite number is kept as its name ("nan"), which JSON lacks."""
-    if value is None:
-        return None
-    if isinstance(value, float) and not math.isfinite(value):
-        return json.dumps(str(value))
-    if isinstance(value, str):
-        value = _clip(value)
-    return json.dumps(value)
-
-
-def _value(text: str | None) -> Any:
-    return None if text is None else json.loads(text)
-
-
-def _entry(row: tuple[Any, ...]) -> AuditEntry:
-    id_, t, client, tok, drive, parameter, idx, store, old, new, raw, outcome, fault = row[:13]
-    detail, count = row[13:15]
-    return AuditEntry(
-        client=client,
-        drive=drive,
-        parameter=parameter,
-        index=idx,
-        outcome=outcome,
-        token_id=tok,
-        store=store,
-        old_value=_value(old),
-        new_value=_value(new),
-        raw_value=raw,
-        fault=fault,
-        detail=detail,
-        time=t,
-        id=id_,
-        count=count,
-    )
-
-
-def as_dict(entry: AuditEntry) -> dict[str, Any]:
-    return asdict(entry)
+def _column_value(column: str, value: Any) -> Any:
+    if column in ("old_value", "new_value"):
+        return stored_value(value)
+    return clip_text(value) if column == "detail" else value

@@ -10,7 +10,7 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
-from pkwbus import durations, limits
+from pkwbus import durations, hostport, limits
 from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
 from pkwbus.durations import DurationRange
 from pkwbus.protocol import buses
@@ -106,15 +106,9 @@ def parse_addresses(text: str) -> list[int]:
 
 
 def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
-    rest = text.removeprefix(scheme) if scheme else text
-    if scheme and not text.startswith(scheme):
-        raise ValueError(f"{text!r}: write {scheme}HOST:PORT")
-    host, sep, port = rest.rpartition(":")
-    if not sep or not port.isdigit() or not host:
-        raise ValueError(f"{text!r}: write {scheme}HOST:PORT")
-    if len(port) > 5 or int(port) > limits.MAX_TCP_PORT:
-        raise ValueError(f"{text!r}: the port must be 0-{limits.MAX_TCP_PORT} (0: any free port)")
-    return host.strip("[]"), int(port)
+    """``--listen`` (``tcp://HOST:PORT``) or ``--stats-listen`` (``HOST:PORT``); port 0:
+    any free port. ValueError otherwise (:func:`pkwbus.hostport.parse_host_port`)."""
+    return hostport.parse_host_port(text, lowest_port=hostport.ANY_FREE_PORT, scheme=scheme)
 
 
 def catalog_for(protocol: str, name: str | None) -> str | None:

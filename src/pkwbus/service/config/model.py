@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ipaddress
 import os
 import re
 from collections.abc import Iterator, Mapping
@@ -18,6 +17,7 @@ from pydantic import (
     model_validator,
 )
 
+from pkwbus.hostport import MAX_TCP_PORT, check_host, parse_host_port
 from pkwbus.problems import plain, short
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
@@ -38,7 +38,7 @@ class Listen(Model):
     """Where the HTTP server listens: written ``HOST:PORT`` or ``[IPv6]:PORT``."""
 
     host: str
-    port: StrictInt = Field(ge=1, le=65535)
+    port: StrictInt = Field(ge=1, le=MAX_TCP_PORT)
 
     @model_validator(mode="before")
     @classmethod
@@ -53,46 +53,17 @@ class Listen(Model):
     @field_validator("host")
     @classmethod
     def _host(cls, value: str) -> str:
-        return _check_host(value)
+        return check_host(value)
 
     def __str__(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{host}:{self.port}"
 
 
-_HOSTNAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.-]{0,252}$")
-_LISTEN_HINT = "write HOST:PORT, e.g. 127.0.0.1:9725, 0.0.0.0:9725 or [::1]:9725"
-
-
-def _check_host(host: str) -> str:
-    """A host name, an IPv4 address or a bare IPv6 address."""
-    if ":" in host:
-        try:
-            ipaddress.IPv6Address(host)
-        except ValueError:
-            raise ValueError(f"{host!r} is not an IPv6 address") from None
-    elif not _HOSTNAME.match(host):
-        raise ValueError(f"{host!r} is not a host name or address: {_LISTEN_HINT}")
-    return host
-
-
 def parse_listen(text: str) -> tuple[str, int]:
-    """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port); ValueError otherwise."""
-    head, sep, port_text = text.strip().rpartition(":")
-    if not sep or not head:
-        raise ValueError(f"{short(text)} is not HOST:PORT: {_LISTEN_HINT}")
-    bracketed = head.startswith("[") and head.endswith("]")
-    if ":" in head and not bracketed:
-        raise ValueError(f"{short(text)}: write an IPv6 address in brackets, e.g. [::1]:9725")
-    try:
-        host = _check_host(head[1:-1] if bracketed else head)
-        if bracketed and ":" not in host:
-            raise ValueError(f"{host!r} is not an IPv6 address")
-    except ValueError as exc:
-        raise ValueError(f"{short(text)}: {exc}") from None
-    if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
-        raise ValueError(f"{short(text)}: port must be a number 1-65535")
-    return host, int(port_text)
+    """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port), port 1-65535; ValueError otherwise
+    (:func:`pkwbus.hostport.parse_host_port`)."""
+    return parse_host_port(text, lowest_port=1)
 
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,127}$")

@@ -1,0 +1,145 @@
+"""What the parameter API checks before anything is sent: names, the caller's token, the index.
+
+:class:`ApiError` is the one error of the parameter API: an HTTP status, a
+kind and a message. The checks here raise it: :func:`check_names` (404, a name
+longer than any can be), :class:`TokenCheck` (403 when writes are disabled or
+the token is wrong, 401 without a bearer token; compared in constant time),
+:func:`locate` (404 unknown drive or parameter, 422 wrong notation or index),
+:func:`fit_index` (422 index past the array) and :func:`raise_for` (the
+failure of a job's outcome).
+"""
+
+from __future__ import annotations
+
+import hmac
+from dataclasses import dataclass
+from typing import Any
+
+from pkwbus.master.jobs import JobResult
+from pkwbus.master.outcomes import http_failure
+from pkwbus.master.values import ParameterFormat
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import ParameterNotationError, ParameterRef, parse_parameter
+from pkwbus.service.runtime import DriveEntry, Runtime
+
+__all__ = [
+    "INCOMPLETE",
+    "MAX_DRIVE_NAME",
+    "MAX_PARAMETER_TEXT",
+    "ApiError",
+    "Caller",
+    "TokenCheck",
+    "check_names",
+    "clip",
+    "fit_index",
+    "locate",
+    "raise_for",
+]
+
+MAX_DRIVE_NAME = 64  # the configuration's limit on names
+MAX_PARAMETER_TEXT = 32  # "P65535[255]" is 11 characters: room for spaces, not for a book
+INCOMPLETE = "incomplete"  # the answer's "audit" when its row could not be (fully) stored
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, kind: str, message: str, **extra: Any) -> None:
+        super().__init__(message)
+        self.status = status
+        self.kind = kind
+        self.extra = extra
+        self.audit_incomplete = False
+
+    def body(self) -> dict[str, Any]:
+        body: dict[str, Any] = {"error": {"kind": self.kind, "message": str(self), **self.extra}}
+        if self.audit_incomplete:
+            body["audit"] = INCOMPLETE
+        return body
+
+
+def check_names(drive: str, parameter: str) -> None:
+    """Refuse, before any lookup, a name longer than a drive name or parameter can be."""
+    if len(drive) > MAX_DRIVE_NAME:
+        raise ApiError(404, "unknown_drive", f"no drive has a name of {len(drive)} characters")
+    if len(parameter) > MAX_PARAMETER_TEXT:
+        raise ApiError(
+            404, "unknown_parameter", f"no parameter is written in {len(parameter)} characters"
+        )
+
+
+def clip(name: str, limit: int) -> str:
+    """A name as the audit keeps it: at most ``limit`` characters and a mark."""
+    return name if len(name) <= limit else name[:limit] + "..."
+
+
+@dataclass(frozen=True)
+class Caller:
+    client: str
+    authorization: str | None
+
+
+class TokenCheck:
+    """The write token (None: no writes) and the id the audit knows it by."""
+
+    def __init__(self, token: str | None, token_id: str | None) -> None:
+        self._token = token
+        self._token_id = token_id
+
+    def identify(self, caller: Caller) -> str | None:
+        """The token id of a caller with the write token; an :class:`ApiError` otherwise."""
+        if self._token is None:
+            raise ApiError(403, "writes_disabled", "writes are disabled: no write token is set")
+        header = caller.authorization or ""
+        scheme, _, given = header.partition(" ")
+        if scheme.lower() != "bearer" or not given:
+            raise ApiError(401, "unauthenticated", "writes need Authorization: Bearer <token>")
+        if not hmac.compare_digest(given.strip().encode(), self._token.encode()):
+            raise ApiError(403, "forbidden", "the token is not the write token")
+        return self._token_id
+
+
+def locate(
+    runtime: Runtime, drive: str, parameter: str, index: int | None
+) -> tuple[DriveEntry, ParameterRef]:
+    """The drive and the parameter by the drive's one name for it, with ``index`` applied."""
+    entry = runtime.drives.get(drive)
+    if entry is None:
+        raise ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+    try:
+        ref = parse_parameter(parameter)
+        entry.target.dialect.check_pnu(ref.pnu)
+    except LocalProtocolError as exc:
+        raise ApiError(404, "unknown_parameter", str(exc)) from None
+    try:  # one name per drive: 341 and 0341 are 3-41 on an FC drive, p0341 is refused
+        ref = entry.canonical(ref)
+    except ParameterNotationError as exc:
+        raise ApiError(422, "wrong_notation", str(exc)) from None
+    if index is not None:
+        if ref.index is not None and ref.index != index:
+            raise ApiError(
+                422, "invalid_index", f"{parameter} names index {ref.index}, not {index}"
+            )
+        if not 0 <= index <= 255:
+            raise ApiError(422, "invalid_index", f"index {index} is outside 0-255")
+        ref = ParameterRef(ref.pnu, index, ref.name)
+    return entry, ref
+
+
+def fit_index(ref: ParameterRef, fmt: ParameterFormat) -> ParameterRef:
+    """Index 0 of a parameter the catalog does not call an array is the parameter itself;
+    an index past the catalog's array length is refused before anything is sent."""
+    if ref.index is None:
+        return ref
+    if fmt.array is None:
+        return ParameterRef(ref.pnu, None, ref.name) if ref.index == 0 else ref
+    if ref.index >= fmt.array:
+        raise ApiError(
+            422, "invalid_index", f"{ref.name} has {fmt.array} elements: index {ref.index}"
+        )
+    return ref
+
+
+def raise_for(result: JobResult) -> None:
+    """The :class:`ApiError` of a job that did not succeed; nothing for one that did."""
+    failure = http_failure(result.outcome)
+    if failure is not None:
+        raise ApiError(failure.status, failure.kind, failure.message, **failure.extra)

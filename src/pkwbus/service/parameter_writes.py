@@ -1,0 +1,248 @@
+"""Audited, validated writes of one parameter for the HTTP API.
+
+A write is refused before anything is sent unless the caller has the write
+token, the parameter is in the drive's ``writable`` list, and the value passes
+the type, range and limits of the catalog and the configuration (a value the
+raw number cannot represent exactly is refused, never rounded). Every attempt,
+refused ones included, lands in the audit log (callers without a valid token
+as a count per address and minute); a write is sent only once its row is
+stored, and once queued it runs to its end and its row is completed even if
+the HTTP client goes away.
+
+Raises :class:`~pkwbus.service.parameter_checks.ApiError`: 401/403 for the
+token, 403 for a parameter that is not writable, 422 for a value that does
+not fit, 503 when the audit log cannot store the row (nothing sent), those of
+the checks (:mod:`pkwbus.service.parameter_checks`) and of the job's outcome.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+from typing import Any
+
+from pkwbus.master.jobs import JobKind, JobResult
+from pkwbus.master.outcomes import Answered, audit_outcome
+from pkwbus.master.values import ParameterFormat, Value
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.params import ParameterRef, encode_text
+from pkwbus.service.audit import AuditEntry
+from pkwbus.service.parameter_checks import (
+    INCOMPLETE,
+    MAX_DRIVE_NAME,
+    MAX_PARAMETER_TEXT,
+    ApiError,
+    Caller,
+    TokenCheck,
+    check_names,
+    clip,
+    fit_index,
+    locate,
+    raise_for,
+)
+from pkwbus.service.parameter_reads import Reads
+from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
+from pkwbus.service.runtime import DriveEntry, Runtime
+
+__all__ = ["WriteOrder", "Writes"]
+
+
+@dataclass(frozen=True)
+class WriteOrder:
+    value: float | int | str
+    index: int | None = None
+    store: pkw.Store = pkw.Store.RAM
+    verify: bool = False
+    dry_run: bool = False
+
+
+class Writes:
+    """The writes of a runtime, each audited through ``recorder``."""
+
+    def __init__(
+        self, runtime: Runtime, recorder: AuditRecorder, tokens: TokenCheck, reads: Reads
+    ) -> None:
+        self.runtime = runtime
+        self.recorder = recorder
+        self._tokens = tokens
+        self._reads = reads
+        self._running: set[asyncio.Future[dict[str, Any]]] = set()
+
+    async def write(
+        self, drive: str, parameter: str, order: WriteOrder, caller: Caller
+    ) -> dict[str, Any]:
+        identity = await self._identify(caller)
+        audit = AuditEntry(
+            client=caller.client,
+            drive=clip(drive, MAX_DRIVE_NAME),
+            parameter=clip(parameter, MAX_PARAMETER_TEXT),
+            index=order.index or 0,
+            outcome="pending",
+            token_id=identity,
+            store=order.store.value,
+            new_value=order.value,
+        )
+        try:
+            check_names(drive, parameter)
+            entry, ref = locate(self.runtime, drive, parameter, order.index)
+            audit.parameter, audit.index = ref.name, ref.index or 0
+            if not entry.may_write(ref):
+                raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
+            fmt = entry.format_of(ref)
+            ref = fit_index(ref, fmt)
+            request = self._write_request(entry, ref, fmt, order)
+            audit.raw_value = request.value if not request.text else None
+        except ApiError as exc:
+            audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
+            audit.detail = str(exc)
+            exc.audit_incomplete = not await self.recorder.note(audit)
+            raise
+        telegram = entry.target.telegram(request).hex(" ")
+        if order.dry_run:
+            audit.outcome = "dry_run"
+            stored = await self.recorder.note(audit)
+            body = self._write_body(ref, fmt, order, request, telegram, audit, None)
+            return body if stored else {**body, "audit": INCOMPLETE}
+        # Once its row is stored the write runs to its end and the row is completed even
+        # when the HTTP client goes away: the request may reach the drive regardless.
+        task = asyncio.ensure_future(
+            self._perform(entry, ref, fmt, order, request, telegram, audit)
+        )
+        self._running.add(task)
+        task.add_done_callback(self._finished)
+        return await asyncio.shield(task)
+
+    def _finished(self, task: asyncio.Future[dict[str, Any]]) -> None:
+        self._running.discard(task)
+        if not task.cancelled():
+            task.exception()  # collected: a client that left is not told, the audit row is
+
+    async def refuse_malformed(
+        self, drive: str, parameter: str, caller: Caller, problem: str
+    ) -> bool:
+        """Audit a write whose body did not validate (nothing was sent); False when the
+        audit log could not store it. A caller without a valid token gets its refusal."""
+        identity = await self._identify(caller)
+        return await self.recorder.note(
+            AuditEntry(
+                client=caller.client,
+                drive=clip(drive, MAX_DRIVE_NAME),
+                parameter=clip(parameter, MAX_PARAMETER_TEXT),
+                index=0,
+                outcome="invalid",
+                token_id=identity,
+                detail=problem,
+            )
+        )
+
+    async def _identify(self, caller: Caller) -> str | None:
+        """The caller's token id; a refusal (counted, audited per address and minute)
+        when the caller has no valid token."""
+        try:
+            return self._tokens.identify(caller)
+        except ApiError as exc:
+            exc.audit_incomplete = not await self.recorder.refused(caller.client, exc.kind)
+            raise
+
+    async def _perform(
+        self,
+        entry: DriveEntry,
+        ref: ParameterRef,
+        fmt: ParameterFormat,
+        order: WriteOrder,
+        request: pkw.PkwRequest,
+        telegram: str,
+        audit: AuditEntry,
+    ) -> dict[str, Any]:
+        # The old value is the latest the drive confirmed (polled, read, or echoed by
+        # an earlier write): reading it first would cost an exchange and double the
+        # write's latency. Kept at once; the line then reports the latest one just
+        # before the write's answer, which a write queued behind another needs.
+        old = self._latest(entry, ref)
+        audit.old_value = old
+        try:
+            row = await self.recorder.attempt(audit)  # committed before anything is sent
+        except AuditUnavailable as exc:
+            raise ApiError(
+                503,
+                "audit_unavailable",
+                f"the audit log cannot record the write ({exc}): nothing was sent",
+            ) from None
+        result = await self.runtime.submit(
+            entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
+        )
+        if result.previous is not None and result.previous.value != old:
+            old = audit.old_value = result.previous.value  # stored with the outcome
+        audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)
+        outcome, fault, detail = audited.outcome, audited.fault, audited.detail
+        verified: bool | None = None
+        if outcome == "ok" and order.verify:
+            back = await self._reads.try_read(entry, ref, fmt)
+            if isinstance(back.outcome, Answered):
+                verified = back.value == result.value if request.text else back.raw == request.value
+                if not verified:
+                    outcome, detail = "mismatch", f"read back {back.value!r} (raw {back.raw})"
+            else:
+                verified = False
+                outcome, detail = "unverified", "the read-back had no answer"
+        stored = await self.recorder.outcome(
+            row, outcome=outcome, fault=fault, detail=detail, old_value=old
+        )
+        try:
+            raise_for(result)
+        except ApiError as exc:
+            exc.audit_incomplete = not stored
+            raise
+        body = self._write_body(ref, fmt, order, request, telegram, audit, result)
+        body.update(old_value=old, verified=verified)
+        if not stored:
+            body["audit"] = INCOMPLETE
+        return body
+
+    def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
+        reading = self.runtime.snapshot.latest.get((entry.name, ref.pnu, ref.index or 0))
+        return reading.value if reading is not None else None
+
+    def _write_request(
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat, order: WriteOrder
+    ) -> pkw.PkwRequest:
+        d = entry.target.dialect
+        try:
+            if fmt.is_text:
+                if not isinstance(order.value, str):
+                    raise LocalProtocolError(f"{ref.name} is a text parameter: send a string")
+                return pkw.write_text(d, ref.pnu, encode_text(order.value), ref.index or 0)
+            if isinstance(order.value, bool):
+                raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
+            if isinstance(order.value, str):
+                raise LocalProtocolError(f"{ref.name} takes a number, not a string")
+            raw, width = fmt.encode(order.value, str(ref))
+            request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
+            entry.target.telegram(request)
+        except LocalProtocolError as exc:
+            raise ApiError(422, "invalid_value", str(exc)) from None
+        return request
+
+    def _write_body(
+        self,
+        ref: ParameterRef,
+        fmt: ParameterFormat,
+        order: WriteOrder,
+        request: pkw.PkwRequest,
+        telegram: str,
+        audit: AuditEntry,
+        result: JobResult | None,
+    ) -> dict[str, Any]:
+        return {
+            "parameter": ref.name,
+            "pnu": ref.pnu,
+            "index": ref.index or 0,
+            "value": result.value if result is not None else order.value,
+            "raw": request.value if not request.text else None,
+            "unit": fmt.unit,
+            "store": order.store.value,
+            "dry_run": order.dry_run,
+            "telegram": telegram,
+            "audit_id": audit.id,
+        }
