@@ -9,7 +9,11 @@ ends; ``time.process_time()`` here counts the master's CPU only.
     always due, with ``LineMetrics`` turning every event into Prometheus
     counter increments, as ``pkwbus run`` does.
 
+``--drives 1,16,126`` runs (b) with that many drives on the line instead of
+3, interleaved, and prints each one's CPU per exchange against the first.
+
     .venv/bin/python bench/cpu_per_exchange.py [--n 5000] [--repeat 3]
+    .venv/bin/python bench/cpu_per_exchange.py --drives 1,16,126 [--n 5000] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -31,7 +35,7 @@ from prometheus_client import CollectorRegistry
 
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Reply
+from pkwbus.master.transaction import Answered, Reply
 from pkwbus.protocol import pkw
 from pkwbus.service.metrics import ServiceMetrics
 
@@ -56,10 +60,35 @@ async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
     return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s, "errors": bad}
 
 
-async def service_path(port: str, n: int) -> dict[str, float]:
+class Counting:
+    """The line's metrics, counting exchanges and good polls on the side.
+
+    Reading the counters back from the registry would cost the master CPU in
+    proportion to the number of drives, and that is not the line's cost.
+    """
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.telegrams = 0
+        self.ok = 0
+
+    def exchange(self, drive: str, result: Any, busy: float) -> None:
+        self.telegrams += 1
+        self.inner.exchange(drive, result, busy)
+
+    def job_finished(self, drive: str, kind: Any, result: Any) -> None:
+        if isinstance(result.outcome, Answered):
+            self.ok += 1
+        self.inner.job_finished(drive, kind, result)
+
+    def overrun(self, drive: str) -> None:
+        self.inner.overrun(drive)
+
+
+async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry)
-    names = ["d1", "d2", "d3"]
+    names = [f"d{i}" for i in range(1, count + 1)]
     drives = []
     for i, name in enumerate(names, 1):
         target = DriveTarget.create("fc", i)
@@ -69,30 +98,20 @@ async def service_path(port: str, n: int) -> dict[str, float]:
         )
         drives.append(DriveSpec(name, target, polls))
     line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    counting = Counting(metrics.for_line("bench", {d.name: d.target.dialect for d in drives}))
     sched = LineScheduler(
         "bench",
         line,
         drives,
-        events=metrics.for_line("bench", {d.name: d.target.dialect for d in drives}),
+        events=counting,
         poll_deadline=1.0,
     )
 
     def done() -> float:
-        total = 0.0
-        for name in names:
-            v = registry.get_sample_value(
-                "pkwbus_jobs_total",
-                {"line": "bench", "drive": name, "kind": "read", "outcome": "ok"},
-            )
-            total += v or 0.0
-        return total
+        return counting.ok
 
     def telegrams() -> float:
-        return sum(
-            registry.get_sample_value("pkwbus_telegrams_total", {"line": "bench", "drive": d})
-            or 0.0
-            for d in names
-        )
+        return counting.telegrams
 
     task = asyncio.create_task(sched.run())
     while telegrams() < 200:
@@ -166,12 +185,33 @@ def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
     return {"rows": rows, "table": table, "n": n, "repeat": repeat}
 
 
+def by_drives(n: int, repeat: int, counts: list[int]) -> dict[int, list[float]]:
+    """CPU per exchange of the service path at each number of drives, runs interleaved."""
+    cpu: dict[int, list[float]] = {c: [] for c in counts}
+    for _ in range(repeat):
+        for c in counts:
+            with sim_process("fc", f"1-{c}") as port:
+                cpu[c].append(link.run(service_path(port, n, c))["cpu_us_per_op"])
+    first = statistics.median(cpu[counts[0]])
+    for c in counts:
+        best, med = best_median(cpu[c], higher_is_better=False)
+        print(
+            f"{c} drives: CPU {best:.1f} us best, {med:.1f} us median per exchange,"
+            f" {med / first:.2f}x {counts[0]} drive(s)"
+        )
+    return cpu
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--n", type=int, default=5000)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--only", choices=("raw", "service"), help="pkwbus only, no baseline")
+    parser.add_argument("--drives", help="service path with these numbers of drives: 1,16,126")
     args = parser.parse_args()
+    if args.drives:
+        by_drives(args.n, args.repeat, [int(c) for c in args.drives.split(",")])
+        return
     if args.only:
         for _ in range(args.repeat):
             with sim_process("fc", "1-3") as port:

@@ -135,17 +135,17 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.01)
         s, events, _ = scheduler(port, "fc", specs)
-        real = s.line.exchange
+        real = s.line.start
         calls = 0
 
-        async def flaky(*args: Any, **kw: Any) -> ExchangeResult:
+        def flaky(*args: Any, **kw: Any) -> None:
             nonlocal calls
             calls += 1
             if calls == 5:
                 raise RuntimeError("something nobody expected")
-            return await real(*args, **kw)
+            real(*args, **kw)
 
-        s.line.exchange = flaky  # type: ignore[method-assign]
+        s.line.start = flaky  # type: ignore[method-assign]
         task = asyncio.create_task(s.run())
         await asyncio.sleep(1.2)  # the port is reopened after 0.5 s
         s.stop()

@@ -1,9 +1,13 @@
 """A serial port (device path or pyserial URL) seen as a half-duplex RS-485 link.
 
 The link writes one request at a time after the line has been quiet for the
-start pause, discards stale input before each request, optionally strips
-the echo of its own transmission, and hands every received chunk to its
-owner's receiver. When the port disappears it tells its owner once
+start pause, counted from the last byte received (or the end of its own
+last request on the wire), optionally strips the echo of its own
+transmission, and hands every received chunk to its owner's receiver.
+:meth:`Link.send` waits out the pause and discards stale input itself; a
+caller that runs its exchanges from callbacks asks :meth:`Link.pause_left`
+and writes with :meth:`Link.write_now`, discarding input only when stray
+bytes arrived. When the port disappears it tells its owner once
 (``on_lost``); when and whether to reopen is the owner's decision
 (:class:`pkwbus.link.reconnect.Reconnect`).
 """
@@ -145,6 +149,9 @@ class Link:
         self._pause = settings.start_pause
         self._char_time = settings.char_time
         self._fine_timer: ThreadPoolExecutor | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._echo_on = settings.echo
+        self._fine = False
 
     @property
     def state(self) -> LinkState:
@@ -171,6 +178,8 @@ class Link:
         self._transport = _transport(loop, self, instance)
         self._serial = instance
         self._fd = _raw_fd(instance)
+        self._loop = loop
+        self._fine = has_fine_timers(loop)
         self._quiet_at = loop.time()
         self._state = LinkState.OPEN
 
@@ -208,11 +217,38 @@ class Link:
             await self._pause_for(loop, wait)
             if self._transport is not transport:
                 raise PortError(f"{self.settings.url} was lost")
-        self._discard_input()
-        if self.settings.echo:
+        self.write_now(data, discard=True)
+
+    def pause_left(self, now: float) -> float:
+        """Seconds of the start pause still to wait at ``now`` (0 or less: none).
+
+        The pause runs from the last byte received, or from the end on the
+        wire of our own last request when nothing came back since.
+        """
+        return self._quiet_at + self._pause - now
+
+    def write_now(self, data: bytes, *, discard: bool) -> None:
+        """Write ``data`` at once (the caller waited out :meth:`pause_left`).
+
+        ``discard`` drops unread input first (a ``tcflush``): the caller asks
+        for it only when stray bytes arrived. :class:`PortError` when the
+        port is not open.
+        """
+        transport = self._transport
+        loop = self._loop
+        if transport is None or loop is None or self._state is not LinkState.OPEN:
+            raise PortError(f"{self.settings.url} is not open")
+        if discard:
+            self._discard_input()
+        if self._echo_on:
             self._echo = data
         self._write(transport, data)
         self._quiet_at = loop.time() + len(data) * self._char_time
+
+    @property
+    def fine_timers(self) -> bool:
+        """Whether the loop the port was opened on times to the microsecond."""
+        return self._fine
 
     async def _pause_for(self, loop: asyncio.AbstractEventLoop, wait: float) -> None:
         """Wait ``wait`` seconds, to the microsecond rather than to the loop's millisecond."""
@@ -256,7 +292,8 @@ class Link:
                 port.reset_input_buffer()
 
     def _on_data(self, data: bytes) -> None:
-        now = asyncio.get_running_loop().time()
+        loop = self._loop
+        now = loop.time() if loop is not None else asyncio.get_running_loop().time()
         if self._echo:
             self._quiet_at = max(self._quiet_at, now)
             data = self._strip_echo(data)

@@ -6,12 +6,24 @@ planner (:mod:`pkwbus.master.planner`), which may put other drives'
 exchanges between its repeats. The line is the one owner of its port: it
 opens, aborts and closes it and tells :attr:`Line.reconnect` of each
 change; others listen there.
+
+An exchange runs as a small state machine in the line's callbacks
+(:meth:`Line.start`): the start pause is counted from the last byte
+received, and whatever the caller does before starting the next exchange
+uses it up; only what remains is waited, by a loop timer (a remainder of a
+few microseconds is waited in place, cheaper than a wake-up). The request
+goes out from that timer or at once, the answer is checked in the data
+callback, and the caller's callback gets the result. No coroutine, lock or
+future per exchange: :meth:`Line.exchange` wraps one exchange in a future
+for callers that await.
 """
 
 from __future__ import annotations
 
 import asyncio
+import enum
 import logging
+import time
 from collections.abc import Callable
 
 from pkwbus.link import Link, PortError, PortSettings, Reconnect
@@ -37,6 +49,17 @@ from pkwbus.protocol.telegram import (
 log = logging.getLogger(__name__)
 
 TraceHook = Callable[[str, bytes], None]
+Done = Callable[[ExchangeResult], None]
+
+# A remainder of the start pause up to this long is waited in place: a loop
+# timer's wake-up costs more CPU than that.
+WAIT_IN_PLACE = 0.00002
+
+
+class _State(enum.Enum):
+    IDLE = "idle"
+    PAUSE = "pause"  # the request waits for the start pause to end
+    ANSWER = "answer"  # the request is out, the answer is awaited
 
 
 class Line:
@@ -62,13 +85,19 @@ class Line:
         lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
         self._deframer = Deframer(lengths)
         self._lock = asyncio.Lock()
-        self._waiter: asyncio.Future[ExchangeResult] | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._state = _State.IDLE
+        self._done: Done | None = None
         self._expect_adr = 0
+        self._timeout = timeout
         self._started = 0.0
+        self._send_timer: asyncio.TimerHandle | None = None
         self._gap_timer: asyncio.TimerHandle | None = None
         self._pending_error: ErrorKind | None = None
         self._sent = b""
+        self._stray = True  # unread input may be waiting: discard it before the first request
         self._warned_echo = False
+        self._wire_char = settings.char_time
         # One response timer, re-armed only when it fires early (not one per exchange).
         self._deadline = 0.0
         self._timer: asyncio.TimerHandle | None = None
@@ -79,13 +108,20 @@ class Line:
     def is_open(self) -> bool:
         return self.link.is_open
 
+    @property
+    def busy(self) -> bool:
+        """An exchange is in flight."""
+        return self._done is not None
+
     async def open(self) -> None:
         """Open the port now; :class:`PortError` (and a back-off) when it cannot be opened."""
+        loop = self._loop = asyncio.get_running_loop()
         try:
             await self.link.open()
         except PortError as exc:
-            self.reconnect.failed(str(exc), asyncio.get_running_loop().time())
+            self.reconnect.failed(str(exc), loop.time())
             raise
+        self._stray = True
         self.reconnect.opened()
 
     async def close(self) -> None:
@@ -102,36 +138,121 @@ class Line:
     ) -> ExchangeResult:
         """Send ``telegram`` to ``target`` and wait for its answer."""
         async with self._lock:
-            return await self._exchange(target.adr, telegram, timeout or self.timeout)
+            loop = self._loop = asyncio.get_running_loop()
+            timeout = timeout or self.timeout
+            if not self.link.is_open:
+                try:
+                    await self._ensure_open(loop.time() + timeout)
+                except PortError as exc:
+                    return Failure(ErrorKind.PORT, str(exc))
+            waiter: asyncio.Future[ExchangeResult] = loop.create_future()
+            self.start(target.adr, telegram, waiter.set_result, timeout)
+            try:
+                return await waiter
+            except asyncio.CancelledError:
+                self._abandon()
+                raise
+
+    def start(self, adr: int, telegram: bytes, done: Done, timeout: float | None = None) -> None:
+        """Begin one exchange; ``done`` gets its result, from a later callback.
+
+        The request waits for what remains of the start pause. One exchange at
+        a time: RuntimeError when one is in flight.
+        """
+        if self._done is not None:
+            raise RuntimeError("an exchange is already in flight on this line")
+        loop = self._loop
+        if loop is None:
+            loop = self._loop = asyncio.get_running_loop()
+        self._done = done
+        self._expect_adr = adr
+        self._sent = telegram
+        self._timeout = timeout or self.timeout
+        self._state = _State.PAUSE
+        link = self.link
+        wait = link.pause_left(loop.time())
+        if wait <= 0:
+            self._send()
+        elif wait <= WAIT_IN_PLACE:
+            end = time.monotonic() + wait  # the loop's clock (asyncio's default)
+            while time.monotonic() < end:
+                pass
+            self._send()
+        elif link.fine_timers or not link.is_open:
+            self._send_timer = loop.call_later(wait, self._on_send_timer)
+        else:  # a loop with millisecond timers: the link's thread-assisted pause
+            self._send_timer = loop.call_later(0, self._pause_then_send)
 
     # --------------------------------------------------------- internals
 
-    async def _exchange(self, adr: int, telegram: bytes, timeout: float) -> ExchangeResult:
-        loop = asyncio.get_running_loop()
-        link = self.link
+    def _pause_then_send(self) -> None:
+        self._send_timer = None
+        loop = self._loop
+        assert loop is not None
+        task = loop.create_task(self._pause_on_coarse_loop(loop, self._done))
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
+
+    async def _pause_on_coarse_loop(
+        self, loop: asyncio.AbstractEventLoop, done: Done | None
+    ) -> None:
+        wait = self.link.pause_left(loop.time())
+        if wait > 0:
+            await self.link._pause_for(loop, wait)
+        if self._state is _State.PAUSE and self._done is done:  # not abandoned meanwhile
+            self._send()
+
+    def _on_send_timer(self) -> None:
+        self._send_timer = None
+        loop = self._loop
+        assert loop is not None
+        wait = self.link.pause_left(loop.time())
+        if wait > WAIT_IN_PLACE:  # input came in meanwhile: the pause starts again
+            self._send_timer = loop.call_later(wait, self._on_send_timer)
+            return
+        if wait > 0:
+            end = time.monotonic() + wait
+            while time.monotonic() < end:
+                pass
+        self._send()
+
+    def _send(self) -> None:
+        loop = self._loop
+        assert loop is not None
+        telegram = self._sent
+        self._deframer.reset()
+        self._pending_error = None
+        stray, self._stray = self._stray, False
         try:
-            if not link.is_open:
-                await self._ensure_open(loop.time() + timeout)
-            self._deframer.reset()
-            self._pending_error = None
-            await link.send(telegram)
+            self.link.write_now(telegram, discard=stray)
         except PortError as exc:
-            return Failure(ErrorKind.PORT, str(exc))
+            self._finish(Failure(ErrorKind.PORT, str(exc)))
+            return
         if self.trace:
             self.trace("tx", telegram)
         now = loop.time()
         self._started = now
-        self._expect_adr = adr
-        self._sent = telegram
-        waiter: asyncio.Future[ExchangeResult] = loop.create_future()
-        self._waiter = waiter
-        self._arm(loop, now + timeout + link.settings.wire_time(len(telegram)))
-        try:
-            return await waiter
-        finally:
-            if self._gap_timer is not None:
-                self._cancel_gap_timer()
-            self._waiter = None
+        self._state = _State.ANSWER
+        self._arm(loop, now + self._timeout + len(telegram) * self._wire_char)
+
+    def _finish(self, result: ExchangeResult) -> None:
+        """The exchange is over: the caller's callback gets ``result``."""
+        if self._gap_timer is not None:
+            self._cancel_gap_timer()
+        if self._send_timer is not None:
+            self._send_timer.cancel()
+            self._send_timer = None
+        if not isinstance(result, Reply) or self._deframer.buffered:
+            self._stray = True  # what follows a bad answer must not start the next one
+        done, self._done = self._done, None
+        self._state = _State.IDLE
+        if done is not None:
+            done(result)
+
+    def _abandon(self) -> None:
+        """The caller stopped waiting: the exchange ends without a result."""
+        if self._done is not None:
+            self._done = None
+            self._finish(Failure(ErrorKind.TIMEOUT, "abandoned"))
 
     async def _ensure_open(self, deadline: float) -> None:
         """Reopen the port, waiting out the back-off (never past ``deadline``)."""
@@ -154,47 +275,46 @@ class Line:
 
     def _on_timer(self) -> None:
         self._timer = None
-        waiter = self._waiter
-        if waiter is None or waiter.done():
+        if self._state is not _State.ANSWER:
             return
-        loop = asyncio.get_running_loop()
+        loop = self._loop
+        assert loop is not None
         if self._deadline - loop.time() > 1e-4:
             self._timer = loop.call_at(self._deadline, self._on_timer)
             return
-        self._on_timeout(waiter)
-
-    def _resolve(self, result: ExchangeResult) -> None:
-        waiter = self._waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(result)
+        self._on_timeout()
 
     def _on_lost(self, reason: str) -> None:
-        self.reconnect.failed(reason, asyncio.get_running_loop().time())
-        self._resolve(Failure(ErrorKind.PORT, reason))
+        loop = self._loop or asyncio.get_running_loop()
+        self.reconnect.failed(reason, loop.time())
+        if self._state is _State.ANSWER:
+            self._finish(Failure(ErrorKind.PORT, reason))
 
-    def _on_timeout(self, waiter: asyncio.Future[ExchangeResult]) -> None:
-        if waiter.done():
-            return
+    def _on_timeout(self) -> None:
         if not self.link.is_open:
-            waiter.set_result(Failure(ErrorKind.PORT, self.reconnect.last_error or "port lost"))
+            self._finish(Failure(ErrorKind.PORT, self.reconnect.last_error or "port lost"))
             return
         kind = self._pending_error or ErrorKind.TIMEOUT
-        waiter.set_result(Failure(kind, "no answer" if kind is ErrorKind.TIMEOUT else ""))
+        self._finish(Failure(kind, "no answer" if kind is ErrorKind.TIMEOUT else ""))
 
     def _on_data(self, data: bytes) -> None:
         if self.trace:
             self.trace("rx", data)
-        if self._waiter is None:
-            return  # stale input between exchanges: dropped before the next request
+        if self._state is not _State.ANSWER:
+            self._stray = True  # stale input between exchanges: dropped before the next request
+            return
         self._handle_events(self._deframer.feed(data))
-        self._cancel_gap_timer()
-        if self._waiter is not None and self._deframer.buffered:
-            loop = asyncio.get_running_loop()
+        if self._gap_timer is not None:
+            self._cancel_gap_timer()
+        if self._state is _State.ANSWER and self._deframer.buffered:
+            loop = self._loop
+            assert loop is not None
             self._gap_timer = loop.call_later(self.inter_char_timeout, self._on_gap)
 
     def _on_gap(self) -> None:
         self._gap_timer = None
-        self._handle_events(self._deframer.flush())
+        if self._state is _State.ANSWER:
+            self._handle_events(self._deframer.flush())
 
     def _cancel_gap_timer(self) -> None:
         if self._gap_timer is not None:
@@ -204,7 +324,8 @@ class Line:
     def _handle_events(self, events: list[DeframerEvent]) -> None:
         for event in events:
             if isinstance(event, Telegram):
-                if self._sent and event.data == self._sent[3:-1] and event.adr == self._sent[2]:
+                sent = self._sent
+                if sent and event.data == sent[3:-1] and event.adr == sent[2]:
                     # Our own request, heard back: an adapter that echoes although the
                     # line's echo option is off. Never taken for the drive's answer.
                     self._sent = b""
@@ -220,14 +341,16 @@ class Line:
                     # listening for ours; reported as an address error if it never comes.
                     self._pending_error = ErrorKind.ADDRESS
                     continue
-                duration = asyncio.get_running_loop().time() - self._started
-                self._resolve(Reply(event.adr, event.data, duration))
+                loop = self._loop
+                assert loop is not None
+                duration = loop.time() - self._started
+                self._finish(Reply(event.adr, event.data, duration))
                 return
             if isinstance(event, BadChecksum):
-                self._resolve(Failure(ErrorKind.CHECKSUM, event.raw.hex(" ")))
+                self._finish(Failure(ErrorKind.CHECKSUM, event.raw.hex(" ")))
                 return
             if isinstance(event, Truncated):
-                self._resolve(Failure(ErrorKind.LENGTH, f"truncated: {event.raw.hex(' ')}"))
+                self._finish(Failure(ErrorKind.LENGTH, f"truncated: {event.raw.hex(' ')}"))
                 return
             if isinstance(event, BadLength):
                 self._pending_error = ErrorKind.LENGTH

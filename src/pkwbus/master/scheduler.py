@@ -1,10 +1,13 @@
 """The runner of one line: feeds its planner from the port, one exchange at a time.
 
 The policy is the planner's (:mod:`pkwbus.master.planner`); what its events
-mean is :mod:`pkwbus.master.record`'s. This module only waits: for the
-port to reopen (the line's reconnect object says when), for an exchange,
-or idle until something is due or a job comes in. :func:`run_job` drives
-one job the same way, for the command line.
+mean is :mod:`pkwbus.master.record`'s. The exchanges run in the line's
+callbacks: each result goes to the planner, and the next exchange starts
+from the same callback, before the events of the last one are recorded (that
+work uses up the start pause). The runner's task only waits: for the port
+to reopen (the line's reconnect object says when), for a run of exchanges
+to end, or idle until something is due or a job comes in. :func:`run_job`
+drives one job the same way, for the command line.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pkwbus.master.planner import Planner
 from pkwbus.master.record import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Outcome
+from pkwbus.master.transaction import ExchangeResult, Outcome
 from pkwbus.protocol import pkw
 
 __all__ = [
@@ -58,6 +61,10 @@ class LineScheduler:
         self.planner = Planner(drives, poll_deadline=deadline, retries=retries, policy=policy)
         self._wake = asyncio.Event()
         self._stopping = False
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._run_over: asyncio.Future[None] | None = None  # one per run of exchanges
+        self._send: Send | None = None
+        self._sent_at = 0.0
         line.reconnect.add_listener(self._on_port)
 
     def submit(self, job: Job) -> None:
@@ -72,7 +79,7 @@ class LineScheduler:
         self._wake.set()
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
+        loop = self._loop = asyncio.get_running_loop()
         if self.line.is_open:  # opened by its owner before
             self.planner.line_up(loop.time())
         try:
@@ -100,16 +107,47 @@ class LineScheduler:
             await self._reopen(loop)
             return
         action = planner.next_action(loop.time())
-        self._flush()
         if isinstance(action, Send):
-            t0 = loop.time()
-            result = await self.line.exchange(action.target, action.telegram)
-            now = loop.time()
-            self.events.exchange(action.drive, result, now - t0)
-            planner.exchanged(action, result, now)
+            over = self._run_over = loop.create_future()
+            self._start(action, loop)
             self._flush()
-        elif not self._stopping:
-            await self._idle(loop, action.until)
+            await over
+        else:
+            self._flush()
+            if not self._stopping:
+                await self._idle(loop, action.until)
+
+    def _start(self, send: Send, loop: asyncio.AbstractEventLoop) -> None:
+        self._send = send
+        self._sent_at = loop.time()
+        self.line.start(send.target.adr, send.telegram, self._exchanged)
+
+    def _exchanged(self, result: ExchangeResult) -> None:
+        """The line's callback: account for the result, start the next exchange."""
+        over = self._run_over
+        try:
+            send, self._send = self._send, None
+            loop = self._loop
+            assert send is not None and loop is not None
+            now = loop.time()
+            self.events.exchange(send.drive, result, now - self._sent_at)
+            planner = self.planner
+            planner.exchanged(send, result, now)
+            if not self._stopping and self.line.is_open:
+                action = planner.next_action(now)
+                if isinstance(action, Send):
+                    self._start(action, loop)
+                    self._flush()  # while the start pause runs
+                    return
+            self._flush()
+        except Exception as exc:  # the runner's task reports it and reopens the port
+            self._run_over = None
+            if over is not None and not over.done():
+                over.set_exception(exc)
+            return
+        self._run_over = None
+        if over is not None and not over.done():
+            over.set_result(None)
 
     async def _reopen(self, loop: asyncio.AbstractEventLoop) -> None:
         reconnect = self.line.reconnect
