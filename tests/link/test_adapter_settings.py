@@ -15,7 +15,9 @@ from typing import Any
 import pytest
 
 from pkwbus.link import Link, LinkState, PortError, PortSettings
-from pkwbus.link.port import Rs485Mode, _open_port, apply_adapter_settings
+from pkwbus.link.serialport import apply_adapter_settings
+from pkwbus.link.serialport import open_port as _open_port
+from pkwbus.link.settings import Rs485Mode
 from pkwbus.service.build import _line
 from tests.service.test_config import parse, problems_of
 

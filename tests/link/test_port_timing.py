@@ -12,7 +12,7 @@ import serial
 from pkwbus.link import Link, PortSettings, new_event_loop
 from pkwbus.link import run as run_on_pkwbus_loop
 from pkwbus.link.eventloop import has_fine_timers
-from pkwbus.link.port import _raw_fd
+from pkwbus.link.serialport import raw_fd as _raw_fd
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimTiming, Simulator

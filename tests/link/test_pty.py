@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 
 from pkwbus.link import Link, LinkState, PortSettings
-from pkwbus.link.port import _open_port, _reason, is_pty
+from pkwbus.link.serialport import describe_error as _reason
+from pkwbus.link.serialport import is_pty
+from pkwbus.link.serialport import open_port as _open_port
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux ptys")
 
