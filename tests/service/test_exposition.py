@@ -130,7 +130,7 @@ def test_unchanged_series_reuse_their_line_and_changed_ones_are_made_again() -> 
         'pkwbus_parameter_value{drive="l0d0",index="0",line="line0",parameter="16-00"} 42.5\n'
         in second
     )
-    assert "pkwbus_poll_overruns_total{" not in first
+    assert 'pkwbus_poll_overruns_total{drive="l0d0",line="line0"} 0.0\n' in first
     assert 'pkwbus_poll_overruns_total{drive="l0d0",line="line0"} 1.0\n' in second
     assert second == generate_latest(plant.registry).decode()
 

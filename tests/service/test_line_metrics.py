@@ -53,18 +53,21 @@ def _exported(registry: CollectorRegistry) -> set[str]:
 
 
 def test_only_the_counters_an_alert_needs_at_zero_exist_before_they_move() -> None:
-    """Faults (alert PkwbusDriveFaults) and the line's busy time exist at 0; the per-drive
-    counters that move at the first poll, or feed rates only, appear at their first step."""
+    """Faults (alert PkwbusDriveFaults), the line's busy time and poll overruns (a panel of
+    rare events) exist at 0; the per-drive counters that move at the first poll, or feed
+    rates only, appear at their first step."""
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry).for_line("l", {"d1": FC})
     exported = _exported(registry)
-    assert {FAULTS, "pkwbus_line_busy_seconds_total"} <= exported
+    assert {FAULTS, "pkwbus_line_busy_seconds_total", "pkwbus_poll_overruns_total"} <= exported
+    assert (
+        registry.get_sample_value("pkwbus_poll_overruns_total", {"line": "l", "drive": "d1"}) == 0
+    )
     quiet = {
         "pkwbus_telegram_errors_total",
         "pkwbus_telegrams_total",
         "pkwbus_jobs_total",
         "pkwbus_job_retries_total",
-        "pkwbus_poll_overruns_total",
     }
     assert not quiet & exported
     metrics.exchange("d1", Failure(ErrorKind.TIMEOUT), 0.01)

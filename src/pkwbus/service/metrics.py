@@ -156,16 +156,18 @@ class LineMetrics:
       the configuration, appears at its first fault;
     - ``pkwbus_line_busy_seconds_total`` and
       ``pkwbus_transaction_duration_seconds`` per line (alert
-      ``PkwbusLineOverloaded``; one series per line).
+      ``PkwbusLineOverloaded``; one series per line);
+    - ``pkwbus_poll_overruns_total`` per drive (dashboard panel "Poll
+      overruns": one series per drive, and a first overrun is a rare event
+      that must show).
 
     The other counters appear at their first increment: a zero series for
     each drive and kind would be most of the scrape (eight lines of 126
     drives: 20,000 series). ``pkwbus_telegrams_total`` and read jobs move at
     the first poll; ``pkwbus_telegram_errors_total`` feeds the alert
     ``PkwbusTelegramErrorRateRising`` as a share sustained over minutes, which
-    the missing first step does not change; ``pkwbus_jobs_total``,
-    ``pkwbus_job_retries_total`` and ``pkwbus_poll_overruns_total`` are
-    dashboard rates.
+    the missing first step does not change; ``pkwbus_jobs_total`` and
+    ``pkwbus_job_retries_total`` are dashboard rates.
     """
 
     def __init__(self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect]) -> None:
@@ -180,7 +182,7 @@ class LineMetrics:
         self._duration = m.duration.labels(line)
         self._telegrams = {d: m.telegrams.labels(line, d) for d in drives}
         self._retries = {d: m.retries.labels(line, d) for d in drives}
-        self._overruns = {d: m.overruns.labels(line, d) for d in drives}
+        self._overruns = {d: m.overruns.labels(line, d, zero=True) for d in drives}
         self._errors = {(d, k): m.errors.labels(line, d, k) for d in drives for k in ERROR_KINDS}
         self._jobs = {
             (d, kind, outcome): m.jobs.labels(line, d, kind, outcome.value)
