@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Protocol
 
@@ -24,12 +24,21 @@ from pkwbus.master.plan import (
     StatusWord,
 )
 from pkwbus.master.snapshot import DriveState, Reading, Snapshot
-from pkwbus.master.transaction import Answered, ExchangeResult, Outcome, Tally, TimedOut
+from pkwbus.master.transaction import (
+    Answered,
+    ExchangeResult,
+    Outcome,
+    Rejected,
+    Tally,
+    TimedOut,
+)
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 
 log = logging.getLogger("pkwbus.master.scheduler")
+
+REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
 
 
 class LineEvents(Protocol):
@@ -70,11 +79,20 @@ class LineRecord:
     """Applies one line's events to the snapshot, the jobs' futures and the metrics."""
 
     def __init__(
-        self, line: str, drives: Sequence[DriveSpec], snapshot: Snapshot, events: LineEvents
+        self,
+        line: str,
+        drives: Sequence[DriveSpec],
+        snapshot: Snapshot,
+        events: LineEvents,
+        *,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.line = line
         self.snapshot = snapshot
         self.events = events
+        self._clock = clock
+        # A poll the drive refuses, by (drive, parameter, index): when it was last told.
+        self._refused: dict[tuple[str, str, int], float] = {}
         self._polls = {d.name: d.polls for d in drives}
         snapshot.lines[line] = False
         for d in drives:
@@ -95,7 +113,7 @@ class LineRecord:
     def _health(self, event: HealthChanged) -> None:
         ctx = {"line": self.line, "drive": event.drive}
         if event.reason and event.up:
-            log.warning("drive %s %s", event.drive, event.reason, extra=ctx)
+            log.info("drive %s %s", event.drive, event.reason, extra=ctx)
         elif event.reason:
             log.warning(
                 "drive %s is down: %s (probing at back-off)", event.drive, event.reason, extra=ctx
@@ -110,6 +128,7 @@ class LineRecord:
         result = self._result(event)
         reading, previous = self._remember(drive, work.request, result)
         if isinstance(work, PollSpec):
+            self._tell_refusal(drive, work, event.outcome)
             self.events.job_finished(drive, JobKind.READ, result)
             if reading is not None:
                 self.snapshot.readings[drive, work.parameter, work.index] = reading
@@ -120,6 +139,25 @@ class LineRecord:
             result = replace(result, previous=previous)  # it ran: a write's old value
         self.events.job_finished(drive, work.kind, result)
         work.resolve(result)
+
+    def _tell_refusal(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
+        """A poll the drive refuses is logged once with the fault text, then once a day
+        while the refusals last; its first answer after them is logged too."""
+        key = (drive, poll.parameter, poll.index)
+        ctx = {"line": self.line, "drive": drive}
+        where = poll.parameter + (f"[{poll.index}]" if poll.index else "")
+        if isinstance(outcome, Rejected):
+            now = self._clock()
+            told = self._refused.get(key)
+            if told is None or now - told >= REFUSAL_RETELL:
+                again = "" if told is None else " (still, every poll)"
+                log.warning(
+                    "drive %s refuses the poll of %s%s: %s",
+                    drive, where, again, outcome.text or outcome.short, extra=ctx,
+                )  # fmt: skip
+                self._refused[key] = now
+        elif isinstance(outcome, Answered) and self._refused.pop(key, None) is not None:
+            log.info("drive %s answers the poll of %s again", drive, where, extra=ctx)
 
     def _result(self, event: Finished) -> JobResult:
         work = event.work

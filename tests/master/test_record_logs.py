@@ -1,0 +1,59 @@
+"""What a line tells the log: a refused poll once, then once a day; a drive back at info."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+
+from pkwbus.master.outcomes import Answered, Rejected
+from pkwbus.master.plan import DriveSpec, Finished, HealthChanged, PollSpec
+from pkwbus.master.record import REFUSAL_RETELL, LineRecord, NoEvents
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
+
+TARGET = DriveTarget.create("fc", 1)
+POLL = PollSpec("19-99", 0, pkw.read(TARGET.dialect, 1999), 1.0)
+REFUSED = Rejected(0, "Illegal PNU", "illegal PNU")
+
+
+def record(clock: list[float]) -> LineRecord:
+    return LineRecord(
+        "l1", [DriveSpec("fan", TARGET, (POLL,))], Snapshot(), NoEvents(), clock=lambda: clock[0]
+    )
+
+
+def lines(caplog: pytest.LogCaptureFixture, level: int) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.levelno == level]
+
+
+def test_a_poll_refused_every_cycle_is_told_once_then_once_a_day(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO)
+    clock = [1000.0]
+    rec = record(clock)
+    for _ in range(50):
+        rec.apply([Finished("fan", POLL, REFUSED)])
+        clock[0] += 1.0
+    told = lines(caplog, logging.WARNING)
+    assert told == ["drive fan refuses the poll of 19-99: Illegal PNU"]
+    clock[0] = 1000.0 + REFUSAL_RETELL
+    rec.apply([Finished("fan", POLL, REFUSED)])
+    assert len(lines(caplog, logging.WARNING)) == 2
+    assert "still" in lines(caplog, logging.WARNING)[-1]
+    answer = pkw.ValueResponse(1, 1999, 0, 5, pkw.Width.WORD)
+    rec.apply([Finished("fan", POLL, Answered(answer))])
+    assert lines(caplog, logging.INFO)[-1] == "drive fan answers the poll of 19-99 again"
+
+
+def test_a_drive_that_answers_again_is_told_at_info(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO)
+    rec = record([0.0])
+    rec.apply([HealthChanged("fan", False, "no answer to 3 exchanges")])
+    rec.apply([HealthChanged("fan", True, "answers again")])
+    assert lines(caplog, logging.WARNING) == [
+        "drive fan is down: no answer to 3 exchanges (probing at back-off)"
+    ]
+    assert lines(caplog, logging.INFO) == ["drive fan answers again"]
