@@ -124,6 +124,10 @@ def test_status_page_in_a_browser(served: Served, tmp_path: Path) -> None:
             sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
             sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
             sync_api.expect(fan1.locator(".bits")).to_contain_text("running")
+            # The line's share of busy time from the second refresh on; the drive's counts.
+            busy = page.locator('#lines [data-line="line_fc"] .busy')
+            sync_api.expect(busy).to_have_text(re.compile(r"^\d+ %$"), timeout=20_000)
+            sync_api.expect(fan1.locator(".counts")).to_contain_text("faults")
 
             served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
             sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+import time
 from pathlib import Path
 from typing import Any, Literal
 
@@ -65,6 +66,17 @@ class DriveView(BaseModel):
     status_word: int | None
     status: dict[str, bool]
     values: list[ParameterReading]
+    faults: int = 0  # rejections since the service started
+    telegram_errors: int = 0  # exchanges without a usable answer since the service started
+
+
+class LineView(BaseModel):
+    name: str
+    open: bool
+    drives: int
+    drives_up: int
+    busy_seconds: float  # since the service started
+    utilisation: float | None  # share of the time busy since the last look (None: first look)
 
 
 class Health(BaseModel):
@@ -308,6 +320,12 @@ def create_app(
     async def drives() -> list[DriveView]:
         return [drive_view(runtime, name) for name in runtime.drives]
 
+    looks: dict[str, tuple[float, float]] = {}  # line -> (monotonic time, busy seconds)
+
+    @app.get("/api/v1/lines", response_model=list[LineView])
+    async def lines() -> list[LineView]:
+        return line_views(runtime, looks, time.monotonic())
+
     return app
 
 
@@ -328,9 +346,39 @@ def _error_response(exc: ApiError) -> JSONResponse:
     return JSONResponse(body, status_code=exc.status)
 
 
+def line_views(
+    runtime: Runtime, looks: dict[str, tuple[float, float]], now: float
+) -> list[LineView]:
+    """Each line's port, drives and how busy it was since ``looks`` last saw it."""
+    snap = runtime.snapshot
+    views = []
+    for name in runtime.schedulers:
+        mine = [d for d, e in runtime.drives.items() if e.line == name]
+        up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
+        counts = runtime.counts.get(name)
+        busy = counts.busy_total if counts is not None else 0.0
+        utilisation = None
+        seen = looks.get(name)
+        if seen is not None and now > seen[0]:
+            utilisation = min(1.0, max(0.0, (busy - seen[1]) / (now - seen[0])))
+        looks[name] = (now, busy)
+        views.append(
+            LineView(
+                name=name,
+                open=bool(snap.lines.get(name)),
+                drives=len(mine),
+                drives_up=up,
+                busy_seconds=busy,
+                utilisation=utilisation,
+            )
+        )
+    return views
+
+
 def drive_view(runtime: Runtime, name: str) -> DriveView:
     entry = runtime.drives[name]
     snap = runtime.snapshot
+    counts = runtime.counts.get(entry.line)
     state = snap.drives.get(name)
     word = state.status_word if state else None
     values = [
@@ -354,5 +402,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         up=state.up if state else True,
         status_word=word,
         status=status_bits(word, entry.target.profile) if word is not None else {},
+        faults=counts.fault_counts.get(name, 0) if counts is not None else 0,
+        telegram_errors=counts.error_counts.get(name, 0) if counts is not None else 0,
         values=values,
     )

@@ -28,6 +28,7 @@ from pkwbus.service import config as cfg
 from pkwbus.service.exposition import MetricsRegistry
 from pkwbus.service.metrics import (
     DriveInfo,
+    LineMetrics,
     ParameterInfo,
     ServiceMetrics,
     SnapshotCollector,
@@ -54,12 +55,15 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     entries: list[DriveEntry] = []
     infos: list[ParameterInfo] = []
     cleanups: list[Callable[[], object]] = []
+    counts: dict[str, LineMetrics] = {}
     for line in config.lines:
         port = line.port
         if line.sim is not None:
             port, close = await _start_sim(line, line.sim)
             cleanups.append(close)
         specs = [_drive(line, drive, entries, infos) for drive in line.drives]
+        events = metrics.for_line(line.name, {d.name: d.pkw_dialect for d in line.drives})
+        counts[line.name] = events
         schedulers.append(
             LineScheduler(
                 line.name,
@@ -67,13 +71,14 @@ async def build_runtime(config: cfg.Config) -> Runtime:
                 specs,
                 retries=line.retries,
                 snapshot=snapshot,
-                events=metrics.for_line(line.name, {d.name: d.pkw_dialect for d in line.drives}),
+                events=events,
             )
         )
     drives = {d.name: DriveInfo(line.name, _target(line, d).profile) for line, d in config.drives()}
     registry.register(SnapshotCollector(snapshot, drives, infos))
     runtime = Runtime(schedulers, entries, snapshot, registry)
     runtime.cleanups.extend(cleanups)
+    runtime.counts.update(counts)
     return runtime
 
 

@@ -10,6 +10,7 @@ label values exist at 0 from the start is said at :class:`LineMetrics`.
 
 from __future__ import annotations
 
+import collections
 import platform
 import weakref
 from collections.abc import Mapping
@@ -179,6 +180,10 @@ class LineMetrics:
             for labels in (fault_labels(n, short) for n, short in pkw.rejections(dialect))
         }
         self._busy = m.busy.labels(line, zero=True)
+        # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
+        self.busy_total = 0.0
+        self.fault_counts: collections.Counter[str] = collections.Counter()
+        self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
         self._telegrams = {d: m.telegrams.labels(line, d) for d in drives}
         self._retries = {d: m.retries.labels(line, d) for d in drives}
@@ -196,10 +201,12 @@ class LineMetrics:
             return  # nothing went on the wire
         self._telegrams[drive].inc()
         self._busy.inc(busy)
+        self.busy_total += busy
         if isinstance(result, Reply):
             self._duration.observe(result.duration)
         else:
             self._errors[(drive, result.kind.value)].inc()
+            self.error_counts[drive] += 1
 
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
@@ -215,12 +222,14 @@ class LineMetrics:
             unexpected = tally.errors.get(ErrorKind.UNEXPECTED, 0)
             if unexpected:
                 self._errors[(drive, ErrorKind.UNEXPECTED.value)].inc(unexpected)
+                self.error_counts[drive] += unexpected
         if isinstance(outcome, Rejected):
             labels = fault_labels(outcome.fault, outcome.short)
             fault = self._faults.get((drive, *labels))
             if fault is None:
                 fault = self._m.faults.labels(self._line, drive, *labels)
             fault.inc()
+            self.fault_counts[drive] += 1
 
     def overrun(self, drive: str) -> None:
         self._overruns[drive].inc()

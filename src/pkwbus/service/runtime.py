@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 
@@ -46,6 +47,19 @@ class DriveEntry:
         return self.units.get(parameter, "")
 
 
+class LineCounts(Protocol):
+    """Plain counts of one line: busy seconds, and faults and telegram errors by drive."""
+
+    @property
+    def busy_total(self) -> float: ...
+
+    @property
+    def fault_counts(self) -> Mapping[str, int]: ...
+
+    @property
+    def error_counts(self) -> Mapping[str, int]: ...
+
+
 class Runtime:
     def __init__(
         self,
@@ -63,6 +77,8 @@ class Runtime:
         self.job_timeout = job_timeout
         self._tasks: list[asyncio.Task[None]] = []
         self.cleanups: list[Callable[[], object]] = []
+        # What the status page shows of each line besides the snapshot (service.metrics).
+        self.counts: dict[str, LineCounts] = {}
 
     async def start(self) -> None:
         for scheduler in self.schedulers.values():

@@ -30,17 +30,17 @@ function words(name) {
   return name.replace(/_/g, " ");
 }
 
-function drawLines(ready, drives) {
+function drawLines(lines) {
   const body = document.querySelector("#lines tbody");
-  const rows = [];
-  for (const [name, open] of Object.entries(ready.lines || {})) {
-    const mine = drives.filter((d) => d.line === name);
-    const up = mine.filter((d) => d.up).length;
-    rows.push(el("tr", { "data-line": name },
-      el("td", {}, name),
-      el("td", { class: open ? "" : "bad" }, open ? "open" : "closed"),
-      el("td", { class: "num" + (up < mine.length ? " bad" : "") }, `${up} / ${mine.length}`)));
-  }
+  const rows = lines.map((line) => {
+    const busy = line.utilisation === null ? "-" : `${Math.round(line.utilisation * 100)} %`;
+    return el("tr", { "data-line": line.name },
+      el("td", {}, line.name),
+      el("td", { class: line.open ? "" : "bad" }, line.open ? "open" : "closed"),
+      el("td", { class: "num" + (line.drives_up < line.drives ? " bad" : "") },
+        `${line.drives_up} / ${line.drives}`),
+      el("td", { class: "num busy" }, busy));
+  });
   body.replaceChildren(...rows);
 }
 
@@ -60,6 +60,10 @@ function drawDrive(drive, now) {
   return el("div", { class: `drive ${drive.up ? "up" : "down"}`, "data-drive": drive.name },
     el("h3", {}, `${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
       ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
+    el("div", { class: "counts" },
+      el("span", { class: drive.faults ? "alarm" : "" }, `${drive.faults} faults`),
+      el("span", { class: drive.telegram_errors ? "alarm" : "" },
+        `${drive.telegram_errors} telegram errors`), " since the service started"),
     el("div", { class: "bits" }, ...bits),
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"),
       el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
@@ -74,9 +78,10 @@ async function getJson(path) {
 async function refresh() {
   const problem = document.getElementById("problem");
   try {
-    const [drives, ready] = await Promise.all([getJson("/api/v1/drives"), getJson("/readyz")]);
+    const [lines, drives, ready] = await Promise.all(
+      [getJson("/api/v1/lines"), getJson("/api/v1/drives"), getJson("/readyz")]);
     const now = Date.now() / 1000;
-    drawLines(ready, drives);
+    drawLines(lines);
     document.getElementById("drives").replaceChildren(
       el("h2", {}, "Drives"), ...drives.map((d) => drawDrive(d, now)));
     problem.hidden = ready.writes !== false;
