@@ -17,11 +17,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 import uvicorn
 
 from pkwbus.service.api import create_app
-from tests.api.conftest import service
+from tests.api.conftest import AUTH, TOKEN, service
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = [
@@ -59,7 +60,7 @@ class Served:
     async def _main(self) -> None:
         async with service(self.tmp_path, fc=DRIVES) as svc:
             self.svc, self.loop = svc, asyncio.get_running_loop()
-            app = create_app(svc.runtime, audit=svc.audit)
+            app = create_app(svc.runtime, audit=svc.audit, write_token=TOKEN)
             sock = socket.socket()
             sock.bind(("127.0.0.1", 0))
             host, port = sock.getsockname()
@@ -131,6 +132,21 @@ def test_status_page_in_a_browser(served: Served, tmp_path: Path) -> None:
 
             served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
             sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)
+
+            # The last write attempts show once the page is given a token.
+            audit = page.locator("#audit")
+            sync_api.expect(audit).to_be_hidden()
+            written = httpx.put(
+                f"{served.url}/api/v1/drives/fan1/parameters/3-41",
+                json={"value": 7.5}, headers=AUTH, timeout=30,
+            )  # fmt: skip
+            assert written.status_code == 200, written.text
+            page.fill("#token", TOKEN)
+            page.click("#token-form button")
+            sync_api.expect(audit).to_contain_text("fan1", timeout=20_000)
+            sync_api.expect(audit).to_contain_text("7.5")
+            sync_api.expect(audit.locator("tbody tr").first).to_contain_text("ok")
+            assert page.input_value("#token") == ""  # not left in the form
 
             shot = tmp_path / "status-page.png"
             page.screenshot(path=str(shot), full_page=True)

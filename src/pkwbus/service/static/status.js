@@ -69,6 +69,43 @@ function drawDrive(drive, now) {
       el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
 }
 
+// The token for the audit log: in this variable only (no storage), for this page's life.
+let auditToken = "";
+
+function drawWrites(entries) {
+  const rows = entries.map((e) => {
+    const when = new Date(e.time * 1000).toLocaleString();
+    const where = e.index ? `${e.parameter}[${e.index}]` : e.parameter;
+    const change = e.count ? `${e.count} refused` : `${e.old_value ?? "?"} \u2192 ${e.new_value ?? "?"}`;
+    return el("tr", { class: e.outcome === "ok" ? "" : "bad" },
+      el("td", {}, when), el("td", {}, e.drive || "-"), el("td", {}, where || "-"),
+      el("td", {}, change), el("td", {}, e.outcome), el("td", {}, e.client || ""));
+  });
+  const table = document.getElementById("audit");
+  table.querySelector("tbody").replaceChildren(...rows);
+  table.hidden = false;
+}
+
+async function refreshWrites() {
+  if (!auditToken) return;
+  const response = await fetch("/api/v1/audit?limit=10", {
+    cache: "no-store", headers: { Authorization: `Bearer ${auditToken}` } });
+  if (response.status === 401 || response.status === 403) {
+    auditToken = "";
+    document.getElementById("audit").hidden = true;
+    throw new Error("the token was refused");
+  }
+  if (response.ok) drawWrites(await response.json());
+}
+
+document.getElementById("token-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  const input = document.getElementById("token");
+  auditToken = input.value.trim();
+  input.value = "";
+  refreshWrites().catch(() => {});
+});
+
 async function getJson(path) {
   const response = await fetch(path, { cache: "no-store" });
   if (!response.ok && response.status !== 503) throw new Error(`${path}: ${response.status}`);
@@ -86,6 +123,7 @@ async function refresh() {
       el("h2", {}, "Drives"), ...drives.map((d) => drawDrive(d, now)));
     problem.hidden = ready.writes !== false;
     problem.textContent = ready.reason || "";
+    await refreshWrites();
     document.getElementById("updated").textContent =
       `updated ${new Date().toLocaleTimeString()}`;
   } catch (error) {
