@@ -18,7 +18,8 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.master.values import ParameterFormat
-from pkwbus.protocol import ppo
+from pkwbus.protocol import fdl, ppo
+from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import SlaveState
 from pkwbus.service.api import create_app
 from pkwbus.service.audit import AuditLog
@@ -27,6 +28,7 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.ends import TcpEnd
 from tests.master.dp_wire import DpWire, record_dp_wire
 
 TOKEN = "s3cret-Write-Token-0123456789"
@@ -68,6 +70,7 @@ class DpService:
     runtime: Runtime
     client: httpx.AsyncClient
     audit: AuditLog
+    end: TcpEnd
 
     def metrics(self) -> str:
         return generate_latest(self.runtime.registry).decode()
@@ -97,7 +100,6 @@ async def dp_service(tmp_path: Path) -> AsyncIterator[DpService]:
         )
         wire = record_dp_wire(sim)
         end = await sim.serve_tcp("127.0.0.1", 0)
-        stack.push_async_callback(end.close)
         env = {"TEST_TOKEN": TOKEN}
         config = parse_config(config_text(end.url, tmp_path / "audit.sqlite"), environ=env)
         runtime = await build_runtime(config)
@@ -110,7 +112,8 @@ async def dp_service(tmp_path: Path) -> AsyncIterator[DpService]:
             transport=httpx.ASGITransport(app=app), base_url="http://pkwbus.test", timeout=30.0
         )
         stack.push_async_callback(client.aclose)
-        service = DpService(sim, wire, runtime, client, audit)
+        service = DpService(sim, wire, runtime, client, audit, end)
+        stack.push_async_callback(lambda: service.end.close())
         await until(lambda: all(service.reads(n) >= 2 for n in NAMES.values()))
         yield service
         assert sim.ppo.length == ppo.ppo_type(1).length
@@ -195,3 +198,47 @@ async def test_a_dead_slave_goes_offline_while_the_others_keep_their_poll_rate(
         await until(lambda: svc.state("fan") is SlaveState.DATA_EXCHANGE)
         await until(lambda: svc.reads("fan") >= dead_reads + 2)
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
+
+
+async def test_a_write_while_its_slave_restarts_ends_with_a_clear_outcome(tmp_path: Path) -> None:
+    async with dp_service(tmp_path) as svc:
+        put = asyncio.ensure_future(
+            svc.client.put(
+                "/api/v1/drives/mixer/parameters/3-41",
+                json={"value": 7.5},
+                headers={"Authorization": f"Bearer {TOKEN}"},
+            )
+        )
+        svc.sim.restart(8)
+        r = await put
+        (row,) = [e for e in svc.audit.latest(10) if e.drive == "mixer"]
+        if r.status_code == 200:
+            assert row.outcome == "ok" and svc.sim.drives[8].params.value(341) == 750
+        else:
+            assert r.status_code == 504 and row.outcome == "timeout", r.text
+        await until(lambda: svc.state("mixer") is SlaveState.DATA_EXCHANGE)
+
+
+async def test_port_loss_takes_every_slave_offline_and_back(tmp_path: Path) -> None:
+    async with dp_service(tmp_path) as svc:
+        end = svc.end
+        port = end.port
+        await end.close()
+        await until(
+            lambda: all(svc.sample("pkwbus_drive_up", drive=n) == 0 for n in NAMES.values())
+        )
+        assert all(svc.state(n) is SlaveState.OFFLINE for n in NAMES.values())
+        assert svc.runtime.snapshot.lines["dp"] is False
+        svc.end = await svc.sim.serve_tcp("127.0.0.1", port)
+        reads = {n: svc.reads(n) for n in NAMES.values()}
+        await until(lambda: all(svc.reads(n) >= reads[n] + 2 for n in NAMES.values()))
+        assert all(svc.state(n) is SlaveState.DATA_EXCHANGE for n in NAMES.values())
+
+
+async def test_stop_sends_global_control_clear_then_closes(tmp_path: Path) -> None:
+    async with dp_service(tmp_path) as svc:
+        await svc.runtime.stop()
+        last = svc.wire.frames[-1]
+        assert last.dsap == Service.GLOBAL_CONTROL and last.da == fdl.BROADCAST
+        assert all(svc.sim.slaves[a].clears == 1 for a in ADDRESSES)
+        assert svc.runtime.snapshot.lines["dp"] is False
