@@ -242,3 +242,37 @@ async def test_stop_sends_global_control_clear_then_closes(tmp_path: Path) -> No
         assert last.dsap == Service.GLOBAL_CONTROL and last.da == fdl.BROADCAST
         assert all(svc.sim.slaves[a].clears == 1 for a in ADDRESSES)
         assert svc.runtime.snapshot.lines["dp"] is False
+
+
+MIXED = """
+lines:
+  - name: dp
+    port: sim://profibus?drives=8,9
+    protocol: profibus
+    baudrate: 93750
+    drives:
+      - name: extruder
+        address: 8
+        dialect: danfoss-pcv
+        ident: 0x0402
+        catalog: danfoss-fc
+        poll: [{parameter: "3-41", every: 200ms}]
+      - name: blower
+        address: 9
+        dialect: profidrive
+        ident: 0x80B5
+        catalog: siemens-g120
+        poll: [{parameter: p1120, every: 200ms}]
+"""
+
+
+async def test_a_sim_port_simulates_each_slave_in_its_own_dialect(tmp_path: Path) -> None:
+    config = parse_config(MIXED + f"audit_db: {tmp_path / 'a.sqlite'}\n", environ={})
+    runtime = await build_runtime(config)
+    await runtime.start()
+    try:
+        readings = runtime.snapshot.readings
+        await until(lambda: {("extruder", "3-41", 0), ("blower", "p1120", 0)} <= readings.keys())
+        assert all(s.up for s in runtime.snapshot.drives.values())
+    finally:
+        await runtime.stop()

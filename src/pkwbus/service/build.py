@@ -38,7 +38,7 @@ from pkwbus.service.metrics import (
 )
 from pkwbus.service.runtime import DriveEntry, LineRunner, Runtime
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.dp_line import DpSimulator, SlaveKind
 
 __all__ = [
     "DEFAULT_SIM_DELAY",
@@ -241,18 +241,22 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
 async def _start_dp_sim(
     line: cfg.Line, sim: cfg.SimPort
 ) -> tuple[str, Callable[[], Awaitable[None]]]:
-    catalogs = {d.catalog for d in line.drives if d.catalog}
-    first = line.drives[0]  # the config checked that the slaves share one shape
-    found, _ = first.dp.settings()
+    """Simulated slaves, each of its drive's dialect, ident and catalog (one PPO per line)."""
+    each: dict[int, SlaveKind] = {}
+    for drive in line.drives:
+        found, _ = drive.dp.settings()
+        each[drive.address] = SlaveKind(
+            drive.pkw_dialect.name,
+            found.ident if found is not None else None,
+            drive.catalog or "default",
+        )
     simulator = DpSimulator(
         sim.drives,
-        dialect=first.pkw_dialect.name,
-        ppo_number=first.ppo,
-        ident=found.ident if found is not None else None,
+        ppo_number=line.drives[0].ppo,  # the config checked that the slaves share one PPO
         timing=SimTiming(
             response_delay=sim.response_delay if sim.response_delay is not None else 0.0
         ),
-        catalog=next(iter(catalogs)) if len(catalogs) == 1 else "default",
+        each=each,
     )
     folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
     end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))

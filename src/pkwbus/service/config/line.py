@@ -188,7 +188,8 @@ class Line(Model):
                     (
                         f"drives[{i}]",
                         f"the simulated drives of a sim:// port share one dialect, IND layout "
-                        f"and PKW/PZD lengths: {drive.name} differs from {first.name}",
+                        f"and PKW/PZD lengths (over PROFIBUS: one PPO): {drive.name} differs"
+                        f" from {first.name}",
                     )
                 ]
         return []
@@ -254,8 +255,8 @@ def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
     layout = drive.ind_layout or dialect(name).default_ind_layout
     if protocol is BusProtocol.FC:
         return (name, layout)
-    if protocol is BusProtocol.PROFIBUS:
-        return (name, drive.ppo, drive.ident, drive.gsd, drive.cfg, drive.user_prm)
+    if protocol is BusProtocol.PROFIBUS:  # each simulated slave has its own dialect and ident
+        return (drive.ppo, drive.cfg)
     return (name, layout, drive.pkw_words, drive.pzd_words)
 
 
