@@ -55,6 +55,9 @@ SIM_LATE: Final = DurationRange("the delay of a late answer", 0.0, 3600.0)
 STATS_INTERVAL: Final = DurationRange("a stats interval", 0.01, 3600.0)
 # The kernel caps the RTS delays of RS-485 mode at 100 ms (serial_rs485, RS485_MAX_RTS_DELAY).
 RS485_DELAY: Final = DurationRange("an RS-485 RTS delay", 0.0, 0.1)
+DP_SLOT_TIME: Final = DurationRange("a slot time", 0.0005, 1.0)
+# Set_Prm's watchdog counts 10 ms ticks times two factors of at most 255 (EN 50170 vol. 2).
+DP_WATCHDOG: Final = DurationRange("a watchdog", 0.01, 650.25)
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -71,6 +74,8 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("`simulate --late-after`", SIM_LATE),
     ("`simulate --stats-interval`", STATS_INTERVAL),
     ("line `rs485` `delay_before_tx`, `delay_before_rx` (whole milliseconds)", RS485_DELAY),
+    ("profibus line `slot_time`, `--slot-time`", DP_SLOT_TIME),
+    ("profibus line `watchdog`", DP_WATCHDOG),
 )
 
 

@@ -18,8 +18,37 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def service_config(port: str, folder: Path, extra_poll: str = "") -> str:
-    """A `pkwbus run` config: one FC line on ``port``, both drives polling 3-41 and 16-13."""
+# The PROFIBUS DP slave of the optional DP line: name -> station address.
+DP_DRIVES = {"mixer": 8}
+
+
+def dp_line(port: str) -> str:
+    """A PROFIBUS DP line on ``port`` with one Danfoss slave (PPO 1) polling 16-13."""
+    drives = "".join(
+        f"""
+      - name: {name}
+        address: {address}
+        dialect: danfoss-pcv
+        ident: 0x0402
+        catalog: danfoss-fc
+        poll:
+          - {{parameter: "16-13", every: 250ms}}
+"""
+        for name, address in DP_DRIVES.items()
+    )
+    return f"""
+  - name: dp_line
+    port: {port}
+    protocol: profibus
+    baudrate: 19200
+    drives:{drives}"""
+
+
+def service_config(
+    port: str, folder: Path, extra_poll: str = "", dp_port: str | None = None
+) -> str:
+    """A `pkwbus run` config: one FC line on ``port``, both drives polling 3-41 and 16-13;
+    with ``dp_port`` also a PROFIBUS DP line (:func:`dp_line`)."""
     drives = "".join(
         f"""
       - name: {name}
@@ -42,4 +71,4 @@ lines:
     parity: E
     timeout: 200ms
     retries: 2
-    drives:{drives}"""
+    drives:{drives}""" + (dp_line(dp_port) if dp_port is not None else "")

@@ -32,7 +32,8 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.exposition import CounterFamily
 from pkwbus.service.metrics import ServiceMetrics
 from pkwbus.sim import SimTiming, Simulator
-from tests.deploy.conftest import DRIVES, service_config
+from pkwbus.sim.dp_line import DpSimulator
+from tests.deploy.conftest import DP_DRIVES, DRIVES, service_config
 
 ROOT = Path(__file__).resolve().parents[2]
 DASHBOARDS = sorted((ROOT / "deploy" / "grafana").rglob("*.json"))
@@ -78,15 +79,18 @@ async def scrape(folder: Path) -> str:
         "fc", DRIVES.values(), timing=SimTiming(response_delay=0.002), catalog="danfoss-fc"
     )
     server = await sim.serve_tcp("127.0.0.1", 0)
+    dp_sim = DpSimulator(DP_DRIVES.values(), dialect="danfoss-pcv", seed=3)
+    dp_server = await dp_sim.serve_tcp("127.0.0.1", 0)
     extra = f'\n          - {{parameter: "{MISSING}", every: 250ms}}'
-    config = parse_config(service_config(server.url, folder, extra_poll=extra))
+    text = service_config(server.url, folder, extra_poll=extra, dp_port=dp_server.url)
+    config = parse_config(text)
     runtime = await build_runtime(config)
     try:
         await runtime.start()
         deadline = time.monotonic() + 20
         while True:
             text = prometheus_client.generate_latest(runtime.registry).decode()
-            if complete(text):
+            if complete(text) and "pkwbus_dp_diagnostics_total{" in text:
                 return text
             if time.monotonic() > deadline:
                 pytest.fail(f"no values and faults from both drives after 20 s:\n{text}")
@@ -94,6 +98,7 @@ async def scrape(folder: Path) -> str:
     finally:
         await runtime.stop()
         await server.close()
+        await dp_server.close()
 
 
 def exported_metrics(text: str) -> Exported:
@@ -113,24 +118,11 @@ def exported_metrics(text: str) -> Exported:
     return names
 
 
-# The PROFIBUS DP families have series only where a configuration has DP lines;
-# the scraped configuration has FC drives only.
-WITHOUT_DP_LINES = {
-    "pkwbus_dp_slave_state",
-    "pkwbus_dp_restarts_total",
-    "pkwbus_dp_diagnostics_total",
-}
-
-
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory: pytest.TempPathFactory) -> Exported:
     text = asyncio.run(scrape(tmp_path_factory.mktemp("metrics")))
     names = exported_metrics(text)
-    empty = sorted(
-        n
-        for n, labels in names.items()
-        if n.startswith("pkwbus_") and not labels and n not in WITHOUT_DP_LINES
-    )
+    empty = sorted(n for n, labels in names.items() if n.startswith("pkwbus_") and not labels)
     declared = declared_counters()
     for name in empty:
         if name in declared:

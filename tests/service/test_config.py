@@ -106,12 +106,18 @@ lines:
 
 def test_demo_loads_with_its_defaults() -> None:
     config = load_config(DEMO, environ={}, catalogs=FAKE)
-    assert [line.name for line in config.lines] == ["fc_line", "uss_line"]
-    fc_line, uss_line = config.lines
+    assert [line.name for line in config.lines] == ["fc_line", "uss_line", "dp_line"]
+    fc_line, uss_line, dp_line = config.lines
     assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003)
     assert uss_line.sim == SimPort(Protocol.USS, (1, 2), 0.005)
+    assert dp_line.sim == SimPort(Protocol.PROFIBUS, (8, 9, 10))
+    assert [d.pkw_dialect.name for d in dp_line.drives] == [
+        "danfoss-pcv", "profidrive", "hitachi-sjpb",
+    ]  # fmt: skip
     names = [d.name for _, d in config.drives()]
-    assert names == ["supply_fan", "exhaust_fan", "pump_3", "conveyor", "mixer"]
+    assert names == [
+        "supply_fan", "exhaust_fan", "pump_3", "conveyor", "mixer", "extruder", "blower", "hoist",
+    ]  # fmt: skip
     _, fan = drive_named(config, "supply_fan") or pytest.fail("no supply_fan")
     assert [str(p.ref) for p in fan.poll] == [
         "16-13", "16-14", "16-10", "16-30", "16-90", "16-92", "15-30[0]",

@@ -98,7 +98,7 @@ def test_simulator_response_delay_counts_when_the_line_has_none() -> None:
     assert exchange_seconds(fc, fc.drives[0]) == pytest.approx(
         32 * character + 3.5 * character + 0.003
     )
-    assert [load.line for load in config_load(config)] == ["fc_line", "uss_line"]
+    assert [load.line for load in config_load(config)] == ["fc_line", "uss_line", "dp_line"]
 
 
 def test_line_without_polls_has_a_capacity_and_no_load() -> None:

@@ -53,7 +53,7 @@ class CommandError(Exception):
 PROFIBUS = "profibus"  # --protocol profibus: pkwbus as DP-V0 master (commands.dp)
 DEFAULT_BAUDRATE = 9600
 
-DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in Protocol}
+DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in (Protocol.FC, Protocol.USS)}
 
 
 def duration_option(within: DurationRange) -> Callable[[str], float]:
@@ -96,7 +96,7 @@ def add_line_options(
 ) -> None:
     g = parser.add_argument_group("line")
     g.add_argument("--port", required=True, help="device path or pyserial URL (socket://...)")
-    g.add_argument("--protocol", choices=[*(p.value for p in Protocol), PROFIBUS], default="fc")
+    g.add_argument("--protocol", choices=[p.value for p in Protocol], default="fc")
     g.add_argument(
         "--baudrate",
         type=baudrate_option,

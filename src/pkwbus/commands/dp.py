@@ -17,10 +17,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from pkwbus import limits
+from pkwbus import durations, limits
 from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
-from pkwbus.durations import DurationRange
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
 from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
@@ -46,7 +45,7 @@ __all__ = [
 
 DEFAULT_BAUDRATE = 19200
 DEFAULT_DIALECT = "profidrive"
-SLOT_TIME = DurationRange("a slot time", 0.0005, 1.0)
+SLOT_TIME = durations.DP_SLOT_TIME
 MAX_DP_RETRIES = 8
 DEFAULT_DEADLINE = 2.0  # seconds for one job, the slave's start-up included
 # The catalog each dialect's parameters are named and scaled by, when none is given.

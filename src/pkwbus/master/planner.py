@@ -182,6 +182,24 @@ class Planner:
                 return send
         return None
 
+    def active(self, drive: str) -> PkwTransaction | None:
+        """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
+        active = self._by_name[drive].active
+        return active.tx if active is not None else None
+
+    def expire_queued(self, drive: str, now: float) -> None:
+        """End the queued jobs of ``drive`` past their deadline (its slot cannot take one)."""
+        d = self._by_name[drive]
+        self._expire(d, d.writes, now)
+        self._expire(d, d.reads, now)
+
+    def drive_back(self, drive: str, now: float) -> None:
+        """``drive`` is back (a DP slave in data exchange again): its polls are due now,
+        none counted as an overrun."""
+        d = self._by_name[drive]
+        d.restart_polls(now)
+        self._index(d, now)
+
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
         """The result of ``send``'s exchange."""
         d = self._by_name[send.drive]

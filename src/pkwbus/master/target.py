@@ -13,6 +13,7 @@ from pkwbus.protocol.buses import (
 )
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.ppo import DEFAULT_PROFILES
 from pkwbus.protocol.pzd import MONITORING_CTW, Profile
 from pkwbus.protocol.telegram import (
     FC_PARAMETER,
@@ -47,6 +48,11 @@ class DriveTarget:
     def __post_init__(self) -> None:
         if self.protocol is Protocol.FC:
             adr = fc_adr(self.address, self.fc_format)
+        elif self.protocol is Protocol.PROFIBUS:  # the FDL frame's DA: the station itself
+            low, high = address_range(self.protocol)
+            if not low <= self.address <= high:
+                raise LocalProtocolError(f"DP address {self.address} is outside {low}-{high}")
+            adr = self.address
         else:
             low, high = address_range(self.protocol)
             if not low <= self.address <= high:
@@ -80,6 +86,8 @@ class DriveTarget:
 
     @property
     def profile(self) -> Profile:
+        if self.protocol is Protocol.PROFIBUS:
+            return DEFAULT_PROFILES.get(self.dialect.name, Profile.PROFIDRIVE)
         return Profile.FC if self.protocol is Protocol.FC else Profile.PROFIDRIVE
 
     @property
@@ -92,6 +100,8 @@ class DriveTarget:
         if self.protocol is Protocol.FC and request.text:
             words = None
         data = pkw.encode_request(request, self.dialect, self.ind_layout, words)
+        if self.protocol is Protocol.PROFIBUS:  # the PPO-write; the DP master frames it
+            return encode_block(data, self._idle_pzd)
         return frame(self.adr, encode_block(data, self._idle_pzd))
 
     def probe(self) -> bytes:

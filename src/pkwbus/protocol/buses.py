@@ -3,7 +3,8 @@
 The configuration, the command line, the simulator and the load estimate all
 ask here. FC: addresses 1-126 (ADR format 1-126) or 1-31 (format 1-31),
 Danfoss FC protocol, telegram structure; USS: 0-30 (ADR bits 0-4 give 0-31,
-drives accept 0-30), SINAMICS G120 Operating Instructions, USS.
+drives accept 0-30), SINAMICS G120 Operating Instructions, USS; PROFIBUS DP:
+0-125 (EN 50170 vol. 2, station addresses).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
 __all__ = [
     "DIALECTS_BY_PROTOCOL",
+    "DP_MAX_ADDRESS",
     "FIXED_PKW_WORDS",
     "USS_MAX_ADDRESS",
     "VARIABLE_PKW_WORDS",
@@ -30,7 +32,9 @@ VARIABLE_PKW_WORDS: Final = 127  # the USS code of a variable PKW length
 DIALECTS_BY_PROTOCOL: Final = {
     Protocol.FC: ("fc",),
     Protocol.USS: ("uss", "profidrive", "danfoss-pcv", "hitachi-sjpb"),
+    Protocol.PROFIBUS: ("profidrive", "danfoss-pcv", "hitachi-sjpb"),
 }
+DP_MAX_ADDRESS: Final = 125  # DP stations 0-125 (126: commissioning, 127: broadcast)
 
 
 def address_range(
@@ -39,6 +43,8 @@ def address_range(
     """The lowest and highest address a drive of ``protocol`` can have."""
     if protocol is Protocol.USS:
         return (0, USS_MAX_ADDRESS)
+    if protocol is Protocol.PROFIBUS:
+        return (0, DP_MAX_ADDRESS)
     return (1, 31) if fc_format is FcAddressFormat.RANGE_1_31 else (1, 126)
 
 

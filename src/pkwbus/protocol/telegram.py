@@ -62,6 +62,7 @@ PCD_WORDS_FC: Final = 2
 class Protocol(enum.StrEnum):
     FC = "fc"
     USS = "uss"
+    PROFIBUS = "profibus"  # DP-V0: FDL frames (protocol.fdl), the PKW channel inside PPOs
 
 
 def bcc(data: bytes | bytearray | memoryview) -> int:

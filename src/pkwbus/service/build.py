@@ -16,12 +16,15 @@ import prometheus_client
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
+from pkwbus.master.dp_line import DpLine
+from pkwbus.master.dp_scheduler import DpDriveSpec, DpScheduler
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.values import ParameterFormat
-from pkwbus.protocol import pkw
+from pkwbus.protocol import dp_services, dp_timing, pkw
+from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
@@ -34,8 +37,9 @@ from pkwbus.service.metrics import (
     SnapshotCollector,
     api_metrics,
 )
-from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.runtime import DriveEntry, LineRunner, Runtime
 from pkwbus.sim import SimTiming, Simulator
+from pkwbus.sim.dp_line import DpSimulator, SlaveKind
 
 __all__ = [
     "DEFAULT_SIM_DELAY",
@@ -51,7 +55,7 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     metrics = ServiceMetrics(registry)
     api_metrics(registry)  # the API's counters, exported (at zero) from the start
     snapshot = Snapshot()
-    schedulers: list[LineScheduler] = []
+    schedulers: list[LineRunner] = []
     entries: list[DriveEntry] = []
     infos: list[ParameterInfo] = []
     cleanups: list[Callable[[], object]] = []
@@ -59,11 +63,15 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     for line in config.lines:
         port = line.port
         if line.sim is not None:
-            port, close = await _start_sim(line, line.sim)
+            start = _start_dp_sim if line.protocol is Protocol.PROFIBUS else _start_sim
+            port, close = await start(line, line.sim)
             cleanups.append(close)
         specs = [_drive(line, drive, entries, infos) for drive in line.drives]
         events = metrics.for_line(line.name, {d.name: d.pkw_dialect for d in line.drives})
         counts[line.name] = events
+        if line.protocol is Protocol.PROFIBUS:
+            schedulers.append(_dp_scheduler(line, port, specs, snapshot, metrics, events))
+            continue
         schedulers.append(
             LineScheduler(
                 line.name,
@@ -98,6 +106,49 @@ def _line(line: cfg.Line, port: str) -> Line:
         Protocol(line.protocol),
         timeout=line.timeout,
         inter_char_timeout=line.inter_char_seconds,
+    )
+
+
+def _dp_scheduler(
+    line: cfg.Line,
+    port: str,
+    specs: list[DriveSpec],
+    snapshot: Snapshot,
+    metrics: ServiceMetrics,
+    events: LineMetrics,
+) -> DpScheduler:
+    """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
+    settings = PortSettings(
+        port,
+        baudrate=line.baudrate,
+        parity="E",
+        low_latency=line.low_latency,
+        rs485=Rs485Mode(**line.rs485.model_dump()) if line.rs485 is not None else None,
+    )
+    dp = DpLine(settings, line.master_address, slot_time=line.slot_time)
+    # The watchdog: as configured, else several worst-case cycles and at least a second.
+    watchdog = line.watchdog or max(1.0, 10 * dp.slot_time * (line.retries + 1) * len(specs))
+    slaves = []
+    for drive, spec in zip(line.drives, specs, strict=True):
+        found, _ = drive.dp.settings()
+        if found is None:  # the configuration checked it; a GSD file changed since
+            raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
+        parameters = dp_services.Parameters(
+            found.ident, dp_services.watchdog_factors(watchdog), user_prm=found.user_prm
+        )
+        setup = SlaveSetup(drive.address, line.master_address, parameters, found.cfg, line.retries)
+        slaves.append(DpDriveSpec(spec, setup, found.ppo))
+    # A job may take the cycles of every slave a few times over, and a restart of its slave.
+    deadline = max(2.0, 20 * sum(dp_timing.default_slot_time(line.baudrate) for _ in specs))
+    return DpScheduler(
+        line.name,
+        dp,
+        slaves,
+        snapshot=snapshot,
+        events=events,
+        dp_events=metrics.for_dp_line(line.name, [d.name for d in line.drives]),
+        poll_deadline=deadline,
+        retries=line.retries,
     )
 
 
@@ -182,6 +233,36 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
             else DEFAULT_SIM_DELAY
         ),
         catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
+    )
+    folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
+    end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))
+
+    async def close() -> None:
+        await end.close()
+        folder.rmdir()
+
+    return end.path, close
+
+
+async def _start_dp_sim(
+    line: cfg.Line, sim: cfg.SimPort
+) -> tuple[str, Callable[[], Awaitable[None]]]:
+    """Simulated slaves, each of its drive's dialect, ident and catalog (one PPO per line)."""
+    each: dict[int, SlaveKind] = {}
+    for drive in line.drives:
+        found, _ = drive.dp.settings()
+        each[drive.address] = SlaveKind(
+            drive.pkw_dialect.name,
+            found.ident if found is not None else None,
+            drive.catalog or "default",
+        )
+    simulator = DpSimulator(
+        sim.drives,
+        ppo_number=line.drives[0].ppo,  # the config checked that the slaves share one PPO
+        timing=SimTiming(
+            response_delay=sim.response_delay if sim.response_delay is not None else 0.0
+        ),
+        each=each,
     )
     folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
     end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))

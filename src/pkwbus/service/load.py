@@ -12,17 +12,27 @@ A character is 11 bits with the default 8E1 (10 with parity N). Each polled
 parameter demands ``1 / every`` exchanges per second; the line's utilisation
 is the sum of exchange time times rate. Repeats after missing answers are
 not counted: a silent drive costs ``timeout`` per try on top of this.
+
+A PROFIBUS DP line instead cycles its slaves in turn, one Data_Exchange each
+per cycle, whatever is polled. The cycle at best is the sum of each slave's
+request and answer frames with the idle and reaction times of the bus timing
+(:func:`pkwbus.protocol.dp_timing.exchange_time`); a USB adapter's latency
+adds to each answer. A slave's PKW channel completes at most one job every
+:data:`DP_JOB_CYCLES` cycles (the request, then AK 0 before the next one),
+so its polls are refreshed at most ``1 / (DP_JOB_CYCLES * cycle)`` times a
+second between them; polls that ask for more are warned about.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final
 
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
-from pkwbus.protocol import timing
+from pkwbus.protocol import dp_timing, fdl, timing
+from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
 
@@ -31,6 +41,7 @@ WARN_UTILISATION: Final = 0.8
 FC_PARAMETER_TELEGRAM: Final = 16  # bytes: STX LGE ADR PKE IND PWE PCD1 PCD2 BCC
 USS_OVERHEAD: Final = 4  # bytes: STX LGE ADR BCC
 USS_VARIABLE_PKW_WORDS: Final = 4
+DP_JOB_CYCLES: Final = 2  # DP cycles per PKW job at best: the request, then AK 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,6 +56,7 @@ class LineLoad:
     utilisation: float  # fraction of the line's time (1.0 = always busy)
     capacity: float  # exchanges per second if the line did nothing else
     exchange_seconds: dict[str, float] = field(default_factory=dict)  # per drive
+    cycle: float | None = None  # PROFIBUS DP: seconds of one cycle through every slave, at best
     warnings: list[str] = field(default_factory=list)
 
 
@@ -65,8 +77,52 @@ def exchange_seconds(line: Line, drive: Drive) -> float:
     return wire + line.pause_seconds + delay
 
 
+def dp_frame_bytes(drive: Drive) -> int:
+    """A Data_Exchange request (and its answer) carrying the drive's PPO, in bytes."""
+    data = bytes(ppo_type(drive.ppo).length)
+    frame = fdl.DataFrame(drive.address, 0, fdl.request_fc(fdl.Function.SRD_HIGH), data=data)
+    return len(fdl.encode(frame))
+
+
+def dp_line_load(line: Line) -> LineLoad:
+    """The DP cycle of a line and how often each slave's polls can really be refreshed."""
+    times = {
+        d.name: dp_timing.exchange_time(dp_frame_bytes(d), dp_frame_bytes(d), line.baudrate)
+        for d in line.drives
+    }
+    cycle = sum(times.values())
+    per_slave = 1 / (DP_JOB_CYCLES * cycle)  # PKW jobs per second on each slave, at most
+    rate = 0.0
+    worst = 0.0
+    load = LineLoad(
+        line=line.name,
+        protocol=line.protocol,
+        baudrate=line.baudrate,
+        drives=len(line.drives),
+        exchanges_per_second=0.0,
+        utilisation=0.0,
+        capacity=per_slave,
+        exchange_seconds=times,
+        cycle=cycle,
+    )
+    for drive in line.drives:
+        demand = sum(1 / entry.every for entry in drive.poll)
+        rate += demand
+        worst = max(worst, demand / per_slave)
+        if demand > per_slave:
+            load.warnings.append(
+                f"line {line.name}: drive {drive.name}'s polls ask for {demand:.1f} reads/s;"
+                f" its PKW channel carries at most {per_slave:.1f}/s at a DP cycle of"
+                f" {cycle * 1000:.1f} ms: each of its {len(drive.poll)} polled parameters is"
+                f" refreshed about every {len(drive.poll) / per_slave:.2f} s at best"
+            )
+    return replace(load, exchanges_per_second=rate, utilisation=worst)
+
+
 def line_load(line: Line) -> LineLoad:
     """Utilisation, demand and capacity of one line."""
+    if line.protocol is Protocol.PROFIBUS:
+        return dp_line_load(line)
     times = {d.name: exchange_seconds(line, d) for d in line.drives}
     rate = 0.0
     busy = 0.0
@@ -162,6 +218,16 @@ def check_config_report(
     """What ``pkwbus check-config`` prints for a valid configuration, line by line."""
     report = [f"listen {config.listen}, audit log {config.audit_db}"]
     for line, load in zip(config.lines, config_load(config), strict=True):
+        if load.cycle is not None:
+            report.append(
+                f"line {load.line}: profibus at {load.baudrate} baud, {load.drives} slaves,"
+                f" DP cycle {load.cycle * 1000:.1f} ms at best ({1 / load.cycle:.0f} cycles/s;"
+                f" a USB adapter's latency adds to each answer), {load.exchanges_per_second:.2f}"
+                f" polls/s, at most {load.capacity:.1f} PKW jobs/s per slave"
+            )
+            report.extend(f"WARN {w}" for w in load.warnings)
+            report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
+            continue
         report.append(
             f"line {load.line}: {load.protocol} at {load.baudrate} baud, {load.drives} drives, "
             f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "

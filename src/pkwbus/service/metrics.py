@@ -13,7 +13,7 @@ from __future__ import annotations
 import collections
 import platform
 import weakref
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
@@ -23,6 +23,7 @@ from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol.dp_slave import RestartReason, SlaveState
 
 # Re-exported: built with the others in pkwbus.service.build.
 from pkwbus.service.device_metrics import DriveInfo as DriveInfo
@@ -123,13 +124,13 @@ class ServiceMetrics:
             [*ld, "state"],
             registry=registry,
         )
-        self.dp_restarts = Counter(
+        self.dp_restarts = CounterFamily(
             "pkwbus_dp_restarts",
             "PROFIBUS DP: times a slave had to be parametrised again, by reason",
             [*ld, "reason"],
             registry=registry,
         )
-        self.dp_diagnostics = Counter(
+        self.dp_diagnostics = CounterFamily(
             "pkwbus_dp_diagnostics",
             "PROFIBUS DP: diagnosis flags seen, by flag",
             [*ld, "flag"],
@@ -139,6 +140,43 @@ class ServiceMetrics:
     def for_line(self, line: str, drives: Mapping[str, Dialect]) -> LineMetrics:
         """The counters of ``line``; ``drives`` maps each configured drive to its dialect."""
         return LineMetrics(self, line, drives)
+
+    def for_dp_line(self, line: str, drives: Iterable[str]) -> DpMetrics:
+        """The PROFIBUS DP gauges and counters of ``line``'s slaves."""
+        return DpMetrics(self, line, drives)
+
+
+class DpMetrics:
+    """A DP line's slave states, restarts and diagnosis flags.
+
+    Every slave has a ``pkwbus_dp_slave_state`` series for each state (1 for the
+    current one, 0 for the others) and a restart series for each reason at 0
+    from the start, so that an alert sees the first change. Diagnosis flags
+    appear when first seen.
+    """
+
+    def __init__(self, m: ServiceMetrics, line: str, drives: Iterable[str]) -> None:
+        self._m = m
+        self._line = line
+        self._states = {
+            d: {s: m.dp_state.labels(line, d, s.value) for s in SlaveState} for d in drives
+        }
+        self._restarts = {
+            (d, r): m.dp_restarts.labels(line, d, r.value, zero=True)
+            for d in self._states
+            for r in RestartReason
+        }
+
+    def slave_state(self, drive: str, state: SlaveState) -> None:
+        for s, gauge in self._states[drive].items():
+            gauge.set(1 if s is state else 0)
+
+    def restarted(self, drive: str, reason: RestartReason) -> None:
+        self._restarts[(drive, reason)].inc()
+
+    def diagnosis(self, drive: str, flags: frozenset[str]) -> None:
+        for flag in sorted(flags):
+            self._m.dp_diagnostics.labels(self._line, drive, flag).inc()
 
 
 class LineMetrics:

@@ -16,7 +16,7 @@ from typing import Protocol
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
-from pkwbus.master.scheduler import LineScheduler, PollSpec
+from pkwbus.master.scheduler import PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.values import ParameterFormat
@@ -60,10 +60,21 @@ class LineCounts(Protocol):
     def error_counts(self) -> Mapping[str, int]: ...
 
 
+class LineRunner(Protocol):
+    """One line's task: a :class:`~pkwbus.master.scheduler.LineScheduler` (FC, USS) or a
+    :class:`~pkwbus.master.dp_scheduler.DpScheduler` (PROFIBUS DP)."""
+
+    name: str
+
+    def submit(self, job: Job) -> None: ...
+    def stop(self) -> None: ...
+    async def run(self) -> None: ...
+
+
 class Runtime:
     def __init__(
         self,
-        schedulers: Iterable[LineScheduler],
+        schedulers: Iterable[LineRunner],
         drives: Iterable[DriveEntry],
         snapshot: Snapshot,
         registry: CollectorRegistry,

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from pkwbus.protocol import fdl, ppo
@@ -89,6 +89,15 @@ class DpFaults:
         )  # fmt: skip
 
 
+@dataclass(frozen=True, slots=True)
+class SlaveKind:
+    """One simulated slave's dialect, ident number (None: the dialect's) and catalog."""
+
+    dialect: str
+    ident: int | None = None
+    catalog: str | None = "default"
+
+
 class DpSimulator:
     """Simulated DP slaves on one line; the ends serve it on a pty or TCP."""
 
@@ -104,10 +113,14 @@ class DpSimulator:
         seed: int | None = None,
         catalog: str | None = "default",
         clock: Clock = time.monotonic,
+        each: Mapping[int, SlaveKind] | None = None,
     ) -> None:
+        """``each``: slaves of another dialect, ident or catalog than the line's, by address."""
         try:
             self.dialect = ppo.dp_dialect(dialect)
             self.ppo = ppo.ppo_type(ppo_number)
+            for kind in (each or {}).values():
+                ppo.dp_dialect(kind.dialect)
         except LocalProtocolError as exc:
             raise ValueError(str(exc)) from None
         self.protocol = "profibus"
@@ -117,25 +130,30 @@ class DpSimulator:
         self.rng = random.Random(seed)
         self.ident = DEFAULT_IDENTS[dialect] if ident is None else ident
         self.stats = SimStats(sorted(set(addresses)))
-        drive_protocol = DRIVE_PROTOCOL[dialect]
-        specs = _specs(
-            drive_protocol, DEFAULT_CATALOGS[dialect] if catalog == "default" else catalog
-        )
         shape = BlockShape(self.ppo.pkw_words, self.ppo.pzd_words)
         self.drives: dict[int, SimDrive] = {}
         self.slaves: dict[int, SimDpSlave] = {}
         self._last: dict[int, bytes] = {}
+        line_kind = SlaveKind(dialect, self.ident, catalog)
         for address in self.stats.drives:
             if not 0 <= address <= MAX_ADDRESS:
                 raise ValueError(f"profibus slave address {address} is outside 0-{MAX_ADDRESS}")
+            kind = (each or {}).get(address, line_kind)
+            name = kind.dialect
+            drive_protocol = DRIVE_PROTOCOL[name]
+            specs = _specs(
+                drive_protocol,
+                DEFAULT_CATALOGS[name] if kind.catalog == "default" else kind.catalog,
+            )
             rng = random.Random(None if seed is None else seed * 1000 + address)
             drive = SimDrive(
-                address, drive_protocol, self.dialect, IndLayout.PROFIDRIVE, shape, specs,
+                address, drive_protocol, ppo.dp_dialect(name), IndLayout.PROFIDRIVE, shape, specs,
                 self.timing, rng,
             )  # fmt: skip
             drive.model.now = clock()
             self.drives[address] = drive
-            self.slaves[address] = SimDpSlave(address, self.ident, self.ppo.cfg, drive.respond)
+            ident_number = DEFAULT_IDENTS[name] if kind.ident is None else kind.ident
+            self.slaves[address] = SimDpSlave(address, ident_number, self.ppo.cfg, drive.respond)
 
     # ------------------------------------------------------------ faults
 

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
-from typing import Annotated, Self
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Annotated, Self, TypeVar
 
 from pydantic import (
     Field,
@@ -22,14 +23,19 @@ from pkwbus.protocol.params import (
     canonical,
     siemens_name,
 )
+from pkwbus.protocol.ppo import LAYOUT as PPO_LAYOUT
+from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
 from pkwbus.service.config.fields import Name, Notation, PkwWords
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
+from pkwbus.service.config.profibus import DpDrive, hex_bytes, ident_number, resolve_gsd_path
 
 __all__ = ["Drive", "duplicates"]
+
+T = TypeVar("T")
 
 
 def _line_protocol(value: object) -> BusProtocol:
@@ -37,6 +43,10 @@ def _line_protocol(value: object) -> BusProtocol:
     if isinstance(value, BusProtocol):
         return value
     raise ValueError("is the line's setting: give the protocol once, on the line")
+
+
+def _optional(check: Callable[[object], T]) -> Callable[[object], T | None]:
+    return lambda value: None if value is None else check(value)
 
 
 class Drive(Model):
@@ -52,6 +62,12 @@ class Drive(Model):
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)
+    # PROFIBUS DP only: the PPO type, and the ident number or the GSD file (+ cfg, user_prm).
+    ppo: StrictInt = Field(default=1, ge=1, le=5)
+    ident: Annotated[int | None, PlainValidator(_optional(ident_number))] = None
+    gsd: str | None = Field(default=None, strict=True)
+    cfg: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
+    user_prm: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
     # Filled in by the Line from its own protocol before the drive is validated.
     protocol: Annotated[BusProtocol, PlainValidator(_line_protocol)] = Field(
         default=BusProtocol.FC, exclude=True
@@ -63,6 +79,18 @@ class Drive(Model):
         if value is not None:
             dialect(value)
         return value
+
+    @field_validator("gsd")
+    @classmethod
+    def _gsd_path(cls, value: str | None, info: ValidationInfo) -> str | None:
+        """Relative to the configuration file's folder."""
+        if value is None:
+            return None
+        if not value.strip() or any(ord(c) < 0x20 for c in value):
+            raise ValueError("must be the path of the drive's GSD file")
+        context = info.context if isinstance(info.context, dict) else {}
+        base = context.get("base")
+        return resolve_gsd_path(value, base if isinstance(base, Path) else None)
 
     @field_validator("catalog")
     @classmethod
@@ -139,15 +167,25 @@ class Drive(Model):
 
     @property
     def layout(self) -> IndLayout:
-        """The IND layout, given or the dialect's default."""
+        """The IND layout, given or the dialect's default (in a PPO always PROFIdrive's)."""
+        if self.protocol is BusProtocol.PROFIBUS:
+            return PPO_LAYOUT
         return self.ind_layout or self.pkw_dialect.default_ind_layout
 
     @property
     def shape(self) -> BlockShape:
-        """The data block of a parameter telegram: FC fixed, USS as configured."""
+        """The data block of a parameter telegram: FC fixed, USS as configured, DP the PPO's."""
         if self.protocol is BusProtocol.FC:
             return FC_PARAMETER
+        if self.protocol is BusProtocol.PROFIBUS:
+            kind = ppo_type(self.ppo)
+            return BlockShape(kind.pkw_words, kind.pzd_words)
         return BlockShape(self.pkw_words, self.pzd_words)
+
+    @property
+    def dp(self) -> DpDrive:
+        """The PROFIBUS DP fields, as given."""
+        return DpDrive(self.ppo, self.ident, self.gsd, None, self.cfg, self.user_prm)
 
     def refs(self) -> Iterator[tuple[str, ParameterRef]]:
         """Every parameter the drive's config names, with its place."""

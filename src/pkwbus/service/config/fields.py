@@ -33,8 +33,10 @@ __all__ = [
     "Number",
     "Pause",
     "PkwWords",
+    "SlotTime",
     "Timeout",
     "TypeName",
+    "Watchdog",
     "upper",
 ]
 
@@ -83,6 +85,8 @@ Timeout = Annotated[float, _duration(durations.TELEGRAM_TIMEOUT)]
 Pause = Annotated[float, _duration(durations.PAUSE)]
 CharTimeout = Annotated[float, _duration(durations.INTER_CHAR_TIMEOUT)]
 Delay = Annotated[float, _duration(durations.RESPONSE_DELAY)]
+SlotTime = Annotated[float, _duration(durations.DP_SLOT_TIME)]
+Watchdog = Annotated[float, _duration(durations.DP_WATCHDOG)]
 
 
 def _rs485_delay(value: object) -> float:

@@ -17,13 +17,19 @@ from pydantic import (
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.problems import short
 from pkwbus.protocol import timing
-from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, address_range, default_dialect
+from pkwbus.protocol.buses import (
+    DIALECTS_BY_PROTOCOL,
+    DP_MAX_ADDRESS,
+    address_range,
+    default_dialect,
+)
 from pkwbus.protocol.dialects import Dialect, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
     ParameterRef,
     canonical,
 )
+from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import FcAddressFormat
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
@@ -34,12 +40,16 @@ from pkwbus.service.config.fields import (
     Name,
     Pause,
     Rs485Delay,
+    SlotTime,
     Timeout,
+    Watchdog,
     upper,
 )
 from pkwbus.sim.url import SimPort, parse_sim_port
 
-__all__ = ["Line", "Rs485"]
+__all__ = ["MAX_DP_RETRIES", "Line", "Rs485"]
+
+MAX_DP_RETRIES = 8  # a DP slave's request is repeated at most 8 times (DpSlave, SlaveSetup)
 
 
 def _check_port(value: str) -> str:
@@ -85,6 +95,10 @@ class Line(Model):
     fc_address_format: FcAddressFormat | None = None
     low_latency: StrictBool = False  # ask the adapter's driver for 1 ms latency
     rs485: Rs485 | None = None  # kernel RS-485 mode (native UARTs)
+    # PROFIBUS DP only: pkwbus's own station, the slot time, the slaves' watchdog.
+    master_address: StrictInt = Field(default=2, ge=0, le=DP_MAX_ADDRESS)
+    slot_time: SlotTime | None = None
+    watchdog: Watchdog | None = None
     drives: list[Drive] = Field(min_length=1)
 
     @field_validator("port")
@@ -123,7 +137,10 @@ class Line(Model):
     def _drives_fit_line(self) -> Self:
         problems = self._line_problems()
         for i, drive in enumerate(self.drives):
-            problems += [(f"drives[{i}].{p}", m) for p, m in _drive_problems(self, drive)]
+            problems += [
+                (f"drives[{i}].{p}" if p else f"drives[{i}]", m)
+                for p, m in _drive_problems(self, drive)
+            ]
         problems += self._address_problems()
         if problems:
             raise fail(problems)
@@ -131,8 +148,16 @@ class Line(Model):
 
     def _line_problems(self) -> list[Place]:
         problems: list[Place] = []
-        if self.protocol is BusProtocol.USS and self.fc_address_format is not None:
+        if self.protocol is not BusProtocol.FC and self.fc_address_format is not None:
             problems.append(("fc_address_format", "applies to protocol fc only"))
+        if self.protocol is BusProtocol.PROFIBUS:
+            problems += self._dp_line_problems()
+        else:
+            problems += [
+                (key, "applies to protocol profibus only")
+                for key in ("master_address", "slot_time", "watchdog")
+                if key in self.model_fields_set
+            ]
         sim = self.sim
         if sim is not None:
             if sim.protocol is not self.protocol:
@@ -146,6 +171,14 @@ class Line(Model):
             problems += self._sim_shape_problems()
         return problems
 
+    def _dp_line_problems(self) -> list[Place]:
+        problems: list[Place] = []
+        if self.parity != "E" or self.stopbits != 1:
+            problems.append(("parity", "PROFIBUS characters are always 8E1: parity E, stopbits 1"))
+        if self.retries > MAX_DP_RETRIES:
+            problems.append(("retries", f"at most {MAX_DP_RETRIES} over PROFIBUS"))
+        return problems
+
     def _sim_shape_problems(self) -> list[Place]:
         """One simulator answers every drive of a ``sim://`` line with one telegram shape."""
         first = self.drives[0]
@@ -155,7 +188,8 @@ class Line(Model):
                     (
                         f"drives[{i}]",
                         f"the simulated drives of a sim:// port share one dialect, IND layout "
-                        f"and PKW/PZD lengths: {drive.name} differs from {first.name}",
+                        f"and PKW/PZD lengths (over PROFIBUS: one PPO): {drive.name} differs"
+                        f" from {first.name}",
                     )
                 ]
         return []
@@ -221,6 +255,8 @@ def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
     layout = drive.ind_layout or dialect(name).default_ind_layout
     if protocol is BusProtocol.FC:
         return (name, layout)
+    if protocol is BusProtocol.PROFIBUS:  # each simulated slave has its own dialect and ident
+        return (drive.ppo, drive.cfg)
     return (name, layout, drive.pkw_words, drive.pzd_words)
 
 
@@ -241,7 +277,15 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
             )
         )
         return problems
-    if line.protocol is BusProtocol.FC:
+    if line.protocol is not BusProtocol.PROFIBUS:
+        problems += [
+            (key, "applies to protocol profibus only")
+            for key in ("ppo", "ident", "gsd", "cfg", "user_prm")
+            if key in drive.model_fields_set
+        ]
+    if line.protocol is BusProtocol.PROFIBUS:
+        problems += _dp_drive_problems(line, drive)
+    elif line.protocol is BusProtocol.FC:
         for key in ("pkw_words", "pzd_words"):
             if key in drive.model_fields_set:
                 problems.append(
@@ -250,6 +294,30 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
     elif drive.pkw_words == 0 and (drive.poll or drive.writable):
         problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
     problems += _pnu_problems(drive, drive.pkw_dialect)
+    return problems
+
+
+def _dp_drive_problems(line: Line, drive: Drive) -> list[Place]:
+    problems: list[Place] = []
+    if drive.address == line.master_address:
+        problems.append(
+            ("address", f"{drive.address} is the master's own station (master_address)")
+        )
+    problems += [
+        (key, "the PPO sets it over PROFIBUS: give ppo")
+        for key in ("pkw_words", "pzd_words", "ind_layout")
+        if key in drive.model_fields_set
+    ]
+    kind = ppo_type(drive.ppo)
+    if not kind.has_pkw and (drive.poll or drive.writable):
+        problems.append(
+            (
+                "ppo",
+                f"PPO {kind.number} has no PKW words: the drive has no parameter channel"
+                " to poll or write (PPO 1, 2 and 5 have one)",
+            )
+        )
+    problems += drive.dp.settings()[1]
     return problems
 
 

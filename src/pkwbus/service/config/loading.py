@@ -41,7 +41,7 @@ def load_config(
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ConfigError([f"{shown}: not UTF-8 text (byte {exc.start})"]) from None
-    return parse_config(text, environ=environ, catalogs=catalogs)
+    return parse_config(text, environ=environ, catalogs=catalogs, base=Path(path).parent)
 
 
 def parse_config(
@@ -49,6 +49,7 @@ def parse_config(
     *,
     environ: Mapping[str, str] | None = None,
     catalogs: Catalogs | None = None,
+    base: Path | None = None,
 ) -> Config:
     """Check configuration text (what :func:`load_config` does after reading the file)."""
     data = _parse_yaml(text)
@@ -56,7 +57,8 @@ def parse_config(
     listen = env.get(LISTEN_ENV)
     if listen:
         data = {**data, "listen": listen}
-    context = {"catalogs": catalogs or builtin_catalogs()}
+    # ``base``: the configuration file's folder, where relative GSD paths start.
+    context = {"catalogs": catalogs or builtin_catalogs(), "base": base}
     try:
         return Config.model_validate(data, context=context)
     except ValidationError as exc:

@@ -1,0 +1,151 @@
+"""What a drive on a PROFIBUS DP line needs to be parametrised: its PPO, ident number,
+user parameters and module identifiers, given in the configuration or read from the
+drive's GSD file (PROFIBUS DP GSD specification; the drive's PROFIBUS manual names
+where the vendor publishes it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from pkwbus.problems import short
+from pkwbus.protocol import dp_services, gsd, ppo
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.ppo import PpoType
+from pkwbus.service.config.base import Place
+
+__all__ = ["DpDrive", "DpSettings", "hex_bytes", "ident_number", "resolve_gsd_path"]
+
+MAX_GSD_BYTES = 1 << 20
+
+
+@dataclass(frozen=True, slots=True)
+class DpSettings:
+    """The Set_Prm and Chk_Cfg data of one slave."""
+
+    ppo: PpoType
+    ident: int
+    user_prm: bytes
+    cfg: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class DpDrive:
+    """The DP fields of a drive as configured (``gsd`` already made absolute)."""
+
+    ppo: int
+    ident: int | None
+    gsd: str | None
+    gsd_given: str | None
+    cfg: bytes | None
+    user_prm: bytes | None
+
+    def settings(self) -> tuple[DpSettings | None, list[Place]]:
+        """The slave's settings, or the problems (each with its place) that stop them."""
+        kind = ppo.ppo_type(self.ppo)
+        problems: list[Place] = []
+        ident, user_prm, cfg = self.ident, b"", kind.cfg
+        if self.gsd is not None:
+            found, problems = _read_gsd(self.gsd, self.gsd_given or self.gsd, kind)
+            if found is not None:
+                gsd_ident, user_prm, cfg = found
+                if ident is not None and ident != gsd_ident:
+                    problems.append(
+                        (
+                            "ident",
+                            f"0x{ident:04X} contradicts the GSD file's Ident_Number"
+                            f" 0x{gsd_ident:04X}",
+                        )
+                    )
+                ident = gsd_ident
+        elif ident is None:
+            problems.append(
+                ("", "give the slave's ident number (ident: 0x0402) or its GSD file (gsd: PATH)")
+            )
+        if self.cfg is not None:
+            cfg = self.cfg
+        if self.user_prm is not None:
+            user_prm = self.user_prm
+        try:
+            dp_services.check_cfg(cfg)
+            lengths = dp_services.io_lengths(cfg)
+        except LocalProtocolError as exc:
+            problems.append(("cfg", str(exc)))
+        else:
+            if lengths != (kind.length, kind.length):
+                problems.append(
+                    (
+                        "cfg",
+                        f"{cfg.hex(' ').upper()} sets up {lengths[0]}/{lengths[1]} bytes in/out;"
+                        f" PPO {kind.number} has {kind.length}",
+                    )
+                )
+        if problems or ident is None:
+            return None, problems
+        try:
+            dp_services.Parameters(ident, user_prm=user_prm).encode()
+        except LocalProtocolError as exc:
+            return None, [("user_prm", str(exc))]
+        return DpSettings(kind, ident, user_prm, cfg), []
+
+
+def _read_gsd(
+    path: str, shown: str, kind: PpoType
+) -> tuple[tuple[int, bytes, bytes] | None, list[Place]]:
+    try:
+        with Path(path).open("rb") as file:
+            data = file.read(MAX_GSD_BYTES + 1)
+    except OSError as exc:
+        return None, [("gsd", f"cannot read {shown}: {exc.strerror or exc}")]
+    if len(data) > MAX_GSD_BYTES:
+        return None, [("gsd", f"{shown} is larger than 1 MiB: not a GSD file")]
+    try:
+        found = gsd.parse(data.decode("latin-1"))
+    except gsd.GsdError as exc:
+        return None, [("gsd", f"{shown}: {exc}")]
+    modules = [m for m in found.modules if m.cfg.lstrip(b"\x00") == kind.cfg]
+    if not modules:
+        wanted = f"ppo{kind.number}"
+        modules = [m for m in found.modules if wanted in m.name.casefold().replace(" ", "")]
+    if not modules:
+        known = ", ".join(repr(m.name) for m in found.modules) or "none"
+        return None, [
+            ("gsd", f"{shown} has no module for PPO {kind.number} (modules: {known}); give cfg")
+        ]
+    module = modules[0]
+    return (found.ident, found.prm_for([module]), module.cfg), []
+
+
+def ident_number(value: object) -> int:
+    """An ident number: 0x0402 in YAML is already a number; "0x0402" as text too."""
+    if isinstance(value, str):
+        try:
+            value = int(value.strip(), 0)
+        except ValueError:
+            raise ValueError(f"{short(value)} is not a 16-bit number such as 0x0402") from None
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+        raise ValueError(f"{short(value)} is not a 16-bit number such as 0x0402")
+    return value
+
+
+def hex_bytes(value: object) -> bytes:
+    """Bytes written as hex text ("F3 F1", "0xF3,0xF1") or a list of numbers 0-255."""
+    if isinstance(value, list):
+        if all(isinstance(b, int) and not isinstance(b, bool) and 0 <= b <= 255 for b in value):
+            return bytes(value)
+        raise ValueError("must be numbers 0-255, such as [0xF3, 0xF1]")
+    if not isinstance(value, str):
+        raise ValueError(f'{short(value)} is not hex bytes such as "F3 F1"')
+    cleaned = value.replace(",", " ").replace("0x", "").replace("0X", "")
+    try:
+        return bytes.fromhex(cleaned)
+    except ValueError:
+        raise ValueError(f'{short(value)} is not hex bytes such as "F3 F1"') from None
+
+
+def resolve_gsd_path(value: str, base: Path | None) -> str:
+    """A GSD path relative to the configuration file's folder, made absolute."""
+    path = Path(value).expanduser()
+    if not path.is_absolute() and base is not None:
+        path = base / path
+    return str(path)

@@ -1,0 +1,143 @@
+"""PROFIBUS DP lines in the configuration: every mistake a placed error, exit 2, nothing sent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from pkwbus.cli import main
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.service.config import ConfigError, load_config, parse_config
+
+BAD = Path(__file__).parent / "bad_dp_configs"
+
+EXPECTED = {
+    "ppo_without_pkw": "lines[0].drives[0].ppo: PPO 3 has no PKW words",
+    "writable_ppo_without_pkw": "lines[0].drives[0].ppo: PPO 4 has no PKW words",
+    "address_range": "lines[0].drives[0].address: 126 is outside 0-125 for protocol profibus",
+    "address_master": "lines[0].drives[0].address: 3 is the master's own station",
+    "gsd_missing": "lines[0].drives[0].gsd: cannot read ",
+    "gsd_broken": "lines[0].drives[0].gsd: ",
+    "ident_contradicts_gsd": (
+        "lines[0].drives[0].ident: 0x0403 contradicts the GSD file's Ident_Number 0x0402"
+    ),
+    "dialect_fc": "lines[0].drives[0].dialect: fc is not for protocol profibus",
+    "duplicate_address": "lines[0].drives[1].address: address 8 is already used by mixer",
+    "no_ident": "lines[0].drives[0]: give the slave's ident number",
+    "master_address_on_fc": "lines[0].master_address: applies to protocol profibus only",
+    "ppo_on_uss": "lines[0].drives[0].ppo: applies to protocol profibus only",
+    "parity_odd": "lines[0].parity: PROFIBUS characters are always 8E1",
+    "cfg_mismatch": "lines[0].drives[0].cfg: F3 F5 sets up 20/20 bytes in/out; PPO 1 has 12",
+    "bad_ident": "lines[0].drives[0].ident: 65536 is not a 16-bit number",
+    "pkw_words_on_dp": "lines[0].drives[0].pkw_words: the PPO sets it over PROFIBUS",
+    "bad_watchdog": "lines[0].watchdog: '1h' is too long for a watchdog",
+}
+
+GOOD = """
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 93750
+    slot_time: 8ms
+    watchdog: 2s
+    drives:
+      - name: mixer
+        address: 8
+        dialect: danfoss-pcv
+        gsd: {gsd}
+        catalog: danfoss-fc
+        poll: [{{parameter: "16-13", every: 1s}}]
+      - name: pump
+        address: 9
+        ident: 0x80B5
+        ppo: 3
+"""
+
+
+def test_every_broken_file_has_an_expectation() -> None:
+    assert sorted(p.stem for p in BAD.glob("*.yaml")) == sorted(EXPECTED)
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_broken_dp_file_names_its_place(name: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        load_config(BAD / f"{name}.yaml", environ={})
+    problems = caught.value.problems
+    assert any(p.startswith(EXPECTED[name]) for p in problems), problems
+    for problem in problems:
+        assert "Input should" not in problem and "Value error" not in problem
+
+
+def test_a_broken_gsd_file_names_its_line() -> None:
+    with pytest.raises(ConfigError) as caught:
+        load_config(BAD / "gsd_broken.yaml", environ={})
+    (problem,) = caught.value.problems
+    assert "broken.gsd: GSD line 4: " in problem
+
+
+@pytest.mark.parametrize("name", ["gsd_broken", "address_master", "ppo_without_pkw"])
+def test_check_config_exits_2(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check-config", str(BAD / f"{name}.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert EXPECTED[name] in err and "Traceback" not in err
+
+
+def test_a_good_dp_line(tmp_path: Path) -> None:
+    gsd = BAD / "gsd" / "drive.gsd"
+    (tmp_path / "drive.gsd").write_bytes(gsd.read_bytes())
+    path = tmp_path / "pkwbus.yaml"
+    path.write_text(GOOD.format(gsd="drive.gsd"))  # relative to the configuration's folder
+    config = load_config(path, environ={})
+    line = config.lines[0]
+    assert line.protocol is Protocol.PROFIBUS
+    assert (line.master_address, line.slot_time, line.watchdog) == (2, 0.008, 2.0)
+    mixer, pump = line.drives
+    settings, problems = mixer.dp.settings()
+    assert problems == [] and settings is not None
+    assert settings.ident == 0x0402 and settings.cfg == b"\xf3\xf1"
+    assert settings.user_prm  # the GSD's user parameters with their defaults
+    pump_settings, _ = pump.dp.settings()
+    assert pump_settings is not None and pump_settings.ppo.number == 3
+    assert pump.pkw_dialect.name == "profidrive"
+
+
+def test_parse_config_without_a_folder_reads_gsd_paths_as_given() -> None:
+    gsd = BAD / "gsd" / "drive.gsd"
+    config = parse_config(GOOD.format(gsd=str(gsd)), environ={})
+    assert config.lines[0].drives[0].dp.settings()[0] is not None
+
+
+SIM_LINE = """
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: {baud}
+    drives:
+      - name: a
+        address: 8
+        dialect: danfoss-pcv
+        ident: 0x0402
+        poll: [{{parameter: "16-13", every: {every}}}, {{parameter: "16-14", every: 1s}}]
+      - {{name: b, address: 9, ident: 0x0402, dialect: danfoss-pcv, ppo: 2}}
+"""
+
+
+def test_check_config_estimates_the_dp_cycle_and_warns_of_polls_it_cannot_carry() -> None:
+    from pkwbus.protocol import dp_timing
+    from pkwbus.service.load import DP_JOB_CYCLES, check_config_report, line_load
+
+    config = parse_config(SIM_LINE.format(baud=19200, every="50ms"), environ={})
+    load = line_load(config.lines[0])
+    # PPO 1: 12 data bytes + 9 of the frame; PPO 2: 20 + 9, each way.
+    expected = dp_timing.exchange_time(21, 21, 19200) + dp_timing.exchange_time(29, 29, 19200)
+    assert load.cycle == pytest.approx(expected)
+    assert load.capacity == pytest.approx(1 / (DP_JOB_CYCLES * expected))
+    (warning,) = load.warnings
+    assert "drive a's polls ask for 21.0 reads/s" in warning
+    report = "\n".join(check_config_report(config))
+    assert f"DP cycle {expected * 1000:.1f} ms" in report and "WARN" in report
+    fast = parse_config(SIM_LINE.format(baud=93750, every="1s"), environ={})
+    assert line_load(fast.lines[0]).warnings == []
