@@ -35,6 +35,7 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import (
     CONVERSION_FACTORS,
     DATA_TYPES,
+    ParameterRef,
     Scaling,
     ValueType,
     decode_text,
@@ -136,6 +137,11 @@ def run_describe(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     found = link.run(_elements(args, target, ref.pnu))
+    return report(args, ref, found)
+
+
+def report(args: argparse.Namespace, ref: ParameterRef, found: dict[Any, Any]) -> int:
+    """Print what the drive said of ``ref`` (its description elements); FC/USS and DP alike."""
     if all(v is None for v in found.values()):
         raise CommandError(
             f"{ref}: the drive describes none of its elements", Exit.REJECTED, kind="rejected"

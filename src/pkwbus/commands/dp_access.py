@@ -8,8 +8,8 @@ from typing import Any
 
 from pkwbus import link
 from pkwbus.commands.access import _finish, _report
-from pkwbus.commands.common import CommandError, Exit, emit_json
-from pkwbus.commands.describe import ELEMENTS, describe
+from pkwbus.commands.common import CommandError, Exit
+from pkwbus.commands.describe import ELEMENTS, report
 from pkwbus.commands.dp import DpContext, build_context, resolve, session
 from pkwbus.master.outcomes import Answered, Outcome, Rejected, command_failure
 from pkwbus.protocol import pkw, ppo
@@ -91,18 +91,4 @@ def run_describe(args: argparse.Namespace) -> int:
             failure = command_failure(outcome)
             assert failure is not None
             raise CommandError(failure.message, failure.code)
-    if all(v is None for v in found.values()):
-        raise CommandError(
-            f"{ref}: the drive describes none of its elements", Exit.REJECTED, kind="rejected"
-        )
-    info = {"parameter": ref.name, "pnu": ref.pnu, **describe(found)}
-    if args.json:
-        emit_json(info)
-        return Exit.OK
-    print(f"{ref.name}: {info.get('name', '(no name)')}")
-    if "data_type" in info:
-        print(f"  data type: {info['data_type']['name']} ({info['data_type']['code']})")
-    for key in ("array_elements", "conversion_index", "unit_index", "min", "max"):
-        if key in info:
-            print(f"  {key.replace('_', ' ')}: {info[key]}")
-    return Exit.OK
+    return report(args, ref, found)
