@@ -29,6 +29,11 @@ def add_parsers(sub: Any) -> None:
     run.set_defaults(func=run_service)
     check = sub.add_parser("check-config", help="validate a configuration, estimate line load")
     check.add_argument("file")
+    check.add_argument(
+        "--probe",
+        action="store_true",
+        help="also open each line briefly and ask each drive once (exit 3 if one does not answer)",
+    )
     check.set_defaults(func=run_check)
     audit = sub.add_parser("audit", help="show the latest write attempts")
     audit.add_argument("--config", required=True)
@@ -61,6 +66,10 @@ def run_check(args: argparse.Namespace) -> int:
         raise CommandError(f"invalid configuration:\n  audit_db: {problem}", Exit.BAD_INPUT)
     for line in check_config_report(config):
         print(line)
+    if args.probe:
+        from pkwbus.commands.probe import run_probe
+
+        return run_probe(config)
     return Exit.OK
 
 

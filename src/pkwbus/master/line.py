@@ -113,6 +113,11 @@ class Line:
         """An exchange is in flight."""
         return self._done is not None
 
+    @property
+    def echo_heard(self) -> bool:
+        """Whether the adapter echoed a request although the line's echo option is off."""
+        return self._warned_echo
+
     async def open(self) -> None:
         """Open the port now; :class:`PortError` (and a back-off) when it cannot be opened."""
         loop = self._loop = asyncio.get_running_loop()

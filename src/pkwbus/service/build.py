@@ -44,6 +44,8 @@ from pkwbus.sim.dp_line import DpSimulator, SlaveKind
 __all__ = [
     "DEFAULT_SIM_DELAY",
     "build_runtime",
+    "line_for",
+    "target_for",
 ]
 
 DEFAULT_SIM_DELAY = 0.003
@@ -75,14 +77,16 @@ async def build_runtime(config: cfg.Config) -> Runtime:
         schedulers.append(
             LineScheduler(
                 line.name,
-                _line(line, port),
+                line_for(line, port),
                 specs,
                 retries=line.retries,
                 snapshot=snapshot,
                 events=events,
             )
         )
-    drives = {d.name: DriveInfo(line.name, _target(line, d).profile) for line, d in config.drives()}
+    drives = {
+        d.name: DriveInfo(line.name, target_for(line, d).profile) for line, d in config.drives()
+    }
     registry.register(SnapshotCollector(snapshot, drives, infos))
     runtime = Runtime(schedulers, entries, snapshot, registry)
     runtime.cleanups.extend(cleanups)
@@ -90,7 +94,8 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     return runtime
 
 
-def _line(line: cfg.Line, port: str) -> Line:
+def line_for(line: cfg.Line, port: str) -> Line:
+    """The FC/USS line a configuration describes, on ``port``."""
     settings = PortSettings(
         port,
         baudrate=line.baudrate,
@@ -152,7 +157,8 @@ def _dp_scheduler(
     )
 
 
-def _target(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
+def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
+    """Where and how a configured drive is reached."""
     return DriveTarget(
         Protocol(line.protocol),
         drive.address,
@@ -166,7 +172,7 @@ def _target(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
 def _drive(
     line: cfg.Line, drive: cfg.Drive, entries: list[DriveEntry], infos: list[ParameterInfo]
 ) -> DriveSpec:
-    target = _target(line, drive)
+    target = target_for(line, drive)
     polls = []
     units: dict[str, str] = {}
     for entry in drive.poll:

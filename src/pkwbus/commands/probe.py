@@ -1,0 +1,87 @@
+"""`pkwbus check-config --probe`: each configured drive asked once, with the line's settings.
+
+Each FC or USS line's port is opened briefly and every drive gets one short
+telegram (the one a down drive is probed with), retried as the line says. A
+drive that answers is listed with its status word; one that does not, with
+what came back instead. An adapter that echoes the requests while the line's
+``echo`` is off is named. Simulated (``sim://``) lines are not probed, nor
+are PROFIBUS lines: ``pkwbus scan --protocol profibus`` shows their live list.
+"""
+
+from __future__ import annotations
+
+from pkwbus import link
+from pkwbus.commands.common import CommandError, Exit
+from pkwbus.link import PortError
+from pkwbus.master.transaction import Failure, Reply
+from pkwbus.protocol.telegram import Protocol
+from pkwbus.service import config as cfg
+from pkwbus.service.build import line_for, target_for
+
+__all__ = ["probe"]
+
+
+def probe(config: cfg.Config) -> tuple[list[str], bool]:
+    """The report's lines, and whether every probed drive answered."""
+    return link.run(_probe(config))
+
+
+async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
+    report: list[str] = []
+    every = True
+    for line in config.lines:
+        if line.sim is not None:
+            report.append(f"line {line.name}: simulated ({line.port}), not probed")
+            continue
+        if line.protocol is Protocol.PROFIBUS:
+            report.append(
+                f"line {line.name}: PROFIBUS, not probed here: "
+                f"pkwbus scan --protocol profibus --port {line.port} lists its stations"
+            )
+            continue
+        answered, lines = await _probe_line(line)
+        report += lines
+        every = every and answered
+    return report, every
+
+
+async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
+    bus = line_for(line, line.port)
+    try:
+        await bus.open()
+    except PortError as exc:
+        return False, [f"line {line.name}: cannot open {line.port}: {exc}"]
+    out = [f"line {line.name}: {line.port} open, {line.baudrate} baud {line.parity}"]
+    every = True
+    try:
+        for drive in line.drives:
+            target = target_for(line, drive)
+            result = None
+            for _ in range(line.retries + 1):
+                result = await bus.exchange(target, target.probe())
+                if isinstance(result, Reply) or (
+                    isinstance(result, Failure) and result.kind.value == "port"
+                ):
+                    break
+            if isinstance(result, Reply):
+                out.append(f"  {drive.name} (address {drive.address}): answers")
+            else:
+                every = False
+                why = result.detail if isinstance(result, Failure) else "no answer"
+                out.append(f"  {drive.name} (address {drive.address}): NO ANSWER ({why})")
+        if bus.echo_heard:
+            out.append(
+                f"  the adapter on {line.port} echoes our requests: set echo: true for this line"
+            )
+    finally:
+        await bus.close()
+    return every, out
+
+
+def run_probe(config: cfg.Config) -> int:
+    lines, every = probe(config)
+    for text in lines:
+        print(text)
+    if not every:
+        raise CommandError("some drives did not answer (see above)", Exit.NO_ANSWER)
+    return Exit.OK

@@ -1,0 +1,71 @@
+"""`pkwbus check-config --probe`: each configured drive asked once with the line's settings."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+
+@pytest.fixture
+def pty(tmp_path: Path) -> Iterator[str]:
+    path = str(tmp_path / "ttySIM")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "fc", "--pty", path,
+         "--drives", "1,2", "--response-delay", "1ms"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        assert "simulating" in proc.stdout.readline()
+        yield path
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def config(tmp_path: Path, port: str, addresses: list[int]) -> Path:
+    drives = "".join(
+        f"\n      - {{name: d{a}, address: {a}, catalog: danfoss-fc}}" for a in addresses
+    )
+    path = tmp_path / "config.yaml"
+    path.write_text(
+        f"audit_db: {tmp_path / 'audit.sqlite'}\n"
+        f"lines:\n  - name: hall\n    port: {port}\n    protocol: fc\n    baudrate: 19200\n"
+        f"    timeout: 50ms\n    retries: 1\n    drives:{drives}\n"
+        f"  - name: demo\n    port: sim://fc?drives=5\n    protocol: fc\n    baudrate: 19200\n"
+        f"    drives:\n      - {{name: s5, address: 5}}\n"
+    )
+    return path
+
+
+def check(path: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "pkwbus", "check-config", "--probe", str(path)],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+
+
+def test_every_drive_answers(pty: str, tmp_path: Path) -> None:
+    done = check(config(tmp_path, pty, [1, 2]))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "d1 (address 1): answers" in done.stdout
+    assert "d2 (address 2): answers" in done.stdout
+    assert "line demo: simulated" in done.stdout and "not probed" in done.stdout
+
+
+def test_a_drive_that_does_not_answer_is_named_and_exits_3(pty: str, tmp_path: Path) -> None:
+    done = check(config(tmp_path, pty, [1, 7]))
+    assert done.returncode == 3, done.stdout + done.stderr
+    assert "d1 (address 1): answers" in done.stdout
+    assert "d7 (address 7): NO ANSWER" in done.stdout
+    assert "Traceback" not in done.stderr
+
+
+def test_a_port_that_cannot_be_opened_is_said(tmp_path: Path) -> None:
+    done = check(config(tmp_path, str(tmp_path / "no-such-tty"), [1]))
+    assert done.returncode == 3
+    assert "line hall: cannot open" in done.stdout
