@@ -77,6 +77,17 @@ RULES = Path("deploy/prometheus/rules.yml")
 COMPOSE = Path("deploy/compose.yaml")
 K8S = Path("deploy/kubernetes")
 SCHEMAS = Path("deploy/schemas")
+DEMO = Path("config/demo.yaml")
+
+
+def demo_drives() -> int:
+    """How many drives the demo configuration has, on all its lines."""
+    return sum(len(line["drives"]) for line in yaml.safe_load(DEMO.read_text())["lines"])
+
+
+def rule_count() -> int:
+    """How many alert and recording rules deploy/prometheus/rules.yml has."""
+    return sum(len(group["rules"]) for group in yaml.safe_load(RULES.read_text())["groups"])
 
 # --- output ---------------------------------------------------------------------
 
@@ -525,9 +536,10 @@ def check_demo(token: str) -> None:
         text = metrics(port)
         up = samples(text, "pkwbus_drive_up")
         stamps = samples(text, "pkwbus_parameter_last_update_timestamp_seconds")
-        return len(up) == 5 and all(v == 1 for v in up.values()) and len(stamps) > 0
+        return len(up) == drives and all(v == 1 for v in up.values()) and len(stamps) > 0
 
-    wait_until("all 5 demo drives up", live, 15)
+    drives = demo_drives()
+    wait_until(f"all {drives} demo drives up", live, 30)
     first = samples(metrics(port), "pkwbus_parameter_last_update_timestamp_seconds")
     time.sleep(2.5)
     second = samples(metrics(port), "pkwbus_parameter_last_update_timestamp_seconds")
@@ -1161,7 +1173,8 @@ def check_compose(state: Path) -> None:
         f"    target {up[0]['scrapeUrl']} up; {len(rules)} rules loaded "
         f"(health {', '.join(sorted(map(str, health)))})"
     )
-    expect(len(rules) == 8, f"{len(rules)} rules loaded, not 8")
+    expected = rule_count()
+    expect(len(rules) == expected, f"{len(rules)} rules loaded, not {expected}")
     status, _ = http(f"http://127.0.0.1:{pkwbus_port}/readyz")
     expect(status == 200, f"pkwbus /readyz on the published port answered {status}")
     took = time.monotonic()
