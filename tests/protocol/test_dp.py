@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import pytest
@@ -536,3 +537,46 @@ def test_random_walk_keeps_the_rules(steps: list[tuple[str, float]], retries: in
             cfg_acked = True
         if slave.state is SlaveState.LOCKED:
             diag_ok = False
+
+
+def _probe_times(
+    m: DpSlave, answers: Callable[[int], fdl.Frame | NoAnswer], until: float
+) -> list[float]:
+    """When the master sends its first request after each silence, on a fake clock."""
+    sent: list[float] = []
+    now, n = 0.0, 0
+    while now < until:
+        frame = m.poll(now)
+        if frame is not None:
+            if m.state is not SlaveState.DATA_EXCHANGE and (not sent or now - sent[-1] > 0.5):
+                sent.append(now)
+            m.feed(answers(n), now)
+            n += 1
+        now += 0.25
+    return sent
+
+
+def test_an_offline_slave_is_probed_at_capped_exponential_back_off() -> None:
+    m = DpSlave(SlaveSetup(SLAVE, MASTER, PRM, PPO1_CFG, retries=0, probe_interval=1.0,
+                           probe_cap=8.0))  # fmt: skip
+    times = _probe_times(m, lambda n: NoAnswer(), 60.0)
+    gaps = [round(b - a, 2) for a, b in itertools.pairwise(times)]
+    assert gaps[:5] == [1.0, 2.0, 4.0, 8.0, 8.0], gaps
+    assert all(g == 8.0 for g in gaps[3:])
+
+
+def test_a_locked_slave_is_asked_less_and_less_often() -> None:
+    m = DpSlave(SlaveSetup(SLAVE, MASTER, PRM, PPO1_CFG, probe_interval=1.0, probe_cap=4.0))
+    times = _probe_times(m, lambda n: LOCKED_DIAG, 40.0)
+    assert m.state is SlaveState.LOCKED
+    gaps = [round(b - a, 2) for a, b in itertools.pairwise(times)]
+    assert gaps[:3] == [1.0, 2.0, 4.0] and set(gaps[3:]) == {4.0}, gaps
+
+
+def test_the_back_off_starts_again_after_data_exchange() -> None:
+    m = DpSlave(SlaveSetup(SLAVE, MASTER, PRM, PPO1_CFG, retries=0, probe_interval=1.0,
+                           probe_cap=8.0))  # fmt: skip
+    _probe_times(m, lambda n: NoAnswer(), 20.0)  # well into the back-off
+    assert m._probe_wait == 8.0
+    m._set_state(SlaveState.DATA_EXCHANGE)
+    assert m._probe_wait == 1.0

@@ -135,7 +135,8 @@ class SlaveSetup:
     parameters: Parameters
     cfg: bytes
     retries: int = 1
-    probe_interval: float = 1.0  # seconds between probes of an offline or locked slave
+    probe_interval: float = 1.0  # seconds before the first probe of an offline or locked slave
+    probe_cap: float = 30.0  # the probes' interval doubles up to this while it stays so
 
     def __post_init__(self) -> None:
         if not 0 <= self.address <= 125:
@@ -144,8 +145,8 @@ class SlaveSetup:
             raise LocalProtocolError(f"master address {self.master} is not usable")
         if not 0 <= self.retries <= 8:
             raise LocalProtocolError(f"retry limit {self.retries} is outside 0-8")
-        if self.probe_interval < 0:
-            raise LocalProtocolError("probe interval below 0")
+        if self.probe_interval < 0 or self.probe_cap < self.probe_interval:
+            raise LocalProtocolError("probe interval below 0, or above its cap")
         check_cfg(self.cfg)
         self.parameters.encode()
 
@@ -173,6 +174,7 @@ class DpSlave:
         self._due = float("-inf")
         self._last_answer: float | None = None
         self._events: list[Event] = []
+        self._probe_wait = setup.probe_interval  # doubles while offline or locked
 
     # ----------------------------------------------------------- sending
 
@@ -337,7 +339,7 @@ class DpSlave:
         if self._tries <= self.setup.retries:
             return  # the pending request goes again, same FCB
         if kind is FailureKind.TIMEOUT or self.state is SlaveState.OFFLINE:
-            self._fresh(now + self.setup.probe_interval)
+            self._fresh(now + self._next_probe())
             self._set_state(SlaveState.OFFLINE)
         else:
             self._restart(RestartReason.DIAG, now, wait=True)
@@ -348,8 +350,15 @@ class DpSlave:
         self._set_state(SlaveState.WAIT_PRM)
 
     def _lock(self, now: float) -> None:
-        self._fresh(now + self.setup.probe_interval)
+        self._fresh(now + self._next_probe())
         self._set_state(SlaveState.LOCKED)
+
+    def _next_probe(self) -> float:
+        """The wait before the next probe of a slave that is offline or locked: capped
+        exponential back-off, so that a dead slave costs the line less and less."""
+        wait = self._probe_wait
+        self._probe_wait = min(self.setup.probe_cap, max(wait * 2, self.setup.probe_interval))
+        return wait
 
     def _fresh(self, due: float) -> None:
         self._step = _Step.DIAG
@@ -364,6 +373,8 @@ class DpSlave:
         self._set_state(state)
 
     def _set_state(self, state: SlaveState) -> None:
+        if state is SlaveState.DATA_EXCHANGE:
+            self._probe_wait = self.setup.probe_interval  # in service again: back-off over
         if state is not self.state:
             self._events.append(StateChanged(self.state, state))
             self.state = state
