@@ -156,7 +156,14 @@ def run_read(args: argparse.Namespace) -> int:
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = _finish(link.run(_perform(args, target, req)))
+    return show_read(args, ref, fmt, link.run(_perform(args, target, req)))
+
+
+def show_read(
+    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterFormat, outcome: Outcome
+) -> int:
+    """The answer to a read, printed as ``read`` prints it (FC, USS and PROFIBUS alike)."""
+    response = _finish(outcome)
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError as exc:

@@ -7,7 +7,7 @@ import argparse
 from typing import Any
 
 from pkwbus import link
-from pkwbus.commands.access import _finish, _report
+from pkwbus.commands.access import _finish, _report, show_read
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.commands.describe import ELEMENTS, report
 from pkwbus.commands.dp import DpContext, build_context, resolve, session
@@ -33,13 +33,7 @@ def run_read(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     (outcome,) = _outcomes(args, session(args, ctx, args.address, [req]))
-    response = _finish(outcome)
-    try:
-        raw, value = fmt.value_of(response)
-    except RemoteProtocolError as exc:
-        raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
-    _report(args, ref, raw, value, fmt)
-    return Exit.OK
+    return show_read(args, ref, fmt, outcome)
 
 
 def run_write(args: argparse.Namespace) -> int:

@@ -31,6 +31,7 @@ from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.fdl import BROADCAST, DataFrame, Status
 from pkwbus.protocol.telegram import BlockShape, Protocol
+from pkwbus.sim import ends
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.dp_slave import SimDpSlave
 from pkwbus.sim.drive import SimDrive
@@ -181,14 +182,10 @@ class DpSimulator:
         return len(fdl.encode(event))
 
     async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
-        end = TcpEnd(self)
-        await end.start(host, port)
-        return end
+        return await ends.serve_tcp(self, host, port)
 
     async def serve_pty(self, link: str) -> PtyEnd:
-        end = PtyEnd(self, link)
-        await end.start()
-        return end
+        return await ends.serve_pty(self, link)
 
     # ------------------------------------------------------------ frames
 

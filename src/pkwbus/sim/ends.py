@@ -31,7 +31,10 @@ from pkwbus.sim.config import SimTiming
 from pkwbus.sim.faults import Answer
 from pkwbus.sim.stats import SimStats
 
-__all__ = ["Answerer", "PathInUseError", "PtyEnd", "Session", "TcpEnd", "check_link_free"]
+__all__ = [
+    "Answerer", "PathInUseError", "PtyEnd", "Session", "TcpEnd", "check_link_free",
+    "serve_pty", "serve_tcp",
+]  # fmt: skip
 
 Write = Callable[[bytes], None]
 
@@ -304,3 +307,17 @@ def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
         view = view[os.write(fd, view) :]
+
+
+async def serve_tcp(line: Answerer, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
+    """Serve ``line`` on TCP (raw bytes); ``.url`` is a pyserial URL."""
+    end = TcpEnd(line)
+    await end.start(host, port)
+    return end
+
+
+async def serve_pty(line: Answerer, link: str) -> PtyEnd:
+    """Serve ``line`` on a new pseudo-terminal reachable at the symlink ``link``."""
+    end = PtyEnd(line, link)
+    await end.start()
+    return end

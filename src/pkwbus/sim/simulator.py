@@ -21,6 +21,7 @@ from pkwbus.protocol.telegram import (
     frame,
     uss_lengths,
 )
+from pkwbus.sim import ends
 from pkwbus.sim import faults as inject
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drive import SimDrive
@@ -119,15 +120,11 @@ class Simulator:
 
     async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
         """Serve the line on TCP (raw telegram bytes); ``.url`` is a pyserial URL."""
-        end = TcpEnd(self)
-        await end.start(host, port)
-        return end
+        return await ends.serve_tcp(self, host, port)
 
     async def serve_pty(self, link: str) -> PtyEnd:
         """Serve the line on a new pseudo-terminal reachable at the symlink ``link``."""
-        end = PtyEnd(self, link)
-        await end.start()
-        return end
+        return await ends.serve_pty(self, link)
 
     # --------------------------------------------------------- telegrams
 
