@@ -30,7 +30,8 @@ def pty_sim() -> Iterator[str]:
         path = str(Path(tmp) / "ttySIM")
         proc = subprocess.Popen(
             [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "fc", "--pty", path,
-             "--drives", "2,17", "--response-delay", "0"],
+             "--drives", "2,17", "--response-delay", "0",
+             "--warnings-per-hour", "0", "--trips-per-hour", "0"],  # the status word is checked
             stdout=subprocess.PIPE,
             text=True,
         )  # fmt: skip

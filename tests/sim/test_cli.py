@@ -22,6 +22,7 @@ from pkwbus.protocol.dialects import USS
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim.catalogs import UNIT_FACTORS
 from pkwbus.sim.cli import configure, main, parse_addresses, parse_host_port, plan
+from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR
 from pkwbus.sim.table import TABLES
 from tests.sim.conftest import request_telegram
 
@@ -94,6 +95,8 @@ def test_pty_end_from_the_command_line(tmp_path: pathlib.Path) -> None:
         ["--listen", "127.0.0.1:5020"],
         ["--listen", "tcp://127.0.0.1:0", "--drives", "0"],
         ["--listen", "tcp://127.0.0.1:0", "--wire-timing"],
+        ["--listen", "tcp://127.0.0.1:0", "--warnings-per-hour", "-1"],
+        ["--listen", "tcp://127.0.0.1:0", "--trips-per-hour", "nan"],
         ["--listen", "tcp://127.0.0.1:0", "--protocol", "uss", "--pkw-words", "5"],
     ],
 )
@@ -191,3 +194,17 @@ def test_a_stale_link_of_a_killed_simulator_is_replaced(tmp_path: pathlib.Path) 
     finally:
         code, _ = stop(second)
     assert code == 0 and not os.path.lexists(link)
+
+
+@pytest.mark.parametrize("protocol", ["fc", "uss", "profibus"])
+def test_warning_and_trip_rates_reach_every_drive(protocol: str) -> None:
+    def models(*options: str) -> set[tuple[float, float]]:
+        args = make_parser().parse_args(
+            ["--protocol", protocol, "--listen", "tcp://127.0.0.1:0", "--drives", "3-4", *options]
+        )
+        drives = plan(args).sim.drives.values()
+        return {(d.model.config.warning_rate, d.model.config.trip_rate) for d in drives}
+
+    assert models() == {(WARNINGS_PER_HOUR / 3600, TRIPS_PER_HOUR / 3600)}
+    assert models("--warnings-per-hour", "0", "--trips-per-hour", "0") == {(0.0, 0.0)}
+    assert models("--warnings-per-hour", "360", "--trips-per-hour", "36") == {(0.1, 0.01)}

@@ -19,6 +19,7 @@ from pkwbus.protocol.errors import ProtocolError
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
 from pkwbus.sim.dp_line import DpFaults, DpSimulator
 from pkwbus.sim.ends import PathInUseError
+from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR, ModelConfig
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
 
@@ -91,6 +92,20 @@ def configure(parser: argparse.ArgumentParser) -> None:
     faults.add_argument("--rs", type=float, default=0.0, metavar="P", help="profibus: answer RS")
     faults.add_argument(
         "--restart", type=float, default=0.0, metavar="P", help="profibus: the slave restarts"
+    )
+    faults.add_argument(
+        "--warnings-per-hour",
+        type=float,
+        default=WARNINGS_PER_HOUR,
+        metavar="N",
+        help="how often a drive raises a warning (default %(default)g; 0: never)",
+    )
+    faults.add_argument(
+        "--trips-per-hour",
+        type=float,
+        default=TRIPS_PER_HOUR,
+        metavar="N",
+        help="how often a drive trips (default %(default)g; 0: never)",
     )
     faults.add_argument("--late-after", default="1s", help="how late a late answer is")
     faults.add_argument("--dead", default="", help="addresses that never answer: 3,4")
@@ -176,8 +191,9 @@ def plan(args: argparse.Namespace) -> Plan:
     dead = frozenset(parse_addresses(args.dead))
     late = _duration("--late-after", args.late_after, durations.SIM_LATE)
     faults = SimFaults(**probabilities, late_seconds=late, dead=dead)
+    model = _model(args)
     if args.protocol == "profibus":
-        return _plan(args, _dp_simulator(args, timing, faults))
+        return _plan(args, _dp_simulator(args, timing, faults, model))
     pkw_words = _pkw_words(args.pkw_words)
     sim = Simulator(
         args.protocol,
@@ -190,11 +206,24 @@ def plan(args: argparse.Namespace) -> Plan:
         faults=faults,
         seed=args.seed,
         catalog=catalog_for(args.protocol, args.catalog),
+        model=model,
     )
     return _plan(args, sim)
 
 
-def _dp_simulator(args: argparse.Namespace, timing: SimTiming, faults: SimFaults) -> DpSimulator:
+def _model(args: argparse.Namespace) -> ModelConfig:
+    for option in ("warnings_per_hour", "trips_per_hour"):
+        value = getattr(args, option)
+        if not 0 <= value <= 3600:  # also refuses NaN
+            raise ValueError(f"--{option.replace('_', '-')}: {value:g} is not 0-3600")
+    return ModelConfig(
+        warning_rate=args.warnings_per_hour / 3600, trip_rate=args.trips_per_hour / 3600
+    )
+
+
+def _dp_simulator(
+    args: argparse.Namespace, timing: SimTiming, faults: SimFaults, model: ModelConfig
+) -> DpSimulator:
     unused = [name for name in ("truncate", "wrong_address") if getattr(args, name)]
     if unused:
         raise ValueError(f"--{unused[0].replace('_', '-')} is not a PROFIBUS fault")
@@ -215,6 +244,7 @@ def _dp_simulator(args: argparse.Namespace, timing: SimTiming, faults: SimFaults
     return DpSimulator(
         parse_addresses(args.drives), dialect=args.dialect or "profidrive", ppo_number=args.ppo,
         ident=ident, timing=timing, faults=dp_faults, seed=args.seed, catalog=catalog,
+        model=model,
     )  # fmt: skip
 
 

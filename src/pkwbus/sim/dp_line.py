@@ -37,6 +37,7 @@ from pkwbus.sim.dp_slave import SimDpSlave
 from pkwbus.sim.drive import SimDrive
 from pkwbus.sim.ends import PtyEnd, TcpEnd
 from pkwbus.sim.faults import Answer
+from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
 
@@ -115,6 +116,7 @@ class DpSimulator:
         catalog: str | None = "default",
         clock: Clock = time.monotonic,
         each: Mapping[int, SlaveKind] | None = None,
+        model: ModelConfig | None = None,
     ) -> None:
         """``each``: slaves of another dialect, ident or catalog than the line's, by address."""
         try:
@@ -149,7 +151,7 @@ class DpSimulator:
             rng = random.Random(None if seed is None else seed * 1000 + address)
             drive = SimDrive(
                 address, drive_protocol, ppo.dp_dialect(name), IndLayout.PROFIDRIVE, shape, specs,
-                self.timing, rng,
+                self.timing, rng, model,
             )  # fmt: skip
             drive.model.now = clock()
             self.drives[address] = drive

@@ -14,6 +14,8 @@ from pkwbus.protocol import pzd
 from pkwbus.protocol.pzd import Profile
 
 SQRT3 = math.sqrt(3.0)
+WARNINGS_PER_HOUR = 12.0  # the defaults of `pkwbus simulate --warnings-per-hour`
+TRIPS_PER_HOUR = 1.0  # and of --trips-per-hour
 
 
 @dataclass(frozen=True, slots=True)
@@ -24,9 +26,9 @@ class ModelConfig:
     rated_current_a: float = 21.0
     dc_link_v: float = 560.0
     noise: float = 0.01  # relative noise of current and power
-    warning_rate: float = 1 / 300
+    warning_rate: float = WARNINGS_PER_HOUR / 3600
     warning_seconds: float = 20.0
-    trip_rate: float = 1 / 3600
+    trip_rate: float = TRIPS_PER_HOUR / 3600
     trip_reset_seconds: float = 30.0  # a local operator resets the trip; 0 = never
 
 
