@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import re
+import socket
+import socketserver
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -69,3 +73,51 @@ def test_a_port_that_cannot_be_opened_is_said(tmp_path: Path) -> None:
     done = check(config(tmp_path, str(tmp_path / "no-such-tty"), [1]))
     assert done.returncode == 3
     assert "line hall: cannot open" in done.stdout
+
+
+@pytest.fixture
+def echoing_adapter() -> Iterator[str]:
+    """`pkwbus simulate` on TCP behind a relay that, as an RS-485 adapter hearing its own
+    transmission does, sends every request back before the drive's answer."""
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "fc", "--listen",
+         "tcp://127.0.0.1:0", "--drives", "1", "--response-delay", "0"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert sim.stdout is not None
+    found = re.search(r"socket://127\.0\.0\.1:(\d+)", sim.stdout.readline())
+    assert found
+    sim_port = int(found[1])
+
+    class Relay(socketserver.BaseRequestHandler):
+        def handle(self) -> None:
+            with socket.create_connection(("127.0.0.1", sim_port)) as drive:
+                drive.settimeout(5)
+                while data := self.request.recv(256):
+                    self.request.sendall(data)  # the echo
+                    drive.sendall(data)
+                    self.request.sendall(drive.recv(256))
+
+    server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Relay)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        yield f"socket://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+        sim.terminate()
+        sim.wait(10)
+
+
+def test_an_echoing_adapter_is_named(echoing_adapter: str, tmp_path: Path) -> None:
+    done = check(config(tmp_path, echoing_adapter, [1]))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "d1 (address 1): answers" in done.stdout  # the echo is not taken for the answer
+    assert f"the adapter on {echoing_adapter} echoes our requests: set echo: true" in done.stdout
+
+
+def test_no_echo_warning_without_an_echo(pty: str, tmp_path: Path) -> None:
+    done = check(config(tmp_path, pty, [1]))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "echoes our requests" not in done.stdout
