@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import connection_flood
 import cpu_per_exchange
 import dead_drive
+import floor
 import line_efficiency
 import pkw_lag
 import scale
@@ -81,6 +82,15 @@ def plan(quick: bool) -> Plan:
             lambda: connection_flood.measure(
                 2000 if q else 5000, 500 if q else 2000, 2.0 if q else 5.0
             ),
+        ),
+        (
+            "8. The floor: the start pause's wake-up",
+            "The smallest asyncio master (a reader callback, the answer checked by length, "
+            "BCC and address) with and without the 3.5-character start pause, pkwbus's line "
+            "driven by callbacks and awaited, and pymodbus (which writes its next request "
+            "at once): FC at 115200 baud on a zero-delay pty, CPU per exchange of the "
+            "master, interleaved rounds.",
+            lambda: floor.run(1500 if q else 5000, 2 if q else 3),
         ),
     ]
 

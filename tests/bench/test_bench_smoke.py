@@ -15,6 +15,7 @@ MODULES = [
     "connection_flood",
     "cpu_per_exchange",
     "dead_drive",
+    "floor",
     "line_efficiency",
     "pkw_lag",
     "run_all",
@@ -55,6 +56,20 @@ def test_cpu_raw_loop_smallest() -> None:
     with common.sim_process("fc", "1-3") as port:
         got = asyncio.run(mod.raw_loop(port, 50, warmup=5))
     assert got["errors"] == 0 and got["cpu_us_per_op"] > 0
+
+
+@pytest.mark.parametrize("variant", ["bare none", "bare timer", "bare spin", "chain", "awaited"])
+def test_floor_smallest(variant: str) -> None:
+    mod = load("floor")
+    common = load("_common")
+    with common.sim_process("fc", "1") as port:
+        if variant.startswith("bare"):
+            got = asyncio.run(mod.bare(port, 50, variant.split()[1], warmup=5))
+        elif variant == "chain":
+            got = asyncio.run(mod.line_chain(port, 50, warmup=5))
+        else:
+            got = asyncio.run(mod.line_awaited(port, 50, warmup=5))
+    assert got["cpu_us_per_op"] > 0 and got["ops_per_s"] > 0
 
 
 def test_service_path_smallest() -> None:
