@@ -18,7 +18,7 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.master.values import ParameterFormat
-from pkwbus.protocol import fdl, ppo
+from pkwbus.protocol import fdl, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import SlaveState
 from pkwbus.service.api import create_app
@@ -144,6 +144,24 @@ async def test_values_in_metrics_are_the_simulators_scaled_by_the_catalog(
             assert svc.state(name) is SlaveState.DATA_EXCHANGE
             # The status word comes from the PZD of every cycle.
             assert svc.sample("pkwbus_drive_status_word", drive=name) is not None
+
+
+async def test_the_main_actual_value_of_every_cycle_is_exported_as_percent(
+    tmp_path: Path,
+) -> None:
+    async with dp_service(tmp_path) as svc:
+        for address, hz in zip(ADDRESSES, (12.5, 30.0, 47.0), strict=True):
+            model = svc.sim.drives[address].model
+            model.setpoint = model.frequency = hz  # a different value for each slave
+        mav = "pkwbus_drive_main_actual_percent"
+        await until(lambda: len({svc.sample(mav, drive=n) for n in NAMES.values()}) == 3)
+        # Stopped, every answer sent is accounted for: the exported value is the one of
+        # each slave's latest PPO-read, which the simulated drive still holds.
+        await svc.runtime.stop()
+        values = {a: svc.sample(mav, drive=n) for a, n in NAMES.items()}
+        assert len(set(values.values())) == len(ADDRESSES)
+        for address in ADDRESSES:
+            assert values[address] == pzd.ref_to_percent(svc.sim.drives[address].mav)
 
 
 async def test_a_write_through_the_api_reaches_its_slave_and_is_audited(tmp_path: Path) -> None:

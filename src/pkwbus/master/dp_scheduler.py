@@ -309,12 +309,14 @@ class DpScheduler:
             )  # fmt: skip
 
     def _status(self, name: str, address: int, data: bytes) -> None:
+        """The PPO-read's PZD: status word (ZSW) and main actual value (HIW)."""
         spec = self._specs[address]
         at = 2 * spec.ppo.pkw_words
         if len(data) >= at + 2:
             word = int.from_bytes(data[at : at + 2], "big")
+            mav = int.from_bytes(data[at + 2 : at + 4], "big") if len(data) >= at + 4 else None
             old = self.snapshot.drives.get(name, DriveState())
-            self.snapshot.drives[name] = DriveState(old.up, word, time.time())
+            self.snapshot.drives[name] = DriveState(old.up, word, time.time(), mav)
 
     # ------------------------------------------------------------ events
 
