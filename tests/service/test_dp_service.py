@@ -7,6 +7,7 @@ of 0 (bit 10 clear), so the service never took control of a drive.
 from __future__ import annotations
 
 import asyncio
+from collections import Counter
 from collections.abc import AsyncIterator, Callable
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
@@ -17,6 +18,7 @@ import httpx
 from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
+from pkwbus.master.dp_scheduler import DpScheduler
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import fdl, ppo, pzd
 from pkwbus.protocol.dp_services import Service
@@ -216,6 +218,81 @@ async def test_a_dead_slave_goes_offline_while_the_others_keep_their_poll_rate(
         await until(lambda: svc.state("fan") is SlaveState.DATA_EXCHANGE)
         await until(lambda: svc.reads("fan") >= dead_reads + 2)
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
+
+
+@dataclass
+class Window:
+    """What went on the wire over some master cycles."""
+
+    cycles: int
+    exchanges: Counter[int]  # Data_Exchange requests, by slave
+    requests: Counter[int]  # every request, by slave
+
+    def per_cycle(self, address: int) -> float:
+        return self.exchanges[address] / self.cycles
+
+
+async def window(svc: DpService, cycles: int) -> Window:
+    """The wire over the next ``cycles`` cycles of the DP master: counts, not a duration."""
+    scheduler = svc.runtime.schedulers["dp"]
+    assert isinstance(scheduler, DpScheduler)
+    master = scheduler.master
+    first_cycle, first_frame = master.cycles, len(svc.wire.frames)
+    await until(lambda: master.cycles >= first_cycle + cycles)
+    frames = svc.wire.frames[first_frame:]
+    return Window(
+        master.cycles - first_cycle,
+        Counter(f.da for f in frames if f.dsap is None and f.data),
+        Counter(f.da for f in frames if f.da != fdl.BROADCAST),
+    )
+
+
+async def test_a_slave_owned_by_another_master_is_locked_and_costs_the_others_nothing(
+    tmp_path: Path,
+) -> None:
+    other_master = 1
+    async with dp_service(tmp_path) as svc:
+        baseline = await window(svc, 300)
+        assert all(baseline.exchanges[a] > 0 for a in ADDRESSES)
+        svc.sim.lock(10, other_master)
+        await until(lambda: svc.state("fan") is SlaveState.LOCKED)
+        assert svc.sample("pkwbus_dp_slave_state", drive="fan", state="locked") == 1
+        assert svc.sample("pkwbus_drive_up", drive="fan") == 0
+        sent_before_lock = len(svc.wire.frames)
+        locked = await window(svc, 300)
+        # Per master cycle the others get their Data_Exchange as often as before, and the
+        # locked slave, probed at back-off, takes under 5 % of the line's requests: the
+        # others have at least 95 % of the line they would have without it.
+        for address in (8, 9):
+            assert locked.per_cycle(address) >= 0.95 * baseline.per_cycle(address)
+        assert locked.requests[10] <= 0.05 * locked.requests.total()
+        assert baseline.requests[10] >= baseline.cycles - 1  # before: once every cycle
+        assert all(
+            svc.sample("pkwbus_jobs_total", drive=n, kind="read", outcome=o) is None
+            for n in ("mixer", "pump")
+            for o in ("timeout", "cancelled")
+        )
+
+        # Locked: pkwbus reads its diagnosis at back-off (probes after 1 s, then 2 s more),
+        # never parametrises it or sends it data.
+        def to_fan() -> list[fdl.DataFrame]:
+            return [f for f in svc.wire.frames[sent_before_lock:] if f.da == 10]
+
+        await until(lambda: len(to_fan()) >= 2)
+        assert all(f.dsap == Service.SLAVE_DIAG for f in to_fan())
+        assert svc.sim.slaves[10].owner == other_master
+        # The other master lets go: the slave is parametrised and exchanges data again.
+        svc.sim.release(10)
+        await until(lambda: svc.state("fan") is SlaveState.DATA_EXCHANGE)
+        reads = svc.reads("fan")
+        await until(lambda: svc.reads("fan") >= reads + 2)
+        assert svc.sample("pkwbus_drive_up", drive="fan") == 1
+        assert svc.sim.slaves[10].owner == svc.runtime.schedulers["dp"].line.master
+        # Control word bit 10 clear in every PPO-write to every slave (also checked at exit).
+        for address in ADDRESSES:
+            outputs = [f for f in svc.wire.data_exchanges() if f.da == address]
+            assert outputs
+            assert all(int.from_bytes(f.data[8:10], "big") == pzd.MONITORING_CTW for f in outputs)
 
 
 async def test_a_write_while_its_slave_restarts_ends_with_a_clear_outcome(tmp_path: Path) -> None:

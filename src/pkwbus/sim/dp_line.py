@@ -166,6 +166,14 @@ class DpSimulator:
     def revive(self, address: int) -> None:
         self.faults = _with_dead(self.faults, self.faults.dead - {address})
 
+    def lock(self, address: int, master: int) -> None:
+        """Another master (station ``master``) takes the slave: locked to it."""
+        self.slaves[address].lock_to(master)
+
+    def release(self, address: int) -> None:
+        """The other master lets the slave go."""
+        self.slaves[address].release()
+
     def restart(self, address: int) -> None:
         """Power-cycle a slave: its DP parameters and configuration are lost."""
         self.slaves[address]._reset()
