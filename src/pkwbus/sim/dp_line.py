@@ -261,6 +261,8 @@ class DpSimulator:
     def _send(self, address: int, clean: bytes, kind: str | None) -> Answer | None:
         stale = self._last.get(address)
         self._last[address] = clean
+        if kind == "corrupt" and len(clean) <= 2:
+            kind = None  # the short acknowledge has no FCS to get wrong: nothing injected
         if kind is not None:
             self.stats.inject(kind, address)
         if kind == "drop":
@@ -270,8 +272,8 @@ class DpSimulator:
             return Answer(clean, self.faults.late_seconds)
         if kind == "stale":
             return Answer(stale if stale is not None else clean)
-        if kind == "corrupt" and len(clean) > 2:
-            # The FCS is the byte before the end delimiter (the short acknowledge has none).
+        if kind == "corrupt":
+            # The FCS is the byte before the end delimiter.
             wrong = clean[-2] ^ self.rng.randrange(1, 256)
             return Answer(clean[:-2] + bytes((wrong,)) + clean[-1:])
         if kind == "garbage":
