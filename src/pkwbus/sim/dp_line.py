@@ -240,12 +240,13 @@ class DpSimulator:
             return None
         if reply is None:
             return None
-        if kind == "rs" and isinstance(reply, DataFrame):
-            self.stats.inject("rs", frame.da)
-            reply = DataFrame(
-                reply.da, reply.sa, fdl.response_fc(Status.RS), reply.dsap, reply.ssap
-            )
-            kind = None
+        if kind == "rs":
+            kind = None  # the short acknowledge has no status to set: nothing injected
+            if isinstance(reply, DataFrame):
+                self.stats.inject("rs", frame.da)
+                reply = DataFrame(
+                    reply.da, reply.sa, fdl.response_fc(Status.RS), reply.dsap, reply.ssap
+                )
         clean = fdl.encode(reply)
         return self._send(frame.da, clean, kind)
 
