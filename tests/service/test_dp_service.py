@@ -20,8 +20,9 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.master.dp_scheduler import DpScheduler
-from pkwbus.master.jobs import JobKind
+from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Rejected
+from pkwbus.master.transaction import ExchangeResult, Failure, Reply
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
@@ -539,3 +540,35 @@ async def test_late_answers_are_timeouts_of_their_own_slave_only(tmp_path: Path)
         for name in ("mixer", "pump"):
             assert telegram_errors(svc, name).total() == 0, name
             assert restarts(svc, name).total() == 0, name
+
+
+async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: Path) -> None:
+    """Each exchange adds the time it took to the line's busy time, as on FC and USS lines:
+    a request without answer held the line for the whole slot time at least; an answer's
+    duration is the time it took."""
+    slot = 0.2
+    seen: list[tuple[str, ExchangeResult, float]] = []
+    async with dp_service(tmp_path, slot_time=f"{slot * 1000:.0f}ms") as svc:
+        scheduler = svc.runtime.schedulers["dp"]
+        assert isinstance(scheduler, DpScheduler)
+        inner = scheduler.events
+
+        class Tap:
+            def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+                seen.append((drive, result, busy))
+                inner.exchange(drive, result, busy)
+
+            def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
+                inner.job_finished(drive, kind, result)
+
+            def overrun(self, drive: str) -> None:
+                inner.overrun(drive)
+
+        scheduler.events = Tap()
+        svc.sim.kill(10)
+        await until(lambda: sum(isinstance(r, Failure) for _, r, _ in seen) >= 3)
+        await svc.runtime.stop()
+    timeouts = [busy for _, r, busy in seen if isinstance(r, Failure)]
+    assert all(busy >= slot for busy in timeouts), timeouts
+    replies = [(r, busy) for _, r, busy in seen if isinstance(r, Reply)]
+    assert replies and all(busy == r.duration > 0 for r, busy in replies)
