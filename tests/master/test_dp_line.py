@@ -17,9 +17,18 @@ from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, fdl, pkw, ppo
-from pkwbus.protocol.dp_slave import DpSlave, NoAnswer, SlaveSetup, SlaveState
+from pkwbus.protocol.dp_slave import (
+    DpSlave,
+    Failed,
+    FailureKind,
+    Inputs,
+    NoAnswer,
+    SlaveSetup,
+    SlaveState,
+)
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.faults import Answer
 from tests.master.conftest import serve
 from tests.master.dp_wire import DpWire, fake_master, record_dp_wire
 
@@ -194,3 +203,42 @@ def test_the_idle_times_and_the_slot_time_follow_the_baud_rate() -> None:
     assert line.token_lost_time() == pytest.approx((6 + 2 * MASTER) * 0.030)
     # A Data_Exchange of PPO 1 (21 bytes each way) at 19200: about 28 ms.
     assert dp_timing.exchange_time(21, 21, 19200) == pytest.approx((42 * 11 + 81) / 19200)
+
+
+async def test_a_late_answer_of_one_slave_is_not_taken_for_the_next_slaves(end: str) -> None:
+    """One answer of slave 8 misses its slot time and reaches the line just before slave 9's
+    answer: it is not 9's answer (its source address says so), and 9 sees no error."""
+    sim = make_sim([8, 9], "danfoss-pcv")
+    answer = sim.answer
+    held: list[bytes] = []
+    armed = False
+
+    def late_once(frame: object, now: float | None = None) -> Answer | None:
+        nonlocal armed
+        result = answer(frame, now)
+        exchange = isinstance(frame, fdl.DataFrame) and frame.dsap is None and bool(frame.data)
+        if exchange and armed and result is not None:
+            assert isinstance(frame, fdl.DataFrame)
+            if frame.da == 8:
+                armed = False
+                held.append(result.data)
+                return None  # 8's answer comes later ...
+        if exchange and held and result is not None:
+            assert isinstance(frame, fdl.DataFrame) and frame.da == 9
+            return Answer(held.pop() + result.data)  # ... right before 9's
+        return result
+
+    sim.answer = late_once  # type: ignore[method-assign]
+    async with dp_master(sim, end, [8, 9]) as (master, _):
+        events: list[tuple[int, object]] = []
+        master.on_event = lambda address, event: events.append((address, event))
+        while not all(r.slave.state is SlaveState.DATA_EXCHANGE for r in master.runs.values()):
+            await master.cycle()
+        events.clear()
+        armed = True
+        for _ in range(4):
+            await master.cycle()
+    assert not armed and not held
+    failures = [(a, e) for a, e in events if isinstance(e, Failed)]
+    assert [(a, e.kind) for a, e in failures] == [(8, FailureKind.TIMEOUT)]
+    assert sum(1 for a, e in events if a == 9 and isinstance(e, Inputs)) == 4

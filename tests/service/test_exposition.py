@@ -74,7 +74,9 @@ class Plant:
             self.snapshot.readings[(p.drive, p.parameter, p.index)] = Reading(value, i, t)
         for i, p in enumerate(self.infos[::4]):
             word = None if i % 5 == 4 else (int(t) * 97 + i) & 0xFFFF
-            self.snapshot.drives[p.drive] = DriveState(i % 3 != 2, word, t)
+            # A main actual value of either sign, or none (a drive without a second PZD word).
+            mav = None if i % 4 == 1 else (int(t) * 4099 + i * 0x5000) & 0xFFFF
+            self.snapshot.drives[p.drive] = DriveState(i % 3 != 2, word, t, mav)
         for n, line in enumerate(self.lines):
             self.snapshot.lines[line] = n % 2 == 0
 

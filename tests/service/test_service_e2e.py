@@ -22,6 +22,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from pkwbus.catalog import load_catalog
 from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol.params import ValueType, decode_value
+from pkwbus.protocol.pzd import ref_to_percent
 from pkwbus.service.api import create_app
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
@@ -125,6 +126,40 @@ async def test_metrics_carry_the_simulators_values_scaled() -> None:
     assert (up, info, line_up) == (1.0, 1.0, 1.0)
     assert stamp is not None and stamp > 1.7e9
     assert status == sim.drives[2].status_word
+
+
+@pytest.mark.parametrize("protocol", ["fc", "uss"])
+async def test_the_main_actual_value_of_each_reply_is_exported_as_percent(protocol: str) -> None:
+    """FC protocol: PCD 2 of a reply; USS: its second PZD word (HIW). 0x4000 = 100 %."""
+    sim = Simulator(protocol, [1, 2], timing=SimTiming(response_delay=0.001), seed=4)
+    for address, hz in ((1, 17.5), (2, 42.0)):
+        model = sim.drives[address].model
+        model.setpoint = model.frequency = hz  # a different value for each drive
+    server = await sim.serve_tcp("127.0.0.1", 0)
+    parameter = "3-41" if protocol == "fc" else "1120"
+    drives = "\n".join(
+        f"""      - name: d{a}
+        address: {a}
+        poll: [{{parameter: "{parameter}", every: 20ms}}]"""
+        for a in (1, 2)
+    )
+    text = "lines:" + fc_line("l1", server.url, drives).replace(
+        "protocol: fc", f"protocol: {protocol}"
+    )
+    mav = "pkwbus_drive_main_actual_percent"
+    try:
+        async with running(text) as runtime:
+            for _ in range(1000):
+                if len({sample(runtime, mav, drive=d) for d in ("d1", "d2")} - {None}) == 2:
+                    break
+                await asyncio.sleep(0.01)
+        # stopped: every answer is accounted for, the drives still hold the latest one's
+        got = {a: sample(runtime, mav, drive=f"d{a}") for a in (1, 2)}
+    finally:
+        await server.close()
+    assert got[1] != got[2]
+    for address in (1, 2):
+        assert got[address] == ref_to_percent(sim.drives[address].mav)
 
 
 async def test_fault_and_error_counters_match_what_the_simulator_did() -> None:

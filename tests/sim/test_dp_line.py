@@ -167,6 +167,27 @@ def test_a_corrupt_answer_has_a_bad_fcs_and_a_dead_slave_is_silent() -> None:
     assert sim.handle(status_request(9)) is not None  # revived with the new faults
 
 
+@pytest.mark.parametrize("kind", ["corrupt", "rs"])
+def test_a_corrupt_or_rs_fault_is_counted_only_where_it_can_be_made(kind: str) -> None:
+    """The short acknowledge (to Set_Prm) has no FCS and no status: it goes out clean and
+    the stats do not count a fault that did not happen; the next data frame gets it."""
+    sim = DpSimulator([8], dialect="danfoss-pcv", seed=5, faults=DpFaults(**{kind: 1.0}))
+    prm = dps.Parameters(sim.ident, dps.watchdog_factors(1.0)).encode()
+    set_prm = dps.request(dps.Service.SET_PRM, 8, MASTER, prm, fcb=True, fcv=False)
+    assert sim.handle(fdl.encode(set_prm)) == fdl.encode(fdl.ShortAck())
+    assert sim.stats.injected[kind] == 0
+    diag = dps.request(dps.Service.SLAVE_DIAG, 8, MASTER, b"", fcb=False, fcv=True)
+    raw = sim.handle(fdl.encode(diag))
+    assert raw is not None
+    frames = [e for e in fdl.Deframer().feed(raw) if isinstance(e, fdl.Frame)]
+    if kind == "corrupt":
+        assert not frames
+    else:
+        (frame,) = frames
+        assert isinstance(frame, fdl.DataFrame) and frame.control.status is fdl.Status.RS
+    assert sim.stats.injected[kind] == 1
+
+
 def test_bad_options_are_refused() -> None:
     with pytest.raises(ValueError, match="not used over PROFIBUS"):
         DpSimulator([8], dialect="fc")

@@ -4,8 +4,10 @@ The same port layer as FC and USS lines (:class:`pkwbus.link.Link`: device
 paths, ``socket://`` and ``rfc2217://`` URLs, echo suppression). Before every
 request the line stays idle for TID1 = 37 bit times (which covers TSYN = 33,
 EN 50170 vol. 2 part 4, section 4.4); an answer must start within the slot
-time. The deframer is told of the gap at every request (``flush``), so a
-short acknowledge after noise is found. Before going active the master
+time. The answer is a frame from the station asked, to this master, or a
+short acknowledge: another slave's answer that missed its own slot time is
+not taken for it. The deframer is told of the gap at every request
+(``flush``), so a short acknowledge after noise is found. Before going active the master
 listens for the token-lost time; a token or a request from another address
 means another master runs the line, and pkwbus never shares a line with one
 (:class:`ForeignMaster`).
@@ -113,6 +115,7 @@ class DpLine:
         self._deframer = fdl.Deframer()
         self._lock = asyncio.Lock()
         self._waiter: asyncio.Future[Answer] | None = None
+        self._asked = 0  # the station the request out was sent to
         self._garbled: str | None = None
         self._deadline = 0.0
         self._timer: asyncio.TimerHandle | None = None
@@ -174,6 +177,7 @@ class DpLine:
         self._garbled = None
         waiter: asyncio.Future[Answer] = loop.create_future()
         self._waiter = waiter
+        self._asked = frame.da
         try:
             await self.link.send(raw)
             self.requests += 1
@@ -247,7 +251,7 @@ class DpLine:
                 if waiter is not None and not waiter.done():
                     waiter.set_exception(ForeignMaster(self._refusal()))
                 continue
-            if waiter is not None and not waiter.done():
+            if waiter is not None and not waiter.done() and self._answers(event):
                 waiter.set_result(event)
         if (
             waiter is not None
@@ -256,6 +260,14 @@ class DpLine:
             and not self._deframer.buffered
         ):
             waiter.set_result(Garbled(self._garbled))
+
+    def _answers(self, event: Frame) -> bool:
+        """Whether ``event`` can be the answer to the request out: a data frame from the
+        station asked, to this master (a late answer of another slave is not), or the
+        short acknowledge, which names no station."""
+        if isinstance(event, DataFrame):
+            return event.sa == self._asked and event.da == self.master
+        return True
 
     def _on_lost(self, reason: str) -> None:
         self.reconnect.failed(reason, asyncio.get_running_loop().time())

@@ -82,6 +82,9 @@ class DpMaster:
         self.on_event = on_event
         self.feed = feed
         self.cycles = 0
+        # How long the latest request held the line: from its start (the idle time before
+        # it included) to its answer or the end of the slot time, in loop seconds.
+        self.exchange_time = 0.0
 
     async def start(self, *, listen: float | None = None) -> None:
         """Open the port and listen for other masters; :class:`ForeignMaster`, PortError."""
@@ -119,9 +122,11 @@ class DpMaster:
                 self._emit(run, event)
             if frame is None:
                 continue
+            started = loop.time()
             answer = await self.line.exchange(frame)
             sent += 1
             now = loop.time()
+            self.exchange_time = now - started
             for event in slave.feed(answer, now):
                 self._emit(run, event)
                 if isinstance(event, Inputs) and slot is not None:

@@ -39,7 +39,6 @@ from pkwbus.master.planner import Planner
 from pkwbus.master.record import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import DriveState, Snapshot
 from pkwbus.master.transaction import ErrorKind, Failure, Reply
-from pkwbus.protocol import dp_timing, fdl
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
@@ -139,13 +138,6 @@ class DpScheduler:
         self._specs = {d.setup.address: d for d in drives}
         self._sends: dict[str, Send] = {}
         self._inputs: dict[int, bytes] = {}
-        # What one Data_Exchange of each slave takes on the wire at best (line busy time).
-        self._wire = {
-            d.setup.address: dp_timing.exchange_time(
-                _frame_bytes(d), _frame_bytes(d), line.settings.baudrate
-            )
-            for d in drives
-        }
         self._stopping = False
         self._wake = asyncio.Event()
         for d in drives:
@@ -264,13 +256,15 @@ class DpScheduler:
     def _on_event(self, address: int, event: SlaveEvent | JobResult) -> None:
         name = self._names[address]
         now = asyncio.get_running_loop().time()
+        # The line was busy for as long as the exchange took, as on FC and USS lines.
+        took = self.master.exchange_time
         if isinstance(event, Inputs):
             self._inputs[address] = event.data
-            self.events.exchange(name, Reply(address, event.data, 0.0), self._wire[address])
+            self.events.exchange(name, Reply(address, event.data, took), took)
             self._status(name, address, event.data)
         elif isinstance(event, Failed):
             failure = Failure(_ERROR_KINDS[event.kind], event.detail)
-            self.events.exchange(name, failure, self._wire[address])
+            self.events.exchange(name, failure, took)
         elif isinstance(event, StateChanged):
             self._state(name, event, now)
         elif isinstance(event, Restarted):
@@ -309,12 +303,14 @@ class DpScheduler:
             )  # fmt: skip
 
     def _status(self, name: str, address: int, data: bytes) -> None:
+        """The PPO-read's PZD: status word (ZSW) and main actual value (HIW)."""
         spec = self._specs[address]
         at = 2 * spec.ppo.pkw_words
         if len(data) >= at + 2:
             word = int.from_bytes(data[at : at + 2], "big")
+            mav = int.from_bytes(data[at + 2 : at + 4], "big") if len(data) >= at + 4 else None
             old = self.snapshot.drives.get(name, DriveState())
-            self.snapshot.drives[name] = DriveState(old.up, word, time.time())
+            self.snapshot.drives[name] = DriveState(old.up, word, time.time(), mav)
 
     # ------------------------------------------------------------ events
 
@@ -328,9 +324,3 @@ class DpScheduler:
     def _record(self, events: list[Event]) -> None:
         if events:
             self.record.apply(events)
-
-
-def _frame_bytes(drive: DpDriveSpec) -> int:
-    data = bytes(drive.ppo.length)
-    frame = fdl.DataFrame(drive.setup.address, 0, fdl.request_fc(fdl.Function.SRD_HIGH), data=data)
-    return len(fdl.encode(frame))

@@ -89,8 +89,11 @@ class HealthChanged:
 
 @dataclass(frozen=True, slots=True)
 class StatusWord:
+    """A reply's status word, and its main actual value when it has a second PZD word."""
+
     drive: str
     word: int
+    main_actual: int | None = None
 
 
 Event = Finished | Overrun | HealthChanged | StatusWord

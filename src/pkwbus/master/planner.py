@@ -218,8 +218,9 @@ class Planner:
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
-            if isinstance(result, Reply) and tx.tally.status_word is not None:
-                self.events.append(StatusWord(d.name, tx.tally.status_word))
+            tally = tx.tally
+            if isinstance(result, Reply) and tally.status_word is not None:
+                self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
             if outcome is None:
                 # A "not yet" or a failed try: the repeat yields to another drive's
                 # exchange first, so a lagging or dying drive cannot hold the line.
@@ -367,4 +368,4 @@ class Planner:
         except RemoteProtocolError:
             return
         if block.pzd:
-            self.events.append(StatusWord(d.name, block.pzd[0]))
+            self.events.append(StatusWord(d.name, block.pzd[0], block.main_actual))

@@ -104,7 +104,9 @@ class LineRecord:
                 self._finished(event)
             elif isinstance(event, StatusWord):
                 old = self.snapshot.drives.get(event.drive, DriveState())
-                self.snapshot.drives[event.drive] = DriveState(old.up, event.word, time.time())
+                self.snapshot.drives[event.drive] = DriveState(
+                    old.up, event.word, time.time(), event.main_actual
+                )
             elif isinstance(event, HealthChanged):
                 self._health(event)
             elif isinstance(event, Overrun):
@@ -119,9 +121,7 @@ class LineRecord:
                 "drive %s is down: %s (probing at back-off)", event.drive, event.reason, extra=ctx
             )
         old = self.snapshot.drives.get(event.drive, DriveState())
-        self.snapshot.drives[event.drive] = DriveState(
-            event.up, old.status_word, old.status_timestamp
-        )
+        self.snapshot.drives[event.drive] = replace(old, up=event.up)
 
     def _finished(self, event: Finished) -> None:
         work, drive = event.work, event.drive

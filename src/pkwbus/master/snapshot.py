@@ -20,9 +20,13 @@ class Reading:
 
 @dataclass(frozen=True, slots=True)
 class DriveState:
+    """``main_actual``: the raw main actual value word (0x4000 = 100 %) that came with
+    the status word; None until a drive sent one."""
+
     up: bool = True
     status_word: int | None = None
     status_timestamp: float | None = None
+    main_actual: int | None = None
 
 
 ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index

@@ -73,6 +73,7 @@ class Tally:
     retries: int = 0
     errors: Counter[ErrorKind] = field(default_factory=Counter)
     status_word: int | None = None
+    main_actual: int | None = None
     busy: float = 0.0
 
 
@@ -127,6 +128,7 @@ class PkwTransaction:
             block = split_block(reply.data, target.response_shape(len(reply.data)))
             if block.status_word is not None:
                 self.tally.status_word = block.status_word
+                self.tally.main_actual = block.main_actual
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
             return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))

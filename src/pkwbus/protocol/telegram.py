@@ -217,6 +217,12 @@ class Block:
         """A reply's status word: its first process data word; None without PZD."""
         return self.pzd[0] if self.pzd else None
 
+    @property
+    def main_actual(self) -> int | None:
+        """A reply's main actual value: its second process data word (FC protocol PCD 2,
+        USS PZD2 "HIW"); None with fewer than two PZD words."""
+        return self.pzd[1] if len(self.pzd) >= 2 else None
+
 
 def encode_block(pkw: bytes, pzd: Sequence[int]) -> bytes:
     out = bytearray(pkw)

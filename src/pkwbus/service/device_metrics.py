@@ -17,7 +17,7 @@ from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
 from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
-from pkwbus.protocol.pzd import STATUS_BITS, Profile
+from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
 from pkwbus.service.exposition import CHUNK, format_value, head, header
 
 __all__ = ["DriveInfo", "ParameterInfo", "SnapshotCollector"]
@@ -32,6 +32,10 @@ INFO = ("pkwbus_parameter_info", "PNU, name, unit and type of each polled parame
 DRIVE_UP = ("pkwbus_drive_up", "1 while the drive answers, else 0")
 WORD = ("pkwbus_drive_status_word", "Last raw status word")
 BIT = ("pkwbus_drive_status_bit", "Each named bit of the last status word")
+MAV = (
+    "pkwbus_drive_main_actual_percent",
+    "Last main actual value (second process data word), percent of nominal",
+)
 LINE_UP = ("pkwbus_line_up", "1 while the port is open")
 
 
@@ -59,7 +63,19 @@ class DriveInfo:
     profile: Profile
 
 
-_DriveKey = tuple[str, bool, int | None]  # line, up, status word
+_DriveKey = tuple[str, bool, int | None, int | None]  # line, up, status word, main actual
+
+
+@dataclass(frozen=True, slots=True)
+class _DriveLines:
+    """A drive's rendered lines: up, status word, status bits, main actual value."""
+
+    up: str
+    word: str = ""
+    bits: tuple[str, ...] = ()
+    mav: str = ""
+
+
 _Rendered = tuple[Reading, str, str]  # the reading, its value line, its timestamp line
 
 
@@ -85,7 +101,7 @@ class SnapshotCollector(Collector):
         for p in self._parameters:
             self._head((p.drive, p.parameter, p.index))
         self._readings: dict[ReadingKey, _Rendered] = {}
-        self._drive_lines: dict[str, tuple[_DriveKey, tuple[str, ...]]] = {}
+        self._drive_lines: dict[str, tuple[_DriveKey, _DriveLines]] = {}
 
     def _line(self, drive: str) -> str:
         info = self._drives.get(drive)
@@ -117,6 +133,7 @@ class SnapshotCollector(Collector):
         up = GaugeMetricFamily(*DRIVE_UP, labels=_LD)
         word = GaugeMetricFamily(*WORD, labels=_LD)
         bits = GaugeMetricFamily(*BIT, labels=[*_LD, "bit"])
+        mav = GaugeMetricFamily(*MAV, labels=_LD)
         for drive, state in snap.drives.items():
             drive_info = self._drives.get(drive)
             line = self._line(drive)
@@ -126,9 +143,12 @@ class SnapshotCollector(Collector):
             word.add_metric([line, drive], float(state.status_word))
             for bit, name in STATUS_BITS[drive_info.profile].items():
                 bits.add_metric([line, drive, name], float(state.status_word >> bit & 1))
+            if state.main_actual is not None:
+                mav.add_metric([line, drive], ref_to_percent(state.main_actual))
         yield up
         yield word
         yield bits
+        yield mav
         line_up = GaugeMetricFamily(*LINE_UP, labels=["line"])
         for line_name, is_up in snap.lines.items():
             line_up.add_metric([line_name], 1.0 if is_up else 0.0)
@@ -163,16 +183,18 @@ class SnapshotCollector(Collector):
         ups: list[str] = []
         words: list[str] = []
         bits: list[str] = []
+        mavs: list[str] = []
         for drive, state in drives.items():
-            up, *rest = self._drive(drive, state)
-            ups.append(up)
-            if rest:
-                words.append(rest[0])
-                bits.extend(rest[1:])
+            drive_lines = self._drive(drive, state)
+            ups.append(drive_lines.up)
+            words.append(drive_lines.word)
+            bits.extend(drive_lines.bits)
+            mavs.append(drive_lines.mav)
         yield header(*DRIVE_UP, "gauge") + "".join(ups)
         yield header(*WORD, "gauge") + "".join(words)
         yield header(*BIT, "gauge")
         yield "".join(bits)
+        yield header(*MAV, "gauge") + "".join(mavs)
         yield header(*LINE_UP, "gauge") + "".join(
             f"{head(LINE_UP[0], {'line': name})}{'1.0' if is_up else '0.0'}\n"
             for name, is_up in lines.items()
@@ -200,22 +222,30 @@ class SnapshotCollector(Collector):
         heads = self._heads[key] = (head(VALUE[0], labels), head(STAMP[0], labels))
         return heads
 
-    def _drive(self, drive: str, state: DriveState) -> tuple[str, ...]:
-        """The drive's up line, then its status word and bit lines if it has a word."""
+    def _drive(self, drive: str, state: DriveState) -> _DriveLines:
+        """The drive's up line, its status word and bit lines if it has a word, and its
+        main actual value line if that came with the word."""
         line = self._line(drive)
-        key = (line, state.up, state.status_word)
+        key = (line, state.up, state.status_word, state.main_actual)
         cached = self._drive_lines.get(drive)
         if cached is not None and cached[0] == key:
             return cached[1]
         labels = {"line": line, "drive": drive}
-        lines = [f"{head(DRIVE_UP[0], labels)}{'1.0' if state.up else '0.0'}\n"]
+        up = f"{head(DRIVE_UP[0], labels)}{'1.0' if state.up else '0.0'}\n"
         info = self._drives.get(drive)
         word = state.status_word
+        result = _DriveLines(up)
         if word is not None and info is not None:
-            lines.append(f"{head(WORD[0], labels)}{format_value(float(word))}\n")
-            for bit, name in STATUS_BITS[info.profile].items():
-                value = "1.0" if word >> bit & 1 else "0.0"
-                lines.append(f"{head(BIT[0], {**labels, 'bit': name})}{value}\n")
-        result = tuple(lines)
+            bits = tuple(
+                f"{head(BIT[0], {**labels, 'bit': name})}{'1.0' if word >> bit & 1 else '0.0'}\n"
+                for bit, name in STATUS_BITS[info.profile].items()
+            )
+            mav = ""
+            if state.main_actual is not None:
+                percent = format_value(ref_to_percent(state.main_actual))
+                mav = f"{head(MAV[0], labels)}{percent}\n"
+            result = _DriveLines(
+                up, f"{head(WORD[0], labels)}{format_value(float(word))}\n", bits, mav
+            )
         self._drive_lines[drive] = (key, result)
         return result

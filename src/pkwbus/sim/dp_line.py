@@ -166,6 +166,14 @@ class DpSimulator:
     def revive(self, address: int) -> None:
         self.faults = _with_dead(self.faults, self.faults.dead - {address})
 
+    def lock(self, address: int, master: int) -> None:
+        """Another master (station ``master``) takes the slave: locked to it."""
+        self.slaves[address].lock_to(master)
+
+    def release(self, address: int) -> None:
+        """The other master lets the slave go."""
+        self.slaves[address].release()
+
     def restart(self, address: int) -> None:
         """Power-cycle a slave: its DP parameters and configuration are lost."""
         self.slaves[address]._reset()
@@ -232,12 +240,13 @@ class DpSimulator:
             return None
         if reply is None:
             return None
-        if kind == "rs" and isinstance(reply, DataFrame):
-            self.stats.inject("rs", frame.da)
-            reply = DataFrame(
-                reply.da, reply.sa, fdl.response_fc(Status.RS), reply.dsap, reply.ssap
-            )
-            kind = None
+        if kind == "rs":
+            kind = None  # the short acknowledge has no status to set: nothing injected
+            if isinstance(reply, DataFrame):
+                self.stats.inject("rs", frame.da)
+                reply = DataFrame(
+                    reply.da, reply.sa, fdl.response_fc(Status.RS), reply.dsap, reply.ssap
+                )
         clean = fdl.encode(reply)
         return self._send(frame.da, clean, kind)
 
@@ -253,6 +262,8 @@ class DpSimulator:
     def _send(self, address: int, clean: bytes, kind: str | None) -> Answer | None:
         stale = self._last.get(address)
         self._last[address] = clean
+        if kind == "corrupt" and len(clean) <= 2:
+            kind = None  # the short acknowledge has no FCS to get wrong: nothing injected
         if kind is not None:
             self.stats.inject(kind, address)
         if kind == "drop":
@@ -262,8 +273,8 @@ class DpSimulator:
             return Answer(clean, self.faults.late_seconds)
         if kind == "stale":
             return Answer(stale if stale is not None else clean)
-        if kind == "corrupt" and len(clean) > 2:
-            # The FCS is the byte before the end delimiter (the short acknowledge has none).
+        if kind == "corrupt":
+            # The FCS is the byte before the end delimiter.
             wrong = clean[-2] ^ self.rng.randrange(1, 256)
             return Answer(clean[:-2] + bytes((wrong,)) + clean[-1:])
         if kind == "garbage":

@@ -64,6 +64,20 @@ class SimDpSlave:
             self.timeouts += 1
             self._reset()
 
+    def lock_to(self, master: int) -> None:
+        """Another master has parametrised the slave with lock and exchanges data with it.
+
+        Its watchdog is off: that master's traffic, which would keep it running, is
+        not simulated.
+        """
+        self.mode = SlaveMode.DATA_EXCH
+        self.owner = master
+        self.watchdog = None
+
+    def release(self) -> None:
+        """The owning master lets go: the slave waits for parameters from any master."""
+        self._reset()
+
     def _reset(self) -> None:
         self.mode = SlaveMode.WAIT_PRM
         self.owner = None
