@@ -572,3 +572,20 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
     assert all(busy >= slot for busy in timeouts), timeouts
     replies = [(r, busy) for _, r, busy in seen if isinstance(r, Reply)]
     assert replies and all(busy == r.duration > 0 for r, busy in replies)
+
+
+async def test_every_request_a_slave_received_is_one_telegram_of_the_line(tmp_path: Path) -> None:
+    """The start-up requests (diagnosis, Set_Prm, Chk_Cfg) held the line as Data_Exchange
+    does: each counts in pkwbus_telegrams_total and in the busy time, at start and when a
+    restarted slave is parametrised again."""
+    async with dp_service(tmp_path) as svc:
+        busy_at_start = svc.sample("pkwbus_line_busy_seconds_total", line="dp") or 0.0
+        svc.sim.restart(9)
+        await until(lambda: restarts(svc, "pump").total() >= 1)
+        reads = svc.reads("pump")
+        await until(lambda: svc.reads("pump") >= reads + 2)
+        await svc.runtime.stop()  # every exchange accounted for on both sides
+        for address, name in NAMES.items():
+            received = svc.sim.stats.drives[address]["requests"]
+            assert svc.sample("pkwbus_telegrams_total", drive=name) == received, name
+        assert (svc.sample("pkwbus_line_busy_seconds_total", line="dp") or 0.0) > busy_at_start

@@ -63,6 +63,9 @@ class SlaveRun:
 
 
 EventHook = Callable[[int, "Event | JobResult"], None]
+# A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
+# address and how long it held the line.
+AnsweredHook = Callable[[int, float], None]
 Feed = Callable[[SlaveRun, float], None]  # fill an idle slot (a service's planner)
 
 
@@ -76,11 +79,13 @@ class DpMaster:
         *,
         on_event: EventHook | None = None,
         feed: Feed | None = None,
+        on_answered: AnsweredHook | None = None,
     ) -> None:
         self.line = line
         self.runs = {s.address: SlaveRun(DpSlave(s), slot) for s, slot in slaves}
         self.on_event = on_event
         self.feed = feed
+        self.on_answered = on_answered
         self.cycles = 0
         # How long the latest request held the line: from its start (the idle time before
         # it included) to its answer or the end of the slot time, in loop seconds.
@@ -127,12 +132,16 @@ class DpMaster:
             sent += 1
             now = loop.time()
             self.exchange_time = now - started
+            told = False  # an Inputs or a Failed event tells the exchange to on_event
             for event in slave.feed(answer, now):
                 self._emit(run, event)
+                told = told or isinstance(event, Inputs | Failed)
                 if isinstance(event, Inputs) and slot is not None:
                     update = slot.feed(event.data, now)
                     if update.done is not None:
                         self._emit(run, update.done)
+            if not told and self.on_answered is not None:
+                self.on_answered(run.address, self.exchange_time)
         self.cycles += 1
         if not sent:
             await asyncio.sleep(IDLE_STEP)

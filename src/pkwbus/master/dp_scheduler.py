@@ -131,8 +131,9 @@ class DpScheduler:
             policy=_NEVER_DOWN,
         )  # fmt: skip
         self.master = DpMaster(
-            line, [(d.setup, d.slot()) for d in drives], on_event=self._on_event, feed=self._feed
-        )
+            line, [(d.setup, d.slot()) for d in drives], on_event=self._on_event,
+            feed=self._feed, on_answered=self._on_answered,
+        )  # fmt: skip
         self.listen = listen
         self._names = {d.setup.address: d.name for d in drives}
         self._specs = {d.setup.address: d for d in drives}
@@ -286,6 +287,11 @@ class DpScheduler:
                 detail = f"no matching answer within the deadline ({event.cycles} cycles)"
                 self.planner.exchanged(send, Failure(ErrorKind.TIMEOUT, detail), now)
         self._flush()
+
+    def _on_answered(self, address: int, took: float) -> None:
+        """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held
+        the line, like a Data_Exchange."""
+        self.events.exchange(self._names[address], Reply(address, b"", took), took)
 
     def _state(self, name: str, event: StateChanged, now: float) -> None:
         self.dp_events.slave_state(name, event.new)
