@@ -17,7 +17,7 @@ import httpx
 from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
-from pkwbus.master.values import ParameterFormat
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol import fdl, ppo
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import SlaveState
@@ -133,7 +133,7 @@ async def until(condition: Callable[[], bool], timeout: float = 30.0) -> None:
 async def test_values_in_metrics_are_the_simulators_scaled_by_the_catalog(
     tmp_path: Path,
 ) -> None:
-    factor = ParameterFormat.from_spec(load_catalog("danfoss-fc").get(341)).scaling.factor
+    factor = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341)).scaling.factor
     assert factor == Fraction(1, 100)  # conversion index -2
     async with dp_service(tmp_path) as svc:
         for address, name in NAMES.items():

@@ -8,6 +8,7 @@ from typing import Any
 
 from pkwbus import durations, link
 from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
     PROFIBUS,
@@ -25,7 +26,6 @@ from pkwbus.link import PortError
 from pkwbus.master.outcomes import Answered, Outcome, command_failure
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
@@ -66,7 +66,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterFormat]:
+def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterDescription]:
     try:
         ref = parse_parameter(args.parameter)
         target = build_target(args)
@@ -79,7 +79,7 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
         ref = drive_name(ref, target, spec)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return target, ref, ParameterFormat.from_spec(spec).with_type(vtype)
+    return target, ref, ParameterDescription.from_spec(spec).with_type(vtype)
 
 
 def drive_name(ref: ParameterRef, target: DriveTarget, spec: ParameterSpec | None) -> ParameterRef:
@@ -125,7 +125,7 @@ def _report(
     ref: ParameterRef,
     raw: int | None,
     value: Value,
-    fmt: ParameterFormat,
+    fmt: ParameterDescription,
     verb: str = "",
 ) -> None:
     if args.json:
@@ -160,7 +160,7 @@ def run_read(args: argparse.Namespace) -> int:
 
 
 def show_read(
-    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterFormat, outcome: Outcome
+    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterDescription, outcome: Outcome
 ) -> int:
     """The answer to a read, printed as ``read`` prints it (FC, USS and PROFIBUS alike)."""
     response = _finish(outcome)

@@ -19,12 +19,12 @@ from pathlib import Path
 
 from pkwbus import durations, limits
 from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
 from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
 from pkwbus.master.outcomes import Outcome
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, gsd, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
@@ -233,7 +233,7 @@ def _spec(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> Paramete
 
 def resolve(
     args: argparse.Namespace, ctx: DpContext, *, typed: bool = True
-) -> tuple[ParameterRef, ParameterFormat]:
+) -> tuple[ParameterRef, ParameterDescription]:
     """The parameter named on the command line, in the dialect's notation, and its format."""
     try:
         ref = parse_parameter(args.parameter)
@@ -247,7 +247,7 @@ def resolve(
         ref = canonical(ref, danfoss=ctx.dialect.danfoss_numbers, prefix=prefix)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    fmt = ParameterFormat.from_spec(spec).with_type(vtype)
+    fmt = ParameterDescription.from_spec(spec).with_type(vtype)
     if fmt.is_text:
         raise CommandError("a text parameter does not fit the 4 PKW words of a PPO", Exit.BAD_INPUT)
     return ref, fmt

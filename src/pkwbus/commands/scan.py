@@ -17,6 +17,7 @@ import time
 from typing import Any, TextIO
 
 from pkwbus import durations, limits, link
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import (
     DEFAULT_BAUDRATE,
     PROFIBUS,
@@ -34,7 +35,6 @@ from pkwbus.master.line import Line
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -223,7 +223,9 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
         return None
     try:
         _, value = (
-            ParameterFormat.from_spec(None).with_type(ValueType.TEXT).value_of(outcome.response)
+            ParameterDescription.from_spec(None)
+            .with_type(ValueType.TEXT)
+            .value_of(outcome.response)
         )
     except RemoteProtocolError:
         return None

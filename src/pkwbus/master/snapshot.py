@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pkwbus.master.values import Value
+from pkwbus.catalog.description import Value
 
 
 @dataclass(frozen=True, slots=True)

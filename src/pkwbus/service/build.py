@@ -14,6 +14,7 @@ from pathlib import Path
 import prometheus_client
 
 from pkwbus.catalog import ParameterSpec
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.dp_line import DpLine
@@ -22,7 +23,6 @@ from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import dp_services, dp_timing, pkw
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
@@ -181,7 +181,7 @@ def _drive(
         # Labels are the drive's one name for the parameter: "1613" polls 16-13.
         ref = drive.canonical(ParameterRef(ref.pnu, index, ref.name))
         spec = drive.spec(ref)
-        fmt = ParameterFormat.from_spec(spec)
+        fmt = ParameterDescription.from_spec(spec)
         polls.append(PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt))
         units[ref.name] = fmt.unit
         infos.append(_info(line, drive, ref, spec, fmt))
@@ -192,7 +192,7 @@ def _drive(
             target,
             tuple(polls),
             may_write=drive.may_write,
-            format_of=lambda r, d=drive: ParameterFormat.from_spec(d.spec(r)),  # type: ignore[misc]
+            format_of=lambda r, d=drive: ParameterDescription.from_spec(d.spec(r)),  # type: ignore[misc]
             units=units,
             canonical=drive.canonical,
         )
@@ -200,7 +200,7 @@ def _drive(
     return DriveSpec(drive.name, target, tuple(polls))
 
 
-def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterFormat) -> pkw.PkwRequest:
+def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterDescription) -> pkw.PkwRequest:
     return pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
 
 
@@ -209,7 +209,7 @@ def _info(
     drive: cfg.Drive,
     ref: ParameterRef,
     spec: ParameterSpec | None,
-    fmt: ParameterFormat,
+    fmt: ParameterDescription,
 ) -> ParameterInfo:
     return ParameterInfo(
         line.name,

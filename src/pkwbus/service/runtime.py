@@ -15,11 +15,11 @@ from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.scheduler import PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ParameterRef
 
@@ -35,8 +35,8 @@ class DriveEntry:
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
     may_write: Callable[[ParameterRef], bool] = field(default=lambda ref: False)
-    format_of: Callable[[ParameterRef], ParameterFormat] = field(
-        default=lambda ref: ParameterFormat()
+    format_of: Callable[[ParameterRef], ParameterDescription] = field(
+        default=lambda ref: ParameterDescription()
     )
     units: dict[str, str] = field(default_factory=dict)
     # The drive's one name for a parameter (3-41 for 341); LocalProtocolError for a
@@ -121,7 +121,7 @@ class Runtime:
         drive: str,
         request: pkw.PkwRequest,
         kind: JobKind,
-        fmt: ParameterFormat,
+        fmt: ParameterDescription,
         *,
         timeout: float | None = None,
         parameter: str = "",

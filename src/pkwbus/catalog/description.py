@@ -1,9 +1,23 @@
-"""How a parameter's raw PWE becomes a value and back: type, scaling, unit, limits."""
+"""One parameter as the code past the catalog files sees it: :class:`ParameterDescription`.
+
+The one description of a parameter: its name, value type, scaling, unit,
+limits, array length, whether a write is allowed, and its Siemens r/p. The
+catalog's :class:`~pkwbus.catalog.ParameterSpec` (an entry of a catalog file,
+with the config's overrides applied) becomes one through
+:meth:`ParameterDescription.from_spec`; the service resolves one per parameter
+of each drive when it is built (:class:`ParameterTable`), and the master
+decodes and encodes values with it. Pure: no I/O, no clock.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a value that
+cannot be written (:meth:`ParameterDescription.encode`) and
+:class:`~pkwbus.protocol.errors.RemoteProtocolError` for an answer that
+carries no value (:meth:`ParameterDescription.value_of`).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -16,33 +30,23 @@ from pkwbus.protocol.params import (
     encode_exact,
 )
 
+if TYPE_CHECKING:
+    from pkwbus.catalog.loader import ParameterSpec
+
+__all__ = ["ParameterDescription", "Value"]
+
 Value = int | float | str
 
 
-class SpecLike(Protocol):
-    """What a catalog entry or a configuration override says about a parameter."""
-
-    @property
-    def name(self) -> str: ...
-    @property
-    def type(self) -> str | None: ...
-    @property
-    def conversion(self) -> int | None: ...
-    @property
-    def scale(self) -> float | None: ...
-    @property
-    def unit(self) -> str: ...
-    @property
-    def array(self) -> int | None: ...
-    @property
-    def min(self) -> float | None: ...
-    @property
-    def max(self) -> float | None: ...
-
-
 @dataclass(frozen=True, slots=True)
-class ParameterFormat:
-    """Type, scaling, unit and limits of one parameter (all optional)."""
+class ParameterDescription:
+    """Type, scaling, unit, limits and writability of one parameter (all optional).
+
+    ``name`` is the catalog's (or the configuration's) name, empty when neither
+    knows the parameter; its value is then read and shown raw. ``writable`` is
+    the catalog's default outside the service; in the service's tables it is
+    whether the drive's ``writable`` list allows the write.
+    """
 
     name: str = ""
     vtype: ValueType | None = None
@@ -51,9 +55,12 @@ class ParameterFormat:
     minimum: float | None = None
     maximum: float | None = None
     array: int | None = None  # number of elements, when the catalog says it is an array
+    writable: bool = False
+    prefix: str = ""  # Siemens r (read-only) or p (settable), when the catalog says
 
     @classmethod
-    def from_spec(cls, spec: SpecLike | None) -> ParameterFormat:
+    def from_spec(cls, spec: ParameterSpec | None) -> ParameterDescription:
+        """The description of a catalog entry; an empty one (raw values) for None."""
         if spec is None:
             return cls()
         if spec.conversion is not None:
@@ -63,14 +70,23 @@ class ParameterFormat:
         else:
             scaling = UNSCALED
         vtype = ValueType(spec.type) if spec.type else None
-        return cls(spec.name, vtype, scaling, spec.unit, spec.min, spec.max, spec.array)
+        return cls(
+            spec.name,
+            vtype,
+            scaling,
+            spec.unit,
+            spec.min,
+            spec.max,
+            spec.array,
+            spec.writable,
+            spec.prefix,
+        )
 
-    def with_type(self, vtype: ValueType | None) -> ParameterFormat:
+    def with_type(self, vtype: ValueType | None) -> ParameterDescription:
+        """The same with the value type ``vtype`` (from the command line, say), if given."""
         if vtype is None:
             return self
-        return ParameterFormat(
-            self.name, vtype, self.scaling, self.unit, self.minimum, self.maximum, self.array
-        )
+        return replace(self, vtype=vtype)
 
     @property
     def is_text(self) -> bool:
