@@ -5,7 +5,7 @@ limits, array length, whether a write is allowed, and its Siemens r/p. The
 catalog's :class:`~pkwbus.catalog.ParameterSpec` (an entry of a catalog file,
 with the config's overrides applied) becomes one through
 :meth:`ParameterDescription.from_spec`; the service resolves one per parameter
-of each drive when it is built (:class:`ParameterTable`), and the master
+of each drive when it is built (a :class:`ParameterTable`), and the master
 decodes and encodes values with it. Pure: no I/O, no clock.
 
 Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a value that
@@ -16,15 +16,19 @@ carries no value (:meth:`ParameterDescription.value_of`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Final
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
     UNSCALED,
+    ParameterRef,
     Scaling,
     ValueType,
+    canonical,
     decode_text,
     decode_value,
     encode_exact,
@@ -33,7 +37,7 @@ from pkwbus.protocol.params import (
 if TYPE_CHECKING:
     from pkwbus.catalog.loader import ParameterSpec
 
-__all__ = ["ParameterDescription", "Value"]
+__all__ = ["OTHER_INDEX", "ParameterDescription", "ParameterTable", "Value"]
 
 Value = int | float | str
 
@@ -124,3 +128,54 @@ class ParameterDescription:
         width = self.vtype.width
         assert width is not None
         return raw, width
+
+
+#: The key, in :attr:`ParameterTable.configured`, of an index the configuration does not name.
+OTHER_INDEX: Final = -1
+
+Key = tuple[int, int | None]
+_UNKNOWN = ParameterDescription()
+
+
+def _empty() -> Mapping[Key, ParameterDescription]:
+    return MappingProxyType({})
+
+
+def _empty_catalog() -> Mapping[int, ParameterDescription]:
+    return MappingProxyType({})
+
+
+@dataclass(frozen=True)
+class ParameterTable:
+    """Every parameter of one drive, resolved once: PNU (and index) -> its description.
+
+    ``configured``: the parameters the configuration names, the catalog entry
+    with the configuration's overrides, writable when the drive's ``writable``
+    list allows it; keyed by (PNU, index), (PNU, None) for no index and
+    (PNU, :data:`OTHER_INDEX`) for an index the configuration does not name,
+    when that differs from (PNU, None). ``catalog``: the entries of the drive's
+    catalog as they are, none writable. A parameter in neither is unknown: its
+    value is read and shown raw. Immutable: the tables are read-only mappings.
+    """
+
+    danfoss: bool = False  # the drive numbers its parameters in groups (Danfoss FC)
+    configured: Mapping[Key, ParameterDescription] = field(default_factory=_empty)
+    catalog: Mapping[int, ParameterDescription] = field(default_factory=_empty_catalog)
+
+    def describe(self, ref: ParameterRef) -> ParameterDescription:
+        """What is known of ``ref`` (with its index) on the drive."""
+        keys: tuple[Key, ...] = ((ref.pnu, ref.index),)
+        if ref.index is not None:
+            keys += ((ref.pnu, OTHER_INDEX), (ref.pnu, None))
+        for key in keys:
+            found = self.configured.get(key)
+            if found is not None:
+                return found
+        return self.catalog.get(ref.pnu, _UNKNOWN)
+
+    def canonical(self, ref: ParameterRef) -> ParameterRef:
+        """``ref`` under the drive's one name for it (``3-41`` for ``341`` on an FC drive,
+        ``r0021`` when the catalog or configuration gives the prefix); a
+        :class:`~pkwbus.protocol.params.ParameterNotationError` for r/p on an FC drive."""
+        prefix = self.describe(ParameterRef(ref.pnu, None, ref.name)).prefix
+        return canonical(ref, danfoss=self.danfoss, prefix=prefix)
