@@ -37,7 +37,7 @@ from pkwbus.protocol.params import (
 if TYPE_CHECKING:
     from pkwbus.catalog.loader import ParameterSpec
 
-__all__ = ["OTHER_INDEX", "ParameterDescription", "ParameterTable", "Value"]
+__all__ = ["OTHER_INDEX", "ParameterDescription", "ParameterKey", "ParameterTable", "Value"]
 
 Value = int | float | str
 
@@ -133,11 +133,11 @@ class ParameterDescription:
 #: The key, in :attr:`ParameterTable.configured`, of an index the configuration does not name.
 OTHER_INDEX: Final = -1
 
-Key = tuple[int, int | None]
+ParameterKey = tuple[int, int | None]
 _UNKNOWN = ParameterDescription()
 
 
-def _empty() -> Mapping[Key, ParameterDescription]:
+def _empty() -> Mapping[ParameterKey, ParameterDescription]:
     return MappingProxyType({})
 
 
@@ -159,12 +159,12 @@ class ParameterTable:
     """
 
     danfoss: bool = False  # the drive numbers its parameters in groups (Danfoss FC)
-    configured: Mapping[Key, ParameterDescription] = field(default_factory=_empty)
+    configured: Mapping[ParameterKey, ParameterDescription] = field(default_factory=_empty)
     catalog: Mapping[int, ParameterDescription] = field(default_factory=_empty_catalog)
 
     def describe(self, ref: ParameterRef) -> ParameterDescription:
         """What is known of ``ref`` (with its index) on the drive."""
-        keys: tuple[Key, ...] = ((ref.pnu, ref.index),)
+        keys: tuple[ParameterKey, ...] = ((ref.pnu, ref.index),)
         if ref.index is not None:
             keys += ((ref.pnu, OTHER_INDEX), (ref.pnu, None))
         for key in keys:

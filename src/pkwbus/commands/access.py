@@ -1,4 +1,8 @@
-"""`pkwbus read` and `pkwbus write`: one parameter of one drive."""
+"""`pkwbus read` and `pkwbus write`: one parameter of one drive.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad input or
+a port that cannot be opened.
+"""
 
 from __future__ import annotations
 
@@ -37,7 +41,15 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import Protocol
 
-__all__ = ["add_parsers", "drive_name", "run_read", "run_write"]
+__all__ = [
+    "add_parsers",
+    "drive_name",
+    "finish",
+    "report_value",
+    "run_read",
+    "run_write",
+    "show_read",
+]
 
 
 def add_parsers(sub: Any) -> None:
@@ -112,7 +124,7 @@ async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRe
         await line.close()
 
 
-def _finish(outcome: Outcome) -> pkw.PkwResponse:
+def finish(outcome: Outcome) -> pkw.PkwResponse:
     failure = command_failure(outcome)
     if failure is not None:
         raise CommandError(failure.message, failure.code, kind=failure.kind, fault=failure.fault)
@@ -120,7 +132,7 @@ def _finish(outcome: Outcome) -> pkw.PkwResponse:
     return outcome.response
 
 
-def _report(
+def report_value(
     args: argparse.Namespace,
     ref: ParameterRef,
     raw: int | None,
@@ -163,12 +175,12 @@ def show_read(
     args: argparse.Namespace, ref: ParameterRef, fmt: ParameterDescription, outcome: Outcome
 ) -> int:
     """The answer to a read, printed as ``read`` prints it (FC, USS and PROFIBUS alike)."""
-    response = _finish(outcome)
+    response = finish(outcome)
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError as exc:
         raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
-    _report(args, ref, raw, value, fmt)
+    report_value(args, ref, raw, value, fmt)
     return Exit.OK
 
 
@@ -189,10 +201,10 @@ def run_write(args: argparse.Namespace) -> int:
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = _finish(link.run(_perform(args, target, req)))
+    response = finish(link.run(_perform(args, target, req)))
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError:
         value = args.value
-    _report(args, ref, raw, value, fmt, f" written ({store.value})")
+    report_value(args, ref, raw, value, fmt, f" written ({store.value})")
     return Exit.OK

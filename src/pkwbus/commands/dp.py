@@ -7,6 +7,9 @@ and the module identifiers given, or read from the drive's GSD file. A slave
 owned by another master is never parametrised (exit 3); a line another
 master runs is never used (exit 3). At the end Global_Control Clear goes to
 every slave and the port is closed.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options,
+an unreadable GSD file, a port that cannot be opened or a line another master runs.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from pkwbus.protocol.ppo import PkwSlot, PpoType
 
 __all__ = [
     "DEFAULT_BAUDRATE",
+    "MAX_DP_RETRIES",
     "DpContext",
     "add_dp_options",
     "build_context",

@@ -6,6 +6,9 @@ commissioning scan: every baud rate, fastest first, with each parity of
 answer at that rate. A drive is reported at the first setting it answers
 at and not asked again at slower ones. An FC drive is also asked its type
 (15-40 FC Type, Danfoss FC protocol); a drive that does not say has none.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options
+or a port that cannot be opened.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
-__all__ = ["add_parsers", "parse_addresses", "run_scan"]
+__all__ = ["Progress", "add_parsers", "parse_addresses", "run_scan"]
 
 # The rates drives of these protocols take (Danfoss FC parameter 8-32; USS), fastest first.
 AUTO_BAUDRATES = tuple(sorted((b for b in limits.BAUDRATES if b <= 115200), reverse=True))

@@ -16,6 +16,19 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome, Tally
 from pkwbus.protocol import pkw
 
+__all__ = [
+    "Action",
+    "DriveSpec",
+    "Event",
+    "Finished",
+    "HealthChanged",
+    "Idle",
+    "Overrun",
+    "PollSpec",
+    "Send",
+    "StatusWord",
+]
+
 
 @dataclass(frozen=True)
 class PollSpec:

@@ -36,6 +36,8 @@ from pkwbus.master.transaction import (
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 
+__all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
+
 log = logging.getLogger("pkwbus.master.scheduler")
 
 REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing

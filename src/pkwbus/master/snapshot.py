@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import Value
 
+__all__ = ["DriveState", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
+
 
 @dataclass(frozen=True, slots=True)
 class Reading:

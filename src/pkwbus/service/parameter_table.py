@@ -16,7 +16,12 @@ from dataclasses import replace
 from types import MappingProxyType
 
 from pkwbus.catalog import load_catalog
-from pkwbus.catalog.description import OTHER_INDEX, Key, ParameterDescription, ParameterTable
+from pkwbus.catalog.description import (
+    OTHER_INDEX,
+    ParameterDescription,
+    ParameterKey,
+    ParameterTable,
+)
 from pkwbus.protocol.params import MAX_INDEX, ParameterRef
 from pkwbus.service import config as cfg
 
@@ -28,7 +33,7 @@ def parameter_table(drive: cfg.Drive) -> ParameterTable:
     named: dict[int, set[int | None]] = {}
     for _, ref in drive.refs():
         named.setdefault(ref.pnu, {None}).add(ref.index)
-    configured: dict[Key, ParameterDescription] = {}
+    configured: dict[ParameterKey, ParameterDescription] = {}
     for pnu, indexes in named.items():
         prefix = drive.prefix_of(pnu)
         for index in indexes:

@@ -24,6 +24,8 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ParameterRef
 
+__all__ = ["DriveEntry", "LineCounts", "LineRunner", "Runtime"]
+
 log = logging.getLogger(__name__)
 
 

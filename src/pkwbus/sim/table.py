@@ -26,6 +26,8 @@ from typing import Final
 from pkwbus.protocol.params import Scaling, ValueType
 from pkwbus.protocol.telegram import Protocol
 
+__all__ = ["FC_TABLE", "MODEL_PARAMS", "TABLES", "USS_TABLE", "Initial", "ParamSpec"]
+
 Initial = float | str | tuple[float, ...]
 
 
