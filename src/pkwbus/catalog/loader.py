@@ -53,7 +53,12 @@ class CatalogError(Exception):
 
 
 class ParameterSpec(BaseModel):
-    """What a catalog knows about one parameter."""
+    """What a catalog knows about one parameter: an entry of a catalog file, validated.
+
+    The configuration applies its overrides to it (:meth:`overridden`); past
+    that, the code knows a parameter by its
+    :class:`~pkwbus.catalog.description.ParameterDescription` (``from_spec``).
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 

@@ -11,7 +11,7 @@ import asyncio
 from typing import Any
 
 from pkwbus import durations, link
-from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
@@ -86,27 +86,30 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
         vtype = parse_type(args.type) if args.type else None
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    spec = _spec(args, ref)
+    known = _known(args, ref)
     try:
-        ref = drive_name(ref, target, spec)
+        ref = drive_name(ref, target, known)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return target, ref, ParameterDescription.from_spec(spec).with_type(vtype)
+    return target, ref, known.with_type(vtype)
 
 
-def drive_name(ref: ParameterRef, target: DriveTarget, spec: ParameterSpec | None) -> ParameterRef:
+def drive_name(
+    ref: ParameterRef, target: DriveTarget, known: ParameterDescription | None
+) -> ParameterRef:
     """The drive's one name for ``ref`` (3-41 on an FC drive, r/p refused there);
     elsewhere the catalog's r/p, else the one given on the command line."""
-    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    prefix = known.prefix if known is not None and known.prefix else ref.prefix
     return canonical(ref, danfoss=target.dialect.danfoss_numbers, prefix=prefix)
 
 
-def _spec(args: argparse.Namespace, ref: ParameterRef) -> ParameterSpec | None:
+def _known(args: argparse.Namespace, ref: ParameterRef) -> ParameterDescription:
+    """What the catalog named on the command line says of ``ref`` (nothing with 'none')."""
     name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
     if name == "none":
-        return None
+        return ParameterDescription()
     try:
-        return load_catalog(name).get(ref.pnu)
+        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
     except CatalogError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 

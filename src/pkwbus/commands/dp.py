@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pkwbus import durations, limits
-from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
 from pkwbus.link import PortError, PortSettings
@@ -225,12 +225,12 @@ async def session(
     return outcomes
 
 
-def _spec(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterSpec | None:
+def _known(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterDescription:
     name = getattr(args, "catalog", None) or DP_CATALOGS.get(dia.name) or "none"
     if name == "none":
-        return None
+        return ParameterDescription()
     try:
-        return load_catalog(name).get(ref.pnu)
+        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
     except CatalogError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
@@ -245,13 +245,13 @@ def resolve(
         vtype = parse_type(args.type) if typed and args.type else None
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    spec = _spec(args, ctx.dialect, ref) if typed else None
-    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    known = _known(args, ctx.dialect, ref) if typed else ParameterDescription()
+    prefix = known.prefix or ref.prefix
     try:
         ref = canonical(ref, danfoss=ctx.dialect.danfoss_numbers, prefix=prefix)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    fmt = ParameterDescription.from_spec(spec).with_type(vtype)
+    fmt = known.with_type(vtype)
     if fmt.is_text:
         raise CommandError("a text parameter does not fit the 4 PKW words of a PPO", Exit.BAD_INPUT)
     return ref, fmt
