@@ -76,8 +76,8 @@ async def _serve(port: str, baud: int, writes: int, gap: float, nodelay: bool) -
 
 async def _direct(runtime: Any, writes: int, gap: float) -> list[float]:
     """Write jobs submitted straight to the runtime: the master's share of the latency."""
+    from pkwbus.catalog.description import ParameterDescription
     from pkwbus.master.jobs import JobKind
-    from pkwbus.master.values import ParameterFormat
     from pkwbus.protocol import pkw
 
     entry = runtime.drives["l0d2"]
@@ -87,7 +87,7 @@ async def _direct(runtime: Any, writes: int, gap: float) -> list[float]:
         await asyncio.sleep(gap * (0.5 + rng.random()))
         req = pkw.write(entry.target.dialect, 341, 100 + i % 50, pkw.Width.DWORD)
         t0 = time.perf_counter()
-        await runtime.submit("l0d2", req, JobKind.WRITE, ParameterFormat())
+        await runtime.submit("l0d2", req, JobKind.WRITE, ParameterDescription())
         out.append(time.perf_counter() - t0)
     return out
 

@@ -14,6 +14,8 @@ from pkwbus.commands import access, describe, ports, scan, service
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.sim import cli as sim_cli
 
+__all__ = ["Parser", "build_parser", "main"]
+
 
 class Parser(argparse.ArgumentParser):
     """argparse with its usage errors in one line, saying where the help is; exit 2."""

@@ -14,6 +14,25 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Final
 
+__all__ = [
+    "DP_SLOT_TIME",
+    "DP_WATCHDOG",
+    "HINT",
+    "INTER_CHAR_TIMEOUT",
+    "JOB_DEADLINE",
+    "PAUSE",
+    "POLL_INTERVAL",
+    "RANGES",
+    "RESPONSE_DELAY",
+    "RS485_DELAY",
+    "SIM_LAG",
+    "SIM_LATE",
+    "STATS_INTERVAL",
+    "TELEGRAM_TIMEOUT",
+    "DurationRange",
+    "parse_duration",
+]
+
 _DURATION = re.compile(
     r"^\s*([-+]?(?:[0-9]{1,12}(?:\.[0-9]{0,12})?|\.[0-9]{1,12}))\s*(ms|s|min|m|h)?\s*$"
 )

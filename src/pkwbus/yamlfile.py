@@ -12,6 +12,8 @@ from typing import Any
 
 import yaml
 
+__all__ = ["UniqueKeyLoader", "YamlError", "load_yaml"]
+
 
 class YamlError(ValueError):
     """Text that is not YAML pkwbus can read; the message says where and why."""

@@ -19,11 +19,11 @@ import httpx
 from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.dp_scheduler import DpScheduler
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Rejected
 from pkwbus.master.transaction import ExchangeResult, Failure, Reply
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
@@ -155,7 +155,7 @@ async def until(condition: Callable[[], bool], timeout: float = 30.0) -> None:
 async def test_values_in_metrics_are_the_simulators_scaled_by_the_catalog(
     tmp_path: Path,
 ) -> None:
-    factor = ParameterFormat.from_spec(load_catalog("danfoss-fc").get(341)).scaling.factor
+    factor = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341)).scaling.factor
     assert factor == Fraction(1, 100)  # conversion index -2
     async with dp_service(tmp_path) as svc:
         for address, name in NAMES.items():
@@ -431,7 +431,7 @@ async def test_telegram_errors_and_pkw_faults_are_what_the_simulator_injected(
             "mixer",
             pkw.write(svc.sim.dialect, 1613, 1, pkw.Width.DWORD),
             JobKind.WRITE,
-            ParameterFormat(),
+            ParameterDescription(),
         )
         await svc.runtime.stop()  # every exchange accounted for on both sides
         for address, name in NAMES.items():

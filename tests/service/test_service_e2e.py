@@ -20,7 +20,7 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.catalog import load_catalog
-from pkwbus.master.values import ParameterFormat
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import ref_to_percent
 from pkwbus.service.api import create_app
@@ -119,7 +119,7 @@ async def test_metrics_carry_the_simulators_values_scaled() -> None:
         sim.drives[1].value(1613),
         ValueType(spec.type).width,  # type: ignore[arg-type]
         ValueType(spec.type),
-        ParameterFormat.from_spec(spec).scaling,
+        ParameterDescription.from_spec(spec).scaling,
     )
     assert freq == pytest.approx(float(expected), abs=1.0)
     assert dc is not None and 400 < dc < 800

@@ -8,7 +8,7 @@ import random
 import pytest
 
 from pkwbus.catalog import load_catalog
-from pkwbus.master.values import ParameterFormat
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import Profile
 from pkwbus.protocol.telegram import Protocol
@@ -53,7 +53,7 @@ def test_catalog_readings_decode_to_the_models_quantity(
     drive = sim.drives[1]
     spec = load_catalog(catalog).get(pnu)
     assert spec is not None and spec.type is not None
-    fmt = ParameterFormat.from_spec(spec)
+    fmt = ParameterDescription.from_spec(spec)
     vtype = ValueType(spec.type)
     width = vtype.width
     assert width is not None
@@ -90,7 +90,7 @@ def test_catalog_settings_start_at_the_tables_value_in_the_catalogs_unit(
     spec = load_catalog(catalog).get(pnu)
     assert spec is not None and spec.type is not None and spec.unit != model_unit
     sim = Simulator(protocol, [1], catalog=catalog, seed=1, clock=FakeClock())
-    fmt = ParameterFormat.from_spec(spec)
+    fmt = ParameterDescription.from_spec(spec)
     vtype = ValueType(spec.type)
     assert vtype.width is not None
     got = decode_value(sim.drives[1].value(pnu), vtype.width, vtype, fmt.scaling)

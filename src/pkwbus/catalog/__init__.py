@@ -3,6 +3,7 @@
 from types import MappingProxyType
 from typing import Final
 
+from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.catalog.loader import (
     CONVERSION_INDEXES,
     Catalog,
@@ -25,7 +26,9 @@ __all__ = [
     "Catalog",
     "CatalogError",
     "Dialect",
+    "ParameterDescription",
     "ParameterSpec",
+    "Value",
     "ValueType",
     "available_catalogs",
     "load_catalog",

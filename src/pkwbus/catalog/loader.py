@@ -4,6 +4,8 @@ A catalog tells, per parameter number (PNU), what the drive's manual says about
 it: name, value type, scaling (Danfoss conversion index or a plain factor),
 unit, limits, whether the API may write it by default, array length, and where
 the fact comes from. See docs/catalogs.md for the file format.
+
+Raises :class:`CatalogError` for a catalog that cannot be found, read or validated.
 """
 
 from __future__ import annotations
@@ -51,7 +53,12 @@ class CatalogError(Exception):
 
 
 class ParameterSpec(BaseModel):
-    """What a catalog knows about one parameter."""
+    """What a catalog knows about one parameter: an entry of a catalog file, validated.
+
+    The configuration applies its overrides to it (:meth:`overridden`); past
+    that, the code knows a parameter by its
+    :class:`~pkwbus.catalog.description.ParameterDescription` (``from_spec``).
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 

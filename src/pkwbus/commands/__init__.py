@@ -1,1 +1,3 @@
 """The `pkwbus` subcommands."""
+
+__all__: list[str] = []

@@ -1,4 +1,8 @@
-"""`pkwbus read` and `pkwbus write`: one parameter of one drive."""
+"""`pkwbus read` and `pkwbus write`: one parameter of one drive.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad input or
+a port that cannot be opened.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,8 @@ import asyncio
 from typing import Any
 
 from pkwbus import durations, link
-from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog import CatalogError, load_catalog
+from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
     PROFIBUS,
@@ -25,7 +30,6 @@ from pkwbus.link import PortError
 from pkwbus.master.outcomes import Answered, Outcome, command_failure
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
@@ -37,7 +41,15 @@ from pkwbus.protocol.params import (
 )
 from pkwbus.protocol.telegram import Protocol
 
-__all__ = ["add_parsers", "drive_name", "run_read", "run_write"]
+__all__ = [
+    "add_parsers",
+    "drive_name",
+    "finish",
+    "report_value",
+    "run_read",
+    "run_write",
+    "show_read",
+]
 
 
 def add_parsers(sub: Any) -> None:
@@ -66,7 +78,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterFormat]:
+def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterDescription]:
     try:
         ref = parse_parameter(args.parameter)
         target = build_target(args)
@@ -74,27 +86,30 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
         vtype = parse_type(args.type) if args.type else None
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    spec = _spec(args, ref)
+    known = _known(args, ref)
     try:
-        ref = drive_name(ref, target, spec)
+        ref = drive_name(ref, target, known)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return target, ref, ParameterFormat.from_spec(spec).with_type(vtype)
+    return target, ref, known.with_type(vtype)
 
 
-def drive_name(ref: ParameterRef, target: DriveTarget, spec: ParameterSpec | None) -> ParameterRef:
+def drive_name(
+    ref: ParameterRef, target: DriveTarget, known: ParameterDescription | None
+) -> ParameterRef:
     """The drive's one name for ``ref`` (3-41 on an FC drive, r/p refused there);
     elsewhere the catalog's r/p, else the one given on the command line."""
-    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    prefix = known.prefix if known is not None and known.prefix else ref.prefix
     return canonical(ref, danfoss=target.dialect.danfoss_numbers, prefix=prefix)
 
 
-def _spec(args: argparse.Namespace, ref: ParameterRef) -> ParameterSpec | None:
+def _known(args: argparse.Namespace, ref: ParameterRef) -> ParameterDescription:
+    """What the catalog named on the command line says of ``ref`` (nothing with 'none')."""
     name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
     if name == "none":
-        return None
+        return ParameterDescription()
     try:
-        return load_catalog(name).get(ref.pnu)
+        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
     except CatalogError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
@@ -112,7 +127,7 @@ async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRe
         await line.close()
 
 
-def _finish(outcome: Outcome) -> pkw.PkwResponse:
+def finish(outcome: Outcome) -> pkw.PkwResponse:
     failure = command_failure(outcome)
     if failure is not None:
         raise CommandError(failure.message, failure.code, kind=failure.kind, fault=failure.fault)
@@ -120,12 +135,12 @@ def _finish(outcome: Outcome) -> pkw.PkwResponse:
     return outcome.response
 
 
-def _report(
+def report_value(
     args: argparse.Namespace,
     ref: ParameterRef,
     raw: int | None,
     value: Value,
-    fmt: ParameterFormat,
+    fmt: ParameterDescription,
     verb: str = "",
 ) -> None:
     if args.json:
@@ -160,15 +175,15 @@ def run_read(args: argparse.Namespace) -> int:
 
 
 def show_read(
-    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterFormat, outcome: Outcome
+    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterDescription, outcome: Outcome
 ) -> int:
     """The answer to a read, printed as ``read`` prints it (FC, USS and PROFIBUS alike)."""
-    response = _finish(outcome)
+    response = finish(outcome)
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError as exc:
         raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
-    _report(args, ref, raw, value, fmt)
+    report_value(args, ref, raw, value, fmt)
     return Exit.OK
 
 
@@ -189,10 +204,10 @@ def run_write(args: argparse.Namespace) -> int:
         target.telegram(req)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = _finish(link.run(_perform(args, target, req)))
+    response = finish(link.run(_perform(args, target, req)))
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError:
         value = args.value
-    _report(args, ref, raw, value, fmt, f" written ({store.value})")
+    report_value(args, ref, raw, value, fmt, f" written ({store.value})")
     return Exit.OK

@@ -19,6 +19,8 @@ from pkwbus.protocol.params import parse_parameter
 from pkwbus.service.audit import AuditEntry
 from pkwbus.service.config import Config, ConfigError
 
+__all__ = ["HEADER", "UnitOf", "row", "stamp", "table", "units_from", "value_text"]
+
 HEADER = ("TIME", "DRIVE", "PARAMETER", "CHANGE", "STORE", "OUTCOME", "CLIENT", "DETAIL")
 UnitOf = Callable[[str, str], str]
 

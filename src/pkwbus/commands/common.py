@@ -1,4 +1,7 @@
-"""What every bus command shares: exit codes, line and drive options, output."""
+"""What every bus command shares: exit codes, line and drive options, output.
+
+Raises :class:`CommandError` (a message and an exit code) for options that do not fit.
+"""
 
 from __future__ import annotations
 

@@ -3,6 +3,9 @@
 FC 300-style drives (and PROFIdrive ones) answer description elements (AK 4):
 1 data type, 2 number of array elements, 4 conversion index (high byte) and
 unit index (low byte), 6 name, 7 low limit, 8 high limit.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad input, a
+port that cannot be opened or an answer that is a fault.
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from pkwbus.protocol.params import (
     parse_parameter,
 )
 
-__all__ = ["ELEMENTS", "add_parsers", "describe", "run_describe"]
+__all__ = ["ELEMENTS", "add_parsers", "describe", "report", "run_describe"]
 
 ELEMENTS = (1, 2, 4, 6, 7, 8)
 

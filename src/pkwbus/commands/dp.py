@@ -7,6 +7,9 @@ and the module identifiers given, or read from the drive's GSD file. A slave
 owned by another master is never parametrised (exit 3); a line another
 master runs is never used (exit 3). At the end Global_Control Clear goes to
 every slave and the port is closed.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options,
+an unreadable GSD file, a port that cannot be opened or a line another master runs.
 """
 
 from __future__ import annotations
@@ -18,13 +21,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pkwbus import durations, limits
-from pkwbus.catalog import CatalogError, ParameterSpec, load_catalog
+from pkwbus.catalog import CatalogError, load_catalog
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
 from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
 from pkwbus.master.outcomes import Outcome
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, gsd, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
@@ -35,6 +38,7 @@ from pkwbus.protocol.ppo import PkwSlot, PpoType
 
 __all__ = [
     "DEFAULT_BAUDRATE",
+    "MAX_DP_RETRIES",
     "DpContext",
     "add_dp_options",
     "build_context",
@@ -221,19 +225,19 @@ async def session(
     return outcomes
 
 
-def _spec(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterSpec | None:
+def _known(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterDescription:
     name = getattr(args, "catalog", None) or DP_CATALOGS.get(dia.name) or "none"
     if name == "none":
-        return None
+        return ParameterDescription()
     try:
-        return load_catalog(name).get(ref.pnu)
+        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
     except CatalogError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
 
 def resolve(
     args: argparse.Namespace, ctx: DpContext, *, typed: bool = True
-) -> tuple[ParameterRef, ParameterFormat]:
+) -> tuple[ParameterRef, ParameterDescription]:
     """The parameter named on the command line, in the dialect's notation, and its format."""
     try:
         ref = parse_parameter(args.parameter)
@@ -241,13 +245,13 @@ def resolve(
         vtype = parse_type(args.type) if typed and args.type else None
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    spec = _spec(args, ctx.dialect, ref) if typed else None
-    prefix = spec.prefix if spec is not None and spec.prefix else ref.prefix
+    known = _known(args, ctx.dialect, ref) if typed else ParameterDescription()
+    prefix = known.prefix or ref.prefix
     try:
         ref = canonical(ref, danfoss=ctx.dialect.danfoss_numbers, prefix=prefix)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    fmt = ParameterFormat.from_spec(spec).with_type(vtype)
+    fmt = known.with_type(vtype)
     if fmt.is_text:
         raise CommandError("a text parameter does not fit the 4 PKW words of a PPO", Exit.BAD_INPUT)
     return ref, fmt

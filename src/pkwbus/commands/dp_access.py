@@ -1,5 +1,9 @@
 """`pkwbus read`, `write` and `describe` over PROFIBUS DP: the same output and exit codes
-as over FC and USS, the job carried by the slave's PPO."""
+as over FC and USS, the job carried by the slave's PPO.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code, as over FC and
+USS.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import argparse
 from typing import Any
 
 from pkwbus import link
-from pkwbus.commands.access import _finish, _report, show_read
+from pkwbus.commands.access import finish, report_value, show_read
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.commands.describe import ELEMENTS, report
 from pkwbus.commands.dp import DpContext, build_context, resolve, session
@@ -47,12 +51,12 @@ def run_write(args: argparse.Namespace) -> int:
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     (outcome,) = _outcomes(args, session(args, ctx, args.address, [req]))
-    response = _finish(outcome)
+    response = finish(outcome)
     try:
         got, value = fmt.value_of(response)
     except RemoteProtocolError:
         got, value = raw, args.value
-    _report(args, ref, got, value, fmt, f" written ({store.value})")
+    report_value(args, ref, got, value, fmt, f" written ({store.value})")
     return Exit.OK
 
 

@@ -5,6 +5,9 @@ address 0-125 but its own for its FDL status (EN 50170 vol. 2 part 4, "FDL
 status"): the answer says whether a station is there and whether it is a
 slave or a master. Each slave is then asked its diagnosis (Slave_Diag):
 ident number, state, and the master that owns it. Nothing is parametrised.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options,
+a port that cannot be opened or a line another master runs.
 """
 
 from __future__ import annotations

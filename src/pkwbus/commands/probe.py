@@ -6,6 +6,9 @@ drive that answers is listed with its status word; one that does not, with
 what came back instead. An adapter that echoes the requests while the line's
 ``echo`` is off is named. Simulated (``sim://``) lines are not probed, nor
 are PROFIBUS lines: ``pkwbus scan --protocol profibus`` shows their live list.
+
+Raises :class:`~pkwbus.commands.common.CommandError` (exit 3) when a drive does not
+answer.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.build import line_for, target_for
 
-__all__ = ["probe"]
+__all__ = ["probe", "run_probe"]
 
 
 def probe(config: cfg.Config) -> tuple[list[str], bool]:

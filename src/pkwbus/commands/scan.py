@@ -6,6 +6,9 @@ commissioning scan: every baud rate, fastest first, with each parity of
 answer at that rate. A drive is reported at the first setting it answers
 at and not asked again at slower ones. An FC drive is also asked its type
 (15-40 FC Type, Danfoss FC protocol); a drive that does not say has none.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options
+or a port that cannot be opened.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import time
 from typing import Any, TextIO
 
 from pkwbus import durations, limits, link
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import (
     DEFAULT_BAUDRATE,
     PROFIBUS,
@@ -34,7 +38,6 @@ from pkwbus.master.line import Line
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -42,7 +45,7 @@ from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
-__all__ = ["add_parsers", "parse_addresses", "run_scan"]
+__all__ = ["Progress", "add_parsers", "parse_addresses", "run_scan"]
 
 # The rates drives of these protocols take (Danfoss FC parameter 8-32; USS), fastest first.
 AUTO_BAUDRATES = tuple(sorted((b for b in limits.BAUDRATES if b <= 115200), reverse=True))
@@ -223,7 +226,9 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
         return None
     try:
         _, value = (
-            ParameterFormat.from_spec(None).with_type(ValueType.TEXT).value_of(outcome.response)
+            ParameterDescription.from_spec(None)
+            .with_type(ValueType.TEXT)
+            .value_of(outcome.response)
         )
     except RemoteProtocolError:
         return None

@@ -1,4 +1,8 @@
-"""`pkwbus run`, `pkwbus check-config` and `pkwbus audit`."""
+"""`pkwbus run`, `pkwbus check-config` and `pkwbus audit`.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for a
+configuration or audit log that cannot be used.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +21,8 @@ from pkwbus.service.load import check_config_report
 
 if TYPE_CHECKING:
     from pkwbus.service.audit import AuditLog
+
+__all__ = ["add_parsers", "load", "open_audit", "run_audit", "run_check", "run_service"]
 
 log = logging.getLogger("pkwbus")
 

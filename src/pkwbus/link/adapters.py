@@ -16,7 +16,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-__all__ = ["Adapter", "PortInfo", "by_id_names", "describe", "list_adapters", "unstable_name"]
+__all__ = [
+    "DEV",
+    "Adapter",
+    "PortInfo",
+    "by_id_names",
+    "describe",
+    "list_adapters",
+    "unstable_name",
+]
 
 DEV = Path("/dev")
 SYS = Path("/sys")

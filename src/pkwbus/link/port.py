@@ -10,6 +10,8 @@ and writes with :meth:`Link.write_now`, discarding input only when stray
 bytes arrived. When the port disappears it tells its owner once
 (``on_lost``); when and whether to reopen is the owner's decision
 (:class:`pkwbus.link.reconnect.Reconnect`).
+
+Raises :class:`PortError` when the port cannot be opened, is not open or was lost.
 """
 
 from __future__ import annotations

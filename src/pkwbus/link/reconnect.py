@@ -14,6 +14,8 @@ from collections.abc import Callable
 
 from pkwbus.link.backoff import Backoff
 
+__all__ = ["LinkState", "Reconnect", "StateListener"]
+
 
 class LinkState(enum.Enum):
     CLOSED = "closed"

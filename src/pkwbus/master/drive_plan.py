@@ -12,6 +12,8 @@ from pkwbus.master.jobs import Job, Priority
 from pkwbus.master.plan import DriveSpec, PollSpec, Send
 from pkwbus.master.transaction import PkwTransaction
 
+__all__ = ["Active", "DrivePlan", "PollState"]
+
 
 class PollState:
     """A poll and when it is due; its request telegram is built once."""

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 from pkwbus.link.backoff import Backoff
 
+__all__ = ["DriveHealth", "HealthPolicy"]
+
 
 @dataclass(frozen=True, slots=True)
 class HealthPolicy:

@@ -6,10 +6,10 @@ import asyncio
 import enum
 from dataclasses import dataclass, field
 
+from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.outcomes import Cancelled, JobOutcome, Outcome
 from pkwbus.master.snapshot import Reading
 from pkwbus.master.transaction import Tally
-from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 
 __all__ = ["Cancelled", "Job", "JobKind", "JobOutcome", "JobResult", "Priority"]
@@ -52,7 +52,7 @@ class Job:
     kind: JobKind
     priority: Priority
     deadline: float
-    fmt: ParameterFormat = field(default_factory=ParameterFormat)
+    fmt: ParameterDescription = field(default_factory=ParameterDescription)
     future: asyncio.Future[JobResult] | None = None
     parameter: str = ""
     index: int = 0

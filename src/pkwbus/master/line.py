@@ -46,6 +46,8 @@ from pkwbus.protocol.telegram import (
     uss_lengths,
 )
 
+__all__ = ["WAIT_IN_PLACE", "Done", "Line", "TraceHook"]
+
 log = logging.getLogger(__name__)
 
 TraceHook = Callable[[str, bytes], None]

@@ -10,11 +10,24 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import Job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome, Tally
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
+
+__all__ = [
+    "Action",
+    "DriveSpec",
+    "Event",
+    "Finished",
+    "HealthChanged",
+    "Idle",
+    "Overrun",
+    "PollSpec",
+    "Send",
+    "StatusWord",
+]
 
 
 @dataclass(frozen=True)
@@ -25,7 +38,7 @@ class PollSpec:
     index: int
     request: pkw.PkwRequest
     every: float
-    fmt: ParameterFormat = field(default_factory=ParameterFormat)
+    fmt: ParameterDescription = field(default_factory=ParameterDescription)
 
 
 @dataclass(frozen=True)

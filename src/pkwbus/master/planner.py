@@ -60,6 +60,8 @@ from pkwbus.master.transaction import (
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.telegram import split_block
 
+__all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
+
 PORT_CLOSED = "the line's port is not open"
 IDLE_AT_MOST = 3600.0
 _EXPIRY = -1  # a timer entry that ends queued jobs at their deadline (not versioned)

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Protocol
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult
 from pkwbus.master.plan import (
     DriveSpec,
@@ -32,9 +33,10 @@ from pkwbus.master.transaction import (
     Tally,
     TimedOut,
 )
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
+
+__all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
 
 log = logging.getLogger("pkwbus.master.scheduler")
 
@@ -61,7 +63,7 @@ class NoEvents:
 
 
 def job_result(
-    outcome: Outcome, tally: Tally | None, request: pkw.PkwRequest, fmt: ParameterFormat
+    outcome: Outcome, tally: Tally | None, request: pkw.PkwRequest, fmt: ParameterDescription
 ) -> JobResult:
     """The result of a finished job: its value when the answer carries one.
 

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from pkwbus.master.values import Value
+from pkwbus.catalog.description import Value
+
+__all__ = ["DriveState", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,4 +1,8 @@
-"""A drive as the line addresses it: protocol, address, dialect, IND layout, block shape."""
+"""A drive as the line addresses it: protocol, address, dialect, IND layout, block shape.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for an address or dialect the
+protocol does not take.
+"""
 
 from __future__ import annotations
 

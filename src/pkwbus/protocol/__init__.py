@@ -2,3 +2,5 @@
 
 Bytes in, objects out: nothing here reads a clock, a port or an event loop.
 """
+
+__all__: list[str] = []

@@ -4,6 +4,10 @@ The request frames a master sends and the answers it decodes (EN 50170
 vol. 2 part 3, "DP services"; VIPA IM 353 manual, "diagnosis" for the
 diagnosis bytes; Balluff BNI PBS manual for Set_Prm; Beckhoff FC310x manual
 for configuration identifiers). Pure: bytes in, objects out.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a request that cannot be
+built and :class:`~pkwbus.protocol.errors.RemoteProtocolError` for received data that
+does not decode.
 """
 
 from __future__ import annotations
@@ -15,6 +19,29 @@ from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.fdl import BROADCAST, DataFrame, Function, request_fc
+
+__all__ = [
+    "DIAG_FLAGS",
+    "MASTER_SAP",
+    "MAX_USER_PRM",
+    "NO_MASTER",
+    "WATCHDOG_TICK",
+    "ControlCommand",
+    "Diagnosis",
+    "Direction",
+    "Module",
+    "Parameters",
+    "Service",
+    "check_cfg",
+    "decode_diagnosis",
+    "decode_parameters",
+    "encode_diagnosis",
+    "global_control_clear",
+    "io_lengths",
+    "parse_cfg",
+    "request",
+    "watchdog_factors",
+]
 
 MASTER_SAP: Final = 62
 NO_MASTER: Final = 0xFF

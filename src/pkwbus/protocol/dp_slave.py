@@ -30,6 +30,23 @@ from pkwbus.protocol.dp_services import (
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.fdl import DataFrame, Status
 
+__all__ = [
+    "Answer",
+    "DiagnosisRead",
+    "DpSlave",
+    "Event",
+    "Failed",
+    "FailureKind",
+    "Garbled",
+    "Inputs",
+    "NoAnswer",
+    "RestartReason",
+    "Restarted",
+    "SlaveSetup",
+    "SlaveState",
+    "StateChanged",
+]
+
 
 class SlaveState(enum.StrEnum):
     """The ``state`` label of pkwbus_dp_slave_state."""

@@ -16,6 +16,24 @@ from __future__ import annotations
 
 from typing import Final
 
+__all__ = [
+    "CHAR_BITS",
+    "MAX_TSDR_BITS",
+    "MIN_TSDR_BITS",
+    "TID1_BITS",
+    "TSL_BITS",
+    "TSYN_BITS",
+    "TTO_SLOTS",
+    "USB_SLOT_FAST",
+    "USB_SLOT_MIDDLE",
+    "USB_SLOT_SLOW",
+    "bits",
+    "default_slot_time",
+    "exchange_time",
+    "token_lost_time",
+    "wire_time",
+]
+
 CHAR_BITS: Final = 11
 TSYN_BITS: Final = 33
 TID1_BITS: Final = 37

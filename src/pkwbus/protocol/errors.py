@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+__all__ = ["LocalProtocolError", "ProtocolError", "RemoteProtocolError"]
+
 
 class ProtocolError(Exception):
     """Base of every error the protocol layer raises."""

@@ -6,6 +6,9 @@ and ``Ext_User_Prm_Data_Ref`` with the ``ExtUserPrmData`` definitions), the
 modules with their configuration identifiers, and ``MaxTsdr`` per baud rate
 (PROFIBUS GSD specification: keywords are case-insensitive, ``;`` starts a
 comment, ``\\`` at the end of a line continues it). Pure: text in, objects out.
+
+Raises :class:`GsdError` (with the line) for a GSD file that does not parse,
+:class:`~pkwbus.protocol.errors.LocalProtocolError` for a module it lacks.
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ from types import MappingProxyType
 from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError
+
+__all__ = ["BAUD_SUFFIXES", "HEADER", "ExtUserPrm", "Gsd", "GsdError", "GsdModule", "parse"]
 
 HEADER: Final = "#profibus_dp"
 

@@ -11,6 +11,9 @@ was written ``341``, ``0341`` or ``03-41``, and refuses the Siemens ``r``/``p``
 prefix; any other drive calls it ``r0021`` / ``p1082`` when the prefix is
 known (from the catalog, else from the configuration), else by its plain
 number.
+
+Raises :class:`ParameterNotationError` for text that is not a parameter, or a notation
+the drive does not use.
 """
 
 from __future__ import annotations

@@ -9,6 +9,10 @@ PPO-write, the slave answers with the PPO-read.
 pkwbus never takes control of a drive: every PPO-write carries a control
 word of 0 (bit 10 "control by PLC" / "data valid" clear) and every other PZD
 word 0. This is enforced here and cannot be changed by a caller.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a PPO or dialect that
+cannot be used and :class:`~pkwbus.protocol.errors.RemoteProtocolError` for a PPO-read
+that does not decode.
 """
 
 from __future__ import annotations
@@ -22,6 +26,26 @@ from pkwbus.protocol import pkw, pzd
 from pkwbus.protocol.dialects import Command, Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pzd import Profile
+
+__all__ = [
+    "DEFAULT_PROFILES",
+    "DP_DIALECTS",
+    "IDLE_WAIT_CYCLES",
+    "LAYOUT",
+    "PKW_WORDS",
+    "PPO_TYPES",
+    "JobDone",
+    "JobExpired",
+    "JobResult",
+    "PkwSlot",
+    "PpoRead",
+    "PpoType",
+    "SlotUpdate",
+    "decode_ppo_read",
+    "dp_dialect",
+    "encode_ppo_write",
+    "ppo_type",
+]
 
 DP_DIALECTS: Final = ("profidrive", "danfoss-pcv", "hitachi-sjpb")
 LAYOUT: Final = IndLayout.PROFIDRIVE  # subindex in IND high byte, page index in the low byte

@@ -3,6 +3,9 @@
 A monitoring master must never take control of a drive: both the FC profile
 and PROFIdrive ignore the control word while its bit 10 is 0 ("data not
 valid" / "no control by PLC"), so :data:`MONITORING_CTW` is 0.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a bit name, word or
+percentage out of range.
 """
 
 from __future__ import annotations
@@ -13,6 +16,25 @@ from types import MappingProxyType
 from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError
+
+__all__ = [
+    "CONTROL_BITS",
+    "CTW_BIT_DATA_VALID",
+    "FC_CONTROL_BITS",
+    "FC_STATUS_BITS",
+    "MONITORING_CTW",
+    "PROFIDRIVE_CONTROL_BITS",
+    "PROFIDRIVE_STATUS_BITS",
+    "REF_100_PERCENT",
+    "STATUS_BITS",
+    "Profile",
+    "control_word",
+    "percent_to_ref",
+    "ref_to_percent",
+    "status_bits",
+    "status_word",
+    "takes_control",
+]
 
 CTW_BIT_DATA_VALID: Final = 10
 MONITORING_CTW: Final = 0x0000

@@ -3,6 +3,10 @@
 A telegram is ``STX LGE ADR data... BCC``: STX is 0x02, LGE counts the bytes
 after itself (data + ADR + BCC), BCC is the XOR of every byte before it.
 Words travel high byte first. This module is pure: bytes in, objects out.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a telegram that cannot be
+built and :class:`~pkwbus.protocol.errors.RemoteProtocolError` for received bytes that
+do not decode.
 """
 
 from __future__ import annotations

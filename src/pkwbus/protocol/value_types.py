@@ -1,4 +1,8 @@
-"""Value types (u16 ... f32, text), description data types and conversion-index scaling."""
+"""Value types (u16 ... f32, text), description data types and conversion-index scaling.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for an unknown type,
+conversion index or scale.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,9 @@
-"""Engineering values to raw numbers and back: limits, exact encoding, f32, text."""
+"""Engineering values to raw numbers and back: limits, exact encoding, f32, text.
+
+Raises :class:`~pkwbus.protocol.errors.LocalProtocolError` for a value that cannot be
+encoded and :class:`~pkwbus.protocol.errors.RemoteProtocolError` for an answer of the
+wrong kind.
+"""
 
 from __future__ import annotations
 

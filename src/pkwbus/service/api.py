@@ -3,6 +3,9 @@
 Reading the audit log needs a token: the write token, or the read token named
 by ``api.read_token_env``. An error body quotes at most :data:`MAX_MESSAGE`
 characters of what it complains about.
+
+The endpoints answer every :class:`~pkwbus.service.parameter_checks.ApiError` as a JSON
+error body with its status.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ import asyncio
 import hmac
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
@@ -19,18 +22,39 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.security import HTTPBearer
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
-from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service import exposition
+from pkwbus.service.api_models import (
+    ERRORS,
+    DriveView,
+    Health,
+    LineView,
+    ParameterReading,
+    Readiness,
+    ValueBody,
+    WriteBody,
+    WriteResult,
+)
 from pkwbus.service.audit import AuditError, AuditLog, as_dict
 from pkwbus.service.metrics import api_metrics
 from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
 from pkwbus.service.recorder import AuditRecorder
 from pkwbus.service.runtime import Runtime
+
+__all__ = [
+    "BEARER",
+    "MAX_AUDIT_LIMIT",
+    "MAX_BODY",
+    "MAX_MESSAGE",
+    "STATIC",
+    "BodyLimit",
+    "create_app",
+    "drive_view",
+    "line_views",
+]
 
 MAX_BODY = 4096
 MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
@@ -45,93 +69,6 @@ BEARER = HTTPBearer(
     scheme_name="token",
     description="the write token (writes, the audit log) or the read token (the audit log)",
 )
-
-
-class ParameterReading(BaseModel):
-    parameter: str
-    index: int
-    value: float | int | str
-    raw: int | None
-    unit: str
-    timestamp: float
-
-
-class DriveView(BaseModel):
-    name: str
-    line: str
-    protocol: str
-    address: int
-    dialect: str
-    up: bool
-    status_word: int | None
-    status: dict[str, bool]
-    values: list[ParameterReading]
-    faults: int = 0  # rejections since the service started
-    telegram_errors: int = 0  # exchanges without a usable answer since the service started
-
-
-class LineView(BaseModel):
-    name: str
-    open: bool
-    drives: int
-    drives_up: int
-    busy_seconds: float  # since the service started
-    utilisation: float | None  # share of the time busy since the last look (None: first look)
-
-
-class Health(BaseModel):
-    status: str
-    version: str = __version__
-
-
-class Readiness(BaseModel):
-    ready: bool
-    lines: dict[str, bool]
-    writes: bool = Field(default=True, description="false while the audit log cannot record")
-    reason: str | None = Field(default=None, description="why writes are unavailable")
-
-
-class WriteBody(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-    # Strict: true/false is not 1/0, and "10" stays a string (refused for a number).
-    value: StrictInt | StrictFloat | StrictStr = Field(
-        description="engineering value, scaled by the catalog; a string for text parameters"
-    )
-    index: int | None = Field(default=None, ge=0, le=255)
-    store: pkw.Store = pkw.Store.RAM
-    verify: bool = Field(default=False, description="read the parameter back after writing")
-    dry_run: bool = Field(default=False, description="validate and show the telegram only")
-
-
-class ValueBody(BaseModel):
-    parameter: str
-    pnu: int
-    index: int
-    raw: int | None
-    value: float | int | str | None
-    unit: str
-
-
-class WriteResult(ValueBody):
-    store: str
-    dry_run: bool
-    telegram: str
-    audit_id: int | None
-    old_value: float | int | str | None = None
-    verified: bool | None = None
-    audit: Literal["complete", "incomplete"] = Field(
-        default="complete", description="incomplete: the audit row could not be fully stored"
-    )
-
-
-class ErrorBody(BaseModel):
-    error: dict[str, object]
-
-
-ERRORS: dict[int | str, dict[str, object]] = {
-    code: {"model": ErrorBody} for code in (401, 403, 404, 409, 413, 422, 429, 503, 504)
-}
 
 
 class _TooLarge(BaseException):

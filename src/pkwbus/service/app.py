@@ -3,6 +3,8 @@
 SIGTERM, SIGINT or SIGHUP: stop taking new jobs, let every line finish the
 exchange in flight, close the ports, stop the HTTP server, exit 0. SIGHUP
 does not reload the configuration: a new configuration takes a restart.
+
+Raises :class:`ListenError` when the HTTP address cannot be bound.
 """
 
 from __future__ import annotations
@@ -22,6 +24,15 @@ from fastapi import FastAPI
 from pkwbus.service.config import LISTEN_ENV
 from pkwbus.service.http import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
+
+__all__ = [
+    "SPARE_DESCRIPTORS",
+    "STOP_SIGNALS",
+    "ListenError",
+    "bind",
+    "raise_open_files_limit",
+    "serve",
+]
 
 log = logging.getLogger(__name__)
 

@@ -10,10 +10,11 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Awaitable, Callable
 from pathlib import Path
+from types import MappingProxyType
 
 import prometheus_client
 
-from pkwbus.catalog import ParameterSpec
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.dp_line import DpLine
@@ -22,7 +23,6 @@ from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import dp_services, dp_timing, pkw
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
@@ -37,6 +37,7 @@ from pkwbus.service.metrics import (
     SnapshotCollector,
     api_metrics,
 )
+from pkwbus.service.parameter_table import parameter_table
 from pkwbus.service.runtime import DriveEntry, LineRunner, Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.dp_line import DpSimulator, SlaveKind
@@ -173,43 +174,37 @@ def _drive(
     line: cfg.Line, drive: cfg.Drive, entries: list[DriveEntry], infos: list[ParameterInfo]
 ) -> DriveSpec:
     target = target_for(line, drive)
+    table = parameter_table(drive)
     polls = []
     units: dict[str, str] = {}
     for entry in drive.poll:
         ref = entry.ref
         index = entry.index if entry.index is not None else ref.index
         # Labels are the drive's one name for the parameter: "1613" polls 16-13.
-        ref = drive.canonical(ParameterRef(ref.pnu, index, ref.name))
-        spec = drive.spec(ref)
-        fmt = ParameterFormat.from_spec(spec)
+        ref = table.canonical(ParameterRef(ref.pnu, index, ref.name))
+        fmt = table.describe(ref)
         polls.append(PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt))
         units[ref.name] = fmt.unit
-        infos.append(_info(line, drive, ref, spec, fmt))
+        infos.append(_info(line, drive, ref, fmt))
     entries.append(
         DriveEntry(
             drive.name,
             line.name,
             target,
             tuple(polls),
-            may_write=drive.may_write,
-            format_of=lambda r, d=drive: ParameterFormat.from_spec(d.spec(r)),  # type: ignore[misc]
-            units=units,
-            canonical=drive.canonical,
+            parameters=table,
+            units=MappingProxyType(units),
         )
     )
     return DriveSpec(drive.name, target, tuple(polls))
 
 
-def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterFormat) -> pkw.PkwRequest:
+def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterDescription) -> pkw.PkwRequest:
     return pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
 
 
 def _info(
-    line: cfg.Line,
-    drive: cfg.Drive,
-    ref: ParameterRef,
-    spec: ParameterSpec | None,
-    fmt: ParameterFormat,
+    line: cfg.Line, drive: cfg.Drive, ref: ParameterRef, fmt: ParameterDescription
 ) -> ParameterInfo:
     return ParameterInfo(
         line.name,
@@ -217,7 +212,7 @@ def _info(
         ref.name,
         ref.index or 0,
         ref.pnu,
-        spec.name if spec else "",
+        fmt.name,
         fmt.unit,
         fmt.vtype.value if fmt.vtype else "raw",
     )

@@ -36,6 +36,25 @@ from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
 
+__all__ = [
+    "DEFAULT_RESPONSE_DELAY",
+    "DP_JOB_CYCLES",
+    "FC_PARAMETER_TELEGRAM",
+    "USS_OVERHEAD",
+    "USS_VARIABLE_PKW_WORDS",
+    "WARN_UTILISATION",
+    "LineLoad",
+    "catalog_notes",
+    "check_config_report",
+    "config_load",
+    "dp_frame_bytes",
+    "dp_line_load",
+    "exchange_seconds",
+    "line_load",
+    "port_warnings",
+    "telegram_bytes",
+]
+
 DEFAULT_RESPONSE_DELAY: Final = 0.005  # seconds, FC and USS alike
 WARN_UTILISATION: Final = 0.8
 FC_PARAMETER_TELEGRAM: Final = 16  # bytes: STX LGE ADR PKE IND PWE PCD1 PCD2 BCC

@@ -7,6 +7,8 @@ import logging
 import sys
 import time
 
+__all__ = ["CONTEXT", "JsonFormatter", "TextFormatter", "setup_logging"]
+
 CONTEXT = ("line", "drive")
 
 

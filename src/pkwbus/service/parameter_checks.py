@@ -15,9 +15,9 @@ import hmac
 from dataclasses import dataclass
 from typing import Any
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import JobResult
 from pkwbus.master.outcomes import http_failure
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.runtime import DriveEntry, Runtime
@@ -124,7 +124,7 @@ def locate(
     return entry, ref
 
 
-def fit_index(ref: ParameterRef, fmt: ParameterFormat) -> ParameterRef:
+def fit_index(ref: ParameterRef, fmt: ParameterDescription) -> ParameterRef:
     """Index 0 of a parameter the catalog does not call an array is the parameter itself;
     an index past the catalog's array length is refused before anything is sent."""
     if ref.index is None:

@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections import Counter
 from typing import Any
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Answered
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef
@@ -27,7 +27,7 @@ __all__ = ["MAX_READS_PER_DRIVE", "Reads", "read_request"]
 MAX_READS_PER_DRIVE = 4  # on-demand reads of one drive waiting at once
 
 
-def read_request(entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat) -> pkw.PkwRequest:
+def read_request(entry: DriveEntry, ref: ParameterRef, fmt: ParameterDescription) -> pkw.PkwRequest:
     """The read of ``ref`` on the drive: its text for a text parameter, else its value."""
     d = entry.target.dialect
     try:
@@ -74,7 +74,7 @@ class Reads:
         }
 
     async def try_read(
-        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterDescription
     ) -> JobResult:
         """A read whose failure is not an error: the result, with no value when unanswered.
 

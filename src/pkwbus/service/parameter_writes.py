@@ -21,9 +21,9 @@ import asyncio
 from dataclasses import dataclass
 from typing import Any
 
+from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Answered, audit_outcome
-from pkwbus.master.values import ParameterFormat, Value
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, encode_text
@@ -149,7 +149,7 @@ class Writes:
         self,
         entry: DriveEntry,
         ref: ParameterRef,
-        fmt: ParameterFormat,
+        fmt: ParameterDescription,
         order: WriteOrder,
         request: pkw.PkwRequest,
         telegram: str,
@@ -205,7 +205,7 @@ class Writes:
         return reading.value if reading is not None else None
 
     def _write_request(
-        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterFormat, order: WriteOrder
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterDescription, order: WriteOrder
     ) -> pkw.PkwRequest:
         d = entry.target.dialect
         try:
@@ -227,7 +227,7 @@ class Writes:
     def _write_body(
         self,
         ref: ParameterRef,
-        fmt: ParameterFormat,
+        fmt: ParameterDescription,
         order: WriteOrder,
         request: pkw.PkwRequest,
         telegram: str,

@@ -35,6 +35,8 @@ from typing import Any, Final, TypeVar
 from pkwbus.service.audit import AuditEntry, AuditError, AuditLog
 from pkwbus.service.metrics import ApiMetrics
 
+__all__ = ["MAX_UNSAVED", "PROBE_INTERVAL", "RETRY_DELAYS", "AuditRecorder", "AuditUnavailable"]
+
 log = logging.getLogger(__name__)
 
 RETRY_DELAYS: Final = (0.05, 0.2, 0.5)  # seconds before each further try of an outcome

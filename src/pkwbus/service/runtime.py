@@ -11,37 +11,52 @@ import asyncio
 import logging
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 
+from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.scheduler import PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.values import ParameterFormat
 from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ParameterRef
+
+__all__ = ["DriveEntry", "LineCounts", "LineRunner", "Runtime"]
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class DriveEntry:
-    """A configured drive as the service knows it."""
+    """A configured drive as the service knows it: its parameters resolved at build time.
+
+    It holds no configuration model: what a parameter is, whether it may be
+    written and its name on the drive come from ``parameters``.
+    """
 
     name: str
     line: str
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
-    may_write: Callable[[ParameterRef], bool] = field(default=lambda ref: False)
-    format_of: Callable[[ParameterRef], ParameterFormat] = field(
-        default=lambda ref: ParameterFormat()
-    )
-    units: dict[str, str] = field(default_factory=dict)
-    # The drive's one name for a parameter (3-41 for 341); LocalProtocolError for a
-    # notation the drive does not use.
-    canonical: Callable[[ParameterRef], ParameterRef] = field(default=lambda ref: ref)
+    parameters: ParameterTable = field(default_factory=ParameterTable)
+    # The unit of each polled parameter, by its name on the drive.
+    units: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+
+    def may_write(self, ref: ParameterRef) -> bool:
+        """Whether the drive's ``writable`` list allows writing ``ref``."""
+        return self.parameters.describe(ref).writable
+
+    def format_of(self, ref: ParameterRef) -> ParameterDescription:
+        """What is known of ``ref``: type, scaling, unit, limits (empty when nothing)."""
+        return self.parameters.describe(ref)
+
+    def canonical(self, ref: ParameterRef) -> ParameterRef:
+        """The drive's one name for ``ref`` (3-41 for 341); LocalProtocolError for a
+        notation the drive does not use."""
+        return self.parameters.canonical(ref)
 
     def unit_of(self, parameter: str) -> str:
         return self.units.get(parameter, "")
@@ -121,7 +136,7 @@ class Runtime:
         drive: str,
         request: pkw.PkwRequest,
         kind: JobKind,
-        fmt: ParameterFormat,
+        fmt: ParameterDescription,
         *,
         timeout: float | None = None,
         parameter: str = "",

@@ -8,6 +8,9 @@ reading (r0021 in rpm, not the model's Hz) and a stored setting's initial
 value and limits alike (p1082 in rpm, 1-20 in W). A setting whose units have
 no known conversion keeps its number (it is only a starting value); a live
 reading without one is an error.
+
+Raises :class:`~pkwbus.catalog.CatalogError` for a live reading whose unit has no known
+conversion.
 """
 
 from __future__ import annotations

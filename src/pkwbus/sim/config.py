@@ -7,6 +7,8 @@ from typing import Literal
 
 from pkwbus.protocol import timing
 
+__all__ = ["FAULT_KINDS", "LAG_MODES", "LagMode", "SimFaults", "SimTiming"]
+
 LagMode = Literal["none", "stale"]
 LAG_MODES: tuple[LagMode, ...] = ("none", "stale")
 FAULT_KINDS = ("drop", "corrupt", "truncate", "garbage", "wrong_address", "late", "stale")

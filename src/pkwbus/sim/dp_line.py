@@ -41,7 +41,7 @@ from pkwbus.sim.model import ModelConfig
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
 
-__all__ = ["DEFAULT_IDENTS", "DP_FAULT_KINDS", "DpFaults", "DpSimulator"]
+__all__ = ["DEFAULT_IDENTS", "DP_FAULT_KINDS", "DpFaults", "DpSimulator", "SlaveKind"]
 
 Clock = Callable[[], float]
 

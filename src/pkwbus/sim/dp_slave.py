@@ -24,6 +24,8 @@ from pkwbus.protocol.dp_services import (
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.fdl import BROADCAST, DataFrame, ShortAck, Status
 
+__all__ = ["Respond", "SimDpSlave", "SlaveMode"]
+
 Respond = Callable[[bytes, float], bytes]  # outputs (PPO-write), now -> inputs (PPO-read)
 
 

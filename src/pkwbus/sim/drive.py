@@ -1,4 +1,8 @@
-"""One simulated drive: model, parameters, process data, PKW lag."""
+"""One simulated drive: model, parameters, process data, PKW lag.
+
+Raises :class:`~pkwbus.protocol.errors.RemoteProtocolError` for a request whose PKW part
+has the wrong length.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +20,8 @@ from pkwbus.sim.config import SimTiming
 from pkwbus.sim.model import DriveModel, Limits, ModelConfig
 from pkwbus.sim.params import ParameterStore
 from pkwbus.sim.table import MODEL_PARAMS, ParamSpec
+
+__all__ = ["CTW_LOG", "SimDrive"]
 
 CTW_LOG = 10_000
 

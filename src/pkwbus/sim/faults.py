@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from pkwbus.protocol.telegram import STX, Protocol, frame
 from pkwbus.sim.config import SimFaults
 
+__all__ = ["Answer", "apply", "other_adr", "pick"]
+
 _NOISE = bytes(b for b in range(256) if b != STX)
 
 

@@ -13,6 +13,17 @@ from dataclasses import dataclass, field
 from pkwbus.protocol import pzd
 from pkwbus.protocol.pzd import Profile
 
+__all__ = [
+    "ALARMS",
+    "SQRT3",
+    "TRIPS_PER_HOUR",
+    "WARNINGS_PER_HOUR",
+    "WARNING_BITS",
+    "DriveModel",
+    "Limits",
+    "ModelConfig",
+]
+
 SQRT3 = math.sqrt(3.0)
 WARNINGS_PER_HOUR = 12.0  # the defaults of `pkwbus simulate --warnings-per-hour`
 TRIPS_PER_HOUR = 1.0  # and of --trips-per-hour

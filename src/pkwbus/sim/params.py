@@ -1,4 +1,8 @@
-"""A simulated drive's parameters: the store, live readings, and PKW requests executed on them."""
+"""A simulated drive's parameters: the store, live readings, and PKW requests executed on them.
+
+A request the drive refuses raises :class:`Refused` (its fault number), answered as a
+PKW fault.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +14,16 @@ from pkwbus.protocol.dialects import WRITE_COMMANDS, Command, Dialect, Reply
 from pkwbus.protocol.params import ValueType, decode_value, encode_value
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse, Width
 from pkwbus.sim.table import ParamSpec
+
+__all__ = [
+    "ARRAY_COMMANDS",
+    "EEPROM_COMMANDS",
+    "TYPE_CODES",
+    "FaultNumbers",
+    "Live",
+    "ParameterStore",
+    "Refused",
+]
 
 Live = Callable[[str, int], float]
 

@@ -8,6 +8,8 @@ from typing import Any
 
 from pkwbus.sim.config import FAULT_KINDS
 
+__all__ = ["DRIVE_COUNTERS", "INJECTED_KINDS", "LINE_COUNTERS", "SimStats"]
+
 INJECTED_KINDS = (*FAULT_KINDS, "dead")
 LINE_COUNTERS = (
     "requests",

@@ -10,6 +10,8 @@ import tempfile
 
 from pkwbus.sim.stats import SimStats
 
+__all__ = ["StatsServer", "keep_stats_file", "write_stats_file"]
+
 
 def write_stats_file(stats: SimStats, path: str) -> None:
     """Write the counters to ``path`` by rename, so a reader never sees half a file."""

@@ -26,12 +26,22 @@ from typing import Final
 from pkwbus.protocol.params import Scaling, ValueType
 from pkwbus.protocol.telegram import Protocol
 
+__all__ = ["FC_TABLE", "MODEL_PARAMS", "TABLES", "USS_TABLE", "Initial", "ParamSpec"]
+
 Initial = float | str | tuple[float, ...]
 
 
 @dataclass(frozen=True, slots=True)
 class ParamSpec:
-    """One parameter of a simulated drive. Limits are engineering values."""
+    """How one parameter of a simulated drive behaves: its initial value, the model
+    quantity it reads (``live``), whether it changes only while stopped, and the
+    type, scaling, unit, limits and writability it answers with. Limits are
+    engineering values.
+
+    It describes the simulated drive, not what the master knows of a parameter
+    (that is :class:`pkwbus.catalog.ParameterDescription`); a catalog's entries
+    are merged into it by :mod:`pkwbus.sim.catalogs`.
+    """
 
     pnu: int
     name: str

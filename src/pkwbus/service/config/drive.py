@@ -213,9 +213,9 @@ class Drive(Model):
         LocalProtocolError), else ``r0021``/``p1082`` with the prefix of the catalog,
         else of this configuration, else the plain number."""
         numbers = self.pkw_dialect.danfoss_numbers
-        return canonical(ref, danfoss=numbers, prefix=self._prefix(ref.pnu, catalogs))
+        return canonical(ref, danfoss=numbers, prefix=self.prefix_of(ref.pnu, catalogs))
 
-    def _prefix(self, pnu: int, catalogs: Catalogs | None) -> str:
+    def prefix_of(self, pnu: int, catalogs: Catalogs | None = None) -> str:
         """The r/p of ``pnu``: the catalog's, else the first this configuration writes."""
         given = (ref.prefix for _, ref in self.refs() if ref.pnu == pnu and ref.prefix)
         return self._catalog_prefix(pnu, catalogs) or next(given, "")

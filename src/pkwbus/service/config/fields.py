@@ -33,6 +33,7 @@ __all__ = [
     "Number",
     "Pause",
     "PkwWords",
+    "Rs485Delay",
     "SlotTime",
     "Timeout",
     "TypeName",

@@ -1,4 +1,7 @@
-"""The whole file: where the API listens, its tokens, the audit log, the lines."""
+"""The whole file: where the API listens, its tokens, the audit log, the lines.
+
+Raises :class:`~pkwbus.service.config.base.ConfigError` for a malformed ``--listen``.
+"""
 
 from __future__ import annotations
 

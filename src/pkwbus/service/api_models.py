@@ -1,0 +1,110 @@
+"""The bodies of the JSON API's requests and answers, as its OpenAPI schema shows them."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
+
+from pkwbus import __version__
+from pkwbus.protocol import pkw
+
+__all__ = [
+    "ERRORS",
+    "DriveView",
+    "ErrorBody",
+    "Health",
+    "LineView",
+    "ParameterReading",
+    "Readiness",
+    "ValueBody",
+    "WriteBody",
+    "WriteResult",
+]
+
+
+class ParameterReading(BaseModel):
+    parameter: str
+    index: int
+    value: float | int | str
+    raw: int | None
+    unit: str
+    timestamp: float
+
+
+class DriveView(BaseModel):
+    name: str
+    line: str
+    protocol: str
+    address: int
+    dialect: str
+    up: bool
+    status_word: int | None
+    status: dict[str, bool]
+    values: list[ParameterReading]
+    faults: int = 0  # rejections since the service started
+    telegram_errors: int = 0  # exchanges without a usable answer since the service started
+
+
+class LineView(BaseModel):
+    name: str
+    open: bool
+    drives: int
+    drives_up: int
+    busy_seconds: float  # since the service started
+    utilisation: float | None  # share of the time busy since the last look (None: first look)
+
+
+class Health(BaseModel):
+    status: str
+    version: str = __version__
+
+
+class Readiness(BaseModel):
+    ready: bool
+    lines: dict[str, bool]
+    writes: bool = Field(default=True, description="false while the audit log cannot record")
+    reason: str | None = Field(default=None, description="why writes are unavailable")
+
+
+class WriteBody(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    # Strict: true/false is not 1/0, and "10" stays a string (refused for a number).
+    value: StrictInt | StrictFloat | StrictStr = Field(
+        description="engineering value, scaled by the catalog; a string for text parameters"
+    )
+    index: int | None = Field(default=None, ge=0, le=255)
+    store: pkw.Store = pkw.Store.RAM
+    verify: bool = Field(default=False, description="read the parameter back after writing")
+    dry_run: bool = Field(default=False, description="validate and show the telegram only")
+
+
+class ValueBody(BaseModel):
+    parameter: str
+    pnu: int
+    index: int
+    raw: int | None
+    value: float | int | str | None
+    unit: str
+
+
+class WriteResult(ValueBody):
+    store: str
+    dry_run: bool
+    telegram: str
+    audit_id: int | None
+    old_value: float | int | str | None = None
+    verified: bool | None = None
+    audit: Literal["complete", "incomplete"] = Field(
+        default="complete", description="incomplete: the audit row could not be fully stored"
+    )
+
+
+class ErrorBody(BaseModel):
+    error: dict[str, object]
+
+
+ERRORS: dict[int | str, dict[str, object]] = {
+    code: {"model": ErrorBody} for code in (401, 403, 404, 409, 413, 422, 429, 503, 504)
+}
