@@ -231,7 +231,7 @@ def replies(job: PkwTransaction) -> st.SearchStrategy[Reply | Failure]:
 def test_transaction_never_raises_and_ends_by_its_last_retry(data: st.DataObject) -> None:
     job = data.draw(transactions())
     counted = 0
-    for step in range(40):
+    for step in range(int(job.deadline) + 1):  # one step a second, up to the deadline itself
         result = data.draw(replies(job))
         if isinstance(result, Failure):
             counted += result.kind not in (ErrorKind.UNEXPECTED, ErrorKind.PORT)
