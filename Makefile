@@ -20,8 +20,13 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# Two workers (pytest-xdist): most tests wait on simulators, subprocesses and
+# sockets, so two share a two-core machine well; a fixed number, not "auto",
+# which counts the host's cores where a container may have fewer.
+PYTEST_WORKERS ?= 2
+
 pytest: $(STAMP)
-	$(BIN)/python -m pytest -q --cov=pkwbus --cov-report=term:skip-covered
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --cov=pkwbus --cov-report=term:skip-covered
 
 test: lint typecheck pytest
 

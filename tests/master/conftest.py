@@ -74,6 +74,16 @@ async def open_line(
         await line.close()
 
 
+async def until(check: Callable[[], bool], timeout: float = 10.0, step: float = 0.01) -> None:
+    """Until ``check()`` holds; the test fails after ``timeout`` seconds (generous: the
+    machine may be loaded; waiting for the event, not a fixed time, keeps it short)."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not check():
+        assert loop.time() < end, f"not within {timeout} s"
+        await asyncio.sleep(step)
+
+
 async def run_job(
     line: Line,
     target: DriveTarget,
@@ -86,4 +96,13 @@ async def run_job(
     return await _run_job(line, target, request, retries=retries, deadline=loop.time() + deadline)
 
 
-__all__ = ["Callable", "SimFaults", "Trace", "make_sim", "open_line", "run_job", "serve"]
+__all__ = [
+    "Callable",
+    "SimFaults",
+    "Trace",
+    "make_sim",
+    "open_line",
+    "run_job",
+    "serve",
+    "until",
+]

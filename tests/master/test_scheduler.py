@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -21,7 +22,7 @@ from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.protocol import pkw
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.sim import SimTiming
-from tests.master.conftest import Trace, make_sim, serve
+from tests.master.conftest import Trace, make_sim, serve, until
 
 
 class Recorder:
@@ -73,18 +74,20 @@ def scheduler(
     return LineScheduler("line1", line, specs, events=events, **kw), events, trace
 
 
-async def run_for(s: LineScheduler, seconds: float) -> None:
+async def run_until(s: LineScheduler, check: Callable[[], bool]) -> None:
     task = asyncio.create_task(s.run())
-    await asyncio.sleep(seconds)
-    s.stop()
-    await asyncio.wait_for(task, 2.0)
+    try:
+        await until(check)
+    finally:
+        s.stop()
+        await asyncio.wait_for(task, 2.0)
 
 
 async def test_polls_reach_the_snapshot_with_the_drives_values() -> None:
     sim = make_sim("fc", [1, 2])
     async with serve(sim, "tcp") as port:
         s, events, _ = scheduler(port, "fc", drive_specs("fc", [1, 2], [341, 1530], 0.05))
-        await run_for(s, 0.4)
+        await run_until(s, lambda: all(events.polls_ok(f"d{a}") >= 4 for a in (1, 2)))
     for a in (1, 2):
         reading = s.snapshot.readings[(f"d{a}", "341", 0)]
         assert reading.value == sim.drives[a].value(341)
@@ -100,7 +103,9 @@ async def test_two_lines_one_failing() -> None:
         bad_line = Line(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC)
         bad = LineScheduler("line2", bad_line, drive_specs("fc", [1], [1613], 0.01))
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
-        await asyncio.sleep(0.4)
+        await until(
+            lambda: good_events.polls_ok("d1") >= 10 and bad_line.reconnect.last_error is not None
+        )
         for x in (good, bad):
             x.stop()
         await asyncio.gather(*tasks)
@@ -146,10 +151,8 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
             real(*args, **kw)
 
         s.line.start = flaky  # type: ignore[method-assign]
-        task = asyncio.create_task(s.run())
-        await asyncio.sleep(1.2)  # the port is reopened after 0.5 s
-        s.stop()
-        await asyncio.wait_for(task, 2.0)
+        # the port is reopened after 0.5 s
+        await run_until(s, lambda: calls > 10 and events.polls_ok("d1") >= 5)
     assert calls > 10, "the line went on after the error"
     assert events.polls_ok("d1") >= 5
     assert any("unexpected error" in r.getMessage() for r in caplog.records)
@@ -188,7 +191,8 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
         assert s.snapshot.drives["d1"].up is False and s.snapshot.lines["line1"] is False
         sent_before = len(trace.tx)
         server = await sim.serve_tcp("127.0.0.1", int(port.rsplit(":", 1)[1]))
-        await asyncio.sleep(0.8)
+        # back up, and polls sent since: a write sent again would have gone first
+        await until(lambda: s.snapshot.lines["line1"] and len(trace.tx) >= sent_before + 4)
         assert s.snapshot.lines["line1"] is True
         assert target.telegram(write) not in trace.tx[sent_before:]
     finally:

@@ -13,7 +13,7 @@ import pytest
 from pkwbus.service.audit import AuditLog
 from pkwbus.sim import SimTiming, Simulator
 
-from .service import TOKEN, Service
+from .service import TOKEN, Service, wait_for
 
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
@@ -72,7 +72,13 @@ async def test_sigkill_during_writes_leaves_the_audit_database_intact(tmp_path: 
                 )
                 for i in range(20)
             ]
-            await asyncio.sleep(0.6)
+
+            def one_answered() -> bool:
+                return any(
+                    w.done() and not w.exception() and w.result().status_code == 200 for w in writes
+                )
+
+            await wait_for(one_answered, 20)  # then killed with the others on their way
             service.signal(signal.SIGKILL)
             await service.wait(5.0)
             await asyncio.gather(*writes, return_exceptions=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import functools
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -639,10 +641,16 @@ VALUES = st.recursive(
 )
 
 
-def _valid_tree() -> dict[str, Any]:
+@functools.cache
+def _demo_tree() -> dict[str, Any]:
     loaded = yaml.safe_load(DEMO.read_text())
     assert isinstance(loaded, dict)
     return loaded
+
+
+def _valid_tree() -> dict[str, Any]:
+    """The demo configuration as a tree of its own (read once: YAML is slow to parse)."""
+    return copy.deepcopy(_demo_tree())
 
 
 def _mutate(tree: Any, path: Sequence[int], value: Any) -> Any:

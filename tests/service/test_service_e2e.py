@@ -28,6 +28,7 @@ from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimFaults, SimTiming, Simulator
+from tests.master.conftest import until
 
 
 def samples(runtime: Runtime) -> dict[tuple[str, frozenset[tuple[str, str]]], float]:
@@ -249,10 +250,11 @@ async def test_a_dead_drive_is_logged_once_down_and_once_back(
     try:
         async with running("lines:" + fc_line("l1", server.url, drives, timeout="20ms")) as rt:
             sim.kill(2)
-            await asyncio.sleep(0.6)
+            await until(lambda: any("flaky is down" in r.getMessage() for r in caplog.records))
             down = sample(rt, "pkwbus_drive_up", drive="flaky")
             sim.revive(2)
-            await asyncio.sleep(1.6)  # the first probe comes 1 s after going down
+            # the first probe comes 1 s after going down
+            await until(lambda: sample(rt, "pkwbus_drive_up", drive="flaky") == 1.0, step=0.05)
             up = sample(rt, "pkwbus_drive_up", drive="flaky")
     finally:
         await server.close()
