@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import statistics
 import tempfile
 from pathlib import Path
 
@@ -45,7 +44,8 @@ async def test_an_answer_ends_the_wait_for_our_own_request_to_leave_the_wire() -
             await link.close()
             await end.close()
     pause = PortSettings(end.path, baudrate=1200).start_pause
-    assert pause - 0.002 <= waited < pause + 0.05
+    request_on_the_wire = len(_request()) * 11 / 1200
+    assert pause - 0.002 <= waited < request_on_the_wire
 
 
 async def test_a_start_pause_below_a_millisecond_is_kept_to_the_microsecond() -> None:
@@ -58,8 +58,10 @@ async def test_a_start_pause_below_a_millisecond_is_kept_to_the_microsecond() ->
         waited.append(loop.time() - t0)
     await link.close()
     assert min(waited) >= 0.0003
-    # the event loop's own timers would take a whole millisecond or more
-    assert statistics.median(waited) < 0.00095
+    # The event loop's own timers would take a whole millisecond or more, every time; one
+    # pause of the 21 under a millisecond shows they are not used (a loaded machine may
+    # wake us late now and then, but it cannot make a pause shorter).
+    assert min(waited) < 0.00095
 
 
 async def test_a_longer_pause_is_never_cut_short() -> None:
@@ -97,7 +99,7 @@ def test_on_pkwbus_loop_a_short_pause_needs_no_helper_thread() -> None:
     waited, threads = run_on_pkwbus_loop(pauses())
     assert not threads
     assert min(waited) >= 0.0003
-    assert statistics.median(waited) < 0.00095
+    assert min(waited) < 0.00095  # not the loop's millisecond timers (see above)
     loop = new_event_loop()
     try:
         assert has_fine_timers(loop)

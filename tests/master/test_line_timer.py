@@ -25,7 +25,7 @@ async def test_a_shorter_timeout_after_a_longer_one_fires_on_time() -> None:
         result = await line.exchange(dead, _telegram(dead), timeout=0.05)
         waited = loop.time() - t0
     assert isinstance(result, Failure) and result.kind is ErrorKind.TIMEOUT
-    assert 0.05 <= waited < 0.5
+    assert 0.05 <= waited < 1.0  # not the 2 s the timer was armed for before
 
 
 async def test_a_longer_timeout_after_a_shorter_one_is_not_cut_short() -> None:
@@ -35,11 +35,11 @@ async def test_a_longer_timeout_after_a_shorter_one_is_not_cut_short() -> None:
         loop = asyncio.get_running_loop()
         assert isinstance(await line.exchange(alive, _telegram(alive), timeout=0.03), Reply)
         t0 = loop.time()
-        result = await line.exchange(dead, _telegram(dead), timeout=0.2)
+        result = await line.exchange(dead, _telegram(dead), timeout=1.0)
         waited = loop.time() - t0
         assert isinstance(result, Failure) and result.kind is ErrorKind.TIMEOUT
-        assert waited >= 0.2
-        # and back to back timeouts keep their own length
+        assert waited >= 1.0
+        # and back to back timeouts keep their own length: not the 1 s of the one before
         t0 = loop.time()
         await line.exchange(dead, _telegram(dead), timeout=0.04)
-        assert 0.04 <= loop.time() - t0 < 0.15
+        assert 0.04 <= loop.time() - t0 < 0.5
