@@ -12,7 +12,9 @@ from typing import Any
 
 from pkwbus import durations, link
 from pkwbus.catalog import CatalogError, load_catalog
-from pkwbus.catalog.description import ParameterDescription, Value
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.commands import dp_access
+from pkwbus.commands.answers import drive_name, finish, report_value, show_read
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
     PROFIBUS,
@@ -23,18 +25,16 @@ from pkwbus.commands.common import (
     build_line,
     build_target,
     duration_option,
-    emit_json,
 )
 from pkwbus.commands.dp import add_dp_options
 from pkwbus.link import PortError
-from pkwbus.master.outcomes import Answered, Outcome, command_failure
+from pkwbus.master.outcomes import Outcome
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import (
     ParameterRef,
-    canonical,
     encode_text,
     parse_parameter,
     parse_type,
@@ -43,12 +43,8 @@ from pkwbus.protocol.telegram import Protocol
 
 __all__ = [
     "add_parsers",
-    "drive_name",
-    "finish",
-    "report_value",
     "run_read",
     "run_write",
-    "show_read",
 ]
 
 
@@ -94,15 +90,6 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
     return target, ref, known.with_type(vtype)
 
 
-def drive_name(
-    ref: ParameterRef, target: DriveTarget, known: ParameterDescription | None
-) -> ParameterRef:
-    """The drive's one name for ``ref`` (3-41 on an FC drive, r/p refused there);
-    elsewhere the catalog's r/p, else the one given on the command line."""
-    prefix = known.prefix if known is not None and known.prefix else ref.prefix
-    return canonical(ref, danfoss=target.dialect.danfoss_numbers, prefix=prefix)
-
-
 def _known(args: argparse.Namespace, ref: ParameterRef) -> ParameterDescription:
     """What the catalog named on the command line says of ``ref`` (nothing with 'none')."""
     name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
@@ -127,43 +114,8 @@ async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRe
         await line.close()
 
 
-def finish(outcome: Outcome) -> pkw.PkwResponse:
-    failure = command_failure(outcome)
-    if failure is not None:
-        raise CommandError(failure.message, failure.code, kind=failure.kind, fault=failure.fault)
-    assert isinstance(outcome, Answered)  # the one outcome without a failure
-    return outcome.response
-
-
-def report_value(
-    args: argparse.Namespace,
-    ref: ParameterRef,
-    raw: int | None,
-    value: Value,
-    fmt: ParameterDescription,
-    verb: str = "",
-) -> None:
-    if args.json:
-        emit_json(
-            {
-                "parameter": ref.name,
-                "pnu": ref.pnu,
-                "index": ref.index or 0,
-                "raw": raw,
-                "value": value,
-                "unit": fmt.unit,
-            }
-        )
-        return
-    unit = f" {fmt.unit}" if fmt.unit else ""
-    rawtext = f" (raw {raw})" if raw is not None and raw != value else ""
-    print(f"{ref} = {value}{unit}{rawtext}{verb}")
-
-
 def run_read(args: argparse.Namespace) -> int:
     if args.protocol == PROFIBUS:
-        from pkwbus.commands import dp_access
-
         return dp_access.run_read(args)
     target, ref, fmt = _resolve(args)
     try:
@@ -174,23 +126,8 @@ def run_read(args: argparse.Namespace) -> int:
     return show_read(args, ref, fmt, link.run(_perform(args, target, req)))
 
 
-def show_read(
-    args: argparse.Namespace, ref: ParameterRef, fmt: ParameterDescription, outcome: Outcome
-) -> int:
-    """The answer to a read, printed as ``read`` prints it (FC, USS and PROFIBUS alike)."""
-    response = finish(outcome)
-    try:
-        raw, value = fmt.value_of(response)
-    except RemoteProtocolError as exc:
-        raise CommandError(f"unusable answer: {exc}", Exit.NO_ANSWER) from None
-    report_value(args, ref, raw, value, fmt)
-    return Exit.OK
-
-
 def run_write(args: argparse.Namespace) -> int:
     if args.protocol == PROFIBUS:
-        from pkwbus.commands import dp_access
-
         return dp_access.run_write(args)
     target, ref, fmt = _resolve(args)
     store = pkw.Store(args.store)

@@ -11,9 +11,9 @@ import argparse
 from typing import Any
 
 from pkwbus import link
-from pkwbus.commands.access import finish, report_value, show_read
+from pkwbus.commands.answers import finish, report_value, show_read
 from pkwbus.commands.common import CommandError, Exit
-from pkwbus.commands.describe import ELEMENTS, report
+from pkwbus.commands.descriptions import ELEMENTS, report
 from pkwbus.commands.dp import DpContext, build_context, resolve, session
 from pkwbus.master.outcomes import Answered, Outcome, Rejected, command_failure
 from pkwbus.protocol import pkw, ppo

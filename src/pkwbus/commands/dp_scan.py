@@ -20,7 +20,7 @@ from typing import Any
 from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.commands.dp import DEFAULT_BAUDRATE, MAX_DP_RETRIES, dp_line
-from pkwbus.commands.scan import Progress, parse_addresses
+from pkwbus.commands.scanning import Progress, parse_addresses
 from pkwbus.link import PortError
 from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.protocol import dp_services as dps

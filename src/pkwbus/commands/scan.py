@@ -17,10 +17,11 @@ import argparse
 import asyncio
 import sys
 import time
-from typing import Any, TextIO
+from typing import Any
 
 from pkwbus import durations, limits, link
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.commands import dp_scan
 from pkwbus.commands.common import (
     DEFAULT_BAUDRATE,
     PROFIBUS,
@@ -33,6 +34,7 @@ from pkwbus.commands.common import (
     emit_json,
 )
 from pkwbus.commands.dp import add_dp_options
+from pkwbus.commands.scanning import Progress, parse_addresses
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import run_job
@@ -45,7 +47,7 @@ from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
-__all__ = ["Progress", "add_parsers", "parse_addresses", "run_scan"]
+__all__ = ["AUTO_BAUDRATES", "add_parsers", "run_scan"]
 
 # The rates drives of these protocols take (Danfoss FC parameter 8-32; USS), fastest first.
 AUTO_BAUDRATES = tuple(sorted((b for b in limits.BAUDRATES if b <= 115200), reverse=True))
@@ -71,17 +73,6 @@ def add_parsers(sub: Any) -> None:
         help="the parities tried at each rate with --baudrates (default E,O,N)",
     )
     scan.set_defaults(func=run_scan)
-
-
-def parse_addresses(text: str, low: int, high: int) -> list[int]:
-    """``1-126`` or ``1,2,5-9``, each address ``low``-``high`` (the protocol's range)."""
-    try:
-        found = limits.parse_addresses(text, low, high)
-    except ValueError as exc:
-        raise CommandError(f"--addresses: {exc}", Exit.BAD_INPUT) from None
-    if not found:
-        raise CommandError("--addresses: no address given", Exit.BAD_INPUT)
-    return found
 
 
 def parse_baudrates(text: str) -> list[int]:
@@ -112,27 +103,6 @@ def parse_parities(text: str) -> list[str]:
             )
         found.append(part.strip())
     return list(dict.fromkeys(found))
-
-
-class Progress:
-    """One line on a terminal, rewritten in place; nothing when it is not one."""
-
-    def __init__(self, stream: TextIO, enabled: bool) -> None:
-        self.stream = stream
-        self.enabled = enabled
-        self.shown = False
-
-    def show(self, text: str) -> None:
-        if self.enabled:
-            self.stream.write(f"\r\x1b[K{text}")
-            self.stream.flush()
-            self.shown = True
-
-    def clear(self) -> None:
-        if self.shown:
-            self.stream.write("\r\x1b[K")
-            self.stream.flush()
-            self.shown = False
 
 
 def _framing(parity: str, stopbits: int) -> str:
@@ -269,8 +239,6 @@ def summary(
 
 def run_scan(args: argparse.Namespace) -> int:
     if args.protocol == PROFIBUS:
-        from pkwbus.commands import dp_scan
-
         return dp_scan.run_scan(args)
     protocol = Protocol(args.protocol)
     low, high = address_range(protocol, FcAddressFormat(args.address_format))

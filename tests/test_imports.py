@@ -1,0 +1,89 @@
+"""The import graph of pkwbus: no cycle between modules, and the layers of
+docs/architecture.md (``protocol`` below everything, only ``service`` and the
+commands wire the layers together)."""
+
+from __future__ import annotations
+
+import ast
+
+from tests.test_modules import PATHS, module_name
+
+MODULES = {module_name(path): path for path in PATHS}
+
+# What each layer may import from the others (its own modules always).
+MAY_IMPORT = {
+    "protocol": set(),
+    "catalog": {"protocol", "problems", "yamlfile"},
+    "link": {"protocol"},
+    "master": {"protocol", "catalog", "link", "exits"},
+    "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus"},
+}
+
+
+def imports(name: str) -> set[str]:
+    """The pkwbus modules ``name`` imports when it is loaded (``TYPE_CHECKING`` aside)."""
+    path = MODULES[name]
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            continue
+        for n in ast.walk(node):
+            if isinstance(n, ast.Import):
+                found |= {a.name for a in n.names if a.name in MODULES}
+            elif isinstance(n, ast.ImportFrom):
+                if n.level:
+                    base = package.split(".")[: len(package.split(".")) - (n.level - 1)]
+                    module = ".".join([*base, *([n.module] if n.module else [])])
+                else:
+                    module = n.module or ""
+                if module not in MODULES:
+                    continue
+                subs = {f"{module}.{a.name}" for a in n.names} & MODULES.keys()
+                found |= subs
+                if len(subs) < len(n.names):  # a name of the module itself
+                    found.add(module)
+    found.discard(name)
+    return found
+
+
+GRAPH = {name: imports(name) for name in MODULES}
+
+
+def layer(name: str) -> str:
+    parts = name.split(".")
+    return parts[1] if len(parts) > 1 else parts[0]
+
+
+def test_the_graph_is_seen() -> None:
+    assert "pkwbus.protocol.pkw" in GRAPH["pkwbus.master.transaction"]
+    assert "pkwbus.master.planner" in GRAPH["pkwbus.master.scheduler"]
+
+
+def test_no_import_cycle() -> None:
+    done: set[str] = set()
+    path: list[str] = []
+
+    def visit(name: str) -> None:
+        path.append(name)
+        for dep in sorted(GRAPH[name]):
+            assert dep not in path, "import cycle: " + " -> ".join([*path[path.index(dep) :], dep])
+            if dep not in done:
+                visit(dep)
+        path.pop()
+        done.add(name)
+
+    for name in sorted(GRAPH):
+        if name not in done:
+            visit(name)
+
+
+def test_each_layer_imports_only_the_layers_below_it() -> None:
+    wrong = sorted(
+        f"{name} imports {dep}"
+        for name, deps in GRAPH.items()
+        if layer(name) in MAY_IMPORT
+        for dep in deps
+        if layer(dep) != layer(name) and layer(dep) not in MAY_IMPORT[layer(name)]
+    )
+    assert not wrong
