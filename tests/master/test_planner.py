@@ -7,6 +7,7 @@ runs the service's lines and the command line's single jobs.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections import Counter
 from dataclasses import dataclass, field
@@ -170,6 +171,26 @@ def test_polls_carry_the_drives_values_and_status_words() -> None:
         assert all(isinstance(v, pkw.ValueResponse) for v in values)
     words = {e.drive: e.word for e in line.events if isinstance(e, StatusWord)}
     assert words["d1"] == line.sim.drives[1].status_word
+
+
+def test_a_reply_that_is_no_block_tells_no_status_word() -> None:
+    """The status word (and main actual value) of an earlier reply is never told again as
+    if a later reply that could not be split had carried it."""
+    line = fake_line("fc", [1], [341], 50 * MS)
+    send = line.planner.next_action(line.now)
+    assert isinstance(send, Send)
+    # The drive answers another parameter: "not yet", with its status word.
+    other = send.target.telegram(pkw.read(send.target.dialect, 1530))
+    not_ours = line.answer(dataclasses.replace(send, telegram=other))
+    assert isinstance(not_ours, Reply)
+    line.planner.exchanged(send, not_ours, line.now)
+    told = [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
+    assert [e.word for e in told] == [line.sim.drives[1].status_word]
+    # The repeat's answer is no block of this drive's shape: an unexpected answer.
+    again = line.planner.next_action(line.now)
+    assert again == send
+    line.planner.exchanged(send, Reply(1, b"\x01\x02\x03", EXCHANGE), line.now)
+    assert not [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
 
 
 def test_writes_then_reads_then_polls_after_the_exchange_in_flight() -> None:

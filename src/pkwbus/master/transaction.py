@@ -72,6 +72,8 @@ class Tally:
     telegrams: int = 0
     retries: int = 0
     errors: Counter[ErrorKind] = field(default_factory=Counter)
+    # The status word and main actual value of the latest reply; None when it carried
+    # none or could not be split (never an earlier reply's, re-stamped as new).
     status_word: int | None = None
     main_actual: int | None = None
     busy: float = 0.0
@@ -124,11 +126,12 @@ class PkwTransaction:
 
     def _on_reply(self, reply: Reply) -> Outcome | None:
         target = self.target
+        tally = self.tally
+        tally.status_word = tally.main_actual = None
         try:
             block = split_block(reply.data, target.response_shape(len(reply.data)))
-            if block.status_word is not None:
-                self.tally.status_word = block.status_word
-                self.tally.main_actual = block.main_actual
+            tally.status_word = block.status_word
+            tally.main_actual = block.main_actual
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
             return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
