@@ -112,6 +112,7 @@ class DpLine:
         self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
         self.foreign: str | None = None  # another master heard, and how
         self.requests = 0
+        self.sent_at = 0.0  # loop time the latest request was written (its idle time over)
         self._deframer = fdl.Deframer()
         self._lock = asyncio.Lock()
         self._waiter: asyncio.Future[Answer] | None = None
@@ -180,6 +181,7 @@ class DpLine:
         self._asked = frame.da
         try:
             await self.link.send(raw)
+            self.sent_at = loop.time()
             self.requests += 1
             if self.trace:
                 self.trace("tx", describe_frame(frame))

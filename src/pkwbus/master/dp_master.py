@@ -64,8 +64,8 @@ class SlaveRun:
 
 EventHook = Callable[[int, "Event | JobResult"], None]
 # A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
-# address and how long it held the line.
-AnsweredHook = Callable[[int, float], None]
+# address, how long the answer took and how long the request held the line.
+AnsweredHook = Callable[[int, float, float], None]
 Feed = Callable[[SlaveRun, float], None]  # fill an idle slot (a service's planner)
 
 
@@ -88,8 +88,10 @@ class DpMaster:
         self.on_answered = on_answered
         self.cycles = 0
         # How long the latest request held the line: from its start (the idle time before
-        # it included) to its answer or the end of the slot time, in loop seconds.
+        # it included) to its answer or the end of the slot time, in loop seconds; and
+        # how long its answer took from the request written, as on FC and USS lines.
         self.exchange_time = 0.0
+        self.answer_time = 0.0
 
     async def start(self, *, listen: float | None = None) -> None:
         """Open the port and listen for other masters; :class:`ForeignMaster`, PortError."""
@@ -132,6 +134,7 @@ class DpMaster:
             sent += 1
             now = loop.time()
             self.exchange_time = now - started
+            self.answer_time = now - self.line.sent_at
             told = False  # an Inputs or a Failed event tells the exchange to on_event
             for event in slave.feed(answer, now):
                 self._emit(run, event)
@@ -141,7 +144,7 @@ class DpMaster:
                     if update.done is not None:
                         self._emit(run, update.done)
             if not told and self.on_answered is not None:
-                self.on_answered(run.address, self.exchange_time)
+                self.on_answered(run.address, self.answer_time, self.exchange_time)
         self.cycles += 1
         if not sent:
             await asyncio.sleep(IDLE_STEP)

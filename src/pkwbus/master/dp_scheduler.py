@@ -257,11 +257,13 @@ class DpScheduler:
     def _on_event(self, address: int, event: SlaveEvent | JobResult) -> None:
         name = self._names[address]
         now = asyncio.get_running_loop().time()
-        # The line was busy for as long as the exchange took, as on FC and USS lines.
+        # The line was busy for as long as the exchange held it (its idle time before the
+        # request included); the answer took the time from the request written to it.
         took = self.master.exchange_time
         if isinstance(event, Inputs):
             self._inputs[address] = event.data
-            self.events.exchange(name, Reply(address, event.data, took), took)
+            reply = Reply(address, event.data, self.master.answer_time)
+            self.events.exchange(name, reply, took)
             self._status(name, address, event.data)
         elif isinstance(event, Failed):
             failure = Failure(_ERROR_KINDS[event.kind], event.detail)
@@ -288,10 +290,10 @@ class DpScheduler:
                 self.planner.exchanged(send, Failure(ErrorKind.TIMEOUT, detail), now)
         self._flush()
 
-    def _on_answered(self, address: int, took: float) -> None:
+    def _on_answered(self, address: int, answer: float, took: float) -> None:
         """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held
         the line, like a Data_Exchange."""
-        self.events.exchange(self._names[address], Reply(address, b"", took), took)
+        self.events.exchange(self._names[address], Reply(address, b"", answer), took)
 
     def _state(self, name: str, event: StateChanged, now: float) -> None:
         self.dp_events.slave_state(name, event.new)
