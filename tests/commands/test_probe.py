@@ -89,14 +89,24 @@ def echoing_adapter() -> Iterator[str]:
     assert found
     sim_port = int(found[1])
 
+    def telegram(sock: socket.socket) -> bytes:
+        """One whole FC telegram (STX, LGE, then LGE bytes), however TCP splits it."""
+        data = b""
+        while len(data) < 2 or len(data) < data[1] + 2:
+            chunk = sock.recv(256)
+            if not chunk:
+                return b""
+            data += chunk
+        return data
+
     class Relay(socketserver.BaseRequestHandler):
         def handle(self) -> None:
             with socket.create_connection(("127.0.0.1", sim_port)) as drive:
                 drive.settimeout(5)
-                while data := self.request.recv(256):
-                    self.request.sendall(data)  # the echo
-                    drive.sendall(data)
-                    self.request.sendall(drive.recv(256))
+                while request := telegram(self.request):
+                    self.request.sendall(request)  # the echo
+                    drive.sendall(request)
+                    self.request.sendall(telegram(drive))
 
     server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Relay)
     server.daemon_threads = True
