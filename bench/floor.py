@@ -48,6 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import make_line, sim_process
 from _measure import BenchSetupError, markdown_table, measure_cpu
+from cpu_per_exchange import raw_loop
 
 from pkwbus import link
 from pkwbus.master.target import DriveTarget
@@ -173,29 +174,12 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
     return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s}
 
 
-async def line_awaited(port: str, n: int, warmup: int = WARMUP) -> dict[str, float]:
-    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
-    target = DriveTarget.create("fc", 1)
-    telegram = request()
-    await line.open()
-    try:
-        for _ in range(warmup):
-            await line.exchange(target, telegram)
-        with measure_cpu(ops=n) as t:
-            for _ in range(n):
-                if not isinstance(await line.exchange(target, telegram), Reply):
-                    raise BenchSetupError("a failed exchange")
-    finally:
-        await line.close()
-    return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s}
-
-
 VARIANTS: dict[str, Callable[[str, int], Any]] = {
     "bare, no pause": lambda port, n: bare(port, n, "none"),
     "bare, pause by timer": lambda port, n: bare(port, n, "timer"),
     "bare, pause in place": lambda port, n: bare(port, n, "spin"),
     "Line.start chain": line_chain,
-    "Line.exchange loop": line_awaited,
+    "Line.exchange loop": raw_loop,  # benchmark 2's (a)
 }
 
 

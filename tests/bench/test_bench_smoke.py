@@ -68,7 +68,7 @@ def test_floor_smallest(variant: str) -> None:
         elif variant == "chain":
             got = asyncio.run(mod.line_chain(port, 50, warmup=5))
         else:
-            got = asyncio.run(mod.line_awaited(port, 50, warmup=5))
+            got = asyncio.run(mod.raw_loop(port, 50, warmup=5))
     assert got["cpu_us_per_op"] > 0 and got["ops_per_s"] > 0
 
 
