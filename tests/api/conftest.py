@@ -26,10 +26,11 @@ from pkwbus.service.audit import AuditLog
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import Config, parse_config
 from pkwbus.service.runtime import Runtime
-from pkwbus.sim import SimFaults, SimTiming, Simulator
+from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 
 TOKEN = "s3cret-Write-Token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
+STEADY = ModelConfig(warning_rate=0.0, trip_rate=0.0)  # noise stays, nothing random happens
 FC_DRIVES = ("fan1", "fan2", "fan3")
 
 
@@ -193,6 +194,7 @@ async def service(
                 faults=faults,
                 catalog=catalog,
                 seed=11,
+                model=STEADY,  # tests check "running" and the values: no random trips
             )
             recorder.attach(sim)
             end = await sim.serve_tcp("127.0.0.1", 0)

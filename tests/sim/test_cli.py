@@ -135,7 +135,10 @@ def read_json(url: str, protocol: str, parameter: str) -> dict[str, Any]:
 
 def test_without_catalog_the_values_come_in_the_default_catalogs_units() -> None:
     """`pkwbus read` decodes with the protocol's default catalog: the simulator serves with it."""
-    proc, lines = start("--protocol", "uss", "--listen", "tcp://127.0.0.1:0", "--drives", "1")
+    proc, lines = start(
+        "--protocol", "uss", "--listen", "tcp://127.0.0.1:0", "--drives", "1",
+        "--trips-per-hour", "0",  # a tripped drive's frequency is 0
+    )  # fmt: skip
     try:
         url = lines[-1].split(" on ")[-1]
         speed = read_json(url, "uss", "r0021")  # the catalog's rpm
