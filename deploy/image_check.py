@@ -68,6 +68,8 @@ BASE_RECIPE = "1"
 CACHE_DIR = Path(os.environ.get("PKWBUS_IMAGE_CACHE", "/var/cache/pkwbus-image"))
 
 IMAGE = "localhost/pkwbus:check"
+# How docs/deploy.md runs the image: read-only root, no capabilities, no new privileges.
+HARDENED = ("--read-only", "--cap-drop", "ALL", "--security-opt", "no-new-privileges")
 PROM_IMAGE = "localhost/pkwbus-check-prometheus:debian"
 PREFIX = f"pkwbus-check-{os.getpid()}"
 
@@ -477,11 +479,7 @@ def check_demo(token: str) -> None:
         "-d",
         "--name",
         name,
-        "--read-only",
-        "--cap-drop",
-        "ALL",
-        "--security-opt",
-        "no-new-privileges",
+        *HARDENED,
         "-v",
         f"{volume}:/var/lib/pkwbus",
         "-p",
@@ -709,11 +707,7 @@ def start_line_container(state: Path, sim: Simulator, token: str) -> tuple[str, 
         "-d",
         "--name",
         name,
-        "--read-only",
-        "--cap-drop",
-        "ALL",
-        "--security-opt",
-        "no-new-privileges",
+        *HARDENED,
         "-v",
         f"{volume}:/var/lib/pkwbus",
         "-v",

@@ -9,12 +9,7 @@ requests also reach the checks and the bus, not only the 404 and 401 paths.
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import socket
-import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,12 +17,11 @@ import hypothesis
 import pytest
 import requests
 import schemathesis
-import uvicorn
 from hypothesis import strategies as st
 from schemathesis.checks import not_a_server_error
 
-from pkwbus.service.api import create_app
-from tests.api.conftest import AUTH, USS_DRIVES, service
+from tests.api.conftest import AUTH, USS_DRIVES
+from tests.api.threaded import served_in_thread
 
 BUDGET = 45.0  # seconds for the whole run, checked as it goes
 DRIVES = [None, "fan1", "fan2", "pump1"]
@@ -37,67 +31,12 @@ PARAMETERS = [None, "3-41", "3-42", "1-20", "16-13", "15-30", "15-30[3]", "p1120
 VALUES = [None, 5, 10, 20.5]
 
 
-class Running:
-    """The service in a thread of its own: started, served on ``url``, stopped."""
-
-    def __init__(self, tmp_path: Path) -> None:
-        self.tmp_path = tmp_path
-        self.loop = asyncio.new_event_loop()
-        self.ready = threading.Event()
-        self.stop = threading.Event()
-        self.url = ""
-        self.app: Any = None
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._run, name="service", daemon=True)
-
-    def _run(self) -> None:
-        try:
-            self.loop.run_until_complete(self._main())
-        except BaseException as exc:  # reported to the test
-            self.error = exc
-            self.ready.set()
-
-    async def _main(self) -> None:
-        async with service(self.tmp_path, uss=USS_DRIVES) as svc:
-            self.app = create_app(svc.runtime, audit=svc.audit, write_token=AUTH_TOKEN)
-            sock = socket.socket()
-            sock.bind(("127.0.0.1", 0))
-            host, port = sock.getsockname()
-            config = uvicorn.Config(
-                self.app, log_config=None, access_log=False, lifespan="off", log_level="error"
-            )
-            server = uvicorn.Server(config)
-            task = asyncio.create_task(server.serve(sockets=[sock]))
-            while not server.started:
-                await asyncio.sleep(0.01)
-            self.url = f"http://{host}:{port}"
-            self.ready.set()
-            while not self.stop.is_set():
-                await asyncio.sleep(0.05)
-            server.should_exit = True
-            await task
-
-
 AUTH_TOKEN = AUTH["Authorization"].removeprefix("Bearer ")
-
-
-@contextlib.contextmanager
-def running(tmp_path: Path) -> Iterator[Running]:
-    svc = Running(tmp_path)
-    svc.thread.start()
-    assert svc.ready.wait(60), "the service did not start"
-    if svc.error is not None:
-        raise svc.error
-    try:
-        yield svc
-    finally:
-        svc.stop.set()
-        svc.thread.join(30)
 
 
 @pytest.mark.long
 def test_no_server_errors(tmp_path: Path) -> None:
-    with running(tmp_path) as svc:
+    with served_in_thread(tmp_path, AUTH_TOKEN, uss=USS_DRIVES) as svc:
         schema = schemathesis.openapi.from_dict(svc.app.openapi())
         operations = [result.ok() for result in schema.get_all_operations()]
         assert {op.path for op in operations} >= {

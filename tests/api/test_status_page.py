@@ -7,22 +7,18 @@ the test is skipped with the reason.
 
 from __future__ import annotations
 
-import asyncio
 import os
 import re
 import shutil
-import socket
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-import uvicorn
 
-from pkwbus.service.api import create_app
 from tests.api.conftest import AUTH, TOKEN, service
+from tests.api.threaded import ServedInThread, served_in_thread
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = [
@@ -37,66 +33,13 @@ DRIVES = [
 ]  # fmt: skip
 
 
-class Served:
-    """The service with simulated FC drives, served by uvicorn in a thread of its own."""
-
-    def __init__(self, tmp_path: Path) -> None:
-        self.tmp_path = tmp_path
-        self.ready = threading.Event()
-        self.stop = threading.Event()
-        self.url = ""
-        self.svc: Any = None
-        self.loop: asyncio.AbstractEventLoop | None = None
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._run, name="service", daemon=True)
-
-    def _run(self) -> None:
-        try:
-            asyncio.run(self._main())
-        except BaseException as exc:  # reported to the test
-            self.error = exc
-            self.ready.set()
-
-    async def _main(self) -> None:
-        async with service(self.tmp_path, fc=DRIVES) as svc:
-            self.svc, self.loop = svc, asyncio.get_running_loop()
-            app = create_app(svc.runtime, audit=svc.audit, write_token=TOKEN)
-            sock = socket.socket()
-            sock.bind(("127.0.0.1", 0))
-            host, port = sock.getsockname()
-            config = uvicorn.Config(app, log_config=None, lifespan="off", log_level="error")
-            server = uvicorn.Server(config)
-            task = asyncio.create_task(server.serve(sockets=[sock]))
-            while not server.started:
-                await asyncio.sleep(0.01)
-            self.url = f"http://{host}:{port}"
-            self.ready.set()
-            while not self.stop.is_set():
-                await asyncio.sleep(0.05)
-            server.should_exit = True
-            await task
-
-    def set_value(self, address: int, pnu: int, raw: int) -> None:
-        assert self.loop is not None
-        drive = self.svc.sim.drives[address]
-        self.loop.call_soon_threadsafe(drive.set_value, pnu, raw)
-
-
 @pytest.fixture
-def served(tmp_path: Path) -> Iterator[Served]:
-    running = Served(tmp_path)
-    running.thread.start()
-    assert running.ready.wait(60), "the service did not start"
-    if running.error is not None:
-        raise running.error
-    try:
+def served(tmp_path: Path) -> Iterator[ServedInThread]:
+    with served_in_thread(tmp_path, TOKEN, fc=DRIVES) as running:
         yield running
-    finally:
-        running.stop.set()
-        running.thread.join(30)
 
 
-def test_status_page_in_a_browser(served: Served, tmp_path: Path) -> None:
+def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> None:
     sync_api = pytest.importorskip("playwright.sync_api")
     if not Path(CHROMIUM).exists():
         pytest.skip(f"no chromium at {CHROMIUM} (deploy/browser-setup installs it)")

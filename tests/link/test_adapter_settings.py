@@ -6,10 +6,6 @@ from __future__ import annotations
 import logging
 import os
 import sys
-import tempfile
-import tty
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -33,20 +29,6 @@ class FakeSerial:
 
     def set_low_latency_mode(self, on: bool) -> None:
         self.low_latency = on
-
-
-@pytest.fixture
-def pty_path() -> Iterator[str]:
-    controller, follower = os.openpty()
-    tty.setraw(follower)
-    with tempfile.TemporaryDirectory() as tmp:
-        link = Path(tmp) / "ttyX"
-        link.symlink_to(os.ttyname(follower))
-        try:
-            yield str(link)
-        finally:
-            os.close(controller)
-            os.close(follower)
 
 
 def test_settings_are_applied_to_the_port() -> None:

@@ -4,11 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 import termios
-import tty
-from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
@@ -18,21 +14,6 @@ from pkwbus.link.serialport import is_pty
 from pkwbus.link.serialport import open_port as _open_port
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux ptys")
-
-
-@pytest.fixture
-def pty_path() -> Iterator[str]:
-    """A pty whose other end stays open (as the simulator keeps it), reached by a symlink."""
-    controller, follower = os.openpty()
-    tty.setraw(follower)
-    with tempfile.TemporaryDirectory() as tmp:
-        link = Path(tmp) / "ttyX"
-        link.symlink_to(os.ttyname(follower))
-        try:
-            yield str(link)
-        finally:
-            os.close(controller)
-            os.close(follower)
 
 
 def test_ptys_are_told_from_real_ports_and_urls(pty_path: str) -> None:

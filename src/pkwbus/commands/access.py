@@ -11,10 +11,9 @@ import asyncio
 from typing import Any
 
 from pkwbus import durations, link
-from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands import dp_access
-from pkwbus.commands.answers import drive_name, finish, report_value, show_read
+from pkwbus.commands.answers import catalog_entry, drive_name, finish, report_value, show_read
 from pkwbus.commands.common import (
     DEFAULT_CATALOG,
     PROFIBUS,
@@ -92,13 +91,7 @@ def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, Param
 
 def _known(args: argparse.Namespace, ref: ParameterRef) -> ParameterDescription:
     """What the catalog named on the command line says of ``ref`` (nothing with 'none')."""
-    name = args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)]
-    if name == "none":
-        return ParameterDescription()
-    try:
-        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
-    except CatalogError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    return catalog_entry(args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)], ref.pnu)
 
 
 async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRequest) -> Outcome:

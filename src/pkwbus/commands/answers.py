@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.master.outcomes import Answered, Outcome, command_failure
@@ -18,7 +19,18 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.params import ParameterRef, canonical
 
-__all__ = ["drive_name", "finish", "report_value", "show_read"]
+__all__ = ["catalog_entry", "drive_name", "finish", "report_value", "show_read"]
+
+
+def catalog_entry(catalog: str, pnu: int) -> ParameterDescription:
+    """What ``catalog`` says of ``pnu`` (nothing with 'none'); a catalog that does not load
+    is a bad option (exit 2)."""
+    if catalog == "none":
+        return ParameterDescription()
+    try:
+        return ParameterDescription.from_spec(load_catalog(catalog).get(pnu))
+    except CatalogError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
 
 def drive_name(

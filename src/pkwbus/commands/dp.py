@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pkwbus import durations, limits
-from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.commands.answers import catalog_entry
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
@@ -227,12 +227,7 @@ async def session(
 
 def _known(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterDescription:
     name = getattr(args, "catalog", None) or DP_CATALOGS.get(dia.name) or "none"
-    if name == "none":
-        return ParameterDescription()
-    try:
-        return ParameterDescription.from_spec(load_catalog(name).get(ref.pnu))
-    except CatalogError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    return catalog_entry(name, ref.pnu)
 
 
 def resolve(

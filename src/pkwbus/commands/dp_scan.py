@@ -18,9 +18,9 @@ import time
 from typing import Any
 
 from pkwbus import link
-from pkwbus.commands.common import CommandError, Exit, emit_json
+from pkwbus.commands.common import CommandError, Exit
 from pkwbus.commands.dp import DEFAULT_BAUDRATE, MAX_DP_RETRIES, dp_line
-from pkwbus.commands.scanning import Progress, parse_addresses
+from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.protocol import dp_services as dps
@@ -150,11 +150,4 @@ def run_scan(args: argparse.Namespace) -> int:
     progress = Progress(sys.stderr, enabled=not args.json and sys.stderr.isatty())
     started = time.monotonic()
     found: list[dict[str, Any]] = link.run(_scan(args, addresses, progress))
-    text = summary(found, len(addresses), time.monotonic() - started)
-    if args.json:
-        emit_json(found)
-        if not found:
-            print(text, file=sys.stderr)
-    else:
-        print(text, file=sys.stdout if found else sys.stderr)
-    return Exit.OK if found else Exit.NO_ANSWER
+    return report(args.json, found, summary(found, len(addresses), time.monotonic() - started))

@@ -31,10 +31,9 @@ from pkwbus.commands.common import (
     add_line_options,
     build_line,
     build_target,
-    emit_json,
 )
 from pkwbus.commands.dp import add_dp_options
-from pkwbus.commands.scanning import Progress, parse_addresses
+from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import run_job
@@ -257,11 +256,6 @@ def run_scan(args: argparse.Namespace) -> int:
         found = link.run(_scan(args, addresses, settings, progress))
     finally:
         progress.clear()
-    text = summary(found, len(addresses), settings, time.monotonic() - started)
-    if args.json:
-        emit_json(found)
-        if not found:
-            print(text, file=sys.stderr)
-    else:
-        print(text, file=sys.stdout if found else sys.stderr)
-    return Exit.OK if found else Exit.NO_ANSWER
+    return report(
+        args.json, found, summary(found, len(addresses), settings, time.monotonic() - started)
+    )

@@ -1,17 +1,18 @@
-"""What the scans of FC/USS lines and of PROFIBUS lines share: the ``--addresses`` option
-and the progress line on a terminal.
+"""What the scans of FC/USS lines and of PROFIBUS lines share: the ``--addresses`` option,
+the progress line on a terminal and the end: the summary and the exit status.
 
 Raises :class:`~pkwbus.commands.common.CommandError` (exit 2) for bad ``--addresses``.
 """
 
 from __future__ import annotations
 
-from typing import TextIO
+import sys
+from typing import Any, TextIO
 
 from pkwbus import limits
-from pkwbus.commands.common import CommandError, Exit
+from pkwbus.commands.common import CommandError, Exit, emit_json
 
-__all__ = ["Progress", "parse_addresses"]
+__all__ = ["Progress", "parse_addresses", "report"]
 
 
 def parse_addresses(text: str, low: int, high: int) -> list[int]:
@@ -44,3 +45,15 @@ class Progress:
             self.stream.write("\r\x1b[K")
             self.stream.flush()
             self.shown = False
+
+
+def report(as_json: bool, found: list[dict[str, Any]], summary: str) -> int:
+    """The end of a scan: with ``--json`` the drives found, then the summary (on stderr
+    when none answered: exit 3). Without it each drive was printed as it was found."""
+    if as_json:
+        emit_json(found)
+        if not found:
+            print(summary, file=sys.stderr)
+    else:
+        print(summary, file=sys.stdout if found else sys.stderr)
+    return Exit.OK if found else Exit.NO_ANSWER

@@ -235,14 +235,7 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
         ),
         catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
     )
-    folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
-    end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))
-
-    async def close() -> None:
-        await end.close()
-        folder.rmdir()
-
-    return end.path, close
+    return await _serve_on_pty(simulator, line.name)
 
 
 async def _start_dp_sim(
@@ -265,8 +258,15 @@ async def _start_dp_sim(
         ),
         each=each,
     )
+    return await _serve_on_pty(simulator, line.name)
+
+
+async def _serve_on_pty(
+    simulator: Simulator | DpSimulator, line: str
+) -> tuple[str, Callable[[], Awaitable[None]]]:
+    """The simulator on a pty of a temporary folder: its path, and what closes both."""
     folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
-    end = await simulator.serve_pty(str(folder / f"tty-{line.name}"))
+    end = await simulator.serve_pty(str(folder / f"tty-{line}"))
 
     async def close() -> None:
         await end.close()
