@@ -185,21 +185,39 @@ def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
     return {"rows": rows, "table": table, "n": n, "repeat": repeat}
 
 
-def by_drives(n: int, repeat: int, counts: list[int]) -> dict[int, list[float]]:
+def by_drives(n: int, repeat: int, counts: list[int]) -> dict[str, Any]:
     """CPU per exchange of the service path at each number of drives, runs interleaved."""
     cpu: dict[int, list[float]] = {c: [] for c in counts}
     for _ in range(repeat):
         for c in counts:
             with sim_process("fc", f"1-{c}") as port:
                 cpu[c].append(link.run(service_path(port, n, c))["cpu_us_per_op"])
-    first = statistics.median(cpu[counts[0]])
+    first_median = statistics.median(cpu[counts[0]])
+    first_min = min(cpu[counts[0]])
+    rows = []
     for c in counts:
         best, med = best_median(cpu[c], higher_is_better=False)
-        print(
-            f"{c} drives: CPU {best:.1f} us best, {med:.1f} us median per exchange,"
-            f" {med / first:.2f}x {counts[0]} drive(s)"
+        rows.append(
+            {
+                "drives": c,
+                "cpu_best": best,
+                "cpu_median": med,
+                "ratio_best": best / first_min,
+                "ratio_median": med / first_median,
+            }
         )
-    return cpu
+    table = markdown_table(
+        rows,
+        {
+            "drives": "drives on the line",
+            "cpu_best": "CPU µs/exchange, best",
+            "cpu_median": "median",
+            "ratio_best": f"best / best at {counts[0]}",
+            "ratio_median": f"median / median at {counts[0]}",
+        },
+        digits=2,
+    )
+    return {"rows": rows, "table": table, "n": n, "repeat": repeat, "cpu": cpu}
 
 
 def main() -> None:
@@ -210,7 +228,7 @@ def main() -> None:
     parser.add_argument("--drives", help="service path with these numbers of drives: 1,16,126")
     args = parser.parse_args()
     if args.drives:
-        by_drives(args.n, args.repeat, [int(c) for c in args.drives.split(",")])
+        print(by_drives(args.n, args.repeat, [int(c) for c in args.drives.split(",")])["table"])
         return
     if args.only:
         for _ in range(args.repeat):

@@ -23,6 +23,12 @@ same simulated drive, in the same run:
   future per exchange).
 - ``Line.exchange loop``: the same line, awaited one exchange at a time (the
   CLI's and the API's way).
+- ``one wake-up, loop timer`` and ``one wake-up, select()``: no I/O at all,
+  the process only sleeps one pause and wakes, by a loop timer on the same
+  loop, and by a bare ``select()`` without a loop. An exchange that keeps the
+  pause on a zero-delay pty sleeps twice (for the answer, then for the rest
+  of the pause): twice the ``select()`` figure is what any master, in any
+  language, pays on this machine before it does anything.
 
 With pymodbus installed (``.[bench]``), its async RTU client in the same run
 gives the ratios.
@@ -35,6 +41,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import select
 import statistics
 import sys
 import termios
@@ -174,12 +181,42 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
     return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s}
 
 
+async def wake_timer(port: str, n: int) -> dict[str, float]:
+    """``n`` wake-ups by a loop timer of one pause, nothing else (``port`` unused)."""
+    loop = asyncio.get_running_loop()
+    finished: asyncio.Future[None] = loop.create_future()
+    count = 0
+
+    def again() -> None:
+        nonlocal count
+        count += 1
+        if count >= n:
+            finished.set_result(None)
+        else:
+            loop.call_later(PAUSE, again)
+
+    with measure_cpu(ops=n) as t:
+        loop.call_later(PAUSE, again)
+        await finished
+    return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s}
+
+
+async def wake_select(port: str, n: int) -> dict[str, float]:
+    """``n`` sleeps of one pause in ``select()`` on nothing, no loop (``port`` unused)."""
+    with measure_cpu(ops=n) as t:
+        for _ in range(n):
+            select.select([], [], [], PAUSE)
+    return {"cpu_us_per_op": t.cpu_us_per_op, "ops_per_s": t.ops_per_s}
+
+
 VARIANTS: dict[str, Callable[[str, int], Any]] = {
     "bare, no pause": lambda port, n: bare(port, n, "none"),
     "bare, pause by timer": lambda port, n: bare(port, n, "timer"),
     "bare, pause in place": lambda port, n: bare(port, n, "spin"),
     "Line.start chain": line_chain,
     "Line.exchange loop": raw_loop,  # benchmark 2's (a)
+    "one wake-up, loop timer (no I/O)": wake_timer,
+    "one wake-up, select() (no loop, no I/O)": wake_select,
 }
 
 

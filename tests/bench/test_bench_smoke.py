@@ -41,7 +41,8 @@ def test_each_benchmark_has_a_command_line(name: str) -> None:
 
 def test_run_all_plans_every_benchmark() -> None:
     titles = [title for title, _, _ in load("run_all").plan(quick=True)]
-    assert len(titles) == len(MODULES) - 1
+    # cpu_per_exchange gives two: by kind of master, and by the number of drives
+    assert len(titles) == len(MODULES) - 1 + 1
     assert all(callable(step) for _, _, step in load("run_all").plan(quick=True))
 
 
@@ -58,7 +59,9 @@ def test_cpu_raw_loop_smallest() -> None:
     assert got["errors"] == 0 and got["cpu_us_per_op"] > 0
 
 
-@pytest.mark.parametrize("variant", ["bare none", "bare timer", "bare spin", "chain", "awaited"])
+@pytest.mark.parametrize(
+    "variant", ["bare none", "bare timer", "bare spin", "chain", "awaited", "timer", "select"]
+)
 def test_floor_smallest(variant: str) -> None:
     mod = load("floor")
     common = load("_common")
@@ -67,8 +70,11 @@ def test_floor_smallest(variant: str) -> None:
             got = asyncio.run(mod.bare(port, 50, variant.split()[1], warmup=5))
         elif variant == "chain":
             got = asyncio.run(mod.line_chain(port, 50, warmup=5))
-        else:
+        elif variant == "awaited":
             got = asyncio.run(mod.raw_loop(port, 50, warmup=5))
+        else:
+            wake = mod.wake_timer if variant == "timer" else mod.wake_select
+            got = asyncio.run(wake(port, 50))
     assert got["cpu_us_per_op"] > 0 and got["ops_per_s"] > 0
 
 
@@ -78,6 +84,12 @@ def test_service_path_smallest() -> None:
     with common.sim_process("fc", "1-3") as port:
         got = asyncio.run(mod.service_path(port, 50))
     assert got["errors"] == 0 and got["cpu_us_per_op"] > 0
+
+
+def test_cpu_by_drives_smallest() -> None:
+    got = load("cpu_per_exchange").by_drives(50, 1, [1, 2])
+    assert [row["drives"] for row in got["rows"]] == [1, 2]
+    assert got["rows"][0]["ratio_median"] == 1.0 and got["rows"][1]["cpu_median"] > 0
 
 
 def test_dead_drive_and_lag_smallest() -> None:

@@ -7,6 +7,7 @@ planner's, tested on a fake clock in test_planner.py.
 from __future__ import annotations
 
 import asyncio
+import itertools
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
@@ -199,3 +200,53 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
         s.stop()
         await asyncio.wait_for(task, 2.0)
         await server.close()
+
+
+async def test_polls_are_recorded_in_batches_each_with_its_own_time_and_none_lost() -> None:
+    """During a run, polls and counters are recorded in batches; each reading keeps
+    the time of its own exchange, and at the stop everything sent has been recorded."""
+    sim = make_sim("fc", [1, 2])
+    stamps = itertools.count(1000)
+    async with serve(sim, "tcp") as port:
+        s, events, trace = scheduler(
+            port, "fc", drive_specs("fc", [1, 2], [1613, 1614], 0.0),
+            wall_clock=lambda: float(next(stamps)),
+        )  # fmt: skip
+        seen: list[int] = []  # exchanges recorded when each finished poll was recorded
+        job_finished = events.job_finished
+
+        def record(drive: str, kind: JobKind, result: JobResult) -> None:
+            seen.append(len(events.exchanges))
+            job_finished(drive, kind, result)
+
+        events.job_finished = record  # type: ignore[method-assign]
+        await run_until(s, lambda: events.polls_ok("d1") >= 20 and events.polls_ok("d2") >= 20)
+    assert max(Counter(seen).values()) > 1, "some polls were recorded together"
+    assert len(events.exchanges) == len(trace.tx), "every exchange was counted at the stop"
+    times = [r.timestamp for r in s.snapshot.readings.values()]
+    assert len(times) == 4 and all(t >= 1000 for t in times)
+    assert len(set(times)) == 4, "each reading has its own exchange's time, not its batch's"
+
+
+async def test_a_job_is_recorded_at_once_however_long_a_batch_may_last() -> None:
+    sim = make_sim("fc", [1])
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1], [1613], 0.0)
+        s, events, trace = scheduler(port, "fc", specs, record_every=3600.0)
+        task = asyncio.create_task(s.run())
+        try:
+            await until(lambda: len(trace.tx) >= 5)
+            assert not s.snapshot.readings, "the polls wait for their batch"
+            loop = asyncio.get_running_loop()
+            future: asyncio.Future[JobResult] = loop.create_future()
+            request = pkw.read(specs[0].target.dialect, 341)
+            s.submit(
+                Job("d1", request, JobKind.READ, Priority.READ, loop.time() + 5, future=future)
+            )
+            result = await asyncio.wait_for(future, 5.0)
+            assert isinstance(result.outcome, Answered)
+            assert result.value == sim.drives[1].value(341)
+            assert ("d1", JobKind.READ, result) in events.done
+        finally:
+            s.stop()
+            await asyncio.wait_for(task, 2.0)

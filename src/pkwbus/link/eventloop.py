@@ -9,7 +9,8 @@ the service past that and stop it.
 :class:`FineEpollSelector` keeps both: epoll watches every descriptor, and
 a finite wait is spent in ``select()`` on the one epoll descriptor (readable
 as soon as any watched descriptor is ready), which times out to the
-microsecond. After it, epoll is asked without waiting.
+microsecond. After it, epoll is asked without waiting, unless ``select()``
+timed out: then nothing was ready, and the loop's timers are due.
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ class FineEpollSelector(selectors.EpollSelector):
         if timeout is not None and timeout > 0:
             epfd = self.fileno()
             if epfd < _FD_SETSIZE:
-                select.select([epfd], [], [], timeout)  # EINTR is retried (PEP 475)
+                # EINTR is retried (PEP 475).
+                if not select.select([epfd], [], [], timeout)[0]:
+                    return []
                 timeout = 0
         return super().select(timeout)
 

@@ -100,14 +100,17 @@ class LineRecord:
         for d in drives:
             snapshot.drives[d.name] = DriveState()
 
-    def apply(self, events: list[Event]) -> None:
+    def apply(self, events: list[Event], at: float | None = None) -> None:
+        """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now)."""
+        if at is None:
+            at = time.time()
         for event in events:
             if isinstance(event, Finished):
-                self._finished(event)
+                self._finished(event, at)
             elif isinstance(event, StatusWord):
                 old = self.snapshot.drives.get(event.drive, DriveState())
                 self.snapshot.drives[event.drive] = DriveState(
-                    old.up, event.word, time.time(), event.main_actual
+                    old.up, event.word, at, event.main_actual
                 )
             elif isinstance(event, HealthChanged):
                 self._health(event)
@@ -125,10 +128,10 @@ class LineRecord:
         old = self.snapshot.drives.get(event.drive, DriveState())
         self.snapshot.drives[event.drive] = replace(old, up=event.up)
 
-    def _finished(self, event: Finished) -> None:
+    def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
         result = self._result(event)
-        reading, previous = self._remember(drive, work.request, result)
+        reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):
             self._tell_refusal(drive, work, event.outcome)
             self.events.job_finished(drive, JobKind.READ, result)
@@ -171,7 +174,7 @@ class LineRecord:
             return JobResult(TimedOut(f"unusable answer: {exc}"), tally=event.tally)
 
     def _remember(
-        self, drive: str, request: pkw.PkwRequest, result: JobResult
+        self, drive: str, request: pkw.PkwRequest, result: JobResult, at: float
     ) -> tuple[Reading | None, Reading | None]:
         """(the value the drive just confirmed, the latest one before it).
 
@@ -183,7 +186,7 @@ class LineRecord:
         previous = self.snapshot.latest.get(key)
         if result.value is None:
             return None, previous
-        reading = Reading(result.value, result.raw, time.time())
+        reading = Reading(result.value, result.raw, at)
         self.snapshot.latest[key] = reading
         return reading, previous
 

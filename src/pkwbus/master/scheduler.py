@@ -3,11 +3,18 @@
 The policy is the planner's (:mod:`pkwbus.master.planner`); what its events
 mean is :mod:`pkwbus.master.record`'s. The exchanges run in the line's
 callbacks: each result goes to the planner, and the next exchange starts
-from the same callback, before the events of the last one are recorded (that
-work uses up the start pause). The runner's task only waits: for the port
-to reopen (the line's reconnect object says when), for a run of exchanges
-to end, or idle until something is due or a job comes in. :func:`run_job`
+from the same callback. The runner's task only waits: for the port to
+reopen (the line's reconnect object says when), for a run of exchanges to
+end, or idle until something is due or a job comes in. :func:`run_job`
 drives one job the same way, for the command line.
+
+During a run of exchanges, polls' values and the exchanges' counters are
+recorded in batches, at most :data:`RECORD_EVERY` seconds apart, each with
+the time it happened: one batch of the same work keeps the interpreter's
+caches warm, where the same work between every two wake-ups runs cold. What
+someone waits for is recorded at once: a finished write or on-demand read
+(its caller), a drive's change of health (its log line); so is everything at
+the end of a run, when the port fails, and when the line stops.
 """
 
 from __future__ import annotations
@@ -15,13 +22,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 
 from pkwbus.link import LinkState, PortError
 from pkwbus.master.health import HealthPolicy
 from pkwbus.master.jobs import Job, JobKind, Priority
 from pkwbus.master.line import Line
-from pkwbus.master.plan import DriveSpec, Finished, PollSpec, Send
+from pkwbus.master.plan import DriveSpec, Event, Finished, HealthChanged, PollSpec, Send
 from pkwbus.master.planner import Planner
 from pkwbus.master.record import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
@@ -30,10 +38,25 @@ from pkwbus.master.transaction import ExchangeResult, Outcome
 from pkwbus.protocol import pkw
 
 __all__ = [
-    "DriveSpec", "LineEvents", "LineScheduler", "NoEvents", "PollSpec", "perform", "run_job",
+    "RECORD_EVERY", "DriveSpec", "LineEvents", "LineScheduler", "NoEvents", "PollSpec",
+    "perform", "run_job",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
+
+# Seconds at most between two batches of recorded polls and counters during a run.
+RECORD_EVERY = 0.05
+
+
+def _waited_for(events: list[Event]) -> bool:
+    """Whether any of ``events`` is one somebody waits for: record it at once."""
+    for event in events:
+        if isinstance(event, Finished):
+            if isinstance(event.work, Job):
+                return True
+        elif isinstance(event, HealthChanged):
+            return True
+    return False
 
 
 class LineScheduler:
@@ -50,6 +73,8 @@ class LineScheduler:
         snapshot: Snapshot | None = None,
         events: LineEvents | None = None,
         poll_deadline: float | None = None,
+        wall_clock: Callable[[], float] = time.time,
+        record_every: float = RECORD_EVERY,
     ) -> None:
         self.name = name
         self.line = line
@@ -65,6 +90,12 @@ class LineScheduler:
         self._run_over: asyncio.Future[None] | None = None  # one per run of exchanges
         self._send: Send | None = None
         self._sent_at = 0.0
+        # Not yet recorded: the planner's events with their wall time, the exchanges.
+        self._unrecorded: list[tuple[list[Event], float]] = []
+        self._exchanges: list[tuple[str, ExchangeResult, float]] = []
+        self._batch_since = 0.0  # loop time of the batch's first exchange
+        self._wall = wall_clock  # the events' time of day
+        self._record_every = record_every
         line.reconnect.add_listener(self._on_port)
 
     def submit(self, job: Job) -> None:
@@ -130,14 +161,17 @@ class LineScheduler:
             loop = self._loop
             assert send is not None and loop is not None
             now = loop.time()
-            self.events.exchange(send.drive, result, now - self._sent_at)
+            exchanges = self._exchanges
+            if not exchanges:
+                self._batch_since = now
+            exchanges.append((send.drive, result, now - self._sent_at))
             planner = self.planner
             planner.exchanged(send, result, now)
             if not self._stopping and self.line.is_open:
                 action = planner.next_action(now)
                 if isinstance(action, Send):
                     self._start(action, loop)
-                    self._flush()  # while the start pause runs
+                    self._batch(now)  # while the start pause runs
                     return
             self._flush()
         except Exception as exc:  # the runner's task reports it and reopens the port
@@ -168,9 +202,33 @@ class LineScheduler:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._wake.wait(), delay)
 
+    def _batch(self, now: float) -> None:
+        """Keep the planner's events for the batch; record it when it is due."""
+        planner = self.planner
+        if planner.events:
+            events = planner.take_events()
+            self._unrecorded.append((events, self._wall()))
+            if _waited_for(events):
+                self._flush()
+                return
+        if now - self._batch_since >= self._record_every:
+            self._flush()
+
     def _flush(self) -> None:
+        """Record everything not recorded yet, in order."""
+        unrecorded = self._unrecorded
+        if unrecorded:
+            self._unrecorded = []
+            for events, at in unrecorded:
+                self.record.apply(events, at)
         if self.planner.events:
-            self.record.apply(self.planner.take_events())
+            self.record.apply(self.planner.take_events(), self._wall())
+        exchanges = self._exchanges
+        if exchanges:
+            self._exchanges = []
+            exchange = self.events.exchange
+            for drive, result, busy in exchanges:
+                exchange(drive, result, busy)
 
     def _on_port(self, state: LinkState, error: str | None) -> None:
         up = state is LinkState.OPEN
