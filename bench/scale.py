@@ -3,12 +3,15 @@
 Each line goes to its own simulated line (another process, pty, wire timing
 at 115200 baud, 2 ms response delay, 126 FC drives). Every parameter is
 polled every second, far more than a line carries, so each line runs at
-full load. Measured in this process (the service: runtime from a
-configuration, FastAPI on uvicorn): resident memory (VmRSS), CPU per second
-and per exchange, the time of the /metrics renderer in the event loop (of
-``generate_latest`` where the service has no other), the time and size of
-``GET /metrics`` from a client in another process, and the exchanges per
-second while that client scrapes back to back (polling must keep its pace).
+full load; the measuring starts once every polled parameter has a value
+(each of the twenty is one the simulated drive answers). Measured in this
+process (the service: runtime from a configuration, FastAPI on uvicorn):
+resident memory (VmRSS), CPU per second and per exchange, the time of the
+/metrics renderer in the event loop (of ``generate_latest`` where the
+service has no other), the time and size of ``GET /metrics`` from a client
+in another process, the number of parameter values in it, and the exchanges
+per second while that client scrapes back to back (polling must keep its
+pace).
 
     .venv/bin/python bench/scale.py [--lines 1 --lines 8] [--seconds 10]
 """
@@ -34,18 +37,19 @@ from _measure import markdown_table
 
 BAUD = 115200
 DELAY = 0.002
+# Twenty values every simulated FC drive answers: its table's numbers (15-40, a
+# text, aside) and five entries of the alarm log 15-30.
 PARAMETERS = (
-    "16-00", "16-01", "16-02", "16-03", "16-05", "16-09", "16-10", "16-11", "16-12", "16-13",
-    "16-14", "16-15", "16-16", "16-17", "16-18", "16-22", "16-30", "16-34", "16-35", "16-90",
+    "1-20", "3-41", "3-42", "4-14", "15-00", "15-02", "15-30[0]", "15-30[1]", "15-30[2]",
+    "15-30[3]", "15-30[4]", "16-00", "16-03", "16-10", "16-13", "16-14", "16-30", "16-90",
+    "16-92", "15-30[5]",
 )  # fmt: skip
 
 
 def _telegrams(runtime: Any) -> float:
-    total = 0.0
-    for metric in runtime.registry.collect():
-        if metric.name == "pkwbus_telegrams":
-            total += sum(s.value for s in metric.samples if s.name.endswith("_total"))
-    return total
+    """Telegrams exchanged on every line: the lines' plain counts, not a registry
+    collect(), which would hold the event loop for a quarter of a second at 8 lines."""
+    return float(sum(counts.telegram_total for counts in runtime.counts.values()))
 
 
 async def _render(registry: Any) -> bytes:
@@ -69,28 +73,37 @@ async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, A
         rss0 = rss_mb()
         async with Service(text, nodelay=True) as service:
             runtime = service.runtime
-            await asyncio.sleep(min(5.0, seconds))  # every drive answered at least once
+            polled = len(ports) * drives * len(PARAMETERS)
+            # The scrape is measured with a value for every polled parameter: at full
+            # load a line needs about 15 s to read each one once.
+            ready = time.perf_counter() + 60.0
+            while len(runtime.snapshot.readings) < polled and time.perf_counter() < ready:
+                await asyncio.sleep(0.5)
             n0, c0, t0 = _telegrams(runtime), time.process_time(), time.perf_counter()
             await asyncio.sleep(seconds)
             n1, c1, t1 = _telegrams(runtime), time.process_time(), time.perf_counter()
             rss = rss_mb()
             gen = []
             size = 0
+            payload = b""
             for _ in range(5):
                 g0 = time.perf_counter()
                 payload = await _render(runtime.registry)
                 gen.append(time.perf_counter() - g0)
                 size = len(payload)
                 await asyncio.sleep(0.05)
+            values = payload.count(b"\npkwbus_parameter_value{")
             n2, t2 = _telegrams(runtime), time.perf_counter()
             http = await http_client("scrape", service.base, "10")
             n3, t3 = _telegrams(runtime), time.perf_counter()
     http_s = statistics.median(http["latencies"])  # type: ignore[arg-type]
     slowest = max(statistics.median(gen), http_s)
     return {
-        "met": "yes" if rss < 80 and slowest < 0.05 else "no",
+        "memory_met": "yes" if rss < 80 else "no",
+        "scrape_met": "yes" if slowest < 0.05 else "no",
         "lines": len(ports),
-        "polled": len(ports) * drives * len(PARAMETERS),
+        "polled": polled,
+        "values": values,
         "rss_mb": rss,
         "rss_before_mb": rss0,
         "exchanges_s": (n1 - n0) / (t1 - t0),
@@ -130,6 +143,7 @@ def run(
         {
             "lines": "lines",
             "polled": "polled parameters",
+            "values": "values in /metrics",
             "exchanges_s": "exchanges/s",
             "rss_mb": "VmRSS MB",
             "cpu_load": "CPU (cores)",
@@ -138,7 +152,8 @@ def run(
             "gen_ms": "render ms",
             "http_ms": "GET /metrics ms",
             "size_kb": "size KiB",
-            "met": "< 80 MB, < 50 ms",
+            "memory_met": "< 80 MB",
+            "scrape_met": "scrape < 50 ms",
         },
         digits=1,
     )

@@ -93,8 +93,7 @@ async def _direct(runtime: Any, writes: int, gap: float) -> list[float]:
 
 
 def _busy(runtime: Any) -> float:
-    v = runtime.registry.get_sample_value("pkwbus_line_busy_seconds_total", {"line": "line0"})
-    return float(v or 0.0)
+    return float(runtime.counts["line0"].busy_total)
 
 
 def _row(path: str, baud: int, latencies: list[float], errors: int, busy: float) -> dict[str, Any]:

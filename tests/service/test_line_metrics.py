@@ -84,6 +84,29 @@ def test_only_the_counters_an_alert_needs_at_zero_exist_before_they_move() -> No
     )
 
 
+def test_the_plain_counts_agree_with_the_exported_counters() -> None:
+    """The status page's and benchmarks' plain counts: what /metrics says, without a collect()."""
+    registry = CollectorRegistry()
+    metrics = ServiceMetrics(registry).for_line("l", {"d1": FC, "d2": FC})
+    for drive, result in [
+        ("d1", Failure(ErrorKind.TIMEOUT)),
+        ("d2", Failure(ErrorKind.CHECKSUM)),
+        ("d1", Failure(ErrorKind.PORT)),  # nothing went on the wire
+        ("d2", Failure(ErrorKind.TIMEOUT)),
+    ]:
+        metrics.exchange(drive, result, 0.01)
+    exported = sum(
+        sample.value
+        for family in registry.collect()
+        for sample in family.samples
+        if sample.name == "pkwbus_telegrams_total"
+    )
+    assert metrics.telegram_total == exported == 3
+    assert metrics.error_counts == {"d1": 1, "d2": 2}
+    busy = registry.get_sample_value("pkwbus_line_busy_seconds_total", {"line": "l"})
+    assert metrics.busy_total == pytest.approx(busy) == pytest.approx(0.03)
+
+
 def test_outcome_labels() -> None:
     response = pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD)
     assert metric_label(Answered(response)).value == "ok"

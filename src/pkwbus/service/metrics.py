@@ -220,6 +220,7 @@ class LineMetrics:
         self._busy = m.busy.labels(line, zero=True)
         # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
         self.busy_total = 0.0
+        self.telegram_total = 0
         self.fault_counts: collections.Counter[str] = collections.Counter()
         self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
@@ -238,6 +239,7 @@ class LineMetrics:
         if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
             return  # nothing went on the wire
         self._telegrams[drive].inc()
+        self.telegram_total += 1
         self._busy.inc(busy)
         self.busy_total += busy
         if isinstance(result, Reply):

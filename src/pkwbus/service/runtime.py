@@ -63,10 +63,14 @@ class DriveEntry:
 
 
 class LineCounts(Protocol):
-    """Plain counts of one line: busy seconds, and faults and telegram errors by drive."""
+    """Plain counts of one line: busy seconds, telegrams, and faults and telegram errors
+    by drive."""
 
     @property
     def busy_total(self) -> float: ...
+
+    @property
+    def telegram_total(self) -> int: ...
 
     @property
     def fault_counts(self) -> Mapping[str, int]: ...
