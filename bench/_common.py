@@ -172,6 +172,9 @@ class Counting:
     def overrun(self, drive: str) -> None:
         pass
 
+    def value(self, key: object, reading: object) -> None:
+        pass
+
     def total(self, drives: Sequence[str] | None = None) -> int:
         return sum(n for d, n in self.ok.items() if drives is None or d in drives)
 
@@ -256,7 +259,7 @@ class Service:
         import uvicorn
 
         from pkwbus.service.api import create_app
-        from pkwbus.service.app import bind
+        from pkwbus.service.app import bind, settle_heap
         from pkwbus.service.audit import AuditLog
         from pkwbus.service.build import build_runtime
         from pkwbus.service.config import parse_config
@@ -270,6 +273,7 @@ class Service:
         self.server = uvicorn.Server(
             uvicorn.Config(app, log_config=None, access_log=False, lifespan="off")
         )
+        settle_heap()  # as pkwbus run does
         await self.runtime.start()
         self.task = asyncio.create_task(self.server.serve(sockets=[self.sock]))
         while not self.server.started:

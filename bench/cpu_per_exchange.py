@@ -84,6 +84,9 @@ class Counting:
     def overrun(self, drive: str) -> None:
         self.inner.overrun(drive)
 
+    def value(self, key: Any, reading: Any) -> None:
+        self.inner.value(key, reading)
+
 
 async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
     registry = CollectorRegistry()

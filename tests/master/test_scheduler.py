@@ -18,6 +18,7 @@ from pkwbus.link import PortSettings
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
 from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.protocol import pkw
@@ -44,6 +45,9 @@ class Recorder:
 
     def overrun(self, drive: str) -> None:
         self.overruns[drive] += 1
+
+    def value(self, key: ReadingKey, reading: Reading) -> None:
+        pass
 
     def polls_ok(self, drive: str) -> int:
         return sum(

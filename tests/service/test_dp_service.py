@@ -23,6 +23,7 @@ from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.dp_scheduler import DpScheduler
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Rejected
+from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.transaction import ExchangeResult, Failure, Reply
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
@@ -563,6 +564,9 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
 
             def overrun(self, drive: str) -> None:
                 inner.overrun(drive)
+
+            def value(self, key: ReadingKey, reading: Reading) -> None:
+                inner.value(key, reading)
 
         scheduler.events = Tap()
         svc.sim.kill(10)

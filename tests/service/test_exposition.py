@@ -19,7 +19,7 @@ from pkwbus.master.snapshot import DriveState, Reading, Snapshot
 from pkwbus.master.transaction import ErrorKind, Failure, Rejected, TimedOut
 from pkwbus.protocol.dialects import FC
 from pkwbus.protocol.pzd import Profile
-from pkwbus.service import exposition
+from pkwbus.service import device_metrics, exposition
 from pkwbus.service.exposition import MetricsRegistry, format_value, render
 from pkwbus.service.metrics import (
     DriveInfo,
@@ -38,7 +38,9 @@ ODD = 'Motor "A" \\ 1\nÜberlast'
 class Plant:
     """A registry as build_runtime makes it: service counters, API counters, snapshot."""
 
-    def __init__(self, lines: int = 2, drives: int = 3, parameters: int = 4) -> None:
+    def __init__(
+        self, lines: int = 2, drives: int = 3, parameters: int = 4, *, landed: bool = False
+    ) -> None:
         self.registry = MetricsRegistry()
         self.snapshot = Snapshot()
         metrics = ServiceMetrics(self.registry)
@@ -57,7 +59,11 @@ class Plant:
                     infos.append(ParameterInfo(line, drive, f"16-{p:02d}", p % 2, 1600 + p,
                                                f"Parameter {p}", unit, "u16"))  # fmt: skip
         self.infos = infos
-        self.registry.register(SnapshotCollector(self.snapshot, kinds, infos))
+        collector = SnapshotCollector(self.snapshot, kinds, infos)
+        self.registry.register(collector)
+        if landed:  # as build_runtime wires it: the lines' metrics hear of new readings
+            for line_metrics in self.lines.values():
+                line_metrics.values = collector.landed
 
     def info_text(self) -> str:
         text = generate_latest(self.registry).decode()
@@ -71,7 +77,9 @@ class Plant:
             value: float | int | str = special[i % len(special)] + (t if i % 3 else 0)
             if i % 7 == 6:
                 value = "text"  # a text value: in the API, not in the metrics
-            self.snapshot.readings[(p.drive, p.parameter, p.index)] = Reading(value, i, t)
+            key, reading = (p.drive, p.parameter, p.index), Reading(value, i, t)
+            self.snapshot.readings[key] = reading
+            self.lines[p.line].value(key, reading)
         for i, p in enumerate(self.infos[::4]):
             word = None if i % 5 == 4 else (int(t) * 97 + i) & 0xFFFF
             # A main actual value of either sign, or none (a drive without a second PZD word).
@@ -144,6 +152,29 @@ def test_a_value_that_disappears_from_the_snapshot_disappears_from_the_text() ->
     text = _text(plant)
     assert 'parameter="16-01"' not in text.split("# HELP pkwbus_parameter_info")[0]
     assert text == generate_latest(plant.registry).decode()
+
+
+@pytest.mark.parametrize("landed", [True, False])
+def test_values_are_rendered_when_their_poll_lands_so_the_scrape_only_joins(
+    landed: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    plant = Plant(lines=2, drives=5, parameters=6, landed=landed)
+    plant.poll(1_700_000_000.5)
+    formatted = 0
+
+    def counting(value: float) -> str:
+        nonlocal formatted
+        formatted += 1
+        return format_value(value)
+
+    monkeypatch.setattr(device_metrics, "format_value", counting)
+    text = _text(plant)
+    assert text == generate_latest(plant.registry).decode()
+    drives_lines = 2 * len(plant.snapshot.drives)  # status word, main actual value
+    if landed:
+        assert formatted <= drives_lines  # no value or timestamp line made at the scrape
+    else:  # a reading nobody reported is rendered at the scrape, the same text
+        assert formatted > drives_lines
 
 
 def test_promtool_accepts_the_text() -> None:

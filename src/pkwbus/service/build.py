@@ -88,7 +88,10 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     drives = {
         d.name: DriveInfo(line.name, target_for(line, d).profile) for line, d in config.drives()
     }
-    registry.register(SnapshotCollector(snapshot, drives, infos))
+    collector = SnapshotCollector(snapshot, drives, infos)
+    registry.register(collector)
+    for line_metrics in counts.values():
+        line_metrics.values = collector.landed
     runtime = Runtime(schedulers, entries, snapshot, registry)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)

@@ -3,8 +3,10 @@
 Built from a copy of the snapshot at each scrape, so a scrape never causes
 bus traffic and values that disappear also disappear from the output.
 ``pkwbus_parameter_info`` does not change while the service runs: its text is
-made once. A value's line is made again only when its reading changed, a
-drive's lines only when its state did (see :mod:`pkwbus.service.exposition`).
+made once. A value's lines are made when its reading lands in the snapshot
+(:meth:`SnapshotCollector.landed`, called by the line's metrics), so that a
+scrape only joins them; a drive's lines are made again only when its state
+changed (see :mod:`pkwbus.service.exposition`).
 """
 
 from __future__ import annotations
@@ -76,7 +78,19 @@ class _DriveLines:
     mav: str = ""
 
 
+@dataclass(frozen=True, slots=True)
+class _DriveHeads:
+    """The text before the value of each of a drive's lines, made once."""
+
+    up: str
+    word: str
+    bits: tuple[tuple[int, str], ...]  # (bit number, head) of each named bit
+    mav: str
+
+
 _Rendered = tuple[Reading, str, str]  # the reading, its value line, its timestamp line
+# Drives whose lines are brought up to date between two turns of the event loop.
+DRIVES_A_TURN = 100
 
 
 class SnapshotCollector(Collector):
@@ -102,6 +116,7 @@ class SnapshotCollector(Collector):
             self._head((p.drive, p.parameter, p.index))
         self._readings: dict[ReadingKey, _Rendered] = {}
         self._drive_lines: dict[str, tuple[_DriveKey, _DriveLines]] = {}
+        self._drive_heads = {name: self._heads_of(name, d.line) for name, d in self._drives.items()}
 
     def _line(self, drive: str) -> str:
         info = self._drives.get(drive)
@@ -184,12 +199,14 @@ class SnapshotCollector(Collector):
         words: list[str] = []
         bits: list[str] = []
         mavs: list[str] = []
-        for drive, state in drives.items():
+        for count, (drive, state) in enumerate(drives.items(), 1):
             drive_lines = self._drive(drive, state)
             ups.append(drive_lines.up)
             words.append(drive_lines.word)
             bits.extend(drive_lines.bits)
             mavs.append(drive_lines.mav)
+            if count % DRIVES_A_TURN == 0:
+                yield ""  # a turn of the event loop (see exposition.render)
         yield header(*DRIVE_UP, "gauge") + "".join(ups)
         yield header(*WORD, "gauge") + "".join(words)
         yield header(*BIT, "gauge")
@@ -199,6 +216,12 @@ class SnapshotCollector(Collector):
             f"{head(LINE_UP[0], {'line': name})}{'1.0' if is_up else '0.0'}\n"
             for name, is_up in lines.items()
         )
+
+    def landed(self, key: ReadingKey, reading: Reading) -> None:
+        """A new reading: its lines are made now, when its poll lands, not at the scrape."""
+        rendered = self._readings.get(key)
+        if rendered is None or rendered[0] is not reading:
+            self._reading(key, reading)
 
     def _reading(self, key: ReadingKey, reading: Reading) -> _Rendered:
         rendered = self._readings.get(key)
@@ -224,28 +247,39 @@ class SnapshotCollector(Collector):
 
     def _drive(self, drive: str, state: DriveState) -> _DriveLines:
         """The drive's up line, its status word and bit lines if it has a word, and its
-        main actual value line if that came with the word."""
+        main actual value line if that came with the word; only what changed is made
+        again."""
         line = self._line(drive)
         key = (line, state.up, state.status_word, state.main_actual)
         cached = self._drive_lines.get(drive)
         if cached is not None and cached[0] == key:
             return cached[1]
-        labels = {"line": line, "drive": drive}
-        up = f"{head(DRIVE_UP[0], labels)}{'1.0' if state.up else '0.0'}\n"
-        info = self._drives.get(drive)
+        heads = self._drive_heads.get(drive)
+        if heads is None:
+            heads = self._drive_heads[drive] = self._heads_of(drive, line)
+        up = f"{heads.up}{'1.0' if state.up else '0.0'}\n"
         word = state.status_word
         result = _DriveLines(up)
-        if word is not None and info is not None:
-            bits = tuple(
-                f"{head(BIT[0], {**labels, 'bit': name})}{'1.0' if word >> bit & 1 else '0.0'}\n"
-                for bit, name in STATUS_BITS[info.profile].items()
-            )
+        if word is not None and drive in self._drives:
+            if cached is not None and cached[0][2] == word and cached[1].bits:
+                word_line, bits = cached[1].word, cached[1].bits
+            else:
+                word_line = f"{heads.word}{format_value(float(word))}\n"
+                bits = tuple(f"{h}{'1.0' if word >> bit & 1 else '0.0'}\n" for bit, h in heads.bits)
             mav = ""
             if state.main_actual is not None:
-                percent = format_value(ref_to_percent(state.main_actual))
-                mav = f"{head(MAV[0], labels)}{percent}\n"
-            result = _DriveLines(
-                up, f"{head(WORD[0], labels)}{format_value(float(word))}\n", bits, mav
-            )
+                mav = f"{heads.mav}{format_value(ref_to_percent(state.main_actual))}\n"
+            result = _DriveLines(up, word_line, bits, mav)
         self._drive_lines[drive] = (key, result)
         return result
+
+    def _heads_of(self, drive: str, line: str) -> _DriveHeads:
+        labels = {"line": line, "drive": drive}
+        info = self._drives.get(drive)
+        named = STATUS_BITS[info.profile].items() if info is not None else ()
+        return _DriveHeads(
+            head(DRIVE_UP[0], labels),
+            head(WORD[0], labels),
+            tuple((bit, head(BIT[0], {**labels, "bit": name})) for bit, name in named),
+            head(MAV[0], labels),
+        )

@@ -12,7 +12,8 @@ collectors below also answer ``collect()`` with the same series, so
 ``registry.get_sample_value`` and ``generate_latest`` still see them.
 
 :func:`render` hands the event loop back between pieces of text (at most
-:data:`CHUNK` lines each, :data:`YIELD_EVERY` characters together), so
+:data:`CHUNK` lines each, :data:`YIELD_EVERY` characters together, about a
+millisecond of work), and wherever a collector yields an empty piece, so
 polling keeps its pace while a large configuration is scraped.
 """
 
@@ -44,8 +45,8 @@ __all__ = [
 CONTENT_TYPE = CONTENT_TYPE_PLAIN_0_0_4
 # Lines rendered at most in one piece of text, and characters rendered before
 # the scrape returns to the event loop: a few milliseconds of work.
-CHUNK = 2000
-YIELD_EVERY = 200_000
+CHUNK = 500
+YIELD_EVERY = 50_000
 _SPECIAL = {"inf": "+Inf", "-inf": "-Inf", "nan": "NaN"}
 
 
@@ -81,7 +82,11 @@ def header(name: str, documentation: str, kind: str) -> str:
 
 @runtime_checkable
 class Exposed(Protocol):
-    """A collector that renders its own text (the lines of its families, in order)."""
+    """A collector that renders its own text (the lines of its families, in order).
+
+    An empty piece asks :func:`render` for a turn of the event loop: a collector
+    whose work between two pieces of text is long yields one now and then.
+    """
 
     def exposition(self) -> Iterator[str]: ...
 
@@ -208,12 +213,13 @@ async def render(registry: CollectorRegistry) -> bytes:
     """The registry's text; a :class:`MetricsRegistry` returns to the loop now and then."""
     if not isinstance(registry, MetricsRegistry):
         return await asyncio.to_thread(generate_latest, registry)
-    parts: list[str] = []
+    parts: list[bytes] = []
     size = 0
     for piece in registry.exposition():
-        parts.append(piece)
-        size += len(piece)
-        if size >= YIELD_EVERY:
+        if piece:
+            parts.append(piece.encode("utf-8"))
+            size += len(piece)
+        if not piece or size >= YIELD_EVERY:  # an empty piece asks for a turn
             size = 0
             await asyncio.sleep(0)
-    return "".join(parts).encode("utf-8")
+    return b"".join(parts)

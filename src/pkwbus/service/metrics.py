@@ -13,13 +13,14 @@ from __future__ import annotations
 import collections
 import platform
 import weakref
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from pkwbus import __version__
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
+from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
@@ -221,6 +222,9 @@ class LineMetrics:
         # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
         self.busy_total = 0.0
         self.telegram_total = 0
+        # Renders a new reading's lines as it lands (SnapshotCollector.landed), so
+        # that a scrape only joins them; set once the collector is built.
+        self.values: Callable[[ReadingKey, Reading], object] | None = None
         self.fault_counts: collections.Counter[str] = collections.Counter()
         self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
@@ -273,6 +277,10 @@ class LineMetrics:
 
     def overrun(self, drive: str) -> None:
         self._overruns[drive].inc()
+
+    def value(self, key: ReadingKey, reading: Reading) -> None:
+        if self.values is not None:
+            self.values(key, reading)
 
 
 AUDIT_STAGES = ("attempt", "outcome", "refusals")
