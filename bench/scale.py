@@ -9,7 +9,9 @@ process (the service: runtime from a configuration, FastAPI on uvicorn):
 resident memory (VmRSS), CPU per second and per exchange, the time of the
 /metrics renderer in the event loop (of ``generate_latest`` where the
 service has no other), the time and size of ``GET /metrics`` from a client
-in another process, the number of parameter values in it, and the exchanges
+in another process (one 4 s after the last on a kept-alive connection, as
+Prometheus scrapes pkwbus, when some 5,000 values are new; and the median of
+ten back to back), the number of parameter values in it, and the exchanges
 per second while that client scrapes back to back (polling must keep its
 pace).
 
@@ -36,6 +38,9 @@ from _common import Service, http_client, rss_mb, service_config, sim_process
 from _measure import markdown_table
 
 BAUD = 115200
+# Seconds between two scrapes as the deploy's Prometheus has them (scrape_interval 5s),
+# short of the service's 5 s keep-alive.
+SPACED = 4.0
 DELAY = 0.002
 # Twenty values every simulated FC drive answers: its table's numbers (15-40, a
 # text, aside) and five entries of the alarm log 15-30.
@@ -79,10 +84,16 @@ async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, A
             ready = time.perf_counter() + 60.0
             while len(runtime.snapshot.readings) < polled and time.perf_counter() < ready:
                 await asyncio.sleep(0.5)
+            # Meanwhile, as Prometheus does with pkwbus (deploy/prometheus), a client on a
+            # kept-alive connection scrapes, waits SPACED seconds, and scrapes again:
+            # some 5,000 values are new by then.
+            spaced = asyncio.create_task(http_client("scrape", service.base, "2", str(SPACED)))
+            await asyncio.sleep(1.0)  # its first scrape (the one that makes caches) is over
             n0, c0, t0 = _telegrams(runtime), time.process_time(), time.perf_counter()
             await asyncio.sleep(seconds)
             n1, c1, t1 = _telegrams(runtime), time.process_time(), time.perf_counter()
             rss = rss_mb()
+            first = await spaced
             gen = []
             size = 0
             payload = b""
@@ -97,7 +108,8 @@ async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, A
             http = await http_client("scrape", service.base, "10")
             n3, t3 = _telegrams(runtime), time.perf_counter()
     http_s = statistics.median(http["latencies"])  # type: ignore[arg-type]
-    slowest = max(statistics.median(gen), http_s)
+    first_s = float(first["latencies"][1])  # type: ignore[index]
+    slowest = max(statistics.median(gen), http_s, first_s)
     return {
         "memory_met": "yes" if rss < 80 else "no",
         "scrape_met": "yes" if slowest < 0.05 else "no",
@@ -112,6 +124,7 @@ async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, A
         "cpu_us": (c1 - c0) * 1e6 / max(1.0, n1 - n0),
         "gen_ms": statistics.median(gen) * 1e3,
         "http_ms": http_s * 1e3,
+        "first_ms": first_s * 1e3,
         "size_kb": size / 1024,
     }
 
@@ -150,7 +163,8 @@ def run(
             "cpu_us": "CPU µs/exchange",
             "scraped_exchanges_s": "exchanges/s while scraped",
             "gen_ms": "render ms",
-            "http_ms": "GET /metrics ms",
+            "first_ms": f"GET /metrics ms, {SPACED:.0f} s after the last",
+            "http_ms": "GET /metrics ms, back to back (median)",
             "size_kb": "size KiB",
             "memory_met": "< 80 MB",
             "scrape_met": "scrape < 50 ms",

@@ -46,7 +46,7 @@ CONTENT_TYPE = CONTENT_TYPE_PLAIN_0_0_4
 # Lines rendered at most in one piece of text, and characters rendered before
 # the scrape returns to the event loop: a few milliseconds of work.
 CHUNK = 500
-YIELD_EVERY = 50_000
+YIELD_EVERY = 200_000
 _SPECIAL = {"inf": "+Inf", "-inf": "-Inf", "nan": "NaN"}
 
 
