@@ -254,3 +254,20 @@ async def test_a_job_is_recorded_at_once_however_long_a_batch_may_last() -> None
         finally:
             s.stop()
             await asyncio.wait_for(task, 2.0)
+
+
+async def test_a_batch_is_recorded_at_its_time_while_a_slow_exchange_is_out() -> None:
+    """The batch's deadline is a timer: a value is in the snapshot while the next
+    exchange still waits for its (slow) answer, not only when that answer comes."""
+    sim = make_sim("fc", [1], timing=SimTiming(response_delay=1.0))
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1], [1613], 0.0)
+        s, _, trace = scheduler(port, "fc", specs, timeout=3.0, record_every=0.05)
+        task = asyncio.create_task(s.run())
+        try:
+            await until(lambda: bool(s.snapshot.readings))
+            assert len(trace.rx) == 1, "recorded before the second answer came"
+            assert len(trace.tx) == 2
+        finally:
+            s.stop()
+            await asyncio.wait_for(task, 5.0)

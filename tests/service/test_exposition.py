@@ -113,10 +113,12 @@ def _samples(text: str) -> list[tuple[str, tuple[tuple[str, str], ...], str]]:
     ]
 
 
-def test_the_text_is_generate_latest_of_the_same_registry() -> None:
+@pytest.mark.parametrize("landed", [False, True])
+def test_the_text_is_generate_latest_of_the_same_registry(landed: bool) -> None:
     """Sample by sample (names, labels, values) and byte for byte, after each change:
-    a value, a timestamp, a drive's state, a counter, a new series."""
-    plant = Plant()
+    a value, a timestamp, a drive's state, a counter, a new series; whether the lines
+    were made when the values landed or at the scrape."""
+    plant = Plant(landed=landed)
     for step in range(4):
         plant.poll(1_700_000_000.25 + step)
         if step >= 2:
@@ -126,6 +128,20 @@ def test_the_text_is_generate_latest_of_the_same_registry() -> None:
         assert _samples(text) == _samples(expected)
         assert text == expected
     assert 'unit="Motor \\"A\\" \\\\ 1\\nÜberlast"' in text
+    # A value of the other sign of zero, a text after a number, a number after a text;
+    # a drive whose status word stays while its main actual value and state change.
+    info = plant.infos[0]
+    key = (info.drive, info.parameter, info.index)
+    drive = plant.snapshot.drives[info.drive]
+    line = plant.lines[info.line]
+    for t, value in enumerate([0.0, -0.0, 0.0, "text", 5.0, -0.0], start=1):
+        reading = Reading(value, 0, 1_700_000_100.0 + t)
+        plant.snapshot.readings[key] = reading
+        line.value(key, reading)
+        plant.snapshot.drives[info.drive] = DriveState(
+            t % 2 == 0, drive.status_word, 1_700_000_100.0 + t, (drive.main_actual or 0) + t
+        )
+        assert _text(plant) == generate_latest(plant.registry).decode(), value
 
 
 def test_unchanged_series_reuse_their_line_and_changed_ones_are_made_again() -> None:

@@ -9,12 +9,13 @@ end, or idle until something is due or a job comes in. :func:`run_job`
 drives one job the same way, for the command line.
 
 During a run of exchanges, polls' values and the exchanges' counters are
-recorded in batches, at most :data:`RECORD_EVERY` seconds apart, each with
-the time it happened: one batch of the same work keeps the interpreter's
-caches warm, where the same work between every two wake-ups runs cold. What
-someone waits for is recorded at once: a finished write or on-demand read
-(its caller), a drive's change of health (its log line); so is everything at
-the end of a run, when the port fails, and when the line stops.
+recorded in batches, at most :data:`RECORD_EVERY` seconds after the first
+exchange of the batch (a loop timer), each with the time it happened: one
+batch of the same work keeps the interpreter's caches warm, where the same
+work between every two wake-ups runs cold. What someone waits for is
+recorded at once: a finished write or on-demand read (its caller), a
+drive's change of health (its log line); so is everything at the end of a
+run, when the port fails, and when the line stops.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import asyncio
 import contextlib
 import logging
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 
 from pkwbus.link import LinkState, PortError
@@ -90,10 +92,10 @@ class LineScheduler:
         self._run_over: asyncio.Future[None] | None = None  # one per run of exchanges
         self._send: Send | None = None
         self._sent_at = 0.0
-        # Not yet recorded: the planner's events with their wall time, the exchanges.
-        self._unrecorded: list[tuple[list[Event], float]] = []
-        self._exchanges: list[tuple[str, ExchangeResult, float]] = []
-        self._batch_since = 0.0  # loop time of the batch's first exchange
+        # Not yet recorded: the exchanges, the planner's events with their wall time.
+        self._exchanges: deque[tuple[str, ExchangeResult, float]] = deque()
+        self._unrecorded: deque[tuple[list[Event], float]] = deque()
+        self._record_timer: asyncio.TimerHandle | None = None  # the batch's deadline
         self._wall = wall_clock  # the events' time of day
         self._record_every = record_every
         line.reconnect.add_listener(self._on_port)
@@ -161,17 +163,16 @@ class LineScheduler:
             loop = self._loop
             assert send is not None and loop is not None
             now = loop.time()
-            exchanges = self._exchanges
-            if not exchanges:
-                self._batch_since = now
-            exchanges.append((send.drive, result, now - self._sent_at))
+            if self._record_timer is None:  # a batch begins: recorded RECORD_EVERY later
+                self._record_timer = loop.call_later(self._record_every, self._on_record_timer)
+            self._exchanges.append((send.drive, result, now - self._sent_at))
             planner = self.planner
             planner.exchanged(send, result, now)
             if not self._stopping and self.line.is_open:
                 action = planner.next_action(now)
                 if isinstance(action, Send):
                     self._start(action, loop)
-                    self._batch(now)  # while the start pause runs
+                    self._batch()  # while the start pause runs
                     return
             self._flush()
         except Exception as exc:  # the runner's task reports it and reopens the port
@@ -202,33 +203,38 @@ class LineScheduler:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._wake.wait(), delay)
 
-    def _batch(self, now: float) -> None:
-        """Keep the planner's events for the batch; record it when it is due."""
+    def _batch(self) -> None:
+        """Keep the planner's events for the batch; what somebody waits for, at once."""
         planner = self.planner
         if planner.events:
             events = planner.take_events()
             self._unrecorded.append((events, self._wall()))
             if _waited_for(events):
                 self._flush()
-                return
-        if now - self._batch_since >= self._record_every:
+
+    def _on_record_timer(self) -> None:
+        self._record_timer = None
+        try:
             self._flush()
+        except Exception:  # a line never stops; the rest of the batch stays queued
+            log.exception("line %s: recording failed", self.name, extra={"line": self.name})
 
     def _flush(self) -> None:
-        """Record everything not recorded yet, in order."""
+        """Record everything not recorded yet, in order: each exchange before the
+        events it led to. What is not recorded when one of them raises stays queued."""
+        if self._record_timer is not None:
+            self._record_timer.cancel()
+            self._record_timer = None
+        exchanges = self._exchanges
+        exchange = self.events.exchange
+        while exchanges:
+            exchange(*exchanges.popleft())
         unrecorded = self._unrecorded
-        if unrecorded:
-            self._unrecorded = []
-            for events, at in unrecorded:
-                self.record.apply(events, at)
+        while unrecorded:
+            events, at = unrecorded.popleft()
+            self.record.apply(events, at)
         if self.planner.events:
             self.record.apply(self.planner.take_events(), self._wall())
-        exchanges = self._exchanges
-        if exchanges:
-            self._exchanges = []
-            exchange = self.events.exchange
-            for drive, result, busy in exchanges:
-                exchange(drive, result, busy)
 
     def _on_port(self, state: LinkState, error: str | None) -> None:
         up = state is LinkState.OPEN

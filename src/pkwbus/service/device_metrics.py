@@ -11,6 +11,7 @@ changed (see :mod:`pkwbus.service.exposition`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from itertools import islice
@@ -76,6 +77,15 @@ class _DriveLines:
     word: str = ""
     bits: tuple[str, ...] = ()
     mav: str = ""
+
+
+def _same_number(old: float | str, value: float) -> bool:
+    """Whether ``old`` prints as ``value`` does: a number equal to it and of the same
+    sign (-0.0 is printed as such, though it equals 0.0); never a text."""
+    if isinstance(old, str):
+        return False
+    number = float(old)
+    return number == value and math.copysign(1.0, number) == math.copysign(1.0, value)
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,7 +240,7 @@ class SnapshotCollector(Collector):
             return rendered
         heads = self._heads.get(key) or self._head(key)
         value = float(reading.value)  # text values are skipped before
-        if rendered is not None and float(rendered[0].value) == value:
+        if rendered is not None and _same_number(rendered[0].value, value):
             value_line = rendered[1]
         else:
             value_line = f"{heads[0]}{format_value(value)}\n"

@@ -168,7 +168,9 @@ class CounterFamily(Collector):
         yield self._header
         every = list(self._series.values())
         for start in range(0, len(every), CHUNK):
-            yield "".join([s.line() for s in every[start : start + CHUNK] if s.visible])
+            text = "".join([s.line() for s in every[start : start + CHUNK] if s.visible])
+            if text:  # an empty piece would ask render() for a turn of the loop
+                yield text
 
 
 class _Collected:
