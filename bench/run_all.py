@@ -97,7 +97,7 @@ def plan(quick: bool) -> Plan:
             "Benchmark 2's service path (`LineScheduler` with metrics, 3 polls per drive, "
             "always due) with 1, 16 and 126 FC drives on the line, one simulator process "
             "serving them all; rounds interleaved, each count once a round.",
-            lambda: cpu_per_exchange.by_drives(1500 if q else 5000, 2 if q else 5, [1, 16, 126]),
+            lambda: cpu_per_exchange.by_drives(1500 if q else 5000, 2 if q else 9, [1, 16, 126]),
         ),
     ]
 
