@@ -246,3 +246,27 @@ def test_the_content_type_is_the_text_format_0_0_4() -> None:
 @given(st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**63), 2**63))
 def test_values_are_printed_as_prometheus_client_prints_them(value: float) -> None:
     assert format_value(value) == floatToGoString(value)
+
+
+def test_a_counter_family_is_made_again_only_after_one_of_its_series_changed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    plant = Plant(lines=2, drives=4, parameters=2)
+    plant.poll(100.0)
+    plant.traffic()
+    first = _text(plant)
+    made = 0
+    line = exposition.Series.line
+
+    def counting(self: exposition.Series) -> str:
+        nonlocal made
+        made += 1
+        return line(self)
+
+    monkeypatch.setattr(exposition.Series, "line", counting)
+    assert _text(plant) == first
+    assert made == 0, "no counter changed: every family's text was kept"
+    plant.traffic()  # a timeout, faults, an overrun on each line
+    text = _text(plant)
+    assert made > 0 and text != first
+    assert text == generate_latest(plant.registry).decode()

@@ -91,6 +91,15 @@ class Exposed(Protocol):
     def exposition(self) -> Iterator[str]: ...
 
 
+class _Changes:
+    """How many times a family's series changed: its text is made again only then."""
+
+    __slots__ = ("count",)
+
+    def __init__(self) -> None:
+        self.count = 0
+
+
 class Series:
     """One counter series: its value, and its line rendered again only after a change.
 
@@ -98,12 +107,13 @@ class Series:
     exported at 0; the first increment makes it visible.
     """
 
-    __slots__ = ("_line", "_shown", "head", "value", "visible")
+    __slots__ = ("_changes", "_line", "_shown", "head", "value", "visible")
 
-    def __init__(self, head: str, visible: bool) -> None:
+    def __init__(self, head: str, visible: bool, changes: _Changes | None = None) -> None:
         self.head = head
         self.value = 0.0
         self.visible = visible
+        self._changes = changes if changes is not None else _Changes()
         self._shown: float | None = None
         self._line = ""
 
@@ -112,6 +122,12 @@ class Series:
             raise ValueError("a counter only goes up")
         self.value += amount
         self.visible = True
+        self._changes.count += 1
+
+    def show(self) -> None:
+        """Export the series from now on, at its value (0 until it moves)."""
+        self.visible = True
+        self._changes.count += 1
 
     def line(self) -> str:
         value = self.value
@@ -124,7 +140,9 @@ class Series:
 class CounterFamily(Collector):
     """A labelled counter whose series exist at 0 only where asked (``labels(..., zero=True)``).
 
-    A series made without ``zero`` appears at its first increment.
+    A series made without ``zero`` appears at its first increment. The family's
+    text is kept until one of its series changes: the fault counters of a
+    thousand drives, nearly all at 0, are made once, not at every scrape.
     """
 
     def __init__(
@@ -139,6 +157,9 @@ class CounterFamily(Collector):
         self.labelnames = tuple(labelnames)
         self._series: dict[tuple[str, ...], Series] = {}
         self._header = header(f"{name}_total", documentation, "counter")
+        self._changes = _Changes()
+        self._pieces: list[str] | None = None  # the text, as of ``_seen`` changes
+        self._seen = 0
         if registry is not None:
             registry.register(self)
 
@@ -149,9 +170,11 @@ class CounterFamily(Collector):
             if len(values) != len(self.labelnames):
                 raise ValueError(f"{self.name}: {len(self.labelnames)} label values expected")
             labels = dict(zip(self.labelnames, values, strict=True))
-            series = self._series[values] = Series(head(f"{self.name}_total", labels), zero)
+            series = Series(head(f"{self.name}_total", labels), zero, self._changes)
+            self._series[values] = series
+            self._changes.count += 1
         elif zero:
-            series.visible = True
+            series.show()
         return series
 
     def describe(self) -> list[Metric]:
@@ -166,11 +189,20 @@ class CounterFamily(Collector):
 
     def exposition(self) -> Iterator[str]:
         yield self._header
+        pieces = self._pieces
+        if pieces is not None and self._seen == self._changes.count:
+            yield from pieces
+            return
+        self._pieces = None  # made again below; a change meanwhile shows at the next scrape
+        self._seen = self._changes.count
+        pieces = []
         every = list(self._series.values())
         for start in range(0, len(every), CHUNK):
             text = "".join([s.line() for s in every[start : start + CHUNK] if s.visible])
             if text:  # an empty piece would ask render() for a turn of the loop
+                pieces.append(text)
                 yield text
+        self._pieces = pieces
 
 
 class _Collected:
