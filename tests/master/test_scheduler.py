@@ -271,3 +271,18 @@ async def test_a_batch_is_recorded_at_its_time_while_a_slow_exchange_is_out() ->
         finally:
             s.stop()
             await asyncio.wait_for(task, 5.0)
+
+
+async def test_a_drive_going_down_is_recorded_at_once_however_long_a_batch_may_last() -> None:
+    sim = make_sim("fc", [1])  # drive 2 never answers
+    async with serve(sim, "tcp") as port:
+        specs = drive_specs("fc", [1, 2], [1613], 0.0)  # drive 1 always due: no idle end
+        s, events, _ = scheduler(port, "fc", specs, record_every=3600.0)
+        task = asyncio.create_task(s.run())
+        try:
+            # drive 1 is always due, so the run never ends: only an at-once record shows it
+            await until(lambda: s.snapshot.drives["d2"].up is False)
+        finally:
+            s.stop()
+            await asyncio.wait_for(task, 2.0)
+    assert events.polls_ok("d1") > 0  # recorded at the stop
