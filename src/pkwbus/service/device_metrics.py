@@ -229,9 +229,7 @@ class SnapshotCollector(Collector):
 
     def landed(self, key: ReadingKey, reading: Reading) -> None:
         """A new reading: its lines are made now, when its poll lands, not at the scrape."""
-        rendered = self._readings.get(key)
-        if rendered is None or rendered[0] is not reading:
-            self._reading(key, reading)
+        self._reading(key, reading)
 
     def _reading(self, key: ReadingKey, reading: Reading) -> _Rendered:
         rendered = self._readings.get(key)
