@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import os
 
+from pkwbus.link.serialport import closer
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
@@ -22,8 +24,11 @@ async def test_a_device_port_above_select_s_limit_answers() -> None:
     sim.drives[7].set_value(341, 4321)
     target = DriveTarget.create("fc", 7)
     fillers: list[int] = []
-    # A descriptor that garbage from an earlier test still holds is closed now: closed by
-    # a collection between the filling and the opening, it would be the port's number.
+    # Descriptors of earlier tests are freed now, not between the filling and the opening,
+    # where the port would get the freed number: ports still being closed off the loop
+    # (a socket:// close sleeps 0.3 s) and garbage still holding one.
+    closed = await asyncio.get_running_loop().run_in_executor(None, closer.wait, 30.0)
+    assert closed, "earlier ports still closing after 30 s"
     gc.collect()
     gc.disable()
     try:

@@ -212,6 +212,17 @@ class _Closer:
 
         instance.close = close
 
+    def wait(self, timeout: float) -> bool:
+        """Block until every close handed over so far is done; False after ``timeout`` s.
+
+        Their descriptors are free then, and no later close of theirs can free one.
+        """
+        if self._thread is None:
+            return True
+        done = threading.Event()
+        self._queue.put((done.set, "(wait)"))
+        return done.wait(timeout)
+
     def _run(self) -> None:
         while True:
             close, url = self._queue.get()
