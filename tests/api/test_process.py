@@ -102,6 +102,7 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     assert proc.returncode == 0, err.decode()
     logs = (out + err).decode()
     assert "writes allowed with the token" in logs
+    assert "start-up objects kept out of the garbage collector" in logs  # serve() settles
     assert TOKEN not in logs
     db = tmp_path / "var" / "audit.sqlite"
     assert db.exists()
