@@ -51,7 +51,19 @@ class Service:
         self.proc: asyncio.subprocess.Process | None = None
 
     async def start(self) -> None:
+        """Start and wait until ready. The port was free when chosen; a process of
+        another test worker may take it before the service binds it: then again."""
+        for _ in range(5):
+            if await self._start():
+                return
+            self.port = free_port()
+            self.base = f"http://127.0.0.1:{self.port}"
+        raise AssertionError(self.log.read_text())
+
+    async def _start(self) -> bool:
+        """Whether the service became ready; False when its port was taken meanwhile."""
         env = {**os.environ, TOKEN_ENV: TOKEN}
+        logged = self.log.stat().st_size if self.log.exists() else 0
         with self.log.open("ab") as err:
             self.proc = await asyncio.create_subprocess_exec(
                 sys.executable, "-m", "pkwbus", *self.extra, "run", "--config", str(self.config),
@@ -68,10 +80,19 @@ class Service:
 
             loop = asyncio.get_running_loop()
             end = loop.time() + 20
-            while not await ready():
-                assert self.proc.returncode is None, self.log.read_text()
+
+            def bound() -> bool:  # ours, not another worker's service on the same port
+                said = self.log.read_bytes()[logged:].decode(errors="replace")
+                return f"metrics on {self.base}/metrics" in said
+
+            while not (bound() and await ready()):
+                if self.proc.returncode is not None:
+                    said = self.log.read_bytes()[logged:].decode(errors="replace")
+                    assert "cannot listen on" in said, said
+                    return False
                 assert loop.time() < end, "the service did not become ready"
                 await asyncio.sleep(0.1)
+        return True
 
     def signal(self, sig: int) -> None:
         assert self.proc is not None
