@@ -81,14 +81,13 @@ class Service:
             loop = asyncio.get_running_loop()
             end = loop.time() + 20
 
-            def bound() -> bool:  # ours, not another worker's service on the same port
-                said = self.log.read_bytes()[logged:].decode(errors="replace")
-                return f"metrics on {self.base}/metrics" in said
+            def said() -> str:  # what this start logged
+                return self.log.read_bytes()[logged:].decode(errors="replace")
 
-            while not (bound() and await ready()):
+            # Ready: ours (bound, so not another worker's service on the port) answers.
+            while not (f"metrics on {self.base}/metrics" in said() and await ready()):
                 if self.proc.returncode is not None:
-                    said = self.log.read_bytes()[logged:].decode(errors="replace")
-                    assert "cannot listen on" in said, said
+                    assert "cannot listen on" in said(), said()
                     return False
                 assert loop.time() < end, "the service did not become ready"
                 await asyncio.sleep(0.1)
