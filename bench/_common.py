@@ -173,6 +173,9 @@ class Counting:
     def overrun(self, drive: str) -> None:
         pass
 
+    def pkw_length(self, drive: str, conflict: bool) -> None:
+        pass
+
     def value(self, key: object, reading: object) -> None:
         pass
 

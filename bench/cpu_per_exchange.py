@@ -86,6 +86,9 @@ class Counting:
     def overrun(self, drive: str) -> None:
         self.inner.overrun(drive)
 
+    def pkw_length(self, drive: str, conflict: bool) -> None:
+        self.inner.pkw_length(drive, conflict)
+
     def value(self, key: Any, reading: Any) -> None:
         self.inner.value(key, reading)
 

@@ -15,5 +15,6 @@ class Exit(enum.IntEnum):
     BAD_INPUT = 2
     NO_ANSWER = 3
     PORT = 4
+    MISMATCH = 5  # the drive acknowledged a write with another value than the one sent
     BUG = 70  # EX_SOFTWARE: an exception pkwbus did not expect
     INTERRUPTED = 130  # 128 + SIGINT

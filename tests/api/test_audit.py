@@ -46,17 +46,18 @@ async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
             ("dry_run", "fan2", "3-42", {"value": 2, "dry_run": True}, AUTH),
             ("mismatch", "fan3", "3-42", {"value": 4, "verify": True}, AUTH),
             ("ok", "fan2", "3-41", {"value": 30, "store": "eeprom"}, AUTH),
-            ("timeout", "fan3", "3-41", {"value": 1}, AUTH),
+            # a dead drive: the read before the change gets no answer, nothing is sent
+            ("not_sent", "fan3", "3-41", {"value": 1}, AUTH),
         ]
         for outcome, drive, parameter, body, headers in steps:
-            if outcome == "timeout":
+            if outcome == "not_sent":
                 svc.sim.kill(3)
             r = await svc.put(drive, parameter, body, headers=headers)
             done.append((outcome, r.status_code))
         r = await svc.client.get("/api/v1/audit", params={"limit": 3}, headers=AUTH)
         assert r.status_code == 200
         latest = r.json()
-        assert [e["outcome"] for e in latest] == ["timeout", "ok", "mismatch"]
+        assert [e["outcome"] for e in latest] == ["not_sent", "ok", "mismatch"]
         r = await svc.client.get("/api/v1/audit", headers=AUTH)
         assert len(r.json()) == len(steps) - 1  # the two without a valid token share a row
         for bad in ("0", "-1", "1001", "10001", "x"):
@@ -101,8 +102,8 @@ async def test_one_row_per_attempt_kept_across_restart(
     assert all(r.time > 0 for r in rows)
     eeprom = rows[9]
     assert (eeprom.store, eeprom.raw_value, eeprom.old_value) == ("eeprom", 3000, 5)
-    timeout = rows[10]
-    assert timeout.old_value == 5 and timeout.raw_value == 100  # polled before it died
+    unsent = rows[10]
+    assert unsent.old_value == 5 and unsent.raw_value == 100  # polled before it died
     # neither the token nor a guess at it is kept or logged
     for f in tmp_path.glob("audit.sqlite*"):
         data = f.read_bytes()

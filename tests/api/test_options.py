@@ -81,10 +81,11 @@ async def test_verify_reads_back(tmp_path: Path) -> None:
         r = await svc.put("fan1", "3-41", {"value": 7.25, "verify": True})
         assert r.status_code == 200, r.text
         out = r.json()
-        # 3-41 is not polled here: no old value, and the write is the first request
+        # 3-41 is not polled here: no old value. The change goes out after a read of
+        # its parameter (the answer a lagging drive would repeat), and is read back.
         assert (out["verified"], out["value"], out["old_value"]) == (True, 7.25, None)
         requests = [req.command.name for req in svc.recorder.for_pnu(1, 341)]
-        assert requests == ["WRITE_DWORD", "READ"]
+        assert requests == ["READ", "WRITE_DWORD", "READ"]
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "ok"
 

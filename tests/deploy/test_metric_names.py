@@ -133,10 +133,16 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> Exported:
 
 
 def declared_counters() -> Exported:
-    """The counters of the service whose series come with their first step, and their labels."""
+    """The counters of the service whose series come with their first step, and their labels;
+    and the gauge whose series come with a USS line (this scrape has FC and DP lines)."""
     metrics = ServiceMetrics(prometheus_client.CollectorRegistry())
     families = [getattr(metrics, name) for name in vars(metrics)]
-    return {f"{f.name}_total": set(f.labelnames) for f in families if isinstance(f, CounterFamily)}
+    declared = {
+        f"{f.name}_total": set(f.labelnames) for f in families if isinstance(f, CounterFamily)
+    }
+    conflict = metrics.pkw_conflict
+    declared[conflict._name] = set(conflict._labelnames)
+    return declared
 
 
 # --- the PromQL in deploy/ ---------------------------------------------------------
@@ -323,7 +329,10 @@ def test_interface_metrics_are_exported(
 ) -> None:
     names, source = interface_list(monkeypatch)
     assert len(names) >= 15
-    missing = sorted(names - set(exported))
+    later = check_deploy().NOT_YET_EXPORTED
+    readme = (ROOT / "README.md").read_text()
+    assert all(f"`{n}` is not exported yet" in readme for n in later), "README.md: say so"
+    missing = sorted(names - set(exported) - later)
     assert not missing, f"in the interface ({source}) but not exported: {missing}"
 
 

@@ -46,6 +46,9 @@ class Recorder:
     def overrun(self, drive: str) -> None:
         self.overruns[drive] += 1
 
+    def pkw_length(self, drive: str, conflict: bool) -> None:
+        pass
+
     def value(self, key: ReadingKey, reading: Reading) -> None:
         pass
 

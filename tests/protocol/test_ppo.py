@@ -185,9 +185,20 @@ def test_slot_write_needs_the_echo() -> None:
     slot.feed(IDLE, 0.0)
     request = pkw.write(PCV, 302, 1500, pkw.Width.WORD)
     slot.submit(request, deadline=10.0)
-    assert slot.feed(value(302, 1400), 0.1).done is None  # the old value: not yet
+    assert slot.feed(IDLE, 0.1).done is None  # AK 0 while the slave works: not yet
     done = slot.feed(value(302, 1500), 0.2).done
-    assert isinstance(done, JobDone)
+    assert isinstance(done, JobDone) and not done.mismatch
+
+
+def test_a_write_acknowledged_with_another_value_ends_at_once() -> None:
+    """After the AK 0 handshake no stale answer can come: another value echoed is what the
+    slave took, and the job ends instead of writing it again every cycle."""
+    slot = PkwSlot(PPO1, PCV)
+    slot.feed(IDLE, 0.0)
+    slot.submit(pkw.write(PCV, 302, 1500, pkw.Width.WORD), deadline=10.0)
+    done = slot.feed(value(302, 1400), 0.1).done
+    assert isinstance(done, JobDone) and done.mismatch
+    assert not slot.busy and pkw_of(slot.outputs()).command is Command.NONE
 
 
 def test_slot_rejection_finishes_the_job() -> None:

@@ -565,6 +565,9 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
             def overrun(self, drive: str) -> None:
                 inner.overrun(drive)
 
+            def pkw_length(self, drive: str, conflict: bool) -> None:
+                inner.pkw_length(drive, conflict)
+
             def value(self, key: ReadingKey, reading: Reading) -> None:
                 inner.value(key, reading)
 

@@ -12,6 +12,8 @@ from pkwbus.master.outcomes import (
     Cancelled,
     JobOutcome,
     LineFailed,
+    Mismatch,
+    NotSent,
     Outcome,
     Rejected,
     TimedOut,
@@ -23,9 +25,12 @@ from pkwbus.master.outcomes import (
 from pkwbus.protocol import pkw
 
 ANSWERED = Answered(pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD))
+MISMATCH = Mismatch(1234, 0, pkw.ValueResponse(1, 1120, 0, 0, pkw.Width.WORD))
 EXAMPLES: list[Outcome] = [
     ANSWERED,
     Rejected(17, "not while running", "running"),
+    MISMATCH,
+    NotSent("the drive answers with a PKW length of 127 (variable), the configuration says 4"),
     TimedOut("deadline passed"),
     LineFailed("no port"),
     Cancelled("the service is stopping"),
@@ -82,3 +87,24 @@ def test_an_unanswered_write_says_whether_it_went_out() -> None:
     assert sent.detail is not None and "3 times and may have been applied" in sent.detail
     cancelled = audit_outcome(Cancelled("stopping"), sent=0)
     assert (cancelled.outcome, cancelled.detail) == ("cancelled", "stopping")
+
+
+def test_a_mismatch_is_its_own_outcome_everywhere() -> None:
+    """A write the drive acknowledged with another value: not a rejection, not a timeout."""
+    assert metric_label(MISMATCH) is JobOutcome.MISMATCH
+    http = http_failure(MISMATCH)
+    assert http is not None
+    assert (http.status, http.kind, http.extra) == (409, "mismatch", {"sent": 1234, "answered": 0})
+    command = command_failure(MISMATCH)
+    assert command is not None and command.code is Exit.MISMATCH and command.kind == "mismatch"
+    audit = audit_outcome(MISMATCH, sent=1)
+    assert audit.outcome == "mismatch" and audit.detail is not None and "1234" in audit.detail
+
+
+def test_a_change_not_sent_says_so_everywhere() -> None:
+    unsent = NotSent("the configuration says 4")
+    http = http_failure(unsent)
+    assert http is not None and (http.status, http.kind) == (409, "not_sent")
+    command = command_failure(unsent)
+    assert command is not None and command.code is Exit.BAD_INPUT
+    assert audit_outcome(unsent, sent=0).outcome == "not_sent"

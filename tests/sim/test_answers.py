@@ -192,7 +192,7 @@ def test_uss_float_read_and_page_index() -> None:
 
 
 def test_uss_array_read_is_answered_with_ak_4_and_p0304_is_17_while_running() -> None:
-    sim = Simulator("uss", [2], seed=3, model=QUIET, clock=FakeClock())
+    sim = Simulator("uss", [2], seed=3, model=QUIET, clock=FakeClock(), pkw_words=4)
     sim.drives[2].model.trip(2, 1)
     ans = parse(sim.handle(request_telegram(2, pkw.read(USS, 947, 0), USS)))
     resp = pkw.decode_response(ans.data[:8], USS, IndLayout.USS)

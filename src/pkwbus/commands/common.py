@@ -22,6 +22,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import buses
 from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.pkw_length import AUTO, PkwSetting
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
 __all__ = [
@@ -132,14 +133,16 @@ def add_drive_options(parser: argparse.ArgumentParser, *, address: bool = True) 
         g.add_argument("--address", type=int, required=True)
     g.add_argument("--dialect", choices=list(DIALECTS), default=None)
     g.add_argument("--ind-layout", choices=[x.value for x in IndLayout], default=None)
-    g.add_argument("--pkw-words", type=_pkw_words, default=4, help="USS: 0, 3, 4 or 127")
+    g.add_argument(
+        "--pkw-words", type=_pkw_words, default=AUTO, help="USS: auto (default), 0, 3, 4 or 127"
+    )
     g.add_argument("--pzd-words", type=int, default=2, help="USS: 0-16")
     g.add_argument("--address-format", choices=[f.value for f in FcAddressFormat], default="1-126")
 
 
-def _pkw_words(text: str) -> int | None:
+def _pkw_words(text: str) -> PkwSetting:
     try:
-        return buses.pkw_words(text, text=True)
+        return buses.pkw_setting(text, text=True)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from pkwbus.link import PortError
 from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.master.outcomes import Answered, LineFailed, Outcome, Rejected, TimedOut
+from pkwbus.master.outcomes import Answered, LineFailed, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dp_services import global_control_clear
 from pkwbus.protocol.dp_slave import (
@@ -159,9 +159,11 @@ def outcome_of(result: JobResult) -> Outcome:
     """What a slot's finished job comes to, as for FC and USS jobs."""
     if isinstance(result, JobExpired):
         return TimedOut(f"no matching answer within the deadline ({result.cycles} cycles)")
-    response = result.response
+    response, request = result.response, result.request
     if isinstance(response, pkw.Rejection):
         return Rejected(response.fault, response.text, response.short)
+    if result.mismatch and isinstance(response, pkw.ValueResponse):
+        return Mismatch(request.value, response.raw, response)
     return Answered(response)
 
 

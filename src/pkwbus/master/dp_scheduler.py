@@ -128,7 +128,7 @@ class DpScheduler:
         self.record = LineRecord(name, [d.spec for d in drives], self.snapshot, self.events)
         self.planner = Planner(
             [d.spec for d in drives], poll_deadline=poll_deadline, retries=retries,
-            policy=_NEVER_DOWN,
+            policy=_NEVER_DOWN, stale_answers=False,  # the PKW slot waits for AK 0 instead
         )  # fmt: skip
         self.master = DpMaster(
             line, [(d.setup, d.slot()) for d in drives], on_event=self._on_event,

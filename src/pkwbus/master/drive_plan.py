@@ -11,6 +11,9 @@ from pkwbus.master.health import DriveHealth, HealthPolicy
 from pkwbus.master.jobs import Job, Priority
 from pkwbus.master.plan import DriveSpec, PollSpec, Send
 from pkwbus.master.transaction import PkwTransaction
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw_length import PkwLength
+from pkwbus.protocol.telegram import Protocol
 
 __all__ = ["Active", "DrivePlan", "PollState"]
 
@@ -35,12 +38,14 @@ class Active:
     order: float
     work: Job | PollState
     send: Send
+    # The read of a change's parameter before the change (master.write_gate).
+    read_first: bool = False
 
 
 class DrivePlan:
     __slots__ = (
-        "active", "busy", "health", "lagging", "name", "polls", "probe", "reads", "seq",
-        "served", "shown_up", "slot", "spec", "target", "version", "writes",
+        "active", "busy", "health", "lagging", "last_answer", "name", "pkw", "polls", "probe",
+        "reads", "seq", "served", "shown_up", "slot", "spec", "target", "version", "writes",
     )  # fmt: skip
 
     def __init__(self, spec: DriveSpec, policy: HealthPolicy, slot: int, count: int) -> None:
@@ -63,8 +68,51 @@ class DrivePlan:
         for p in spec.polls:
             send = Send(spec.name, spec.target, spec.target.telegram(p.request))
             self.push_poll(PollState(p, 0.0, send))
+        # USS: the drive's PKW length, configured or told by its answers.
+        target = spec.target
+        uss = target.protocol is Protocol.USS and target.has_pkw
+        self.pkw = PkwLength(target.pkw_setting) if uss else None
+        self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
+
+    def heard(self, tx: PkwTransaction) -> bool:
+        """Take what the answer ``tx`` just decoded tells; True when the drive's PKW
+        length, as known, changed (requests then go out with the new one)."""
+        answer, response = tx.answer_pkw, tx.response
+        if answer is None or response is None:
+            return False
+        if not isinstance(response, pkw.NoResponse):
+            self.last_answer = answer
+        length = self.pkw
+        if length is None:
+            return False
+        sent = self.target.pkw_words_of(tx.telegram)
+        if not length.observe(sent, len(answer) // 2, response):
+            return False
+        self.retarget()
+        return True
+
+    def forget_pkw(self) -> bool:
+        """The drive is back after it was away: a learned PKW length is learned again."""
+        length = self.pkw
+        if length is None or not self.target.learn or not length.known:
+            return False
+        length.forget()
+        self.retarget()
+        return True
+
+    def retarget(self) -> None:
+        """Requests go out with the PKW length as known now (a learned one)."""
+        length = self.pkw
+        if length is None or not self.target.learn or length.words == self.target.shape.pkw_words:
+            return
+        target = self.target = self.target.with_pkw_words(length.words)
+        self.probe = Send(self.name, target, target.probe(), True)
+        for _, _, poll in self.polls:
+            poll.send = Send(self.name, target, target.telegram(poll.spec.request))
 
     def push_poll(self, poll: PollState) -> None:
+        if poll.send.target is not self.target:  # built before the PKW length was learned
+            poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
 
     def restart_polls(self, now: float) -> None:

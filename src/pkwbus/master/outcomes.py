@@ -24,6 +24,8 @@ __all__ = [
     "HttpFailure",
     "JobOutcome",
     "LineFailed",
+    "Mismatch",
+    "NotSent",
     "Outcome",
     "Rejected",
     "TimedOut",
@@ -65,13 +67,31 @@ class LineFailed:
 
 
 @dataclass(frozen=True, slots=True)
+class Mismatch:
+    """The drive acknowledged the change with another value than the one sent: it took
+    something else. Never repeated: a repeat would write that again."""
+
+    sent: int
+    answered: int
+    response: pkw.PkwResponse
+
+
+@dataclass(frozen=True, slots=True)
+class NotSent:
+    """The request was not sent: what the drive's answers told forbids it (its PKW length
+    contradicts the configuration, or a word's place in PWE is not known)."""
+
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
 class Cancelled:
     """The job never finished: the service stopped or the job was withdrawn."""
 
     reason: str
 
 
-Outcome = Answered | Rejected | TimedOut | LineFailed | Cancelled
+Outcome = Answered | Rejected | Mismatch | NotSent | TimedOut | LineFailed | Cancelled
 
 
 # ------------------------------------------------------------------ metrics
@@ -84,6 +104,7 @@ class JobOutcome(enum.StrEnum):
     REJECTED = "rejected"
     TIMEOUT = "timeout"
     CANCELLED = "cancelled"
+    MISMATCH = "mismatch"
 
 
 def metric_label(outcome: Outcome) -> JobOutcome:
@@ -93,9 +114,11 @@ def metric_label(outcome: Outcome) -> JobOutcome:
             return JobOutcome.OK
         case Rejected():
             return JobOutcome.REJECTED
+        case Mismatch():
+            return JobOutcome.MISMATCH
         case TimedOut() | LineFailed():
             return JobOutcome.TIMEOUT
-        case Cancelled():
+        case Cancelled() | NotSent():
             return JobOutcome.CANCELLED
         case _:
             assert_never(outcome)
@@ -126,6 +149,16 @@ def http_failure(outcome: Outcome) -> HttpFailure | None:
                 f"the drive rejected the request: {text}",
                 {"fault": fault, "text": text},
             )
+        case Mismatch(sent=sent, answered=answered):
+            return HttpFailure(
+                409,
+                "mismatch",
+                f"the drive acknowledged the write with raw {answered}, not the {sent} sent: "
+                "it holds another value than asked (not repeated)",
+                {"sent": sent, "answered": answered},
+            )
+        case NotSent(reason=reason):
+            return HttpFailure(409, "not_sent", f"nothing was sent: {reason}")
         case TimedOut(reason=reason):
             return HttpFailure(504, "timeout", f"no valid answer: {reason}")
         case LineFailed(reason=reason):
@@ -156,6 +189,11 @@ def audit_outcome(outcome: Outcome, sent: int) -> AuditOutcome:
             return AuditOutcome("ok")
         case Rejected(fault=fault, text=text):
             return AuditOutcome("rejected", fault, text)
+        case Mismatch(sent=sent_raw, answered=answered):
+            detail = f"the drive answered raw {answered}, not the {sent_raw} sent"
+            return AuditOutcome("mismatch", None, detail)
+        case NotSent(reason=reason):
+            return AuditOutcome("not_sent", None, reason)
         case TimedOut(reason=reason) | LineFailed(reason=reason):
             if not sent:  # refused by the line before it went out
                 return AuditOutcome("not_sent", None, reason)
@@ -187,6 +225,13 @@ def command_failure(outcome: Outcome) -> CommandFailure | None:
         case Rejected(fault=fault, text=text):
             code = "" if fault is None else f"fault {fault}: "
             return CommandFailure(Exit.REJECTED, "rejected", f"{code}{text}", fault)
+        case Mismatch(sent=sent, answered=answered):
+            message = (
+                f"the drive answered raw {answered}, not the {sent} written: it holds another value"
+            )
+            return CommandFailure(Exit.MISMATCH, "mismatch", message)
+        case NotSent(reason=reason):
+            return CommandFailure(Exit.BAD_INPUT, "not_sent", f"nothing was sent: {reason}")
         case TimedOut(reason=reason) | LineFailed(reason=reason) | Cancelled(reason=reason):
             return CommandFailure(Exit.NO_ANSWER, "timeout", f"no valid answer: {reason}")
         case _:

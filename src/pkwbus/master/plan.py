@@ -15,6 +15,7 @@ from pkwbus.master.jobs import Job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome, Tally
 from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw_length import PkwLength
 
 __all__ = [
     "Action",
@@ -24,6 +25,7 @@ __all__ = [
     "HealthChanged",
     "Idle",
     "Overrun",
+    "PkwLengthTold",
     "PollSpec",
     "Send",
     "StatusWord",
@@ -109,4 +111,13 @@ class StatusWord:
     main_actual: int | None = None
 
 
-Event = Finished | Overrun | HealthChanged | StatusWord
+@dataclass(frozen=True, slots=True)
+class PkwLengthTold:
+    """What a USS drive's answers told of its PKW length changed: learned (``auto``),
+    learned again, or in conflict with the configured length (or agreeing again)."""
+
+    drive: str
+    length: PkwLength  # a copy, as it was then
+
+
+Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold

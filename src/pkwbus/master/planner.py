@@ -32,6 +32,7 @@ import heapq
 import itertools
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import replace
 
 from pkwbus.master.drive_plan import Active, DrivePlan, PollState
 from pkwbus.master.health import HealthPolicy
@@ -44,6 +45,7 @@ from pkwbus.master.plan import (
     HealthChanged,
     Idle,
     Overrun,
+    PkwLengthTold,
     Send,
     StatusWord,
 )
@@ -57,6 +59,7 @@ from pkwbus.master.transaction import (
     Reply,
     TimedOut,
 )
+from pkwbus.master.write_gate import after_read, gate_write
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.telegram import split_block
 
@@ -79,9 +82,13 @@ class Planner:
         poll_deadline: float,
         retries: int = 2,
         policy: HealthPolicy | None = None,
+        stale_answers: bool = True,
     ) -> None:
         policy = policy or HealthPolicy()
         self.retries = retries
+        # FC and USS drives may repeat their previous answer: a change goes out after a
+        # read of its parameter (master.write_gate); a DP PKW slot waits for AK 0 instead.
+        self.stale_answers = stale_answers
         self.poll_deadline = poll_deadline  # a poll's transaction, retries included
         self.drives = [DrivePlan(s, policy, i, len(drives)) for i, s in enumerate(drives)]
         self._by_name = {d.name: d for d in self.drives}
@@ -145,9 +152,8 @@ class Planner:
         for d in self.drives:
             active, d.active = d.active, None
             if active is not None and isinstance(active.work, Job):
-                self.events.append(
-                    Finished(d.name, active.work, Cancelled(reason), active.tx.tally)
-                )
+                tally = None if active.read_first else active.tx.tally  # a write not yet sent
+                self.events.append(Finished(d.name, active.work, Cancelled(reason), tally))
             for queue in (d.writes, d.reads):
                 while queue:
                     self.events.append(Finished(d.name, queue.popleft(), Cancelled(reason)))
@@ -220,6 +226,8 @@ class Planner:
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
+            if isinstance(result, Reply) and d.heard(tx):
+                self._tell_pkw(d)
             tally = tx.tally
             if isinstance(result, Reply) and tally.status_word is not None:
                 self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
@@ -310,10 +318,14 @@ class Planner:
         queue = d.writes or d.reads
         if queue:
             job = queue.popleft()
-            tx = PkwTransaction(d.target, job.request, retries=self.retries, deadline=job.deadline)
-            send = Send(d.name, d.target, tx.telegram)
-            d.active = Active(tx, job.priority, float(next(self._job_seq)), job, send)
-            return send
+            order = float(next(self._job_seq))
+            first = gate_write(d, job, order, retries=self.retries, read_first=self.stale_answers)
+            if isinstance(first, Finished):  # not to be sent
+                self.events.append(first)
+                self._index(d, now)
+                return None
+            d.active = first
+            return first.send
         if not d.health.up:
             return d.probe
         _, _, poll = heapq.heappop(d.polls)
@@ -333,10 +345,21 @@ class Planner:
         d.active = Active(tx, Priority.POLL, poll.due, poll, poll.send)
         return poll.send
 
+    def _tell_pkw(self, d: DrivePlan) -> None:
+        if d.pkw is not None:
+            self.events.append(PkwLengthTold(d.name, replace(d.pkw)))
+
     def _complete(self, d: DrivePlan, active: Active, outcome: Outcome, now: float) -> None:
         d.active = None
         d.lagging = False
         work = active.work
+        if active.read_first and isinstance(work, Job):  # the read before a change
+            after = after_read(d, active, work, outcome, retries=self.retries)
+            if isinstance(after, Finished):
+                self.events.append(after)
+            else:
+                d.active = after
+            return
         if isinstance(work, PollState):
             self.events.append(Finished(d.name, work.spec, outcome, active.tx.tally))
             work.due = max(work.due + work.spec.every, now)
@@ -347,6 +370,8 @@ class Planner:
     def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
         if isinstance(result, Reply):
             if d.health.answered():
+                if d.forget_pkw():
+                    self._tell_pkw(d)
                 self._show(d, True, "answers again")
                 d.restart_polls(now)  # not overruns: the drive was away
             elif not d.shown_up:

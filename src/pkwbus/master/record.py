@@ -21,6 +21,7 @@ from pkwbus.master.plan import (
     Finished,
     HealthChanged,
     Overrun,
+    PkwLengthTold,
     PollSpec,
     StatusWord,
 )
@@ -35,6 +36,7 @@ from pkwbus.master.transaction import (
 )
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.pkw_length import AUTO, shown
 
 __all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
 
@@ -51,6 +53,7 @@ class LineEvents(Protocol):
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None: ...
     def overrun(self, drive: str) -> None: ...
     def value(self, key: ReadingKey, reading: Reading) -> None: ...
+    def pkw_length(self, drive: str, conflict: bool) -> None: ...
 
 
 class NoEvents:
@@ -64,6 +67,9 @@ class NoEvents:
         pass
 
     def value(self, key: ReadingKey, reading: Reading) -> None:
+        pass
+
+    def pkw_length(self, drive: str, conflict: bool) -> None:
         pass
 
 
@@ -121,6 +127,27 @@ class LineRecord:
                 self._health(event)
             elif isinstance(event, Overrun):
                 self.events.overrun(event.drive)
+            elif isinstance(event, PkwLengthTold):
+                self._pkw_length(event)
+
+    def _pkw_length(self, event: PkwLengthTold) -> None:
+        """One log line per change of what a drive's PKW length is known to be."""
+        length, drive = event.length, event.drive
+        ctx = {"line": self.line, "drive": drive}
+        conflict = length.conflict
+        if not isinstance(conflict, str):
+            log.warning(
+                "drive %s answers with a PKW length of %s, but pkw_words is %s: no write goes"
+                " out to it until they agree (set pkw_words: %s, or auto)",
+                drive, shown(conflict), shown(length.configured),
+                "127" if conflict is None else conflict, extra=ctx,
+            )  # fmt: skip
+        elif length.configured != AUTO:
+            log.info("drive %s answers with its configured PKW length again", drive, extra=ctx)
+        elif length.known:
+            log.info("drive %s: PKW length %s, learned from its answers", drive,
+                     shown(length.words), extra=ctx)  # fmt: skip
+        self.events.pkw_length(drive, length.in_conflict)
 
     def _health(self, event: HealthChanged) -> None:
         ctx = {"line": self.line, "drive": event.drive}

@@ -6,7 +6,7 @@ protocol does not take.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import (
@@ -17,6 +17,7 @@ from pkwbus.protocol.buses import (
 )
 from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.pkw_length import AUTO, UNKNOWN_SEND_WORDS, PkwSetting, PkwWords
 from pkwbus.protocol.ppo import DEFAULT_PROFILES
 from pkwbus.protocol.pzd import MONITORING_CTW, Profile
 from pkwbus.protocol.telegram import (
@@ -46,6 +47,9 @@ class DriveTarget:
     ind_layout: IndLayout
     shape: BlockShape
     fc_format: FcAddressFormat = FcAddressFormat.RANGE_1_126
+    # USS: the PKW length is learned from the drive's answers (configured ``auto``);
+    # ``shape`` is what requests go out with meanwhile (see protocol.pkw_length).
+    learn: bool = False
     adr: int = field(init=False)
     _idle_pzd: tuple[int, ...] = field(init=False, repr=False)
 
@@ -75,7 +79,7 @@ class DriveTarget:
         *,
         dialect_name: str | None = None,
         ind_layout: IndLayout | str | None = None,
-        pkw_words: int | None = 4,
+        pkw_words: PkwSetting = AUTO,
         pzd_words: int = 2,
         fc_format: FcAddressFormat | str = FcAddressFormat.RANGE_1_126,
     ) -> DriveTarget:
@@ -84,9 +88,25 @@ class DriveTarget:
         if not dialect_fits(proto, d.name):
             known = ", ".join(DIALECTS_BY_PROTOCOL[proto])
             raise LocalProtocolError(f"the {d.name} dialect is not for protocol {proto} ({known})")
-        shape = FC_PARAMETER if proto is Protocol.FC else BlockShape(pkw_words, pzd_words)
+        learn = isinstance(pkw_words, str)
+        words = UNKNOWN_SEND_WORDS if isinstance(pkw_words, str) else pkw_words
+        shape = FC_PARAMETER if proto is Protocol.FC else BlockShape(words, pzd_words)
         layout = IndLayout(ind_layout) if ind_layout is not None else d.default_ind_layout
-        return cls(proto, address, d, layout, shape, FcAddressFormat(fc_format))
+        learn = learn and proto is Protocol.USS
+        return cls(proto, address, d, layout, shape, FcAddressFormat(fc_format), learn)
+
+    @property
+    def pkw_setting(self) -> PkwSetting:
+        """The PKW length as configured: ``auto`` when it is learned, else the shape's."""
+        return AUTO if self.learn else self.shape.pkw_words
+
+    def with_pkw_words(self, words: PkwWords) -> DriveTarget:
+        """The same drive with requests of ``words`` PKW words (a learned length)."""
+        return replace(self, shape=BlockShape(words, self.shape.pzd_words))
+
+    def pkw_words_of(self, telegram: bytes) -> int:
+        """The PKW words of one of this drive's USS request telegrams (STX to BCC)."""
+        return (len(telegram) - 4) // 2 - self.shape.pzd_words
 
     @property
     def profile(self) -> Profile:
@@ -117,9 +137,24 @@ class DriveTarget:
         return self.telegram(pkw.none_request(self.dialect))
 
     def response_shape(self, data_len: int) -> BlockShape:
-        """The shape to split a response of ``data_len`` bytes by."""
+        """The shape to split a response of ``data_len`` bytes by.
+
+        USS: a drive whose length is learned, or variable, is split by its
+        process data alone (the PKW part is the rest, by LGE). A fixed length
+        also takes an answer of the other fixed length, 3 or 4 words: that is
+        the drive's own length telling against the configured one, which the
+        planner reports (its value placed by its LGE); anything else is split
+        by the configured shape, and fails there.
+        """
         if self.protocol is Protocol.FC:
             if data_len == 4:
                 return FC_PROCESS
             return BlockShape(None, 2) if data_len != 12 else FC_PARAMETER
+        if self.protocol is not Protocol.USS:
+            return self.shape
+        pzd = self.shape.pzd_words
+        if self.learn or self.shape.pkw_words is None:
+            return BlockShape(None, pzd)
+        if self.shape.pkw_words and data_len in (2 * (3 + pzd), 2 * (4 + pzd)):
+            return BlockShape(data_len // 2 - pzd, pzd)
         return self.shape

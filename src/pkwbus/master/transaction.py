@@ -6,7 +6,10 @@ The rule is the SINAMICS G120 CU240B-2/CU240E-2 Operating Instructions'
 The same request bytes go out again until the matching answer arrives or
 the deadline passes. A non-matching answer (AK 0, a stale answer, another
 PNU) is "not yet": counted as unexpected, never a failure. Timeouts and bad
-telegrams are retried up to ``retries`` times.
+telegrams are retried up to ``retries`` times. A change acknowledged with
+another value than the one sent ends at once as :class:`Mismatch` (a repeat
+would write that value again), unless the answer is the drive's previous
+answer repeated (``stale``: a lagging drive still telling its last one).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import enum
 from collections import Counter
 from dataclasses import dataclass, field
 
-from pkwbus.master.outcomes import Answered, LineFailed, Outcome, Rejected, TimedOut
+from pkwbus.master.outcomes import Answered, LineFailed, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
@@ -27,6 +30,7 @@ __all__ = [
     "ExchangeResult",
     "Failure",
     "LineFailed",
+    "Mismatch",
     "Outcome",
     "PkwTransaction",
     "Rejected",
@@ -90,9 +94,14 @@ class PkwTransaction:
         retries: int,
         deadline: float,
         telegram: bytes | None = None,  # ``target.telegram(request)``, when already built
+        stale: bytes | None = None,  # the PKW bytes of the drive's answer before this job
     ) -> None:
         self.target = target
         self.request = request
+        self.stale = stale
+        # The latest answer that decoded: its PKW bytes and what they say.
+        self.answer_pkw: bytes | None = None
+        self.response: pkw.PkwResponse | None = None
         self.telegram = telegram if telegram is not None else target.telegram(request)
         self.retries = retries
         self.deadline = deadline
@@ -105,6 +114,7 @@ class PkwTransaction:
         """Account for one exchange; the outcome once the job is finished."""
         tally = self.tally
         tally.telegrams += 1
+        self.answer_pkw = self.response = None
         if isinstance(result, Reply):
             tally.busy += result.duration
             outcome = self._on_reply(result)
@@ -135,7 +145,13 @@ class PkwTransaction:
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
             return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
-        if not pkw.matches(self.request, response, target.dialect):
+        self.answer_pkw, self.response = block.pkw, response
+        verdict = pkw.judge(self.request, response, target.dialect)
+        mismatch = verdict is pkw.Verdict.MISMATCH and block.pkw != self.stale
+        if mismatch and isinstance(response, pkw.ValueResponse):
+            self.waiting = False
+            return Mismatch(self.request.value, response.raw, response)
+        if verdict is not pkw.Verdict.ANSWER:
             self.tally.errors[ErrorKind.UNEXPECTED] += 1
             self.waiting = True
             return None

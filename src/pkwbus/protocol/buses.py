@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Final
 
+from pkwbus.protocol.pkw_length import AUTO, PkwSetting
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol
 
 __all__ = [
@@ -22,6 +23,7 @@ __all__ = [
     "address_range",
     "default_dialect",
     "dialect_fits",
+    "pkw_setting",
     "pkw_words",
 ]
 
@@ -56,6 +58,16 @@ def default_dialect(protocol: Protocol) -> str:
 def dialect_fits(protocol: Protocol, name: str) -> bool:
     """Whether a drive on a ``protocol`` line can speak the dialect ``name``."""
     return name in DIALECTS_BY_PROTOCOL[protocol]
+
+
+def pkw_setting(value: object, *, text: bool = False) -> PkwSetting:
+    """A master's PKW length: ``auto`` (learned from the drive's answers) or :func:`pkw_words`."""
+    if value == AUTO:
+        return AUTO
+    try:
+        return pkw_words(value, text=text)
+    except ValueError as exc:
+        raise ValueError(str(exc).replace("use 0,", "use auto, 0,")) from None
 
 
 def pkw_words(value: object, *, text: bool = False) -> int | None:

@@ -19,6 +19,7 @@ from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw_fields import Store, Width, decode_pke_ind, decode_pwe, encode_pke_ind
 
 __all__ = [
+    "VARIABLE_READ_PWE",
     "PkwRequest",
     "decode_request",
     "encode_request",
@@ -31,6 +32,12 @@ __all__ = [
     "write",
     "write_text",
 ]
+
+
+# PWE of a variable-length request that carries no value (read, description, AK 0):
+# one word, 0. The drive ignores PWE when a value is requested (MICROMASTER 420
+# Reference Manual, 3.3.5), and one PWE word is the shortest block any task has.
+VARIABLE_READ_PWE: bytes = b"\x00\x00"
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,7 +147,17 @@ def none_request(dialect: Dialect) -> PkwRequest:
 def encode_request(
     req: PkwRequest, dialect: Dialect, layout: IndLayout, pkw_words: int | None
 ) -> bytes:
-    """The PKW bytes of ``req`` for a block of ``pkw_words`` words (None = variable)."""
+    """The PKW bytes of ``req`` for a block of ``pkw_words`` words (None = variable).
+
+    Fixed 4 words: a word right-justified in PWE2, PWE1 = 0; fixed 3: the word
+    in PWE. Variable (USS PKW length 127): only what the task needs, a word
+    in PWE1, a double word in PWE1 (high) and PWE2 (low), a text as long as
+    it is, and a request without a value :data:`VARIABLE_READ_PWE` (USS
+    specification, part C, 4.1.2; SIMOVERT MASTERDRIVES Compendium Motion
+    Control, 8.1, PKW area variable: "PWE1 contains the value. There is no
+    PWE2"; SINAMICS S110 Function Manual, 9.5: "the master will only send
+    the number of words necessary for the task").
+    """
     high = 0
     if req.command is Command.TEXT and dialect.text_ind_high is not None:
         high = dialect.text_ind_high[1 if req.text else 0]
@@ -152,6 +169,8 @@ def encode_request(
         return head + req.text
     if pkw_words == 0:
         raise LocalProtocolError("this drive has no PKW channel (PKW length 0)")
+    if pkw_words is None:
+        return head + _variable_pwe(req)
     if pkw_words == 3:
         if req.width is Width.DWORD or req.value > 0xFFFF:
             raise LocalProtocolError("a double word does not fit a PKW block of 3 words")
@@ -159,15 +178,29 @@ def encode_request(
     return head + req.value.to_bytes(4, "big")
 
 
+def _variable_pwe(req: PkwRequest) -> bytes:
+    """PWE of a variable-length request: as many words as the task's value needs."""
+    if req.command in DWORD_COMMANDS:
+        return req.value.to_bytes(4, "big")
+    if req.command in WRITE_COMMANDS:
+        return req.value.to_bytes(2, "big")
+    return VARIABLE_READ_PWE
+
+
 # ------------------------------------------------------- follower's side
 
 
-def decode_request(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRequest:
+def decode_request(
+    pkw: bytes, dialect: Dialect, layout: IndLayout, pkw_words: int | None = 4
+) -> PkwRequest:
     """Decode a PKW *request* (what a follower receives); inverse of :func:`encode_request`.
 
-    A word request carries its value in PWE low. A text request writes when
-    the dialect marks text writes in IND (FC: 0x05) and the marker is there,
-    or, in a dialect without markers, when PKW is not a 2- or 4-byte PWE.
+    A word request carries its value where the follower's PKW length puts it:
+    PWE2 (the low word) with 4 fixed words, PWE1 (the first PWE word) with a
+    variable length (USS specification, part C, 4.1.2), the one PWE word with
+    3. A text request writes when the dialect marks text writes in IND (FC:
+    0x05) and the marker is there, or, in a dialect without markers, when PKW
+    is not a 2- or 4-byte PWE.
     """
     if len(pkw) < 4:
         raise RemoteProtocolError(f"PKW part of {len(pkw)} bytes is too short")
@@ -183,9 +216,11 @@ def decode_request(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwReques
     rest = bytes(pkw[4:])
     if command is Command.TEXT and _is_text_write(dialect, layout, ind, rest):
         return PkwRequest(ak, command, pnu, subindex, 0, rest)
+    if not rest and pkw_words is None and command not in WRITE_COMMANDS:
+        return PkwRequest(ak, command, pnu, subindex, 0)  # variable: no PWE needed
     value, low = decode_pwe(rest)
     if command not in DWORD_COMMANDS and command is not Command.READ_DESCRIPTION:
-        value = low
+        value = value >> 16 if pkw_words is None and len(rest) >= 4 else low
     return PkwRequest(ak, command, pnu, subindex, value)
 
 

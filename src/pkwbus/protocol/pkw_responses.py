@@ -13,6 +13,7 @@ for a response the dialect or the PKW block cannot carry.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 from pkwbus.protocol.dialects import Command, Dialect, IndLayout, Reply
@@ -30,8 +31,10 @@ __all__ = [
     "SpontaneousResponse",
     "TextResponse",
     "ValueResponse",
+    "Verdict",
     "decode_response",
     "encode_response",
+    "judge",
     "matches",
     "rejections",
     "response_id",
@@ -77,8 +80,15 @@ class ValueResponse(PkwResponse):
 
 @dataclass(frozen=True, slots=True)
 class DescriptionResponse(PkwResponse):
+    """A description element: ``raw`` as a number, ``data`` the PWE bytes as sent.
+
+    ``width``: a numeric element's size, which a variable-length PKW block
+    shows (one PWE word or two); a text element (the name) is ``data``.
+    """
+
     raw: int
     data: bytes
+    width: Width = Width.DWORD
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,7 +161,8 @@ def decode_response(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRespo
         text = dialect.response_text(ak)
         return Rejection(ak, pnu, subindex, None, text, NO_CHANGE_RIGHTS)
     if reply is Reply.DESCRIPTION:
-        return DescriptionResponse(ak, pnu, subindex, value, bytes(rest))
+        width = Width.WORD if len(rest) == 2 else Width.DWORD
+        return DescriptionResponse(ak, pnu, subindex, value, bytes(rest), width)
     if reply is Reply.ARRAY_COUNT:
         return ArrayCountResponse(ak, pnu, subindex, low)
     return SpontaneousResponse(ak, pnu, subindex, value)
@@ -160,7 +171,13 @@ def decode_response(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRespo
 def encode_response(
     resp: PkwResponse, dialect: Dialect, layout: IndLayout, pkw_words: int | None
 ) -> bytes:
-    """The PKW bytes of a response (what a follower sends; used by the simulator)."""
+    """The PKW bytes of a response (what a follower sends; used by the simulator).
+
+    With a variable PKW length (None) the block is as long as the answer
+    needs: a word value, a fault number or a count in PWE1, a double word in
+    PWE1 and PWE2, a text as long as it is, AK 0 as PKE and IND alone (USS
+    specification, part C, 4.1.2).
+    """
     high = 0
     if isinstance(resp, TextResponse) and dialect.text_ind_high is not None:
         high = dialect.text_ind_high[0]
@@ -170,15 +187,20 @@ def encode_response(
         return head + resp.text
     if isinstance(resp, DescriptionResponse) and resp.data and pkw_words is None:
         return head + resp.data  # a text element (the name) in a variable block
-    if isinstance(resp, ValueResponse | DescriptionResponse | SpontaneousResponse):
-        value = resp.raw
+    width = Width.WORD
+    if isinstance(resp, ValueResponse | DescriptionResponse):
+        value, width = resp.raw, resp.width
+    elif isinstance(resp, SpontaneousResponse):
+        value, width = resp.raw, Width.DWORD
     elif isinstance(resp, ArrayCountResponse):
         value = resp.count
     elif isinstance(resp, Rejection):
         value = resp.fault or 0
     else:
+        if pkw_words is None:
+            return head  # AK 0: nothing to carry
         value = 0
-    if pkw_words == 3:
+    if pkw_words == 3 or (pkw_words is None and width is Width.WORD):
         if value > 0xFFFF:
             raise LocalProtocolError("a double word does not fit a PKW block of 3 words")
         return head + value.to_bytes(2, "big")
@@ -207,3 +229,27 @@ def matches(req: PkwRequest, resp: PkwResponse, dialect: Dialect) -> bool:
         written = req.value if resp.width is Width.DWORD else req.value & 0xFFFF
         return resp.raw == written and (resp.width is Width.DWORD or req.value <= 0xFFFF)
     return True
+
+
+class Verdict(enum.Enum):
+    """What an answer is to a request: its answer, not yet, or a change the drive
+    acknowledged with another value than the one sent."""
+
+    ANSWER = "answer"
+    NOT_YET = "not yet"
+    MISMATCH = "mismatch"
+
+
+def judge(req: PkwRequest, resp: PkwResponse, dialect: Dialect) -> Verdict:
+    """:func:`matches`, and a positive answer to a change with another value: the drive
+    took something other than what was sent, and a repeat would write it again."""
+    if matches(req, resp, dialect):
+        return Verdict.ANSWER
+    if (
+        req.is_write
+        and isinstance(resp, ValueResponse)
+        and dialect.accepts(req.ak, resp.ak)
+        and (resp.pnu, resp.subindex) == (req.pnu, req.subindex)
+    ):
+        return Verdict.MISMATCH
+    return Verdict.NOT_YET

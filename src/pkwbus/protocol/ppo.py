@@ -183,11 +183,13 @@ def decode_ppo_read(
 
 @dataclass(frozen=True, slots=True)
 class JobDone:
-    """The matching answer arrived (a value, a count, a description or a rejection)."""
+    """The matching answer arrived (a value, a count, a description or a rejection), or
+    a change was acknowledged with another value (``mismatch``)."""
 
     request: pkw.PkwRequest
     response: pkw.PkwResponse
     cycles: int
+    mismatch: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,7 +218,9 @@ class PkwSlot:
     The same request goes in every PPO-write until the matching answer
     (identifier, PNU, IND and, for a change, the PWE echo; the rule of the
     Siemens CU240 operating instructions, "rules for editing requests and
-    responses") arrives or the deadline passes. With no job, AK 0 goes out.
+    responses") arrives or the deadline passes. A change acknowledged with
+    another value ends the job too (:func:`pkw.judge`): repeated, it would
+    write that value again. With no job, AK 0 goes out.
     Before a new job the slot waits for the slave to answer AK 0 (at most
     :data:`IDLE_WAIT_CYCLES` cycles), so the answer to an earlier identical
     request is never taken for the new one's.
@@ -284,8 +288,11 @@ class PkwSlot:
             else:
                 self._idle_cycles += 1
             return SlotUpdate(read, self.expire(now))
-        if response is not None and pkw.matches(sent, response, self.dialect):
-            done = JobDone(sent, response, self.cycles)
+        verdict = (
+            pkw.Verdict.NOT_YET if response is None else pkw.judge(sent, response, self.dialect)
+        )
+        if response is not None and verdict is not pkw.Verdict.NOT_YET:  # an answer, or a mismatch
+            done = JobDone(sent, response, self.cycles, verdict is pkw.Verdict.MISMATCH)
             self._finish()
             return SlotUpdate(read, done)
         return SlotUpdate(read, self.expire(now))

@@ -26,6 +26,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import dp_services, dp_timing, pkw
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.pkw_length import AUTO
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.exposition import MetricsRegistry
@@ -70,7 +71,8 @@ async def build_runtime(config: cfg.Config) -> Runtime:
             port, close = await start(line, line.sim)
             cleanups.append(close)
         specs = [_drive(line, drive, entries, infos) for drive in line.drives]
-        events = metrics.for_line(line.name, {d.name: d.pkw_dialect for d in line.drives})
+        dialects = {d.name: d.pkw_dialect for d in line.drives}
+        events = metrics.for_line(line.name, dialects, uss=line.protocol is Protocol.USS)
         counts[line.name] = events
         if line.protocol is Protocol.PROFIBUS:
             schedulers.append(_dp_scheduler(line, port, specs, snapshot, metrics, events))
@@ -170,6 +172,7 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
         drive.layout,
         drive.shape,
         line.address_format,
+        learn=drive.pkw_words == AUTO and line.protocol == Protocol.USS,
     )
 
 
@@ -229,7 +232,8 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
         sim.drives,
         dialect=first.pkw_dialect.name,
         ind_layout=first.layout,
-        pkw_words=first.pkw_words,
+        # A drive learned by its answers is simulated as Siemens drives leave the factory.
+        pkw_words=None if first.pkw_words == AUTO else first.pkw_words,
         pzd_words=first.pzd_words,
         timing=SimTiming(
             response_delay=sim.response_delay

@@ -83,7 +83,7 @@ def telegram_bytes(line: Line, drive: Drive) -> int:
     """Bytes of one parameter telegram to or from ``drive``, STX to BCC."""
     if line.protocol is Protocol.FC:
         return FC_PARAMETER_TELEGRAM
-    pkw = drive.pkw_words if drive.pkw_words is not None else USS_VARIABLE_PKW_WORDS
+    pkw = drive.sent_pkw_words if drive.sent_pkw_words is not None else USS_VARIABLE_PKW_WORDS
     return min(2 * (pkw + drive.pzd_words) + USS_OVERHEAD, MAX_TELEGRAM)
 
 

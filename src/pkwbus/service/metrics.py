@@ -117,6 +117,16 @@ class ServiceMetrics:
             registry=registry,
         )  # fmt: skip
         build.labels(__version__, platform.python_version()).set(1)
+        # USS: 1 while a drive's answers show another PKW length than configured
+        # (protocol.pkw_length); no change goes out to it meanwhile. A series per
+        # drive of a USS line.
+        self.pkw_conflict = Gauge(
+            "pkwbus_drive_pkw_length_conflict",
+            "USS: 1 while the drive answers with another PKW length than configured"
+            " (no write goes out to it), else 0",
+            ld,
+            registry=registry,
+        )
         # PROFIBUS DP slaves: the families are there from the start; their series
         # come with the DP lines of a configuration.
         self.dp_state = Gauge(
@@ -138,9 +148,10 @@ class ServiceMetrics:
             registry=registry,
         )
 
-    def for_line(self, line: str, drives: Mapping[str, Dialect]) -> LineMetrics:
-        """The counters of ``line``; ``drives`` maps each configured drive to its dialect."""
-        return LineMetrics(self, line, drives)
+    def for_line(self, line: str, drives: Mapping[str, Dialect], uss: bool = False) -> LineMetrics:
+        """The counters of ``line``; ``drives`` maps each configured drive to its dialect
+        (``uss``: a USS line, whose drives' PKW length can contradict the configuration)."""
+        return LineMetrics(self, line, drives, uss)
 
     def for_dp_line(self, line: str, drives: Iterable[str]) -> DpMetrics:
         """The PROFIBUS DP gauges and counters of ``line``'s slaves."""
@@ -210,9 +221,14 @@ class LineMetrics:
     ``pkwbus_job_retries_total`` are dashboard rates.
     """
 
-    def __init__(self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect]) -> None:
+    def __init__(
+        self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect], uss: bool = False
+    ) -> None:
         self._m = m
         self._line = line
+        if uss:  # at 0 from the start: an alert or a panel sees the first conflict
+            for d in drives:
+                m.pkw_conflict.labels(line, d).set(0)
         self._faults = {
             (d, *labels): m.faults.labels(line, d, *labels, zero=True)
             for d, dialect in drives.items()
@@ -277,6 +293,9 @@ class LineMetrics:
 
     def overrun(self, drive: str) -> None:
         self._overruns[drive].inc()
+
+    def pkw_length(self, drive: str, conflict: bool) -> None:
+        self._m.pkw_conflict.labels(self._line, drive).set(int(conflict))
 
     def value(self, key: ReadingKey, reading: Reading) -> None:
         if self.values is not None:

@@ -66,7 +66,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drives", default="1", help="addresses: 1,2,5 or 1-3 (default 1)")
     parser.add_argument("--dialect", choices=sorted(DIALECTS))
     parser.add_argument("--ind-layout", choices=[x.value for x in IndLayout])
-    parser.add_argument("--pkw-words", default="4", help="USS: 0, 3, 4 or variable")
+    parser.add_argument(
+        "--pkw-words",
+        default="variable",
+        help="USS: 0, 3, 4 or variable (127, the default: Siemens drives' factory setting)",
+    )
     parser.add_argument("--pzd-words", type=int, default=2, help="USS: 0-16 (default 2)")
     parser.add_argument(
         "--catalog",

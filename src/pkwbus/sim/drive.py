@@ -57,6 +57,12 @@ class SimDrive:
         self.shape = shape
         self.timing = timing
         self.profile = Profile.FC if protocol is Protocol.FC else Profile.PROFIDRIVE
+        # Where a value sits: FC always in 4 PKW words (a text, and a description's
+        # name, in a block as long as it is: Danfoss FC protocol, "Read parameter
+        # description"); USS by the drive's PKW length (USS specification, part C, 4.1.2).
+        # (A PROFIBUS slave of the FC profile carries the PPO's 4 fixed words.)
+        self.fc = protocol is Protocol.FC and shape.pkw_words is None
+        self.pkw_words = 4 if self.fc else shape.pkw_words
         log = max((s.array for s in specs if s.live == "alarm_log"), default=10)
         self.model = DriveModel(self.profile, rng, config or ModelConfig(), log_length=log)
         self.params = ParameterStore(specs, dialect, self._live)
@@ -155,7 +161,7 @@ class SimDrive:
 
     def _pkw(self, pkw_in: bytes, now: float, *, broadcast: bool) -> bytes:
         try:
-            req = pkw.decode_request(pkw_in, self.dialect, self.layout)
+            req = pkw.decode_request(pkw_in, self.dialect, self.layout, self.pkw_words)
         except RemoteProtocolError:
             return self._encode(self._unknown_request(pkw_in))
         timing = self.timing
@@ -189,8 +195,10 @@ class SimDrive:
 
     def _encode(self, resp: PkwResponse) -> bytes:
         """PKW bytes of ``resp``, fitted to a fixed PKW length."""
-        words = self.shape.pkw_words
-        if words is None:
+        words = self.pkw_words
+        named = isinstance(resp, pkw.DescriptionResponse) and bool(resp.data)
+        fc_block = self.fc and (isinstance(resp, TextResponse) or named)
+        if words is None or fc_block:
             return pkw.encode_response(resp, self.dialect, self.layout, None)
         room = 2 * words - 4
         too_wide = isinstance(resp, ValueResponse) and resp.width is Width.DWORD and room < 4

@@ -203,6 +203,7 @@ class ParameterStore:
         0 here), 6 name (text), 7 and 8 low and high limit as raw numbers."""
         element = req.subindex
         data = b""
+        width = Width.WORD  # one PWE word in a variable-length block; limits as the value
         if element == 1:
             raw = TYPE_CODES[spec.vtype]
         elif element == 2:
@@ -217,10 +218,11 @@ class ParameterStore:
             if limit is None:
                 raise Refused(self.faults.no_description)
             raw = encode_value(limit, spec.vtype, spec.scaling)
+            width = spec.vtype.width or Width.DWORD
         else:
             raise Refused(self.faults.no_description)
         ak = pkw.response_id(self.dialect, Reply.DESCRIPTION)
-        return pkw.DescriptionResponse(ak, req.pnu, element, raw, data)
+        return pkw.DescriptionResponse(ak, req.pnu, element, raw, data, width)
 
 
 def _value_reply(width: Width, array: bool) -> Reply:

@@ -49,7 +49,7 @@ class Simulator:
         *,
         dialect: str | None = None,
         ind_layout: IndLayout | None = None,
-        pkw_words: int | None = 4,
+        pkw_words: int | None = None,  # USS: variable (127), as Siemens drives leave the factory
         pzd_words: int = 2,
         timing: SimTiming | None = None,
         faults: SimFaults | None = None,

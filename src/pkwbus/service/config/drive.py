@@ -23,6 +23,7 @@ from pkwbus.protocol.params import (
     canonical,
     siemens_name,
 )
+from pkwbus.protocol.pkw_length import AUTO, UNKNOWN_SEND_WORDS
 from pkwbus.protocol.ppo import LAYOUT as PPO_LAYOUT
 from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
@@ -56,7 +57,7 @@ class Drive(Model):
     address: StrictInt
     dialect: str | None = Field(default=None, strict=True)
     ind_layout: IndLayout | None = None
-    pkw_words: PkwWords = 4
+    pkw_words: PkwWords = AUTO  # USS: learned from the drive's answers (protocol.pkw_length)
     pzd_words: StrictInt = Field(default=2, ge=0, le=16)
     catalog: str | None = Field(default=None, strict=True)
     poll: list[Poll] = Field(default_factory=list)
@@ -180,7 +181,14 @@ class Drive(Model):
         if self.protocol is BusProtocol.PROFIBUS:
             kind = ppo_type(self.ppo)
             return BlockShape(kind.pkw_words, kind.pzd_words)
-        return BlockShape(self.pkw_words, self.pzd_words)
+        return BlockShape(self.sent_pkw_words, self.pzd_words)
+
+    @property
+    def sent_pkw_words(self) -> int | None:
+        """The PKW words a request goes out with: configured, or while ``auto`` is not yet
+        learned the length both a fixed-4 and a variable drive answer."""
+        words = self.pkw_words
+        return UNKNOWN_SEND_WORDS if isinstance(words, str) else words
 
     @property
     def dp(self) -> DpDrive:

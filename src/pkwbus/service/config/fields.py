@@ -23,6 +23,7 @@ from pkwbus.protocol.params import (
     parse_parameter,
     parse_type,
 )
+from pkwbus.protocol.pkw_length import PkwSetting
 
 __all__ = [
     "CharTimeout",
@@ -102,7 +103,7 @@ Rs485Delay = Annotated[float, PlainValidator(_rs485_delay)]
 Number = Annotated[float, PlainValidator(_number)]
 Notation = Annotated[ParameterRef, PlainValidator(_notation)]
 TypeName = Annotated[ValueType, PlainValidator(_value_type)]
-PkwWords = Annotated[int | None, PlainValidator(buses.pkw_words)]
+PkwWords = Annotated[PkwSetting, PlainValidator(buses.pkw_setting)]
 Name = Annotated[str, Field(pattern=_NAME, min_length=1, max_length=_NAME_MAX, strict=True)]
 
 
