@@ -2,8 +2,9 @@
 
 Each FC or USS line's port is opened briefly and every drive gets one short
 telegram (the one a down drive is probed with), retried as the line says. A
-drive that answers is listed with its status word; one that does not, with
-what came back instead. An adapter that echoes the requests while the line's
+drive that answers is listed (a USS drive with the PKW length its answer to a
+word read shows, against the configured one); one that does not, with what
+came back instead. An adapter that echoes the requests while the line's
 ``echo`` is off is named. Simulated (``sim://``) lines are not probed, nor
 are PROFIBUS lines: ``pkwbus scan --protocol profibus`` shows their live list.
 
@@ -13,10 +14,16 @@ answer.
 
 from __future__ import annotations
 
+import asyncio
+
 from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
+from pkwbus.master.line import Line
+from pkwbus.master.pkw_probe import ask_pkw_length
+from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Failure, Reply
+from pkwbus.protocol.pkw_length import AUTO, shown
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.build import line_for, target_for
@@ -67,7 +74,8 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
                 ):
                     break
             if isinstance(result, Reply):
-                out.append(f"  {drive.name} (address {drive.address}): answers")
+                told = await _pkw_length(bus, line, target)
+                out.append(f"  {drive.name} (address {drive.address}): answers{told}")
             else:
                 every = False
                 why = result.detail if isinstance(result, Failure) else "no answer"
@@ -79,6 +87,21 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
     finally:
         await bus.close()
     return every, out
+
+
+async def _pkw_length(bus: Line, line: cfg.Line, target: DriveTarget) -> str:
+    """A USS drive's PKW length as its answer shows it, against the configured one."""
+    if line.protocol is not Protocol.USS or not target.has_pkw:
+        return ""
+    deadline = asyncio.get_running_loop().time() + line.timeout * (line.retries + 1) + 0.5
+    words = await ask_pkw_length(bus, target, retries=line.retries, deadline=deadline)
+    if words is None:
+        return ", PKW length not told (no answer to a word read)"
+    seen = "4 or 127" if words == "?" else shown(words)
+    configured = target.pkw_setting
+    if configured == AUTO or words == "?" or words == configured:
+        return f", PKW length {seen} (pkw_words: {shown(configured)})"
+    return f", PKW length {seen}, but pkw_words is {shown(configured)}: CONFLICT, no write goes out"
 
 
 def run_probe(config: cfg.Config) -> int:

@@ -36,6 +36,7 @@ from pkwbus.commands.dp import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
+from pkwbus.master.pkw_probe import ask_pkw_length
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
@@ -43,6 +44,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.params import ValueType
+from pkwbus.protocol.pkw_length import shown
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
 
@@ -163,6 +165,8 @@ async def _probe(
         if isinstance(result, Reply):
             entry = _status(target, result)
             entry["type"] = await _drive_type(line, target)
+            if target.protocol is Protocol.USS:
+                entry["pkw_words"] = await _pkw_words(args, line, target)
             return entry
     return None
 
@@ -205,6 +209,15 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
     return text or None
 
 
+async def _pkw_words(args: argparse.Namespace, line: Line, target: DriveTarget) -> str | None:
+    """A USS drive's PKW length as its answer to a word read shows it (None: no answer)."""
+    deadline = asyncio.get_running_loop().time() + line.timeout * (args.retries + 1) + 0.5
+    words = await ask_pkw_length(line, target, retries=args.retries, deadline=deadline)
+    if words is None:
+        return None
+    return "4 or 127" if words == "?" else shown(words)
+
+
 def _describe_line(entry: dict[str, Any]) -> str:
     where = (
         f"address {entry['address']}: {entry['baudrate']} baud"
@@ -212,6 +225,8 @@ def _describe_line(entry: dict[str, Any]) -> str:
     )
     if entry["type"]:
         where += f" {entry['type']}"
+    if entry.get("pkw_words"):
+        where += f", PKW length {entry['pkw_words']}"
     word = entry["status_word"]
     if word is None:
         return f"{where}, answers (no status word)"

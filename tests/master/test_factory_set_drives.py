@@ -1,0 +1,126 @@
+"""pkwbus's defaults against simulated Siemens drives as they leave the factory (a variable
+PKW length), and against drives set to 4 or 3 fixed words: every read and every change lands
+as asked, a word change never goes out before its place is known, and a change acknowledged
+with another value ends at once as a mismatch."""
+
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+import pytest
+
+from pkwbus.master.outcomes import Answered, Mismatch, NotSent
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
+from pkwbus.protocol.params import ValueType
+from pkwbus.protocol.pkw_length import VARIABLE
+from pkwbus.protocol.telegram import BlockShape, split_block
+from pkwbus.sim import Simulator
+from pkwbus.sim.table import USS_TABLE, ParamSpec
+from tests.master.conftest import make_sim, open_line, run_job, serve
+
+# A word parameter that may change while the motor runs (the table's p0304 may not).
+WORD = ParamSpec(2010, "p2010", ValueType.U16, 0, "", 0.0, 13.0, True, initial=6.0)
+SPECS = (*USS_TABLE, WORD)
+
+
+def sim_with(pkw_words: int | None, **kw: Any) -> Simulator:
+    return make_sim("uss", [1], specs=SPECS, pkw_words=pkw_words, **kw)
+
+
+def raw(outcome: object) -> int:
+    assert isinstance(outcome, Answered), outcome
+    assert isinstance(outcome.response, pkw.ValueResponse)
+    return outcome.response.raw
+
+
+def f32(value: float) -> int:
+    return int.from_bytes(struct.pack(">f", value), "big")
+
+
+def write_telegrams(tx: list[bytes], pnu: int) -> list[bytes]:
+    """The change requests among ``tx`` for ``pnu`` (decoded as a follower decodes them)."""
+    dialect = DriveTarget.create("uss", 1).dialect
+    out = []
+    for t in tx:
+        block = split_block(t[3:-1], BlockShape(None, 2))
+        req = pkw.decode_request(block.pkw, dialect, dialect.default_ind_layout, None)
+        if req.is_write and req.pnu == pnu:
+            out.append(t)
+    return out
+
+
+@pytest.mark.parametrize("sim_words", [VARIABLE, 4])
+async def test_the_defaults_read_and_change_words_and_floats(
+    end: str, sim_words: int | None
+) -> None:
+    """Reads of a word and a float, changes of a word and a double word, each landing as
+    asked, whether the drive is as the factory set it (127) or set to 4 fixed words."""
+    sim = sim_with(sim_words)
+    drive = sim.drives[1]
+    target = DriveTarget.create("uss", 1)  # pkw_words: auto, the default
+    d = target.dialect
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+        assert raw(await run_job(line, target, pkw.read(d, 2010))) == 6
+        assert raw(await run_job(line, target, pkw.read(d, 1120))) == f32(10.0)
+        assert raw(await run_job(line, target, pkw.read(d, 947, 0))) == drive.value(947, 0)
+        word = await run_job(line, target, pkw.write(d, 2010, 9, pkw.Width.WORD))
+        assert raw(word) == 9
+        dword = await run_job(line, target, pkw.write(d, 1120, f32(12.5), pkw.Width.DWORD))
+        assert raw(dword) == f32(12.5)
+    assert drive.value(2010) == 9
+    assert drive.value(1120) == f32(12.5)
+    # the word change went out once, in the drive's own form
+    (change,) = write_telegrams(trace.tx, 2010)
+    pkw_words = (len(change) - 4) // 2 - 2
+    assert pkw_words == (3 if sim_words is VARIABLE else 4)
+    assert not sim.stats.as_dict().get("malformed")
+
+
+async def test_a_word_change_to_a_fixed_3_drive(end: str) -> None:
+    sim = sim_with(3)
+    target = DriveTarget.create("uss", 1, pkw_words=3)
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, _):
+        assert (
+            raw(await run_job(line, target, pkw.write(target.dialect, 2010, 11, pkw.Width.WORD)))
+            == 11
+        )
+    assert sim.drives[1].value(2010) == 11
+
+
+async def test_a_configured_length_the_drive_contradicts_sends_no_change(end: str) -> None:
+    """pkw_words: 4 against a factory-set drive: reads decode by their length, and a change
+    is refused before it goes out (it would put 0 on the drive)."""
+    sim = sim_with(VARIABLE)
+    target = DriveTarget.create("uss", 1, pkw_words=4)
+    d = target.dialect
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+        assert raw(await run_job(line, target, pkw.read(d, 2010))) == 6
+        outcome = await run_job(line, target, pkw.write(d, 2010, 9, pkw.Width.WORD))
+    assert isinstance(outcome, NotSent), outcome
+    assert "127" in outcome.reason and "4" in outcome.reason
+    assert not write_telegrams(trace.tx, 2010)
+    assert sim.drives[1].value(2010) == 6
+
+
+async def test_a_change_acknowledged_with_another_value_ends_after_one_exchange(
+    end: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A drive that takes something else than sent: one change request, then the mismatch;
+    nothing is written again."""
+    sim = sim_with(VARIABLE)
+    drive = sim.drives[1]
+    store = drive.params._write
+
+    def clamped(spec: ParamSpec, req: pkw.PkwRequest) -> None:
+        store(spec, req)
+        drive.params.raw[spec.pnu, req.subindex] = 4  # the drive holds another value
+
+    monkeypatch.setattr(drive.params, "_write", clamped)
+    target = DriveTarget.create("uss", 1)
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+        outcome = await run_job(line, target, pkw.write(target.dialect, 2010, 9, pkw.Width.WORD))
+    assert isinstance(outcome, Mismatch), outcome
+    assert (outcome.sent, outcome.answered) == (9, 4)
+    assert len(write_telegrams(trace.tx, 2010)) == 1
