@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import hmac
+import itertools
 import json
 import sqlite3
 from pathlib import Path
@@ -26,7 +27,8 @@ async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
     done: list[tuple[str, int]] = []
     async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
         assert svc.audit is not None
-        svc.audit.clock = lambda: NOW
+        ticks = itertools.count()  # a millisecond a look: the attempts in order, in one minute
+        svc.audit.clock = lambda: NOW + next(ticks) / 1000
         drive3 = svc.sim.drives[3]
 
         def clamp(address: int, req: PkwRequest, resp: PkwResponse) -> None:
@@ -80,10 +82,12 @@ async def test_one_row_per_attempt_kept_across_restart(
         same_id = log.token_id(TOKEN)  # the key beside the database: the same id
     finally:
         log.close()
-    # one row per attempt with the token; the two without share one counted row
+    # one row per attempt with the token; the two without share one counted row, in
+    # time order, written (a later id) once the log was read or closed
     expected = [o for o, _ in done[:3]] + [o for o, _ in done[4:]]
     assert [r.outcome for r in rows] == expected
-    assert [r.id for r in rows] == list(range(1, len(expected) + 1))
+    assert [r.time for r in rows] == sorted(r.time for r in rows)
+    assert sorted(r.id for r in rows) == list(range(1, len(expected) + 1))
     ok, rejected, refusals, not_writable, *_ = rows
     assert (ok.old_value, ok.new_value, ok.raw_value, ok.store) == (5, 11.5, 1150, "ram")
     assert (rejected.fault, rejected.raw_value) == (17, 500)

@@ -23,6 +23,7 @@ from pkwbus.service.audit import AuditLog
 from tests.api.conftest import Service, service
 
 FULL = "database or disk is full"
+NOW = 1_700_000_000.0
 
 
 class FailingConnection:
@@ -169,9 +170,17 @@ async def test_refused_and_invalid_attempts_say_when_they_are_not_audited(
 ) -> None:
     caplog.set_level(logging.INFO)
     async with service(tmp_path) as svc:
+        assert svc.audit is not None
+        svc.audit.clock = lambda: NOW
         conn = failing(svc.audit)
         conn.fail = {"INSERT", "UPDATE"}
-        for _ in range(20):  # without a token: counted, told once
+        for _ in range(10):  # without a token: counted in memory, nothing stored yet
+            r = await svc.put("fan1", "3-41", {"value": 1}, headers={})
+            assert r.status_code == 401
+            assert "audit" not in r.json()
+        assert conn.failed == 0
+        svc.audit.clock = lambda: NOW + 60  # the minute's count cannot be stored: told once
+        for _ in range(20):
             r = await svc.put("fan1", "3-41", {"value": 1}, headers={})
             assert r.status_code == 401
             assert r.json()["audit"] == "incomplete"
@@ -183,7 +192,14 @@ async def test_refused_and_invalid_attempts_say_when_they_are_not_audited(
         assert r.json()["audit"] == "incomplete"
         assert svc.recorder.writes() == []
         assert await metric(svc, "pkwbus_audit_errors_total", stage="refusals") == 20
-        assert await metric(svc, "pkwbus_api_refusals_total", reason="unauthenticated") == 20
+        assert await metric(svc, "pkwbus_api_refusals_total", reason="unauthenticated") == 30
         told = [r for r in caplog.records if "audit log cannot record" in r.getMessage()]
         assert len(told) == 3  # the start of the trouble, then the two attempts with the token
         no_traceback(caplog)
+
+        # Room again: every refusal counted meanwhile is stored, none lost.
+        conn.fail = set()
+        svc.app.state.recorder.probe_interval = 0.0
+        assert (await svc.client.get("/readyz")).status_code == 200
+        rows = [(e.time, e.count) for e in svc.audit.latest(5) if e.outcome == "refused"]
+        assert rows == [(NOW + 60, 20), (NOW, 10)]

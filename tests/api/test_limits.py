@@ -147,30 +147,6 @@ async def test_without_any_token_the_audit_is_closed(tmp_path: Path) -> None:
         assert "api.read_token_env" in r.json()["error"]["message"]
 
 
-def test_refusals_are_committed_without_a_disk_flush_each(tmp_path: Path) -> None:
-    """A flood of refusals costs no fsync per request; writes' rows stay synced."""
-    log = AuditLog(tmp_path / "a.sqlite", clock=lambda: NOW)
-    statements: list[str] = []
-    try:
-        log._db.set_trace_callback(statements.append)
-        for _ in range(3):
-            log.refused("10.0.0.9", "unauthenticated")
-        counting = [i for i, s in enumerate(statements) if s.startswith(("INSERT", "UPDATE"))]
-        assert len(counting) == 3
-        for i in counting:
-            assert statements[i - 1] == "PRAGMA synchronous=NORMAL"
-            assert statements[i + 1] == "PRAGMA synchronous=FULL"
-        assert log._db.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL again
-    finally:
-        log.close()
-    look = AuditLog(tmp_path / "a.sqlite", readonly=True)
-    try:
-        (row,) = look.latest(5)
-    finally:
-        look.close()
-    assert row.count == 3
-
-
 async def test_on_demand_reads_of_one_drive_are_bounded(tmp_path: Path) -> None:
     """Reads need no token and go ahead of polls: beyond a few waiting, 429."""
     async with service(tmp_path, timing=SimTiming(response_delay=0.05)) as svc:

@@ -6,7 +6,6 @@ import asyncio
 import json
 import os
 import signal
-import socket
 import sys
 from pathlib import Path
 
@@ -14,18 +13,12 @@ import httpx
 
 from pkwbus.sim import SimTiming, Simulator
 from tests.api.conftest import TOKEN, line_yaml
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from tests.reliability.service import start_run
 
 
 async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), catalog="danfoss-fc")
     end = await sim.serve_tcp("127.0.0.1", 0)
-    port = free_port()
     drives = [
         {
             "name": f"fan{a}",
@@ -40,7 +33,6 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     config.write_text(
         "\n".join(
             [
-                f"listen: 127.0.0.1:{port}",
                 "audit_db: var/audit.sqlite",  # relative: to the working directory
                 "lines:",
                 line_yaml("line1", end.url, "fc", drives, timeout=0.2, retries=2),
@@ -49,18 +41,9 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     )
     env = {**os.environ, "PKWBUS_WRITE_TOKEN": TOKEN}
     env.pop("PKWBUS_LISTEN", None)
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "pkwbus",
-        "--debug",
-        "run",
-        "--config",
-        str(config),
-        cwd=tmp_path,
-        env=env,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
+    log = tmp_path / "stderr.log"
+    proc, port = await start_run(
+        ["--debug", "run", "--config", str(config)], log, env=env, cwd=tmp_path
     )
     try:
         async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
@@ -97,10 +80,10 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     finally:
         if proc.returncode is None:
             proc.send_signal(signal.SIGTERM)
-        out, err = await asyncio.wait_for(proc.communicate(), 60)
+        await asyncio.wait_for(proc.wait(), 60)
         await end.close()
-    assert proc.returncode == 0, err.decode()
-    logs = (out + err).decode()
+    logs = log.read_text()
+    assert proc.returncode == 0, logs
     assert "writes allowed with the token" in logs
     assert "start-up objects kept out of the garbage collector" in logs  # serve() settles
     assert TOKEN not in logs

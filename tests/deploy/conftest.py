@@ -1,8 +1,7 @@
-"""Helpers for the deployment tests: free loopback ports, a service config for a simulator."""
+"""Helpers for the deployment tests: a service config for a simulator."""
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 # Drives of the test line: name -> bus address.
@@ -10,12 +9,6 @@ DRIVES = {"fan_a": 1, "fan_b": 2}
 # Values set in the simulator (raw, conversion index -2 in the catalog) -> seconds.
 RAMP_RAW = {"fan_a": 1234, "fan_b": 567}
 RAMP_SECONDS = {"fan_a": 12.34, "fan_b": 5.67}
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 # The PROFIBUS DP slave of the optional DP line: name -> station address.

@@ -13,12 +13,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import re
 import shutil
 import signal
-import subprocess
-import sys
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +25,8 @@ import httpx
 import pytest
 
 from pkwbus.sim import SimTiming, Simulator
-from tests.deploy.conftest import DRIVES, RAMP_RAW, RAMP_SECONDS, free_port, service_config
+from tests.deploy.conftest import DRIVES, RAMP_RAW, RAMP_SECONDS, service_config
+from tests.reliability.service import start_run
 
 # PKWBUS_PROMETHEUS: another prometheus binary than the one on PATH.
 PROMETHEUS = (
@@ -42,21 +42,44 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-@contextlib.contextmanager
-def process(args: list[str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
-    """Run ``args`` with output to ``log``; on the way out terminate it, kill it if it hangs."""
-    with log.open("wb") as out:
-        proc = subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
+Process = asyncio.subprocess.Process
+# Prometheus says where it listens once it has bound (at log level info).
+LISTENING = re.compile(r'msg="Listening on" address=127\.0\.0\.1:(\d+)')
+
+
+@contextlib.asynccontextmanager
+async def stopped_at_exit(proc: Process) -> AsyncIterator[Process]:
+    """On the way out terminate ``proc``, kill it if it hangs."""
     try:
         yield proc
     finally:
-        if proc.poll() is None:
+        if proc.returncode is None:
             proc.send_signal(signal.SIGTERM)
             try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
+                await asyncio.wait_for(proc.wait(), 10)
+            except TimeoutError:
                 proc.kill()
-                proc.wait(timeout=10)
+                await asyncio.wait_for(proc.wait(), 10)
+
+
+async def prometheus(config: Path, tsdb: Path, log: Path) -> tuple[Process, int]:
+    """Prometheus on a loopback port of its own (port 0), and the port it got, from its log."""
+    with log.open("wb") as out:
+        proc = await asyncio.create_subprocess_exec(
+            PROMETHEUS, f"--config.file={config}", f"--storage.tsdb.path={tsdb}",
+            "--web.listen-address=127.0.0.1:0", "--log.level=info",
+            stdout=out, stderr=asyncio.subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
+    loop = asyncio.get_running_loop()
+    end = loop.time() + STARTUP
+    while (found := LISTENING.search(log.read_text(errors="replace"))) is None:
+        if proc.returncode is not None or loop.time() > end:
+            if proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+            pytest.fail(f"prometheus did not say where it listens:\n{log.read_text()[-3000:]}")
+        await asyncio.sleep(0.1)
+    return proc, int(found.group(1))
 
 
 @contextlib.asynccontextmanager
@@ -91,16 +114,16 @@ async def wait_for(
     what: str,
     check: Any,
     deadline: float,
-    procs: list[subprocess.Popen[bytes]],
+    procs: list[Process],
     logs: list[Path],
 ) -> Any:
     """Poll the coroutine function ``check`` until it returns something truthy."""
     last: object = None
     while time.monotonic() < deadline:
         for proc, log in zip(procs, logs, strict=True):
-            if proc.poll() is not None:
+            if proc.returncode is not None:
                 pytest.fail(
-                    f"{proc.args[0]} exited with {proc.returncode} while waiting for {what}:\n"
+                    f"{log.stem} exited with {proc.returncode} while waiting for {what}:\n"
                     + log.read_text(errors="replace")[-3000:]
                 )
         try:
@@ -120,23 +143,17 @@ async def test_prometheus_scrapes_the_service(tmp_path: Path) -> None:
     async with simulator() as (sim, port), httpx.AsyncClient(timeout=5.0) as http:
         config = tmp_path / "pkwbus.yaml"
         config.write_text(service_config(port, tmp_path))
-        service_listen = f"127.0.0.1:{free_port()}"
-        prom_listen = f"127.0.0.1:{free_port()}"
-        prom_config = tmp_path / "prometheus.yml"
-        prom_config.write_text(prometheus_config(service_listen))
         logs = [tmp_path / "pkwbus.log", tmp_path / "prometheus.log"]
-        service_args = [sys.executable, "-m", "pkwbus", "run", "--config", str(config)]
-        prom_args = [
-            PROMETHEUS,
-            f"--config.file={prom_config}",
-            f"--storage.tsdb.path={tmp_path / 'tsdb'}",
-            f"--web.listen-address={prom_listen}",
-            "--log.level=warn",
-        ]
-        with (
-            process([*service_args, "--listen", service_listen], logs[0]) as service,
-            process(prom_args, logs[1]) as prom,
-        ):
+        prom_config = tmp_path / "prometheus.yml"
+        async with contextlib.AsyncExitStack() as stack:
+            # Each on a port of its own: no other test worker can take it meanwhile.
+            service, service_port = await start_run(["run", "--config", str(config)], logs[0])
+            await stack.enter_async_context(stopped_at_exit(service))
+            service_listen = f"127.0.0.1:{service_port}"
+            prom_config.write_text(prometheus_config(service_listen))
+            prom, prom_port = await prometheus(prom_config, tmp_path / "tsdb", logs[1])
+            await stack.enter_async_context(stopped_at_exit(prom))
+            prom_listen = f"127.0.0.1:{prom_port}"
             procs = [service, prom]
             deadline = time.monotonic() + STARTUP
             api = f"http://{prom_listen}/api/v1"

@@ -1,4 +1,5 @@
-"""`pkwbus run` as a subprocess against a simulator served from the test's event loop."""
+"""`pkwbus run` as a subprocess against a simulator served from the test's event loop, on a
+loopback port of its own (:func:`start_run`, which the other process tests use too)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import os
 import signal
 import socket
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,12 +18,54 @@ from .helpers import config_text, fc_line, wait_for
 
 TOKEN = "s3cr3t-Wr1te-T0ken-4711"
 TOKEN_ENV = "PKWBUS_TEST_WRITE_TOKEN"
+ATTEMPTS = 5  # starts of a service whose port another process may take meanwhile
 
 
 def free_port() -> int:
+    """A loopback port that was free when asked (another process may take it next)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+async def start_run(
+    args: Sequence[str],
+    log: Path,
+    *,
+    env: Mapping[str, str] | None = None,
+    cwd: Path | None = None,
+    timeout: float = 30.0,
+) -> tuple[asyncio.subprocess.Process, int]:
+    """``python -m pkwbus ARGS --listen 127.0.0.1:PORT`` (ARGS: ``run`` and its options),
+    its stderr appended to ``log``; returns it and PORT once its own log says it listens
+    there, so the port is its own and no other test worker's.
+
+    `pkwbus run` takes no port 0: PORT is one that was free when chosen. When another
+    process took it before the service bound it, the service says so and exits, and it
+    is started again on another port."""
+    loop = asyncio.get_running_loop()
+    for _ in range(ATTEMPTS):
+        port = free_port()
+        logged = log.stat().st_size if log.exists() else 0
+        with log.open("ab") as err:
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "pkwbus", *args, "--listen", f"127.0.0.1:{port}",
+                stdout=asyncio.subprocess.DEVNULL, stderr=err, env=env, cwd=cwd,
+            )  # fmt: skip
+
+        def said(logged: int = logged) -> str:  # what this start logged
+            return log.read_bytes()[logged:].decode(errors="replace")
+
+        end = loop.time() + timeout
+        while f"metrics on http://127.0.0.1:{port}/metrics" not in said():
+            if proc.returncode is not None:
+                assert "cannot listen on" in said(), said()
+                break  # its port was taken meanwhile: again on another
+            assert loop.time() < end, f"pkwbus did not start listening:\n{said()}"
+            await asyncio.sleep(0.05)
+        else:
+            return proc, port
+    raise AssertionError(f"no port of {ATTEMPTS} was still free when bound:\n{log.read_text()}")
 
 
 class Service:
@@ -39,8 +83,7 @@ class Service:
         audit_db: Path | None = None,
     ) -> None:
         self.tmp = tmp
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
+        self.port = 0  # known once started
         self.audit_db = audit_db or tmp / "audit.sqlite"
         self.config = tmp / "config.yaml"
         line = fc_line("l1", url, [1], ["16-13"], every=every, timeout=timeout, retries=0)
@@ -50,48 +93,27 @@ class Service:
         self.extra = list(extra)
         self.proc: asyncio.subprocess.Process | None = None
 
+    @property
+    def base(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
     async def start(self) -> None:
-        """Start and wait until ready. The port was free when chosen; a process of
-        another test worker may take it before the service binds it: then again."""
-        for _ in range(5):
-            if await self._start():
-                return
-            self.port = free_port()
-            self.base = f"http://127.0.0.1:{self.port}"
-        raise AssertionError(self.log.read_text())
-
-    async def _start(self) -> bool:
-        """Whether the service became ready; False when its port was taken meanwhile."""
+        """Start (on a port of its own, :func:`start_run`) and wait until ready."""
         env = {**os.environ, TOKEN_ENV: TOKEN}
-        logged = self.log.stat().st_size if self.log.exists() else 0
-        with self.log.open("ab") as err:
-            self.proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "pkwbus", *self.extra, "run", "--config", str(self.config),
-                "--listen", f"127.0.0.1:{self.port}",
-                stdout=asyncio.subprocess.DEVNULL, stderr=err, env=env,
-            )  # fmt: skip
+        args = [*self.extra, "run", "--config", str(self.config)]
+        self.proc, self.port = await start_run(args, self.log, env=env)
         async with httpx.AsyncClient(base_url=self.base) as client:
-
-            async def ready() -> bool:
-                try:
-                    return (await client.get("/readyz")).status_code == 200
-                except httpx.TransportError:
-                    return False
-
             loop = asyncio.get_running_loop()
             end = loop.time() + 20
-
-            def said() -> str:  # what this start logged
-                return self.log.read_bytes()[logged:].decode(errors="replace")
-
-            # Ready: ours (bound, so not another worker's service on the port) answers.
-            while not (f"metrics on {self.base}/metrics" in said() and await ready()):
-                if self.proc.returncode is not None:
-                    assert "cannot listen on" in said(), said()
-                    return False
+            while True:
+                try:
+                    if (await client.get("/readyz")).status_code == 200:
+                        return
+                except httpx.TransportError:
+                    pass
+                assert self.proc.returncode is None, self.log.read_text()
                 assert loop.time() < end, "the service did not become ready"
                 await asyncio.sleep(0.1)
-        return True
 
     def signal(self, sig: int) -> None:
         assert self.proc is not None
@@ -110,4 +132,4 @@ class Service:
         return httpx.AsyncClient(base_url=self.base, timeout=30, **kw)
 
 
-__all__ = ["TOKEN", "TOKEN_ENV", "Service", "wait_for"]
+__all__ = ["TOKEN", "TOKEN_ENV", "Service", "free_port", "start_run", "wait_for"]

@@ -4,6 +4,7 @@ exit 2 (a configuration problem), never 70 (an internal error), without a traceb
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
@@ -14,7 +15,6 @@ import pytest
 from pkwbus import cli
 
 from .helpers import tmpfs
-from .service import free_port
 
 LINES = (
     "lines:\n"
@@ -68,13 +68,18 @@ def test_check_config_and_run_refuse_the_place(
     assert cli.main(["check-config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "audit_db:" in err and says in err, err
-    listen = f"127.0.0.1:{free_port()}"
-    done = subprocess.run(
-        [sys.executable, "-m", "pkwbus", "run", "--config", str(path), "--listen", listen],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    # The service stops at its audit_db before it binds: an address this test holds is
+    # one no other test worker can take meanwhile, and were it bound, a refusal too.
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen(1)
+        listen = f"127.0.0.1:{held.getsockname()[1]}"
+        done = subprocess.run(
+            [sys.executable, "-m", "pkwbus", "run", "--config", str(path), "--listen", listen],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert done.returncode == 2, done
     assert "audit_db:" in done.stderr and says in done.stderr, done.stderr
     assert "Traceback" not in done.stderr + done.stdout

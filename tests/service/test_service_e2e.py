@@ -6,9 +6,6 @@ import asyncio
 import logging
 import re
 import signal
-import socket
-import subprocess
-import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -29,6 +26,7 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 from tests.master.conftest import until
+from tests.reliability.service import start_run
 
 
 def samples(runtime: Runtime) -> dict[tuple[str, frozenset[tuple[str, str]]], float]:
@@ -265,13 +263,9 @@ async def test_a_dead_drive_is_logged_once_down_and_once_back(
     assert getattr(went[0], "drive", None) == "flaky" and getattr(went[0], "line", None) == "l1"
 
 
-def test_sigterm_stops_the_service_within_seconds(tmp_path: Path) -> None:
+async def test_sigterm_stops_the_service_within_seconds(tmp_path: Path) -> None:
     config = tmp_path / "c.yaml"
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
     config.write_text(
-        f"listen: 127.0.0.1:{port}\n"
         f"audit_db: {tmp_path / 'audit.sqlite'}\n"
         "lines:\n"
         "  - name: l1\n    port: sim://fc?drives=1,2\n    protocol: fc\n    baudrate: 19200\n"
@@ -279,26 +273,22 @@ def test_sigterm_stops_the_service_within_seconds(tmp_path: Path) -> None:
         "      - {name: a, address: 1, poll: [{parameter: '16-13', every: 100ms}]}\n"
         "      - {name: b, address: 2, poll: [{parameter: '16-13', every: 100ms}]}\n"
     )
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pkwbus", "run", "--config", str(config)],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    assert proc.stderr is not None
-    lines: list[str] = []
-    for line in proc.stderr:
-        lines.append(line)
-        if re.search(r"port .* open", line):
-            break  # a line is up: the service runs
-    proc.send_signal(signal.SIGTERM)
+    log = tmp_path / "stderr.log"
+    proc, _ = await start_run(["run", "--config", str(config)], log)  # a port of its own
     try:
-        code = proc.wait(timeout=5)
+        # a line is up: the service runs
+        await until(lambda: re.search(r"port .* open", log.read_text()) is not None, 30)
+        up = len(log.read_text())
+        proc.send_signal(signal.SIGTERM)
+        code = await asyncio.wait_for(proc.wait(), 5)
     finally:
-        proc.kill()
-    rest = proc.stderr.read()
-    assert code == 0, rest
-    assert "Traceback" not in "".join(lines) + rest
-    assert re.search(r"stopped", rest)
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+    said = log.read_text()
+    assert code == 0, said
+    assert "Traceback" not in said
+    assert re.search(r"stopped", said[up:])
 
 
 @pytest.fixture(autouse=True)

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import pathlib
 import signal
-import socket
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 
 import httpx
 import pytest
+
+from tests.reliability.service import start_run
 
 COMMAND_TIMEOUT = 60
 
@@ -55,22 +56,14 @@ def test_successive_reads_with_every_parity(pty_link: pathlib.Path) -> None:
         assert done.stdout.startswith("16-13 = ")
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def test_a_service_brings_its_line_up_after_reads(
+async def test_a_service_brings_its_line_up_after_reads(
     pty_link: pathlib.Path, tmp_path: pathlib.Path
 ) -> None:
     for parity in ("E", "E"):
         assert read(pty_link, parity).returncode == 0
-    port = free_port()
     config = tmp_path / "config.yaml"
     config.write_text(
         f"""
-listen: 127.0.0.1:{port}
 audit_db: {tmp_path / "audit.sqlite"}
 lines:
   - name: l1
@@ -84,22 +77,20 @@ lines:
 """
     )
     log = tmp_path / "service.log"
-    with log.open("wb") as err:
-        service = subprocess.Popen(
-            [sys.executable, "-m", "pkwbus", "run", "--config", str(config)],
-            stdout=subprocess.DEVNULL,
-            stderr=err,
-        )
+    service, port = await start_run(["run", "--config", str(config)], log)
     try:
         ready = False
-        end = time.monotonic() + COMMAND_TIMEOUT
-        while not ready and time.monotonic() < end and service.poll() is None:
-            with contextlib.suppress(httpx.TransportError):
-                ready = httpx.get(f"http://127.0.0.1:{port}/readyz").status_code == 200
-            time.sleep(0.2)
+        loop = asyncio.get_running_loop()
+        end = loop.time() + COMMAND_TIMEOUT
+        async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}") as client:
+            while not ready and loop.time() < end and service.returncode is None:
+                with contextlib.suppress(httpx.TransportError):
+                    ready = (await client.get("/readyz")).status_code == 200
+                await asyncio.sleep(0.2)
         assert ready, log.read_text()
     finally:
-        service.send_signal(signal.SIGTERM)
-        service.wait(timeout=COMMAND_TIMEOUT)
+        if service.returncode is None:
+            service.send_signal(signal.SIGTERM)
+        await asyncio.wait_for(service.wait(), COMMAND_TIMEOUT)
     done = read(pty_link, "E")
     assert (done.returncode, done.stderr) == (0, "")

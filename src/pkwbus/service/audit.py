@@ -1,19 +1,24 @@
 """The write audit log: every attempt, refused ones included, in SQLite (WAL mode).
 
-One row per attempt: time, client, token identity (a fingerprint, never the
+One row per attempt: time, client, token id (a fingerprint, never the
 token), drive, parameter, index, old value when read, new value, raw value,
 outcome, fault. Requests refused for want of a valid token are the
-exception: they are counted, one row per source address and minute with the
-number of attempts in ``count`` (their drive and parameter are not kept), so
-a flood of them cannot grow the database.
+exception: they are counted in memory, one row per source address and minute
+with the number of attempts in ``count`` (their drive and parameter are not
+kept), and that row is written once its minute has ended (a timer
+:data:`FLUSH_DELAY` after it, or the first refusal of a later minute), when
+the log is closed (a clean shutdown), and before an authorised read of the
+log (:meth:`AuditLog.latest`). A flood of them costs no write per request: a
+killed service loses at most the counts of its last minute or so.
 
-Every store is committed and synced (``synchronous=FULL``) before the call
-returns: the database survives restarts, a killed process and a power cut.
-The counts of refused requests are committed without a sync of their own
-(they reach the disk with the next synced store or checkpoint): a flood of
-refusals costs no disk flush per request.
-A store that fails raises :class:`AuditError` (one line, no traceback).
-
+Every other store is committed and synced (``synchronous=FULL``) before the
+call returns: the database survives restarts, a killed process and a power
+cut. The write-ahead log is checkpointed every :data:`WAL_PAGES` pages and
+cut back to :data:`WAL_BYTES` after a checkpoint, so it cannot take the room
+of the database on a small disk.
+A store that fails raises :class:`AuditError` (one line, no traceback); while
+the log cannot record, so does :meth:`AuditLog.refused` (the count is kept
+and written once the log records again).
 
 The token fingerprint is an HMAC-SHA256 of the token keyed with a random
 secret kept beside the database (``<audit_db>.key``, mode 0600, made on the
@@ -22,7 +27,8 @@ without the key can test a guess of the token against it.
 
 The key is in :mod:`pkwbus.service.audit_key`, the refusal tallies in
 :mod:`pkwbus.service.audit_refusals`, the row and its values in
-:mod:`pkwbus.service.audit_rows`; this module is the store, and re-exports
+:mod:`pkwbus.service.audit_rows`, the check of its place in
+:mod:`pkwbus.service.audit_place`; this module is the store, and re-exports
 their public names. Raises :class:`AuditError` (and :class:`ValueError` from
 :meth:`AuditLog.update` for a column it does not complete).
 """
@@ -30,9 +36,8 @@ their public names. Raises :class:`AuditError` (and :class:`ValueError` from
 from __future__ import annotations
 
 import contextlib
-import os
+import logging
 import sqlite3
-import stat
 import threading
 import time
 from collections.abc import Callable
@@ -47,10 +52,19 @@ from pkwbus.service.audit_key import (
     load_key,
     new_key,
 )
-from pkwbus.service.audit_refusals import MAX_SOURCES_PER_MINUTE, OTHER_SOURCES, RefusalTallies
+from pkwbus.service.audit_place import path_problem
+from pkwbus.service.audit_refusals import (
+    MAX_SOURCES_PER_MINUTE,
+    OTHER_SOURCES,
+    RefusalTallies,
+    Tally,
+    minute_of,
+)
 from pkwbus.service.audit_rows import (
     COLUMNS,
+    INTERRUPTED,
     MAX_TEXT,
+    SCHEMA,
     AuditEntry,
     as_dict,
     clip_text,
@@ -60,6 +74,7 @@ from pkwbus.service.audit_rows import (
 
 __all__ = [
     "COLUMNS",
+    "FLUSH_DELAY",
     "INTERRUPTED",
     "KEY_BYTES",
     "MAX_SOURCES_PER_MINUTE",
@@ -67,6 +82,8 @@ __all__ = [
     "OTHER_SOURCES",
     "SCHEMA",
     "TOKEN_ID_HEX",
+    "WAL_BYTES",
+    "WAL_PAGES",
     "AuditEntry",
     "AuditError",
     "AuditLog",
@@ -75,73 +92,20 @@ __all__ = [
     "path_problem",
 ]
 
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS writes (
-    id          INTEGER PRIMARY KEY AUTOINCREMENT,
-    time        REAL    NOT NULL,
-    client      TEXT    NOT NULL,
-    token_id    TEXT,
-    drive       TEXT    NOT NULL,
-    parameter   TEXT    NOT NULL,
-    idx         INTEGER NOT NULL DEFAULT 0,
-    store       TEXT,
-    old_value   TEXT,
-    new_value   TEXT,
-    raw_value   INTEGER,
-    outcome     TEXT    NOT NULL,
-    fault       INTEGER,
-    detail      TEXT,
-    count       INTEGER
-);
-CREATE INDEX IF NOT EXISTS writes_time ON writes (time);
-CREATE TABLE IF NOT EXISTS probe (id INTEGER PRIMARY KEY CHECK (id = 1), time REAL NOT NULL);
-"""
+log = logging.getLogger(__name__)
 
-INTERRUPTED: Final = (
-    "no outcome was recorded (the service stopped before the answer, or could not"
-    " store it); the drive may have applied the write"
-)
+FLUSH_DELAY: Final = 1.0  # seconds after a minute's end before its refusal counts are written
+WAL_PAGES: Final = 64  # the write-ahead log is checkpointed once it holds this many pages
+WAL_BYTES: Final = 262144  # and cut back to this size (64 pages of 4 KiB) after a checkpoint
 
 
 class AuditError(Exception):
     """The audit log cannot be opened or cannot store: the message is one line."""
 
 
-def path_problem(db: Path) -> str | None:
-    """Why ``db`` cannot be the audit database on this machine, or None.
-
-    A file there must be a regular, writable file; otherwise the nearest existing
-    directory above it must be writable (the service makes the missing ones).
-    """
-    if str(db) == ":memory:":
-        return None
-    for path, what in ((db, "the audit database"), (key_path(db), "its key file")):
-        try:
-            mode = path.stat().st_mode
-        except (FileNotFoundError, NotADirectoryError):
-            continue
-        except OSError as exc:
-            return f"{path}: {exc.strerror or exc}"
-        if stat.S_ISDIR(mode):
-            return f"{path} is a directory, not a file for {what}"
-        if not stat.S_ISREG(mode):
-            return f"{path} is not a regular file (a device or pipe cannot hold {what})"
-        if not os.access(path, os.R_OK | os.W_OK):
-            return f"{path} is not writable (read-only file system or permissions)"
-    parent = db.parent
-    while not parent.exists():
-        if parent.is_symlink() or parent == parent.parent:
-            return f"{db.parent} cannot be created"
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"{parent} is not a directory: {db.parent} cannot be created"
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return f"{parent} is not writable (read-only file system or permissions)"
-    return None
-
-
 class AuditLog:
-    """A small synchronous store; each call is one short, synced transaction.
+    """A small synchronous store; each store is one short, synced transaction (refusals
+    are counted in memory and written by the minute, see the module's text).
 
     Thread-safe: the service calls it from worker threads, off the event loop.
     """
@@ -158,6 +122,9 @@ class AuditLog:
         self._lock = threading.Lock()
         self._key: bytes | None = None
         self._refusals = RefusalTallies()
+        self._timer: threading.Timer | None = None
+        self._problem: str | None = None  # why the last store failed; None once one succeeds
+        self._closed = False
         try:
             if readonly:  # a look at the log: nothing is created or changed
                 uri = f"file:{self.path.resolve()}?mode=ro"
@@ -170,6 +137,8 @@ class AuditLog:
             self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute(f"PRAGMA wal_autocheckpoint={WAL_PAGES}")
+            self._db.execute(f"PRAGMA journal_size_limit={WAL_BYTES}")
             self._db.executescript(SCHEMA)
             if "count" not in self._columns():  # a database of an earlier version
                 self._db.execute("ALTER TABLE writes ADD COLUMN count INTEGER")
@@ -237,58 +206,155 @@ class AuditLog:
         self._store(f"UPDATE writes SET {cols} WHERE id = ?", (*values, row))
 
     def refused(self, client: str, kind: str) -> None:
-        """Count a request refused for want of a valid token: one row per address and
-        minute, its ``count`` raised with each further attempt."""
+        """Count a request refused for want of a valid token, in memory: one row per
+        address and minute, written once the minute has ended.
+
+        Raises :class:`AuditError` when the counts of an ended minute cannot be written,
+        or while the log cannot record: the count is kept all the same."""
         now = self.clock()
         with self._lock:
-            refusal = self._refusals.next(now, client, kind)
-            if refusal.row is None:
-                cur = self._unsynced_locked(
-                    "INSERT INTO writes (time, client, drive, parameter, outcome, detail, count)"
-                    " VALUES (?, ?, '', '', 'refused', ?, 1)",
-                    (now, refusal.client, refusal.detail),
-                )
-                assert cur.lastrowid is not None
-                self._refusals.stored(refusal, cur.lastrowid)
-            else:
-                self._unsynced_locked(
-                    "UPDATE writes SET count = count + 1, detail = ? WHERE id = ?",
-                    (refusal.detail, refusal.row),
-                )
-                self._refusals.stored(refusal, refusal.row)
+            self._refusals.count(now, client, kind)
+            self._give_up_locked()
+            if self._timer is None and not self._closed:
+                self._arm_locked(now)
+            if self._problem is not None:  # the timer tries again, or a store that succeeds
+                raise AuditError(self._problem)
+            self._flush_locked(self._refusals.due(now), now)  # a minute has ended
+
+    def flush(self) -> int:
+        """Write the refusal counts of the minutes that have ended; returns how many
+        refusals that adds. :class:`AuditError` when they cannot be written (kept)."""
+        now = self.clock()
+        with self._lock:
+            due = self._refusals.due(now)
+            added = sum(t.count - t.saved for t in due)
+            self._flush_locked(due, now)
+            return added
 
     def probe(self) -> None:
         """A small committed store, to learn whether the log can record again."""
         self._store("INSERT OR REPLACE INTO probe (id, time) VALUES (1, ?)", (self.clock(),))
 
     def latest(self, limit: int = 100) -> list[AuditEntry]:
+        """The newest ``limit`` rows by time, the refusal counts not yet written written
+        first (a minute's refusal row is written after it, so its id is a later one)."""
         count = "count" if self._has_count else "NULL"
         try:
             with self._lock:
+                with contextlib.suppress(AuditError):  # counts not written stay counted
+                    self._flush_locked(self._refusals.due(), self.clock())
                 rows = self._db.execute(
-                    f"SELECT {COLUMNS}, {count} FROM writes ORDER BY id DESC LIMIT ?", (limit,)
+                    f"SELECT {COLUMNS}, {count} FROM writes ORDER BY time DESC, id DESC LIMIT ?",
+                    (limit,),
                 ).fetchall()
         except sqlite3.Error as exc:
             raise AuditError(f"cannot read the audit log {self.path}: {_reason(exc)}") from None
         return [entry_of_row(r) for r in rows]
 
     def close(self) -> None:
+        """Write the refusal counts not yet written (a clean shutdown loses none), close."""
         with self._lock:
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+            if not self._closed:
+                self._closed = True
+                pending = self._refusals.pending()
+                try:
+                    self._flush_locked(self._refusals.due(), self.clock())
+                except AuditError as exc:
+                    log.error(
+                        "audit log: the counts of %d refused request(s) cannot be stored: %s",
+                        pending,
+                        exc,
+                    )
             self._db.close()
 
     # ----------------------------------------------------------- helpers
 
     def _store(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
         with self._lock:
-            return self._execute_locked(sql, args)
+            try:
+                cur = self._execute_locked(sql, args)
+            except AuditError as exc:
+                self._problem = str(exc)
+                raise
+            self._problem = None
+            return cur
 
-    def _unsynced_locked(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
-        """Commit without waiting for the disk (WAL with synchronous=NORMAL)."""
-        self._execute_locked("PRAGMA synchronous=NORMAL", ())
+    def _flush_locked(self, tallies: list[Tally], now: float) -> None:
+        """Write ``tallies`` in one synced transaction; :class:`AuditError` (nothing
+        written, the tallies kept) when it fails."""
+        if not tallies:
+            return
+        rows: list[int] = []
         try:
-            return self._execute_locked(sql, args)
-        finally:
-            self._execute_locked("PRAGMA synchronous=FULL", ())
+            self._db.execute("BEGIN IMMEDIATE")
+            for tally in tallies:
+                if tally.row is None:
+                    cur = self._db.execute(
+                        "INSERT INTO writes (time, client, drive, parameter, outcome, detail,"
+                        " count) VALUES (?, ?, '', '', 'refused', ?, ?)",
+                        (tally.time, tally.client, tally.detail, tally.count),
+                    )
+                    assert cur.lastrowid is not None
+                    rows.append(cur.lastrowid)
+                else:
+                    self._db.execute(
+                        "UPDATE writes SET count = ?, detail = ? WHERE id = ?",
+                        (tally.count, tally.detail, tally.row),
+                    )
+                    rows.append(tally.row)
+            self._db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            with contextlib.suppress(sqlite3.Error):
+                self._db.execute("ROLLBACK")
+            self._problem = _reason(exc)
+            raise AuditError(self._problem) from None
+        self._problem = None
+        self._refusals.written(tallies, rows, now)
+
+    def _arm_locked(self, now: float) -> None:
+        """A timer that writes the counts of this minute just after it ends."""
+        delay = min(60.0, max(0.0, (minute_of(now) + 1) * 60 - now)) + FLUSH_DELAY
+        self._timer = threading.Timer(delay, self._on_timer)
+        self._timer.name = "pkwbus-audit-refusals"
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _on_timer(self) -> None:
+        with self._lock:
+            self._timer = None
+            if self._closed:
+                return
+            now = self.clock()
+            self._give_up_locked()
+            due = self._refusals.due(now)
+            failing = self._problem is not None
+            try:
+                self._flush_locked(due, now)
+            except AuditError as exc:
+                if not failing:  # told when it starts failing, not every minute
+                    count = sum(t.count - t.saved for t in due)
+                    log.warning(
+                        "audit log cannot store the counts of %d refused request(s): %s;"
+                        " kept, tried again in a minute",
+                        count,
+                        exc,
+                    )
+            if self._refusals.pending():
+                self._arm_locked(now)
+
+    def _give_up_locked(self) -> None:
+        dropped = self._refusals.give_up()
+        if dropped:
+            log.error(
+                "audit log: the counts of %d refused request(s) from %s on could not be"
+                " stored for %d minutes and are given up",
+                sum(t.count - t.saved for t in dropped),
+                time.strftime("%Y-%m-%d %H:%M %z", time.localtime(dropped[0].minute * 60)),
+                self._refusals.max_minutes,
+            )
 
     def _execute_locked(self, sql: str, args: tuple[Any, ...]) -> sqlite3.Cursor:
         try:

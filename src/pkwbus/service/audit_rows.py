@@ -1,4 +1,5 @@
-"""One audit row: :class:`AuditEntry`, and its values as the database keeps them.
+"""One audit row: :class:`AuditEntry`, the table that keeps it (:data:`SCHEMA`), and its
+values as the database keeps them.
 
 Values are kept as JSON (a non-finite number as its name, "nan", which JSON
 lacks); a detail or text value is cut to :data:`MAX_TEXT` characters with a
@@ -18,7 +19,9 @@ from typing import Any, Final
 
 __all__ = [
     "COLUMNS",
+    "INTERRUPTED",
     "MAX_TEXT",
+    "SCHEMA",
     "AuditEntry",
     "as_dict",
     "clip_text",
@@ -31,6 +34,33 @@ COLUMNS: Final = (
     " new_value, raw_value, outcome, fault, detail"
 )
 MAX_TEXT: Final = 500  # a detail or value kept in a row, in characters
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS writes (
+    id          INTEGER PRIMARY KEY AUTOINCREMENT,
+    time        REAL    NOT NULL,
+    client      TEXT    NOT NULL,
+    token_id    TEXT,
+    drive       TEXT    NOT NULL,
+    parameter   TEXT    NOT NULL,
+    idx         INTEGER NOT NULL DEFAULT 0,
+    store       TEXT,
+    old_value   TEXT,
+    new_value   TEXT,
+    raw_value   INTEGER,
+    outcome     TEXT    NOT NULL,
+    fault       INTEGER,
+    detail      TEXT,
+    count       INTEGER
+);
+CREATE INDEX IF NOT EXISTS writes_time ON writes (time);
+CREATE TABLE IF NOT EXISTS probe (id INTEGER PRIMARY KEY CHECK (id = 1), time REAL NOT NULL);
+"""
+
+INTERRUPTED: Final = (
+    "no outcome was recorded (the service stopped before the answer, or could not"
+    " store it); the drive may have applied the write"
+)
 
 
 @dataclass
