@@ -17,7 +17,6 @@ Raises :class:`PortError` when the port cannot be opened, is not open or was los
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
 import os
@@ -25,7 +24,6 @@ import termios
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
 
 import serial
 import serial.rs485
@@ -39,9 +37,9 @@ from pkwbus.link.serialport import (
     is_pty,
     open_port,
     raw_fd,
-    wrap_transport,
 )
 from pkwbus.link.settings import PARITIES, PortError, PortSettings, Rs485Mode
+from pkwbus.link.transport import SerialTransport, wrap_transport
 
 __all__ = [
     "PARITIES", "Link", "LinkState", "PortError", "PortSettings", "Rs485Mode",
@@ -61,6 +59,8 @@ LostListener = Callable[[str], None]
 
 
 class _Protocol(asyncio.Protocol):
+    """One per opening: the end of an earlier transport is not the current port's."""
+
     def __init__(self, link: Link) -> None:
         self._link = link
 
@@ -68,7 +68,7 @@ class _Protocol(asyncio.Protocol):
         self._link._on_data(data)
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self._link._on_lost(exc)
+        self._link._on_lost(self, exc)
 
 
 class Link:
@@ -84,12 +84,12 @@ class Link:
         self.settings = settings
         self._receiver = receiver
         self._on_lost_cb = on_lost
-        self._transport: asyncio.Transport | None = None
+        self._transport: SerialTransport | None = None
+        self._protocol: _Protocol | None = None
         self._state = LinkState.CLOSED
         self._quiet_at = 0.0
         self._echo = b""
         self._closing = False
-        self._serial: Any = None
         self._fd = -1
         self._pause = settings.start_pause
         self._char_time = settings.char_time
@@ -120,8 +120,8 @@ class Link:
             raise PortError(f"cannot open {s.url}: {reason}") from None
         self._closing = False
         closer.start()
-        self._transport = wrap_transport(loop, _Protocol(self), instance, s.url)
-        self._serial = instance
+        self._protocol = protocol = _Protocol(self)
+        self._transport = wrap_transport(loop, protocol, instance, s.url)
         self._fd = raw_fd(instance)
         self._loop = loop
         self._fine = has_fine_timers(loop)
@@ -131,7 +131,7 @@ class Link:
     async def close(self) -> None:
         self._closing = True
         transport, self._transport = self._transport, None
-        self._serial, self._fd = None, -1
+        self._protocol, self._fd = None, -1
         if transport is not None:
             transport.close()
             await asyncio.sleep(0)  # let connection_lost run
@@ -143,8 +143,8 @@ class Link:
     def abort(self) -> None:
         """Give the port up at once (an unexpected error); its owner decides when to reopen."""
         transport, self._transport = self._transport, None
-        self._serial, self._fd = None, -1
-        self._closing = True  # connection_lost of the old transport reports nothing more
+        self._protocol, self._fd = None, -1
+        self._closing = True
         if transport is not None:
             transport.abort()
         self._state = LinkState.FAILED
@@ -152,7 +152,12 @@ class Link:
     # ------------------------------------------------------------ traffic
 
     async def send(self, data: bytes) -> None:
-        """Write ``data`` once the line has been quiet for the start pause; drop stale input."""
+        """Write ``data`` once the line has been quiet for the start pause; drop stale input.
+
+        Stale input is dropped before every request: the PROFIBUS DP line's
+        way, where a late answer of a station asked again must not be taken
+        for the answer to the new request.
+        """
         transport = self._transport
         if transport is None or self._state is not LinkState.OPEN:
             raise PortError(f"{self.settings.url} is not open")
@@ -175,9 +180,10 @@ class Link:
     def write_now(self, data: bytes, *, discard: bool) -> None:
         """Write ``data`` at once (the caller waited out :meth:`pause_left`).
 
-        ``discard`` drops unread input first (a ``tcflush``): the caller asks
-        for it only when stray bytes arrived. :class:`PortError` when the
-        port is not open.
+        ``discard`` drops unread input first (read and dropped, never flushed
+        behind a read already due: :mod:`pkwbus.link.transport`); the caller
+        asks for it only when stray input must not be taken for the answer.
+        :class:`PortError` when the port is not open.
         """
         transport = self._transport
         loop = self._loop
@@ -210,7 +216,7 @@ class Link:
                 self._fine_timer = ThreadPoolExecutor(1, thread_name_prefix="pkwbus-pause")
             await loop.run_in_executor(self._fine_timer, time.sleep, wait)
 
-    def _write(self, transport: asyncio.Transport, data: bytes) -> None:
+    def _write(self, transport: SerialTransport, data: bytes) -> None:
         """Write straight to the port when nothing is queued; else through the transport."""
         fd = self._fd
         if fd >= 0 and not transport.get_write_buffer_size():
@@ -218,8 +224,8 @@ class Link:
                 n = os.write(fd, data)
             except (BlockingIOError, InterruptedError):
                 n = 0
-            except OSError:
-                transport.write(data)  # the transport reports the error and closes
+            except OSError as exc:  # EIO: the device is gone
+                transport.lose(describe_error(exc))
                 return
             if n == len(data):
                 return
@@ -227,14 +233,11 @@ class Link:
         transport.write(data)
 
     def _discard_input(self) -> None:
-        port = self._serial
-        if port is not None:
-            # termios.error (a vanished pty: EIO) is no OSError; the write that
-            # follows finds the port gone and reports it.
-            with contextlib.suppress(
-                serial.SerialException, OSError, NotImplementedError, termios.error
-            ):
-                port.reset_input_buffer()
+        transport = self._transport
+        if transport is not None:
+            dropped = transport.discard_input()
+            if dropped:
+                log.debug("%s: %d stray bytes dropped", self.settings.url, dropped)
 
     def _on_data(self, data: bytes) -> None:
         loop = self._loop
@@ -259,9 +262,11 @@ class Link:
         self._echo = self._echo[n:]
         return data[n:]
 
-    def _on_lost(self, exc: Exception | None) -> None:
-        self._transport = None
-        self._serial, self._fd = None, -1
+    def _on_lost(self, protocol: _Protocol, exc: Exception | None) -> None:
+        if protocol is not self._protocol:
+            return  # an earlier opening's transport, closed since: not the current port
+        self._transport = self._protocol = None
+        self._fd = -1
         if self._closing:
             return
         reason = describe_error(exc) if exc else "closed by the other end"

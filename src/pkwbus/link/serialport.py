@@ -1,8 +1,8 @@
-"""Opening a serial port with pyserial, and the transport and closing around it.
+"""Opening and closing a serial port with pyserial.
 
 Blocking opens run in an executor; closes go to one thread of their own
-(:class:`_Closer`); the transport reads a plain descriptor with read(2).
-Ptys are opened with parity N (:func:`is_pty`).
+(:class:`_Closer`); the transport around an open port is
+:mod:`pkwbus.link.transport`. Ptys are opened with parity N (:func:`is_pty`).
 
 Raises: :class:`serial.SerialException`, :class:`OSError` or
 :class:`ValueError` from :func:`open_port` when the port cannot be opened
@@ -11,7 +11,6 @@ or refuses RS-485 mode.
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import os
 import queue
@@ -24,7 +23,6 @@ from typing import Any
 
 import serial
 import serial.rs485
-import serial_asyncio
 
 from pkwbus.link.settings import PARITIES, PortSettings
 
@@ -35,7 +33,6 @@ __all__ = [
     "is_pty",
     "open_port",
     "raw_fd",
-    "wrap_transport",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -131,55 +128,6 @@ def is_pty(url: str) -> bool:
     except (OSError, ValueError):
         return False
     return stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) in _PTY_FOLLOWER_MAJORS
-
-
-def wrap_transport(
-    loop: asyncio.AbstractEventLoop, protocol: asyncio.Protocol, instance: Any, url: str
-) -> asyncio.Transport:
-    """Wrap an open port in pyserial-asyncio's transport.
-
-    The transport assigns ``timeout = write_timeout = 0``, which the port
-    already has; pyserial would still call tcsetattr again (on a pty asked
-    for a parity, an EINVAL: see :func:`is_pty`). Skip the no-op.
-    """
-    reconfigure = instance._reconfigure_port
-    instance._reconfigure_port = lambda force_update=False: None
-    try:
-        transport = _SerialTransport(loop, protocol, instance)
-    finally:
-        instance._reconfigure_port = reconfigure
-    transport.fd = raw_fd(instance)
-    closer.wrap(instance, url)
-    return transport
-
-
-class _SerialTransport(serial_asyncio.SerialTransport):  # type: ignore[misc]
-    """pyserial-asyncio's transport, reading a plain descriptor with read(2).
-
-    pyserial's ``read`` waits with ``select()``, which refuses a descriptor
-    numbered 1024 or above: a port reopened while many HTTP connections are
-    open could get such a number and then never be read. The event loop has
-    already said that the descriptor is readable, so one ``os.read`` is all
-    a read needs.
-    """
-
-    fd = -1
-
-    def _read_ready(self) -> None:
-        if self.fd < 0:
-            super()._read_ready()
-            return
-        try:
-            data = os.read(self.fd, self._max_read_size)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError as exc:
-            self._close(exc=serial.SerialException(describe_error(exc)))
-            return
-        if not data:  # end of file: the device or the gateway went away
-            self._close(exc=serial.SerialException("the port was closed at its other end"))
-            return
-        self._protocol.data_received(data)
 
 
 class _Closer:
