@@ -131,3 +131,32 @@ def test_no_echo_warning_without_an_echo(pty: str, tmp_path: Path) -> None:
     done = check(config(tmp_path, pty, [1]))
     assert done.returncode == 0, done.stdout + done.stderr
     assert "echoes our requests" not in done.stdout
+
+
+def test_a_uss_drive_is_reported_with_its_pkw_length(tmp_path: Path) -> None:
+    """A factory-set drive (127) answers: auto shows 127, and pkw_words: 4 is a conflict."""
+    path = str(tmp_path / "ttyUSS")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "uss", "--pty", path,
+         "--drives", "1,2", "--response-delay", "1ms"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        assert "simulating" in proc.stdout.readline()
+        conf = tmp_path / "uss.yaml"
+        conf.write_text(
+            f"audit_db: {tmp_path / 'audit.sqlite'}\n"
+            f"lines:\n  - name: hall\n    port: {path}\n    protocol: uss\n"
+            f"    baudrate: 19200\n    timeout: 50ms\n    retries: 1\n    drives:\n"
+            f"      - {{name: d1, address: 1}}\n"
+            f"      - {{name: d2, address: 2, pkw_words: 4}}\n"
+        )
+        done = check(conf)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "d1 (address 1): answers, PKW length 127 (variable) (pkw_words: auto)" in done.stdout
+    assert "d2 (address 2): answers, PKW length 127 (variable), but pkw_words is 4" in done.stdout
+    assert "CONFLICT" in done.stdout

@@ -144,3 +144,36 @@ def test_bad_baudrates_are_exit_2() -> None:
     assert "--baudrates: '12345' is not a supported baud rate" in done.stderr
     done = scan("--port", "/nonexistent/tty", "--baudrates", "auto", "--parities", "E,X")
     assert done.returncode == 2 and "--parities: 'X' is not E, O or N" in done.stderr
+
+
+@contextlib.contextmanager
+def uss_sim(pkw_words: str) -> Iterator[str]:
+    """`pkwbus simulate --protocol uss` on a pty with the PKW length ``pkw_words``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = str(Path(tmp) / "ttyUSS")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "uss", "--pty", path,
+             "--drives", "4", "--response-delay", "0", "--pkw-words", pkw_words],
+            stdout=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        assert proc.stdout is not None
+        assert path in proc.stdout.readline()
+        try:
+            yield path
+        finally:
+            proc.terminate()
+            assert proc.wait(5) == 0
+
+
+@pytest.mark.parametrize(("sim_words", "shown"), [("variable", "127 (variable)"), ("4", "4")])
+def test_a_uss_scan_reports_the_pkw_length(sim_words: str, shown: str) -> None:
+    """With its default (auto) the scan asks each USS drive a word read, whose answer's
+    length tells the drive's PKW length (the simulator's default is the factory's, 127)."""
+    with uss_sim(sim_words) as port:
+        done = scan("--port", port, "--protocol", "uss", "--addresses", "3-4", "--json")
+        text = scan("--port", port, "--protocol", "uss", "--addresses", "4")
+    assert done.returncode == 0, done.stderr
+    (drive,) = json.loads(done.stdout)
+    assert (drive["address"], drive["pkw_words"]) == (4, shown)
+    assert f"PKW length {shown}" in text.stdout.splitlines()[0]

@@ -20,7 +20,7 @@ from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
-from pkwbus.master.pkw_probe import ask_pkw_length
+from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Failure, Reply
 from pkwbus.protocol.pkw_length import AUTO, shown
@@ -95,7 +95,7 @@ async def _pkw_length(bus: Line, line: cfg.Line, target: DriveTarget) -> str:
         return ""
     deadline = asyncio.get_running_loop().time() + line.timeout * (line.retries + 1) + 0.5
     words = await ask_pkw_length(bus, target, retries=line.retries, deadline=deadline)
-    if words is None:
+    if words == NO_ANSWER:
         return ", PKW length not told (no answer to a word read)"
     seen = "4 or 127" if words == "?" else shown(words)
     configured = target.pkw_setting

@@ -36,7 +36,7 @@ from pkwbus.commands.dp import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
-from pkwbus.master.pkw_probe import ask_pkw_length
+from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
@@ -213,7 +213,7 @@ async def _pkw_words(args: argparse.Namespace, line: Line, target: DriveTarget) 
     """A USS drive's PKW length as its answer to a word read shows it (None: no answer)."""
     deadline = asyncio.get_running_loop().time() + line.timeout * (args.retries + 1) + 0.5
     words = await ask_pkw_length(line, target, retries=args.retries, deadline=deadline)
-    if words is None:
+    if words == NO_ANSWER:
         return None
     return "4 or 127" if words == "?" else shown(words)
 

@@ -20,18 +20,19 @@ from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw_length import PkwWords, told
 
-__all__ = ["LENGTH_PNU", "ask_pkw_length"]
+__all__ = ["LENGTH_PNU", "NO_ANSWER", "ask_pkw_length"]
 
 LENGTH_PNU: Final = 2
+NO_ANSWER: Final = "no answer"
 
 
 async def ask_pkw_length(
     line: Line, target: DriveTarget, *, retries: int, deadline: float
-) -> PkwWords | Literal["?"] | None:
-    """The PKW length the drive's answer shows; ``"?"`` when it fits more than one (a double
-    word), None when no answer came (or the target has no PKW channel)."""
+) -> PkwWords | Literal["?", "no answer"]:
+    """The PKW length the drive's answer shows (None: variable); ``"?"`` when it fits more
+    than one (a double word), :data:`NO_ANSWER` when no answer came (or there is no PKW)."""
     if not target.has_pkw:
-        return None
+        return NO_ANSWER
     tx = PkwTransaction(
         target, pkw.read(target.dialect, LENGTH_PNU), retries=retries, deadline=deadline
     )
@@ -44,4 +45,4 @@ async def ask_pkw_length(
         if answer is not None and response is not None and outcome is not None:
             return told(sent, len(answer) // 2, response)
         if outcome is not None:
-            return None
+            return NO_ANSWER
