@@ -10,15 +10,19 @@ from typing import Any
 
 import pytest
 
+from pkwbus.master.health import HealthPolicy
 from pkwbus.master.outcomes import Answered, Mismatch, NotSent
+from pkwbus.master.plan import PkwLengthTold
+from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pkw_length import VARIABLE
 from pkwbus.protocol.telegram import BlockShape, split_block
-from pkwbus.sim import Simulator
+from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.table import USS_TABLE, ParamSpec
 from tests.master.conftest import make_sim, open_line, run_job, serve
+from tests.master.test_planner import FakeLine, drives
 
 # A word parameter that may change while the motor runs (the table's p0304 may not).
 WORD = ParamSpec(2010, "p2010", ValueType.U16, 0, "", 0.0, 13.0, True, initial=6.0)
@@ -27,6 +31,9 @@ SPECS = (*USS_TABLE, WORD)
 
 def sim_with(pkw_words: int | None, **kw: Any) -> Simulator:
     return make_sim("uss", [1], specs=SPECS, pkw_words=pkw_words, **kw)
+
+
+DIALECTS = ["uss", "profidrive"]  # the two that ride on USS framing, each with its IND layout
 
 
 def raw(outcome: object) -> int:
@@ -39,9 +46,9 @@ def f32(value: float) -> int:
     return int.from_bytes(struct.pack(">f", value), "big")
 
 
-def write_telegrams(tx: list[bytes], pnu: int) -> list[bytes]:
+def write_telegrams(tx: list[bytes], pnu: int, name: str = "uss") -> list[bytes]:
     """The change requests among ``tx`` for ``pnu`` (decoded as a follower decodes them)."""
-    dialect = DriveTarget.create("uss", 1).dialect
+    dialect = DriveTarget.create("uss", 1, dialect_name=name).dialect
     out = []
     for t in tx:
         block = split_block(t[3:-1], BlockShape(None, 2))
@@ -51,15 +58,16 @@ def write_telegrams(tx: list[bytes], pnu: int) -> list[bytes]:
     return out
 
 
+@pytest.mark.parametrize("dialect", DIALECTS)
 @pytest.mark.parametrize("sim_words", [VARIABLE, 4])
 async def test_the_defaults_read_and_change_words_and_floats(
-    end: str, sim_words: int | None
+    end: str, sim_words: int | None, dialect: str
 ) -> None:
     """Reads of a word and a float, changes of a word and a double word, each landing as
     asked, whether the drive is as the factory set it (127) or set to 4 fixed words."""
-    sim = sim_with(sim_words)
+    sim = sim_with(sim_words, dialect=dialect)
     drive = sim.drives[1]
-    target = DriveTarget.create("uss", 1)  # pkw_words: auto, the default
+    target = DriveTarget.create("uss", 1, dialect_name=dialect)  # pkw_words: auto, the default
     d = target.dialect
     async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
         assert raw(await run_job(line, target, pkw.read(d, 2010))) == 6
@@ -72,7 +80,7 @@ async def test_the_defaults_read_and_change_words_and_floats(
     assert drive.value(2010) == 9
     assert drive.value(1120) == f32(12.5)
     # the word change went out once, in the drive's own form
-    (change,) = write_telegrams(trace.tx, 2010)
+    (change,) = write_telegrams(trace.tx, 2010, dialect)
     pkw_words = (len(change) - 4) // 2 - 2
     assert pkw_words == (3 if sim_words is VARIABLE else 4)
     assert not sim.stats.as_dict().get("malformed")
@@ -124,3 +132,18 @@ async def test_a_change_acknowledged_with_another_value_ends_after_one_exchange(
     assert isinstance(outcome, Mismatch), outcome
     assert (outcome.sent, outcome.answered) == (9, 4)
     assert len(write_telegrams(trace.tx, 2010)) == 1
+
+
+def test_auto_finds_a_fixed_3_drive_by_a_short_probe() -> None:
+    """A fixed-3 drive answers no 4-word request: it goes down, and while its length is not
+    known every other probe has 3 words; the one it answers tells its length (fake clock)."""
+    sim = Simulator("uss", [1], pkw_words=3, timing=SimTiming(response_delay=0.0), seed=7)
+    policy = HealthPolicy(down_after=3, probe_initial=1.0, probe_cap=4.0)
+    planner = Planner(drives("uss", [1], [52], 0.1), poll_deadline=0.5, policy=policy)
+    line = FakeLine(planner, sim)
+    line.run(10.0)
+    told = [e.length for e in line.events if isinstance(e, PkwLengthTold)]
+    assert [(t.words, t.known) for t in told] == [(3, True)]
+    assert line.shown("d1") and line.polls_ok("d1") > 0
+    last = line.sent[-1].telegram
+    assert (len(last) - 4) // 2 - 2 == 3  # polls go out with 3 PKW words now

@@ -76,9 +76,9 @@ class FakeLine:
 
     def answer(self, send: Send) -> ExchangeResult:
         request = next(
-            e for e in self.sim.deframer().feed(send.telegram) if isinstance(e, Telegram)
-        )
-        answer = self.sim.answer(request, self.now)
+            (e for e in self.sim.deframer().feed(send.telegram) if isinstance(e, Telegram)), None
+        )  # None: a length the simulated drives do not take (a fixed PKW length)
+        answer = None if request is None else self.sim.answer(request, self.now)
         if answer is None:
             self.now += TIMEOUT
             return Failure(ErrorKind.TIMEOUT, "no answer")

@@ -45,7 +45,8 @@ class Active:
 class DrivePlan:
     __slots__ = (
         "active", "busy", "health", "lagging", "last_answer", "name", "pkw", "polls", "probe",
-        "reads", "seq", "served", "shown_up", "slot", "spec", "target", "version", "writes",
+        "probes", "reads", "seq", "served", "shown_up", "slot", "spec", "target", "version",
+        "writes",
     )  # fmt: skip
 
     def __init__(self, spec: DriveSpec, policy: HealthPolicy, slot: int, count: int) -> None:
@@ -73,6 +74,27 @@ class DrivePlan:
         uss = target.protocol is Protocol.USS and target.has_pkw
         self.pkw = PkwLength(target.pkw_setting) if uss else None
         self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
+        self.probes = 0
+
+    def next_probe(self) -> Send:
+        """The probe of a down drive. While a learned PKW length is not known, every other
+        probe has 3 PKW words: a fixed-3 drive answers no 4-word request (SINAMICS S110
+        Function Manual, 9.5: with a fixed length "the slave will not respond" to another)."""
+        self.probes += 1
+        length = self.pkw
+        if length is None or length.known or not self.target.learn or self.probes % 2:
+            return self.probe
+        short = self.target.with_pkw_words(3)
+        return Send(self.name, short, short.probe(), True)
+
+    def probed(self, send: Send) -> bool:
+        """A probe was answered; True when a 3-word one told a fixed-3 drive (learned)."""
+        length = self.pkw
+        if length is None or length.known or send.target.shape.pkw_words != 3:
+            return False
+        length.words, length.known = 3, True  # a 4-word request went unanswered before it
+        self.retarget()
+        return True
 
     def heard(self, tx: PkwTransaction) -> bool:
         """Take what the answer ``tx`` just decoded tells; True when the drive's PKW

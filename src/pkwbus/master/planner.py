@@ -223,6 +223,8 @@ class Planner:
         if send.probe:
             if isinstance(result, Reply):
                 self._status_from_reply(d, result)
+                if d.probed(send):
+                    self._tell_pkw(d)
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
@@ -327,7 +329,7 @@ class Planner:
             d.active = first
             return first.send
         if not d.health.up:
-            return d.probe
+            return d.next_probe()
         _, _, poll = heapq.heappop(d.polls)
         spec = poll.spec
         if now - poll.due > spec.every:
