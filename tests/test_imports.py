@@ -15,7 +15,9 @@ MAY_IMPORT = {
     "protocol": set(),
     "catalog": {"protocol", "problems", "yamlfile"},
     "link": {"protocol"},
-    "master": {"protocol", "catalog", "link", "exits"},
+    # master knows neither HTTP nor the command line: their exit codes and answers
+    # live with the commands and the service (commands.failures, service.outcome_answers)
+    "master": {"protocol", "catalog", "link"},
     "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus"},
 }
 
@@ -87,3 +89,20 @@ def test_each_layer_imports_only_the_layers_below_it() -> None:
         if layer(dep) != layer(name) and layer(dep) not in MAY_IMPORT[layer(name)]
     )
     assert not wrong
+
+
+def test_nothing_in_master_prints() -> None:
+    """master/ reports through events, logging and hooks; the commands print."""
+    printing = sorted(
+        name
+        for name, path in MODULES.items()
+        if layer(name) == "master"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Call)
+        and (
+            (isinstance(node.func, ast.Name) and node.func.id == "print")
+            or "sys.stderr" in ast.unparse(node)
+            or "sys.stdout" in ast.unparse(node)
+        )
+    )
+    assert not printing

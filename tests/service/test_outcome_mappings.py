@@ -6,6 +6,7 @@ from typing import get_args
 
 import pytest
 
+from pkwbus.commands.failures import command_failure
 from pkwbus.exits import Exit
 from pkwbus.master.outcomes import (
     Answered,
@@ -17,12 +18,10 @@ from pkwbus.master.outcomes import (
     Outcome,
     Rejected,
     TimedOut,
-    audit_outcome,
-    command_failure,
-    http_failure,
     metric_label,
 )
 from pkwbus.protocol import pkw
+from pkwbus.service.outcome_answers import audit_outcome, http_failure
 
 ANSWERED = Answered(pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD))
 MISMATCH = Mismatch(1234, 0, pkw.ValueResponse(1, 1120, 0, 0, pkw.Width.WORD))

@@ -13,7 +13,8 @@ import argparse
 from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import CommandError, Exit, emit_json
-from pkwbus.master.outcomes import Answered, Outcome, command_failure
+from pkwbus.commands.failures import command_failure
+from pkwbus.master.outcomes import Answered, Outcome
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError

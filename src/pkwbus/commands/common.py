@@ -39,6 +39,7 @@ __all__ = [
     "duration_option",
     "emit_json",
     "int_option",
+    "print_trace",
 ]
 
 
@@ -178,8 +179,14 @@ def build_line(args: argparse.Namespace) -> Line:
 
 
 def _print_trace(direction: str, data: bytes) -> None:
+    print_trace(direction, data.hex(" "))
+
+
+def print_trace(direction: str, text: str) -> None:
+    """The ``--trace`` printer: a timestamp, the direction and the telegram or the decoded
+    frame, on stderr."""
     stamp = datetime.datetime.now().strftime("%H:%M:%S.%f")
-    print(f"{stamp} {direction} {data.hex(' ')}", file=sys.stderr)
+    print(f"{stamp} {direction} {text}", file=sys.stderr)
 
 
 def emit_json(obj: Any) -> None:

@@ -28,9 +28,10 @@ from pkwbus.commands.common import (
 )
 from pkwbus.commands.descriptions import ELEMENTS, report
 from pkwbus.commands.dp import add_dp_options
+from pkwbus.commands.failures import command_failure
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
-from pkwbus.master.outcomes import Answered, Rejected, command_failure
+from pkwbus.master.outcomes import Answered, Rejected
 from pkwbus.master.scheduler import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw

@@ -23,9 +23,9 @@ from pathlib import Path
 from pkwbus import durations, limits
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.answers import catalog_entry
-from pkwbus.commands.common import CommandError, Exit, duration_option, int_option
+from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
 from pkwbus.link import PortError, PortSettings
-from pkwbus.master.dp_line import DpLine, ForeignMaster, print_trace
+from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
 from pkwbus.master.outcomes import Outcome
 from pkwbus.protocol import dp_services as dps

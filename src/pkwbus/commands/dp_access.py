@@ -15,7 +15,8 @@ from pkwbus.commands.answers import finish, report_value, show_read
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.commands.descriptions import ELEMENTS, report
 from pkwbus.commands.dp import DpContext, build_context, resolve, session
-from pkwbus.master.outcomes import Answered, Outcome, Rejected, command_failure
+from pkwbus.commands.failures import command_failure
+from pkwbus.master.outcomes import Answered, Outcome, Rejected
 from pkwbus.protocol import pkw, ppo
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError

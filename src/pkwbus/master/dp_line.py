@@ -16,8 +16,6 @@ means another master runs the line, and pkwbus never shares a line with one
 from __future__ import annotations
 
 import asyncio
-import datetime
-import sys
 from collections.abc import Callable
 
 from pkwbus.link import Link, PortError, PortSettings, Reconnect
@@ -25,7 +23,7 @@ from pkwbus.protocol import dp_timing, fdl
 from pkwbus.protocol.dp_slave import Answer, Garbled, NoAnswer
 from pkwbus.protocol.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
 
-__all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame", "print_trace"]
+__all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame"]
 
 TraceHook = Callable[[str, str], None]  # direction ("tx"/"rx"), the decoded frame
 
@@ -60,12 +58,6 @@ def describe_frame(event: Frame | FramingError) -> str:
     if isinstance(event, FramingError):
         return f"! {event.describe()}"
     return type(event).__name__
-
-
-def print_trace(direction: str, text: str) -> None:
-    """The ``--trace`` printer: a timestamp, the direction and the decoded frame on stderr."""
-    stamp = datetime.datetime.now().strftime("%H:%M:%S.%f")
-    print(f"{stamp} {direction} {text}", file=sys.stderr)
 
 
 def _foreign(event: Frame, master: int) -> str | None:

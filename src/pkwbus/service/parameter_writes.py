@@ -23,11 +23,12 @@ from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.jobs import JobKind, JobResult
-from pkwbus.master.outcomes import Answered, audit_outcome
+from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, encode_text
 from pkwbus.service.audit import AuditEntry
+from pkwbus.service.outcome_answers import audit_outcome
 from pkwbus.service.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
