@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -37,10 +36,17 @@ HERE = Path(__file__).resolve().parent
 TELEGRAMS = re.compile(r"^pkwbus_telegrams_total\{[^}]*\} ([0-9.e+]+)$", re.M)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+LISTENING = re.compile(rb"metrics on http://127\.0\.0\.1:(\d+)/metrics")
+
+
+def listening(path: Path, service: subprocess.Popen[bytes]) -> int:
+    """The port the service got for ``--listen 127.0.0.1:0``, from its log line."""
+    deadline = time.monotonic() + 30
+    while (found := LISTENING.search(path.read_bytes())) is None:
+        if time.monotonic() > deadline or service.poll() is not None:
+            raise RuntimeError("the service did not start")
+        time.sleep(0.1)
+    return int(found.group(1))
 
 
 def telegrams(client: httpx.Client) -> float:
@@ -70,14 +76,14 @@ def run(idle: int = 5000, parallel: int = 2000, seconds: float = 5.0) -> dict[st
                 audit_db=str(folder / "audit.sqlite"),
             )
         )  # fmt: skip
-        port = free_port()
         log = (folder / "service.log").open("wb")
         service = subprocess.Popen(
             [sys.executable, "-m", "pkwbus", "run", "--config", str(config),
-             "--listen", f"127.0.0.1:{port}"],
+             "--listen", "127.0.0.1:0"],
             stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
         )  # fmt: skip
         try:
+            port = listening(folder / "service.log", service)
             base = f"http://127.0.0.1:{port}"
             with httpx.Client(base_url=base, timeout=30) as client:
                 deadline = time.monotonic() + 30

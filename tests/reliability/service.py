@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import signal
-import socket
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,14 +18,10 @@ from .helpers import config_text, fc_line, wait_for
 
 TOKEN = "s3cr3t-Wr1te-T0ken-4711"
 TOKEN_ENV = "PKWBUS_TEST_WRITE_TOKEN"
-ATTEMPTS = 5  # starts of a service whose port another process may take meanwhile
 
 
-def free_port() -> int:
-    """A loopback port that was free when asked (another process may take it next)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+# The service's log line that names where it listens (the port the system chose).
+LISTENING = re.compile(r"metrics on http://127\.0\.0\.1:(\d+)/metrics")
 
 
 async def start_run(
@@ -36,36 +32,25 @@ async def start_run(
     cwd: Path | None = None,
     timeout: float = 30.0,
 ) -> tuple[asyncio.subprocess.Process, int]:
-    """``python -m pkwbus ARGS --listen 127.0.0.1:PORT`` (ARGS: ``run`` and its options),
-    its stderr appended to ``log``; returns it and PORT once its own log says it listens
-    there, so the port is its own and no other test worker's.
-
-    `pkwbus run` takes no port 0: PORT is one that was free when chosen. When another
-    process took it before the service bound it, the service says so and exits, and it
-    is started again on another port."""
+    """``python -m pkwbus ARGS --listen 127.0.0.1:0`` (ARGS: ``run`` and its options), its
+    stderr appended to ``log``; returns it and the port the system gave it, read back from
+    its own log line once it listens (no port is picked before it binds: none to lose to
+    another test worker)."""
     loop = asyncio.get_running_loop()
-    for _ in range(ATTEMPTS):
-        port = free_port()
-        logged = log.stat().st_size if log.exists() else 0
-        with log.open("ab") as err:
-            proc = await asyncio.create_subprocess_exec(
-                sys.executable, "-m", "pkwbus", *args, "--listen", f"127.0.0.1:{port}",
-                stdout=asyncio.subprocess.DEVNULL, stderr=err, env=env, cwd=cwd,
-            )  # fmt: skip
-
-        def said(logged: int = logged) -> str:  # what this start logged
-            return log.read_bytes()[logged:].decode(errors="replace")
-
-        end = loop.time() + timeout
-        while f"metrics on http://127.0.0.1:{port}/metrics" not in said():
-            if proc.returncode is not None:
-                assert "cannot listen on" in said(), said()
-                break  # its port was taken meanwhile: again on another
-            assert loop.time() < end, f"pkwbus did not start listening:\n{said()}"
-            await asyncio.sleep(0.05)
-        else:
-            return proc, port
-    raise AssertionError(f"no port of {ATTEMPTS} was still free when bound:\n{log.read_text()}")
+    logged = log.stat().st_size if log.exists() else 0
+    with log.open("ab") as err:
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "pkwbus", *args, "--listen", "127.0.0.1:0",
+            stdout=asyncio.subprocess.DEVNULL, stderr=err, env=env, cwd=cwd,
+        )  # fmt: skip
+    end = loop.time() + timeout
+    while (
+        found := LISTENING.search(said := log.read_bytes()[logged:].decode(errors="replace"))
+    ) is None:
+        assert proc.returncode is None, f"pkwbus exited before it listened:\n{said}"
+        assert loop.time() < end, f"pkwbus did not start listening:\n{said}"
+        await asyncio.sleep(0.05)
+    return proc, int(found.group(1))
 
 
 class Service:
@@ -132,4 +117,4 @@ class Service:
         return httpx.AsyncClient(base_url=self.base, timeout=30, **kw)
 
 
-__all__ = ["TOKEN", "TOKEN_ENV", "Service", "free_port", "start_run", "wait_for"]
+__all__ = ["TOKEN", "TOKEN_ENV", "Service", "start_run", "wait_for"]

@@ -1,18 +1,14 @@
-"""The process tests' start of `pkwbus run`: a port another process takes between its
-choice and the service's bind is given up for another, and the start returns only once
-the service listens on its own."""
+"""The process tests' start of `pkwbus run`: it binds port 0 and names the port the system
+gave it, so no port is chosen before the bind that another test worker could take."""
 
 from __future__ import annotations
 
 import asyncio
 import signal
-import socket
 from pathlib import Path
 
 import httpx
-import pytest
 
-from . import service
 from .service import start_run
 
 CONFIG = (
@@ -22,26 +18,22 @@ CONFIG = (
 )
 
 
-async def test_a_port_taken_before_the_bind_is_given_up_for_another(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    config = tmp_path / "c.yaml"
-    config.write_text(f"audit_db: {tmp_path / 'audit.sqlite'}\n{CONFIG}")
-    log = tmp_path / "stderr.log"
-    with socket.socket() as taken:  # another worker's, bound after the choice
-        taken.bind(("127.0.0.1", 0))
-        taken.listen(1)
-        first = taken.getsockname()[1]
-        choices = [first]
-        free = service.free_port
-        monkeypatch.setattr(service, "free_port", lambda: choices.pop() if choices else free())
-        proc, port = await start_run(["run", "--config", str(config)], log)
+async def test_two_services_on_port_0_each_name_the_port_they_got(tmp_path: Path) -> None:
+    started = []
+    for n in range(2):
+        folder = tmp_path / str(n)
+        folder.mkdir()
+        config = folder / "c.yaml"
+        config.write_text(f"audit_db: {folder / 'audit.sqlite'}\n{CONFIG}")
+        started.append(await start_run(["run", "--config", str(config)], folder / "err.log"))
     try:
-        assert port != first
-        assert f"cannot listen on 127.0.0.1:{first}" in log.read_text()
-        assert proc.returncode is None
-        async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}") as client:
-            assert (await client.get("/healthz")).status_code == 200
+        ports = [port for _, port in started]
+        assert len(set(ports)) == 2 and all(ports)
+        for port in ports:
+            async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}") as client:
+                assert (await client.get("/healthz")).status_code == 200
     finally:
-        proc.send_signal(signal.SIGTERM)
-        assert await asyncio.wait_for(proc.wait(), 30) == 0
+        for proc, _ in started:
+            proc.send_signal(signal.SIGTERM)
+        for proc, _ in started:
+            assert await asyncio.wait_for(proc.wait(), 30) == 0

@@ -314,7 +314,7 @@ EXPECTED: dict[str, str] = {
     "bad_conversion": "lines[0].drives[0].poll[0].conversion: conversion index 9 is not one of",
     "bad_duration": "lines[0].drives[0].poll[0].every: '1 week' is not a duration",
     "bad_listen": "listen: 'localhost' is not HOST:PORT",
-    "bad_listen_port": "listen: '127.0.0.1:70000': the TCP port must be 1-65535",
+    "bad_listen_port": "listen: '127.0.0.1:70000': the TCP port must be 0-65535 (0: any free port)",
     "bad_log_format": "log_format: must be 'text' or 'json', not 'xml'",
     "bad_name": "lines[0].drives[0].name: may contain only letters, digits and _ . -",
     "bad_notation": "lines[0].drives[0].poll[0].parameter: '16-1x' is not a parameter",
@@ -526,7 +526,8 @@ def test_listen(text: str, expected: tuple[str, int]) -> None:
 
 
 @pytest.mark.parametrize(
-    "text", ["9725", ":9725", "::1:9725", "[::1]", "[zz]:1", "host:0", "host:x", "a b:1", "h:99999"]
+    "text",
+    ["9725", ":9725", "::1:9725", "[::1]", "[zz]:1", "host:-1", "host:x", "a b:1", "h:99999"],
 )
 def test_bad_listen(text: str) -> None:
     with pytest.raises(ValueError):

@@ -55,9 +55,13 @@ def test_the_three_say_the_same(listen: str, sim: str, url: str) -> None:
 
 
 def test_port_ranges() -> None:
-    """Port 0 is any free port for the simulator; the service's listen and a port URL need 1+."""
+    """Port 0 is any free port for the simulator and the service's listen (its log names the
+    port it got); a port URL, connected to, needs 1+."""
     assert parse_sim_listen("tcp://127.0.0.1:0", "tcp://") == ("127.0.0.1", 0)
-    assert _problem(parse_listen, "127.0.0.1:0").endswith("the TCP port must be 1-65535")
+    assert parse_listen("127.0.0.1:0") == ("127.0.0.1", 0)
+    assert _problem(parse_listen, "127.0.0.1:65536").endswith(
+        "the TCP port must be 0-65535 (0: any free port)"
+    )
     assert _problem(check_port_url, "socket://127.0.0.1:0").endswith("the TCP port must be 1-65535")
     assert _problem(parse_sim_listen, "tcp://127.0.0.1:65536", "tcp://").endswith(
         "the TCP port must be 0-65535 (0: any free port)"

@@ -129,7 +129,8 @@ async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
         )
     host = config.listen.host
     shown = f"[{host}]" if ":" in host else host
-    log.info("pkwbus: metrics on http://%s:%d/metrics", shown, config.listen.port)
+    port = sock.getsockname()[1]  # the one the system chose for listen port 0
+    log.info("pkwbus: metrics on http://%s:%d/metrics", shown, port)
     log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
     try:
         await serve(runtime, app, sock, max_connections=config.api.max_connections)

@@ -20,7 +20,7 @@ from pydantic import (
     model_validator,
 )
 
-from pkwbus.hostport import MAX_TCP_PORT, check_host, parse_host_port
+from pkwbus.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
 from pkwbus.problems import plain, short
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
@@ -41,7 +41,7 @@ class Listen(Model):
     """Where the HTTP server listens: written ``HOST:PORT`` or ``[IPv6]:PORT``."""
 
     host: str
-    port: StrictInt = Field(ge=1, le=MAX_TCP_PORT)
+    port: StrictInt = Field(ge=ANY_FREE_PORT, le=MAX_TCP_PORT)  # 0: the system chooses
 
     @model_validator(mode="before")
     @classmethod
@@ -64,9 +64,10 @@ class Listen(Model):
 
 
 def parse_listen(text: str) -> tuple[str, int]:
-    """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port), port 1-65535; ValueError otherwise
+    """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port), port 0-65535 (0: any free port,
+    which the service's log line "metrics on" names); ValueError otherwise
     (:func:`pkwbus.hostport.parse_host_port`)."""
-    return parse_host_port(text, lowest_port=1)
+    return parse_host_port(text, lowest_port=ANY_FREE_PORT)
 
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,127}$")
