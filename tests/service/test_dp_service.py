@@ -24,7 +24,7 @@ from pkwbus.master.dp_scheduler import DpScheduler
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Rejected
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.master.transaction import ExchangeResult, Failure, Reply
+from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
@@ -598,3 +598,29 @@ async def test_every_request_a_slave_received_is_one_telegram_of_the_line(tmp_pa
             received = svc.sim.stats.drives[address]["requests"]
             assert svc.sample("pkwbus_telegrams_total", drive=name) == received, name
         assert (svc.sample("pkwbus_line_busy_seconds_total", line="dp") or 0.0) > busy_at_start
+
+
+async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
+    tmp_path: Path,
+) -> None:
+    """The PKW slot's decoded answer goes to the planner as it is, with the PZD of the
+    PPO-read it came in and the time that exchange took: no made-up telegram to split and
+    decode again."""
+    async with dp_service(tmp_path) as svc:
+        (scheduler,) = svc.runtime.schedulers.values()
+        assert isinstance(scheduler, DpScheduler)
+        seen: list[ExchangeResult] = []
+        planner = scheduler.planner
+        exchanged = planner.exchanged
+
+        def spy(send: object, result: ExchangeResult, now: float) -> None:
+            seen.append(result)
+            exchanged(send, result, now)  # type: ignore[arg-type]
+
+        planner.exchanged = spy  # type: ignore[method-assign]
+        await until(lambda: len(seen) >= 6)
+    answers = [r for r in seen if isinstance(r, PkwAnswer)]
+    assert answers and not [r for r in seen if isinstance(r, Reply)]
+    for answer in answers:
+        assert answer.duration > 0 and answer.status_word is not None
+        assert isinstance(answer.response, pkw.PkwResponse)

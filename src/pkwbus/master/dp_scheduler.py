@@ -38,7 +38,7 @@ from pkwbus.master.plan import DriveSpec, Event, HealthChanged, Send, StatusWord
 from pkwbus.master.planner import Planner
 from pkwbus.master.record import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import DriveState, Snapshot
-from pkwbus.master.transaction import ErrorKind, Failure, Reply
+from pkwbus.master.transaction import ErrorKind, Failure, PkwAnswer, Reply
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
@@ -138,7 +138,6 @@ class DpScheduler:
         self._names = {d.setup.address: d.name for d in drives}
         self._specs = {d.setup.address: d for d in drives}
         self._sends: dict[str, Send] = {}
-        self._inputs: dict[int, bytes] = {}
         self._stopping = False
         self._wake = asyncio.Event()
         for d in drives:
@@ -261,7 +260,6 @@ class DpScheduler:
         # request included); the answer took the time from the request written to it.
         took = self.master.exchange_time
         if isinstance(event, Inputs):
-            self._inputs[address] = event.data
             reply = Reply(address, event.data, self.master.answer_time)
             self.events.exchange(name, reply, took)
             self._status(name, address, event.data)
@@ -280,9 +278,13 @@ class DpScheduler:
                 self.dp_events.diagnosis(name, event.diagnosis.flags)
         elif isinstance(event, JobDone):
             send = self._sends.pop(name, None)
-            if send is not None:
-                reply = Reply(address, self._inputs.get(address, b""), 0.0)
-                self.planner.exchanged(send, reply, now)
+            if send is not None:  # the answer as the slot decoded it, with its PZD
+                pzd = event.read.pzd if event.read is not None else ()
+                answer = PkwAnswer(
+                    event.response, b"", pzd[0] if pzd else None,
+                    pzd[1] if len(pzd) > 1 else None, self.master.answer_time,
+                )  # fmt: skip
+                self.planner.exchanged(send, answer, now)
         elif isinstance(event, JobExpired):
             send = self._sends.pop(name, None)
             if send is not None:

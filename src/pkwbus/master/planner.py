@@ -228,10 +228,10 @@ class Planner:
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
-            if isinstance(result, Reply) and d.heard(tx):
+            if not isinstance(result, Failure) and d.heard(tx):
                 self._tell_pkw(d)
             tally = tx.tally
-            if isinstance(result, Reply) and tally.status_word is not None:
+            if not isinstance(result, Failure) and tally.status_word is not None:
                 self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
             if outcome is None:
                 # A "not yet" or a failed try: the repeat yields to another drive's
@@ -370,7 +370,7 @@ class Planner:
             self.events.append(Finished(d.name, work, outcome, active.tx.tally))
 
     def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
-        if isinstance(result, Reply):
+        if not isinstance(result, Failure):
             if d.health.answered():
                 if d.forget_pkw():
                     self._tell_pkw(d)

@@ -32,6 +32,7 @@ __all__ = [
     "LineFailed",
     "Mismatch",
     "Outcome",
+    "PkwAnswer",
     "PkwTransaction",
     "Rejected",
     "Reply",
@@ -61,12 +62,24 @@ class Reply:
 
 
 @dataclass(frozen=True, slots=True)
+class PkwAnswer:
+    """A PKW answer decoded once where it came in, with the process data beside it: what a
+    wire that decodes its own frames gives (a PROFIBUS PPO-read), instead of bytes."""
+
+    response: pkw.PkwResponse
+    pkw: bytes  # as sent, for a stale answer's comparison (empty where none is kept)
+    status_word: int | None
+    main_actual: int | None
+    duration: float
+
+
+@dataclass(frozen=True, slots=True)
 class Failure:
     kind: ErrorKind
     detail: str = ""
 
 
-ExchangeResult = Reply | Failure
+ExchangeResult = Reply | PkwAnswer | Failure
 
 
 @dataclass
@@ -115,11 +128,12 @@ class PkwTransaction:
         tally = self.tally
         tally.telegrams += 1
         self.answer_pkw = self.response = None
-        if isinstance(result, Reply):
-            tally.busy += result.duration
-            outcome = self._on_reply(result)
-        else:
+        if isinstance(result, Failure):
             outcome = self._on_failure(result)
+        else:
+            tally.busy += result.duration
+            answer = self._decode(result) if isinstance(result, Reply) else result
+            outcome = self._on_failure(answer) if isinstance(answer, Failure) else self._on(answer)
         if outcome is None and now >= self.deadline:
             outcome = TimedOut("deadline passed" + self._last_error())
         if outcome is not None:
@@ -134,7 +148,8 @@ class PkwTransaction:
         kinds = ", ".join(f"{n} {k.value}" for k, n in self.tally.errors.most_common())
         return f" ({kinds})"
 
-    def _on_reply(self, reply: Reply) -> Outcome | None:
+    def _decode(self, reply: Reply) -> PkwAnswer | Failure:
+        """A telegram's data split by the drive's shape, its PKW part decoded."""
         target = self.target
         tally = self.tally
         tally.status_word = tally.main_actual = None
@@ -144,10 +159,16 @@ class PkwTransaction:
             tally.main_actual = block.main_actual
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
-            return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
-        self.answer_pkw, self.response = block.pkw, response
-        verdict = pkw.judge(self.request, response, target.dialect)
-        mismatch = verdict is pkw.Verdict.MISMATCH and block.pkw != self.stale
+            return Failure(ErrorKind.UNEXPECTED, str(exc))
+        return PkwAnswer(response, block.pkw, block.status_word, block.main_actual, reply.duration)
+
+    def _on(self, answer: PkwAnswer) -> Outcome | None:
+        tally = self.tally
+        tally.status_word, tally.main_actual = answer.status_word, answer.main_actual
+        response = answer.response
+        self.answer_pkw, self.response = answer.pkw, response
+        verdict = pkw.judge(self.request, response, self.target.dialect)
+        mismatch = verdict is pkw.Verdict.MISMATCH and answer.pkw != self.stale
         if mismatch and isinstance(response, pkw.ValueResponse):
             self.waiting = False
             return Mismatch(self.request.value, response.raw, response)

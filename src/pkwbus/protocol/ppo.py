@@ -190,6 +190,7 @@ class JobDone:
     response: pkw.PkwResponse
     cycles: int
     mismatch: bool = False
+    read: PpoRead | None = None  # the PPO-read it came in (its PZD beside the answer)
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,7 +293,7 @@ class PkwSlot:
             pkw.Verdict.NOT_YET if response is None else pkw.judge(sent, response, self.dialect)
         )
         if response is not None and verdict is not pkw.Verdict.NOT_YET:  # an answer, or a mismatch
-            done = JobDone(sent, response, self.cycles, verdict is pkw.Verdict.MISMATCH)
+            done = JobDone(sent, response, self.cycles, verdict is pkw.Verdict.MISMATCH, read)
             self._finish()
             return SlotUpdate(read, done)
         return SlotUpdate(read, self.expire(now))

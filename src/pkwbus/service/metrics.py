@@ -21,7 +21,7 @@ from pkwbus import __version__
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, Reply
+from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
@@ -262,11 +262,11 @@ class LineMetrics:
         self.telegram_total += 1
         self._busy.inc(busy)
         self.busy_total += busy
-        if isinstance(result, Reply):
-            self._duration.observe(result.duration)
-        else:
+        if isinstance(result, Failure):
             self._errors[(drive, result.kind.value)].inc()
             self.error_counts[drive] += 1
+        else:
+            self._duration.observe(result.duration)
 
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
