@@ -185,7 +185,7 @@ class Counting:
 
 def fc_drive(name: str, address: int, pnus: Sequence[int], every: float, protocol: str = "fc"):  # type: ignore[no-untyped-def]
     """A DriveSpec polling ``pnus`` every ``every`` seconds."""
-    from pkwbus.master.scheduler import DriveSpec, PollSpec
+    from pkwbus.master.plan import DriveSpec, PollSpec
     from pkwbus.master.target import DriveTarget
     from pkwbus.protocol import pkw
 

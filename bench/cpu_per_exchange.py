@@ -5,7 +5,7 @@ delay and no wire timing, so the line is as fast as the software on both
 ends; ``time.process_time()`` here counts the master's CPU only.
 
 (a) ``Line.exchange`` in a loop: one FC parameter read after another.
-(b) the service path: a ``LineScheduler`` over 3 drives whose polls are
+(b) the service path: a ``LineRunner`` over 3 drives whose polls are
     always due, with ``LineMetrics`` turning every event into Prometheus
     counter increments and the snapshot's collector rendering each value's
     lines as it lands, as ``pkwbus run`` does.
@@ -34,7 +34,9 @@ from _common import best_median, make_line, sim_process
 from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.exchange_wire import ExchangeWire
+from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, Reply
 from pkwbus.protocol import pkw
@@ -108,9 +110,9 @@ async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
     line = make_line(port, "fc", BAUDRATE, timeout=0.5)
     line_metrics = metrics.for_line("bench", {d.name: d.target.dialect for d in drives})
     counting = Counting(line_metrics)
-    sched = LineScheduler(
+    sched = LineRunner(
         "bench",
-        line,
+        ExchangeWire(line),
         drives,
         events=counting,
         poll_deadline=1.0,
@@ -174,7 +176,7 @@ def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
     rows = []
     titles = {
         "raw": "pkwbus (a) Line.exchange loop",
-        "service": "pkwbus (b) LineScheduler + metrics",
+        "service": "pkwbus (b) LineRunner + metrics",
         "pymodbus": runs["pymodbus"][0]["name"],
     }
     for key, results in runs.items():

@@ -27,7 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.scheduler import LineScheduler
+from pkwbus.master.exchange_wire import ExchangeWire
+from pkwbus.master.runner import LineRunner
 
 BAUD = 115200
 DELAY = 0.002
@@ -45,7 +46,7 @@ async def polls(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, EVERY) for a in (1, 2, 3, 4)]
     line = make_line(port, "fc", BAUD, timeout=0.1)
-    sched = LineScheduler("bench", line, drives, events=events)
+    sched = LineRunner("bench", ExchangeWire(line), drives, events=events)
     task = asyncio.create_task(sched.run())
     await asyncio.sleep(0.5)
     n0, t0 = events.total(HEALTHY), time.perf_counter()

@@ -3,7 +3,7 @@
 Each simulated drive (another process, pty, wire timing at 115200 baud,
 2 ms response delay) answers a PKW request only after ``lag_telegrams``
 further telegrams to it, or after a time, meanwhile with AK 0. Compared:
-the ``LineScheduler`` interleaving the 4 drives (polls always due), and
+the ``LineRunner`` interleaving the 4 drives (polls always due), and
 strictly sequential handling (``run_job`` one job after another, drive
 after drive).
 
@@ -26,7 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.scheduler import LineScheduler, run_job
+from pkwbus.master.exchange_wire import ExchangeWire
+from pkwbus.master.runner import LineRunner
+from pkwbus.master.single_job import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
@@ -40,8 +42,8 @@ LAGS = {"lag_telegrams=3": "3", "lag 20 ms": "20ms"}
 async def interleaved(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, 0.0, "uss") for a in (1, 2, 3, 4)]
-    sched = LineScheduler(
-        "bench", make_line(port, "uss", BAUD, timeout=0.1), drives, events=events,
+    sched = LineRunner(
+        "bench", ExchangeWire(make_line(port, "uss", BAUD, timeout=0.1)), drives, events=events,
         poll_deadline=2.0,
     )  # fmt: skip
     task = asyncio.create_task(sched.run())

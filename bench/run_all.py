@@ -59,7 +59,7 @@ def plan(quick: bool) -> Plan:
         (
             "4. PKW lag",
             "4 USS drives at 115200 baud (wire timing, 2 ms delay) answering late; "
-            "`LineScheduler` interleaving against `run_job` one job after another.",
+            "`LineRunner` interleaving against `run_job` one job after another.",
             lambda: pkw_lag.run(2.0 if q else 5.0, 1 if q else 3),
         ),
         (
@@ -94,7 +94,7 @@ def plan(quick: bool) -> Plan:
         ),
         (
             "9. CPU per exchange by the number of drives on a line",
-            "Benchmark 2's service path (`LineScheduler` with metrics, 3 polls per drive, "
+            "Benchmark 2's service path (`LineRunner` with metrics, 3 polls per drive, "
             "always due) with 1, 16 and 126 FC drives on the line, one simulator process "
             "serving them all; rounds interleaved, each count once a round.",
             lambda: cpu_per_exchange.by_drives(1500 if q else 5000, 2 if q else 9, [1, 16, 126]),

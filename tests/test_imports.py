@@ -59,7 +59,7 @@ def layer(name: str) -> str:
 
 def test_the_graph_is_seen() -> None:
     assert "pkwbus.protocol.pkw" in GRAPH["pkwbus.master.transaction"]
-    assert "pkwbus.master.planner" in GRAPH["pkwbus.master.scheduler"]
+    assert "pkwbus.master.planner" in GRAPH["pkwbus.master.runner"]
 
 
 def test_no_import_cycle() -> None:

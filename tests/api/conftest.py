@@ -252,7 +252,7 @@ async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
     polled = {(d.name, p.parameter, p.index) for d in runtime.drives.values() for p in d.polls}
     while loop.time() < end:
         lines = runtime.snapshot.lines
-        up = lines and all(lines.values()) and len(lines) == len(runtime.schedulers)
+        up = lines and all(lines.values()) and len(lines) == len(runtime.runners)
         if up and polled <= runtime.snapshot.readings.keys():
             return
         await asyncio.sleep(0.01)

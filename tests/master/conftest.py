@@ -13,7 +13,7 @@ import pytest
 
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
-from pkwbus.master.scheduler import run_job as _run_job
+from pkwbus.master.single_job import run_job as _run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome
 from pkwbus.protocol import pkw

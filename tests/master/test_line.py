@@ -221,7 +221,7 @@ async def test_the_port_vanishes_mid_exchange_and_comes_back(end: str, tmp_path:
         await server.close()
         outcome = await asyncio.wait_for(job, 1.0)
         assert isinstance(outcome, LineFailed)
-        assert not line.is_open and line.reconnect.last_error
+        assert not line.is_open and line.link.reconnect.last_error
         sim.timing = SimTiming(response_delay=0.0)
         if end == "tcp":
             server = await sim.serve_tcp("127.0.0.1", int(port.rsplit(":", 1)[1]))

@@ -15,9 +15,11 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
+from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
-from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
@@ -73,16 +75,16 @@ def drive_specs(
 
 def scheduler(
     port: str, protocol: str, specs: list[DriveSpec], *, timeout: float = 0.03, **kw: Any
-) -> tuple[LineScheduler, Recorder, Trace]:
+) -> tuple[LineRunner, Recorder, Trace]:
     trace = Trace()
     line = Line(
         PortSettings(port, baudrate=115200), Protocol(protocol), timeout=timeout, trace=trace
     )
     events = Recorder()
-    return LineScheduler("line1", line, specs, events=events, **kw), events, trace
+    return LineRunner("line1", ExchangeWire(line), specs, events=events, **kw), events, trace
 
 
-async def run_until(s: LineScheduler, check: Callable[[], bool]) -> None:
+async def run_until(s: LineRunner, check: Callable[[], bool]) -> None:
     task = asyncio.create_task(s.run())
     try:
         await until(check)
@@ -109,17 +111,21 @@ async def test_two_lines_one_failing() -> None:
     async with serve(sim, "tcp") as port:
         good, good_events, _ = scheduler(port, "fc", drive_specs("fc", [1], [1613], 0.01))
         bad_line = Line(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC)
-        bad = LineScheduler("line2", bad_line, drive_specs("fc", [1], [1613], 0.01))
+        bad = LineRunner("line2", ExchangeWire(bad_line), drive_specs("fc", [1], [1613], 0.01))
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
         await until(
-            lambda: good_events.polls_ok("d1") >= 10 and bad_line.reconnect.last_error is not None
+            lambda: (
+                good_events.polls_ok("d1") >= 10 and bad_line.link.reconnect.last_error is not None
+            )
         )
         for x in (good, bad):
             x.stop()
         await asyncio.gather(*tasks)
     assert good_events.polls_ok("d1") >= 10
     assert good.snapshot.lines["line1"] is False  # closed at stop
-    assert bad_line.reconnect.last_error and "cannot open" in bad_line.reconnect.last_error
+    assert (
+        bad_line.link.reconnect.last_error and "cannot open" in bad_line.link.reconnect.last_error
+    )
 
 
 async def test_stop_cancels_queued_jobs_and_returns() -> None:
@@ -148,7 +154,8 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.01)
         s, events, _ = scheduler(port, "fc", specs)
-        real = s.line.start
+        line = s.wire.line  # type: ignore[attr-defined]
+        real = line.start
         calls = 0
 
         def flaky(*args: Any, **kw: Any) -> None:
@@ -158,7 +165,7 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
                 raise RuntimeError("something nobody expected")
             real(*args, **kw)
 
-        s.line.start = flaky  # type: ignore[method-assign]
+        line.start = flaky
         # the port is reopened after 0.5 s
         await run_until(s, lambda: calls > 10 and events.polls_ok("d1") >= 5)
     assert calls > 10, "the line went on after the error"
@@ -181,7 +188,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
         timeout=0.05,
         trace=trace,
     )
-    s = LineScheduler("line1", line, specs, events=Recorder())
+    s = LineRunner("line1", ExchangeWire(line), specs, events=Recorder())
     task = asyncio.create_task(s.run())
     loop = asyncio.get_running_loop()
     try:

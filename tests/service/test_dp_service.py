@@ -20,9 +20,10 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.dp_scheduler import DpScheduler
+from pkwbus.master.cycle_wire import CycleWire
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Rejected
+from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.protocol import fdl, pkw, ppo, pzd
@@ -255,9 +256,9 @@ class Window:
 
 async def window(svc: DpService, cycles: int) -> Window:
     """The wire over the next ``cycles`` cycles of the DP master: counts, not a duration."""
-    scheduler = svc.runtime.schedulers["dp"]
-    assert isinstance(scheduler, DpScheduler)
-    master = scheduler.master
+    scheduler = svc.runtime.runners["dp"]
+    assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
+    master = scheduler.wire.master
     first_cycle, first_frame = master.cycles, len(svc.wire.frames)
     await until(lambda: master.cycles >= first_cycle + cycles)
     frames = svc.wire.frames[first_frame:]
@@ -308,9 +309,9 @@ async def test_a_slave_owned_by_another_master_is_locked_and_costs_the_others_no
         reads = svc.reads("fan")
         await until(lambda: svc.reads("fan") >= reads + 2)
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
-        scheduler = svc.runtime.schedulers["dp"]
-        assert isinstance(scheduler, DpScheduler)
-        assert svc.sim.slaves[10].owner == scheduler.line.master
+        scheduler = svc.runtime.runners["dp"]
+        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
+        assert svc.sim.slaves[10].owner == scheduler.wire.line.master
         # Control word bit 10 clear in every PPO-write to every slave (also checked at exit).
         for address in ADDRESSES:
             outputs = [f for f in svc.wire.data_exchanges() if f.da == address]
@@ -550,8 +551,8 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
     slot = 0.2
     seen: list[tuple[str, ExchangeResult, float]] = []
     async with dp_service(tmp_path, slot_time=f"{slot * 1000:.0f}ms") as svc:
-        scheduler = svc.runtime.schedulers["dp"]
-        assert isinstance(scheduler, DpScheduler)
+        scheduler = svc.runtime.runners["dp"]
+        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
         inner = scheduler.events
 
         class Tap:
@@ -607,8 +608,8 @@ async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
     PPO-read it came in and the time that exchange took: no made-up telegram to split and
     decode again."""
     async with dp_service(tmp_path) as svc:
-        (scheduler,) = svc.runtime.schedulers.values()
-        assert isinstance(scheduler, DpScheduler)
+        (scheduler,) = svc.runtime.runners.values()
+        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
         seen: list[ExchangeResult] = []
         planner = scheduler.planner
         exchanged = planner.exchanged

@@ -28,7 +28,7 @@ from pkwbus.commands.common import (
 from pkwbus.commands.dp import add_dp_options
 from pkwbus.link import PortError
 from pkwbus.master.outcomes import Outcome
-from pkwbus.master.scheduler import run_job
+from pkwbus.master.single_job import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError

@@ -32,7 +32,7 @@ from pkwbus.commands.failures import command_failure
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.outcomes import Answered, Rejected
-from pkwbus.master.scheduler import run_job
+from pkwbus.master.single_job import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command

@@ -37,7 +37,7 @@ from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
-from pkwbus.master.scheduler import run_job
+from pkwbus.master.single_job import run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
 from pkwbus.protocol import pkw

@@ -8,8 +8,11 @@ transmission, and hands every received chunk to its owner's receiver.
 caller that runs its exchanges from callbacks asks :meth:`Link.pause_left`
 and writes with :meth:`Link.write_now`, discarding input only when stray
 bytes arrived. When the port disappears it tells its owner once
-(``on_lost``); when and whether to reopen is the owner's decision
-(:class:`pkwbus.link.reconnect.Reconnect`).
+(``on_lost``).
+
+The link is the one owner of its port's state (:attr:`Link.reconnect`): every
+opening, failure, loss and close is told there, to its listeners, and
+:meth:`Link.reopen` opens the port again once the back-off allows.
 
 Raises :class:`PortError` when the port cannot be opened, is not open or was lost.
 """
@@ -29,7 +32,7 @@ import serial
 import serial.rs485
 
 from pkwbus.link.eventloop import has_fine_timers
-from pkwbus.link.reconnect import LinkState
+from pkwbus.link.reconnect import LinkState, Reconnect
 from pkwbus.link.serialport import (
     apply_adapter_settings,
     closer,
@@ -97,6 +100,7 @@ class Link:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._echo_on = settings.echo
         self._fine = False
+        self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
 
     @property
     def state(self) -> LinkState:
@@ -117,7 +121,9 @@ class Link:
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             reason = describe_error(exc).split(f"{s.url}: ", 1)[-1]
             self._state = LinkState.FAILED
-            raise PortError(f"cannot open {s.url}: {reason}") from None
+            error = PortError(f"cannot open {s.url}: {reason}")
+            self.reconnect.failed(str(error), loop.time())
+            raise error from None
         self._closing = False
         closer.start()
         self._protocol = protocol = _Protocol(self)
@@ -127,6 +133,33 @@ class Link:
         self._fine = has_fine_timers(loop)
         self._quiet_at = loop.time()
         self._state = LinkState.OPEN
+        self.reconnect.opened()
+
+    async def reopen(self, wake: asyncio.Event | None = None) -> bool:
+        """Open the port once its back-off has passed; True when it is open.
+
+        A ``wake`` set meanwhile (a job came in) ends the wait early with the
+        back-off still standing: False, nothing tried. A port that cannot be
+        opened is told to the listeners and waits a longer back-off.
+        """
+        loop = asyncio.get_running_loop()
+        wait = self.reconnect.wait(loop.time())
+        if wait > 0:
+            if wake is None:
+                await asyncio.sleep(wait)
+            else:
+                wake.clear()
+                try:
+                    await asyncio.wait_for(wake.wait(), wait)
+                except TimeoutError:
+                    pass
+                else:
+                    return False
+        try:
+            await self.open()
+        except PortError:
+            return False  # told to the listeners
+        return True
 
     async def close(self) -> None:
         self._closing = True
@@ -139,15 +172,17 @@ class Link:
             self._fine_timer.shutdown(wait=False)
             self._fine_timer = None
         self._state = LinkState.CLOSED
+        self.reconnect.closed()
 
-    def abort(self) -> None:
-        """Give the port up at once (an unexpected error); its owner decides when to reopen."""
+    def abort(self, reason: str = "given up") -> None:
+        """Give the port up at once (an unexpected error); reopened after a back-off."""
         transport, self._transport = self._transport, None
         self._protocol, self._fd = None, -1
         self._closing = True
         if transport is not None:
             transport.abort()
         self._state = LinkState.FAILED
+        self.reconnect.failed(reason, asyncio.get_running_loop().time())
 
     # ------------------------------------------------------------ traffic
 
@@ -271,5 +306,7 @@ class Link:
             return
         reason = describe_error(exc) if exc else "closed by the other end"
         self._state = LinkState.FAILED
+        told = f"lost {self.settings.url}: {reason}"
+        self.reconnect.failed(told, asyncio.get_running_loop().time())
         if self._on_lost_cb is not None:
-            self._on_lost_cb(f"lost {self.settings.url}: {reason}")
+            self._on_lost_cb(told)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 
-from pkwbus.link import Link, PortError, PortSettings, Reconnect
+from pkwbus.link import Link, PortError, PortSettings
 from pkwbus.protocol import dp_timing, fdl
 from pkwbus.protocol.dp_slave import Answer, Garbled, NoAnswer
 from pkwbus.protocol.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
@@ -101,7 +101,6 @@ class DpLine:
         )
         self.trace = trace
         self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost)
-        self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
         self.foreign: str | None = None  # another master heard, and how
         self.requests = 0
         self.sent_at = 0.0  # loop time the latest request was written (its idle time over)
@@ -119,16 +118,10 @@ class DpLine:
         return self.link.is_open
 
     async def open(self) -> None:
-        try:
-            await self.link.open()
-        except PortError as exc:
-            self.reconnect.failed(str(exc), asyncio.get_running_loop().time())
-            raise
-        self.reconnect.opened()
+        await self.link.open()
 
     async def close(self) -> None:
         await self.link.close()
-        self.reconnect.closed()
 
     def token_lost_time(self) -> float:
         return dp_timing.token_lost_time(self.slot_time, self.master)
@@ -264,7 +257,6 @@ class DpLine:
         return True
 
     def _on_lost(self, reason: str) -> None:
-        self.reconnect.failed(reason, asyncio.get_running_loop().time())
         waiter = self._waiter
         if waiter is not None and not waiter.done():
             waiter.set_exception(PortError(reason))

@@ -5,11 +5,11 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pkwbus.master.health import DriveHealth, HealthPolicy
 from pkwbus.master.jobs import Job, Priority
-from pkwbus.master.plan import DriveSpec, PollSpec, Send
+from pkwbus.master.plan import DriveSpec, PkwLengthTold, PollSpec, Send
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw_length import PkwLength
@@ -87,50 +87,50 @@ class DrivePlan:
         short = self.target.with_pkw_words(3)
         return Send(self.name, short, short.probe(), True)
 
-    def probed(self, send: Send) -> bool:
-        """A probe was answered; True when a 3-word one told a fixed-3 drive (learned)."""
+    def probed(self, send: Send) -> PkwLengthTold | None:
+        """A probe was answered; the event when a 3-word one told a fixed-3 drive."""
         length = self.pkw
         if length is None or length.known or send.target.shape.pkw_words != 3:
-            return False
+            return None
         length.words, length.known = 3, True  # a 4-word request went unanswered before it
-        self.retarget()
-        return True
+        return self.retarget()
 
-    def heard(self, tx: PkwTransaction) -> bool:
-        """Take what the answer ``tx`` just decoded tells; True when the drive's PKW
+    def heard(self, tx: PkwTransaction) -> PkwLengthTold | None:
+        """Take what the answer ``tx`` just decoded tells; the event when the drive's PKW
         length, as known, changed (requests then go out with the new one)."""
         answer, response = tx.answer_pkw, tx.response
         if answer is None or response is None:
-            return False
+            return None
         if not isinstance(response, pkw.NoResponse):
             self.last_answer = answer
         length = self.pkw
         if length is None:
-            return False
+            return None
         sent = self.target.pkw_words_of(tx.telegram)
         if not length.observe(sent, len(answer) // 2, response):
-            return False
-        self.retarget()
-        return True
+            return None
+        return self.retarget()
 
-    def forget_pkw(self) -> bool:
+    def forget_pkw(self) -> PkwLengthTold | None:
         """The drive is back after it was away: a learned PKW length is learned again."""
         length = self.pkw
         if length is None or not self.target.learn or not length.known:
-            return False
+            return None
         length.forget()
-        self.retarget()
-        return True
+        return self.retarget()
 
-    def retarget(self) -> None:
-        """Requests go out with the PKW length as known now (a learned one)."""
+    def retarget(self) -> PkwLengthTold | None:
+        """Requests go out with the PKW length as known now (a learned one); the event
+        that tells what is known of it now."""
         length = self.pkw
-        if length is None or not self.target.learn or length.words == self.target.shape.pkw_words:
-            return
-        target = self.target = self.target.with_pkw_words(length.words)
-        self.probe = Send(self.name, target, target.probe(), True)
-        for _, _, poll in self.polls:
-            poll.send = Send(self.name, target, target.telegram(poll.spec.request))
+        if length is None:
+            return None
+        if self.target.learn and length.words != self.target.shape.pkw_words:
+            target = self.target = self.target.with_pkw_words(length.words)
+            self.probe = Send(self.name, target, target.probe(), True)
+            for _, _, poll in self.polls:
+                poll.send = Send(self.name, target, target.telegram(poll.spec.request))
+        return PkwLengthTold(self.name, replace(length))
 
     def push_poll(self, poll: PollState) -> None:
         if poll.send.target is not self.target:  # built before the PKW length was learned

@@ -14,6 +14,9 @@ class HealthPolicy:
     down_after: int = 3  # consecutive exchanges without a valid answer
     probe_initial: float = 1.0
     probe_cap: float = 60.0
+    # False where the wire tells a drive's health itself (a PROFIBUS slave's state):
+    # missing answers then never take it down, nor is it probed.
+    from_answers: bool = True
 
 
 class DriveHealth:
@@ -39,6 +42,8 @@ class DriveHealth:
 
     def failed(self, now: float) -> bool:
         """A missing or bad answer; True when this takes the drive down."""
+        if not self.policy.from_answers:
+            return False
         self.failures += 1
         if not self.up:
             self.next_probe = now + self._backoff.next_delay()

@@ -1,11 +1,10 @@
-"""One RS-485 line: owns its link and its reconnect object, runs one exchange at a time.
+"""One RS-485 line: owns its link (the port and its state), runs one exchange at a time.
 
 An exchange is one request telegram out and one answer (or an error) in.
 A PKW job is a series of exchanges (:class:`PkwTransaction`), driven by the
 planner (:mod:`pkwbus.master.planner`), which may put other drives'
-exchanges between its repeats. The line is the one owner of its port: it
-opens, aborts and closes it and tells :attr:`Line.reconnect` of each
-change; others listen there.
+exchanges between its repeats. Its port (:attr:`Line.link`) owns the
+port's state and back-off and tells its listeners of each change.
 
 An exchange runs as a small state machine in the line's callbacks
 (:meth:`Line.start`): the start pause is counted from the last byte
@@ -26,7 +25,7 @@ import logging
 import time
 from collections.abc import Callable
 
-from pkwbus.link import Link, PortError, PortSettings, Reconnect
+from pkwbus.link import Link, LinkState, PortError, PortSettings
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import (
     ErrorKind,
@@ -83,7 +82,7 @@ class Line:
         )
         self.trace = trace
         self.link = Link(settings, receiver=self._on_data, on_lost=self._on_lost)
-        self.reconnect = Reconnect(settings.reopen_initial, settings.reopen_cap)
+        self.link.reconnect.add_listener(self._on_port)
         lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
         self._deframer = Deframer(lengths)
         self._lock = asyncio.Lock()
@@ -122,23 +121,20 @@ class Line:
 
     async def open(self) -> None:
         """Open the port now; :class:`PortError` (and a back-off) when it cannot be opened."""
-        loop = self._loop = asyncio.get_running_loop()
-        try:
-            await self.link.open()
-        except PortError as exc:
-            self.reconnect.failed(str(exc), loop.time())
-            raise
-        self._stray = True
-        self.reconnect.opened()
+        self._loop = asyncio.get_running_loop()
+        await self.link.open()
 
     async def close(self) -> None:
         await self.link.close()
-        self.reconnect.closed()
 
     def abort(self, reason: str) -> None:
         """Give the port up after an unexpected error; it is reopened at back-off."""
-        self.link.abort()
-        self.reconnect.failed(reason, asyncio.get_running_loop().time())
+        self.link.abort(reason)
+
+    def _on_port(self, state: LinkState, error: str | None) -> None:
+        if state is LinkState.OPEN:
+            self._loop = asyncio.get_running_loop()
+            self._stray = True  # unread input may be waiting: discard it before a request
 
     async def exchange(
         self, target: DriveTarget, telegram: bytes, timeout: float | None = None
@@ -263,13 +259,11 @@ class Line:
 
     async def _ensure_open(self, deadline: float) -> None:
         """Reopen the port, waiting out the back-off (never past ``deadline``)."""
-        reconnect = self.reconnect
-        wait = reconnect.wait(asyncio.get_running_loop().time())
-        if wait > 0:
-            if reconnect.next_attempt > deadline:
-                raise PortError(reconnect.last_error or f"{self.link.settings.url} is not open")
-            await asyncio.sleep(wait)
-        await self.open()
+        reconnect = self.link.reconnect
+        if reconnect.next_attempt > deadline:
+            raise PortError(reconnect.last_error or f"{self.link.settings.url} is not open")
+        if not await self.link.reopen():
+            raise PortError(reconnect.last_error or f"{self.link.settings.url} is not open")
 
     def _arm(self, loop: asyncio.AbstractEventLoop, deadline: float) -> None:
         self._deadline = deadline
@@ -292,14 +286,12 @@ class Line:
         self._on_timeout()
 
     def _on_lost(self, reason: str) -> None:
-        loop = self._loop or asyncio.get_running_loop()
-        self.reconnect.failed(reason, loop.time())
         if self._state is _State.ANSWER:
             self._finish(Failure(ErrorKind.PORT, reason))
 
     def _on_timeout(self) -> None:
         if not self.link.is_open:
-            self._finish(Failure(ErrorKind.PORT, self.reconnect.last_error or "port lost"))
+            self._finish(Failure(ErrorKind.PORT, self.link.reconnect.last_error or "port lost"))
             return
         kind = self._pending_error or ErrorKind.TIMEOUT
         self._finish(Failure(kind, "no answer" if kind is ErrorKind.TIMEOUT else ""))

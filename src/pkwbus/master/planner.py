@@ -32,7 +32,6 @@ import heapq
 import itertools
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import replace
 
 from pkwbus.master.drive_plan import Active, DrivePlan, PollState
 from pkwbus.master.health import HealthPolicy
@@ -201,12 +200,14 @@ class Planner:
         self._expire(d, d.writes, now)
         self._expire(d, d.reads, now)
 
-    def drive_back(self, drive: str, now: float) -> None:
-        """``drive`` is back (a DP slave in data exchange again): its polls are due now,
-        none counted as an overrun."""
+    def told_health(self, drive: str, up: bool, reason: str, now: float) -> None:
+        """The wire tells ``drive``'s health (a DP slave in data exchange, or out of it); back
+        up, its polls are due now, none counted as an overrun."""
         d = self._by_name[drive]
-        d.restart_polls(now)
-        self._index(d, now)
+        self._show(d, up, reason)
+        if up:
+            d.restart_polls(now)
+            self._index(d, now)
 
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
         """The result of ``send``'s exchange."""
@@ -223,13 +224,12 @@ class Planner:
         if send.probe:
             if isinstance(result, Reply):
                 self._status_from_reply(d, result)
-                if d.probed(send):
-                    self._tell_pkw(d)
+                self._tell(d.probed(send))
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
-            if not isinstance(result, Failure) and d.heard(tx):
-                self._tell_pkw(d)
+            if not isinstance(result, Failure):
+                self._tell(d.heard(tx))
             tally = tx.tally
             if not isinstance(result, Failure) and tally.status_word is not None:
                 self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
@@ -347,9 +347,9 @@ class Planner:
         d.active = Active(tx, Priority.POLL, poll.due, poll, poll.send)
         return poll.send
 
-    def _tell_pkw(self, d: DrivePlan) -> None:
-        if d.pkw is not None:
-            self.events.append(PkwLengthTold(d.name, replace(d.pkw)))
+    def _tell(self, event: PkwLengthTold | None) -> None:
+        if event is not None:
+            self.events.append(event)
 
     def _complete(self, d: DrivePlan, active: Active, outcome: Outcome, now: float) -> None:
         d.active = None
@@ -372,8 +372,7 @@ class Planner:
     def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
         if not isinstance(result, Failure):
             if d.health.answered():
-                if d.forget_pkw():
-                    self._tell_pkw(d)
+                self._tell(d.forget_pkw())
                 self._show(d, True, "answers again")
                 d.restart_polls(now)  # not overruns: the drive was away
             elif not d.shown_up:

@@ -45,6 +45,7 @@ __all__ = [
     "dp_dialect",
     "encode_ppo_write",
     "ppo_type",
+    "pzd_words",
 ]
 
 DP_DIALECTS: Final = ("profidrive", "danfoss-pcv", "hitachi-sjpb")
@@ -174,8 +175,15 @@ def decode_ppo_read(
         )
     cut = 2 * ppo.pkw_words
     response = pkw.decode_response(data[:cut], dia, LAYOUT) if ppo.has_pkw else None
-    words = tuple(int.from_bytes(data[i : i + 2], "big") for i in range(cut, len(data), 2))
+    words = pzd_words(ppo, data)
     return PpoRead(response, words, profile or DEFAULT_PROFILES.get(dia.name, Profile.PROFIDRIVE))
+
+
+def pzd_words(ppo: PpoType, data: bytes) -> tuple[int, ...]:
+    """The PZD words of a PPO-read (status word, main actual value, ...): what follows its
+    PKW words. The one place they are cut out of the bytes."""
+    cut = 2 * ppo.pkw_words
+    return tuple(int.from_bytes(data[i : i + 2], "big") for i in range(cut, len(data) - 1, 2))
 
 
 # ------------------------------------------------------------------ PKW slot

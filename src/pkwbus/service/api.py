@@ -289,7 +289,7 @@ def line_views(
     """Each line's port, drives and how busy it was since ``looks`` last saw it."""
     snap = runtime.snapshot
     views = []
-    for name in runtime.schedulers:
+    for name in runtime.runners:
         mine = [d for d, e in runtime.drives.items() if e.line == name]
         up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
         counts = runtime.counts.get(name)

@@ -17,10 +17,12 @@ import prometheus_client
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
+from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec
 from pkwbus.master.dp_line import DpLine
-from pkwbus.master.dp_scheduler import DpDriveSpec, DpScheduler
+from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.line import Line
-from pkwbus.master.scheduler import DriveSpec, LineScheduler, PollSpec
+from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import dp_services, dp_timing, pkw
@@ -39,7 +41,7 @@ from pkwbus.service.metrics import (
     api_metrics,
 )
 from pkwbus.service.parameter_table import parameter_table
-from pkwbus.service.runtime import DriveEntry, LineRunner, Runtime
+from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.dp_line import DpSimulator, SlaveKind
 
@@ -59,7 +61,7 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     metrics = ServiceMetrics(registry)
     api_metrics(registry)  # the API's counters, exported (at zero) from the start
     snapshot = Snapshot()
-    schedulers: list[LineRunner] = []
+    runners: list[LineRunner] = []
     entries: list[DriveEntry] = []
     infos: list[ParameterInfo] = []
     cleanups: list[Callable[[], object]] = []
@@ -75,16 +77,12 @@ async def build_runtime(config: cfg.Config) -> Runtime:
         events = metrics.for_line(line.name, dialects, uss=line.protocol is Protocol.USS)
         counts[line.name] = events
         if line.protocol is Protocol.PROFIBUS:
-            schedulers.append(_dp_scheduler(line, port, specs, snapshot, metrics, events))
+            runners.append(_dp_runner(line, port, specs, snapshot, metrics, events))
             continue
-        schedulers.append(
-            LineScheduler(
-                line.name,
-                line_for(line, port),
-                specs,
-                retries=line.retries,
-                snapshot=snapshot,
-                events=events,
+        wire = ExchangeWire(line_for(line, port))
+        runners.append(
+            LineRunner(
+                line.name, wire, specs, retries=line.retries, snapshot=snapshot, events=events
             )
         )
     drives = {
@@ -94,7 +92,7 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     registry.register(collector)
     for line_metrics in counts.values():
         line_metrics.values = collector.landed
-    runtime = Runtime(schedulers, entries, snapshot, registry)
+    runtime = Runtime(runners, entries, snapshot, registry)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)
     return runtime
@@ -120,14 +118,14 @@ def line_for(line: cfg.Line, port: str) -> Line:
     )
 
 
-def _dp_scheduler(
+def _dp_runner(
     line: cfg.Line,
     port: str,
     specs: list[DriveSpec],
     snapshot: Snapshot,
     metrics: ServiceMetrics,
     events: LineMetrics,
-) -> DpScheduler:
+) -> LineRunner:
     """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
     settings = PortSettings(
         port,
@@ -151,16 +149,12 @@ def _dp_scheduler(
         slaves.append(DpDriveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
     deadline = max(2.0, 20 * sum(dp_timing.default_slot_time(line.baudrate) for _ in specs))
-    return DpScheduler(
-        line.name,
-        dp,
-        slaves,
-        snapshot=snapshot,
-        events=events,
-        dp_events=metrics.for_dp_line(line.name, [d.name for d in line.drives]),
-        poll_deadline=deadline,
+    dp_events = metrics.for_dp_line(line.name, [d.name for d in line.drives])
+    wire = CycleWire(dp, slaves, dp_events=dp_events)
+    return LineRunner(
+        line.name, wire, specs, snapshot=snapshot, events=events, poll_deadline=deadline,
         retries=line.retries,
-    )
+    )  # fmt: skip
 
 
 def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:

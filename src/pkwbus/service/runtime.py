@@ -1,4 +1,4 @@
-"""The running service's object graph: lines with their schedulers, drives, snapshot, metrics.
+"""The running service's object graph: lines with their runners, drives, snapshot, metrics.
 
 Built from the configuration by :mod:`pkwbus.service.build`; started and
 stopped by :mod:`pkwbus.service.app`. The HTTP API reads the snapshot and
@@ -18,13 +18,13 @@ from prometheus_client import CollectorRegistry
 
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
-from pkwbus.master.scheduler import PollSpec
+from pkwbus.master.plan import PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.params import ParameterRef
 
-__all__ = ["DriveEntry", "LineCounts", "LineRunner", "Runtime"]
+__all__ = ["DriveEntry", "LineCounts", "LineTask", "Runtime"]
 
 log = logging.getLogger(__name__)
 
@@ -79,9 +79,8 @@ class LineCounts(Protocol):
     def error_counts(self) -> Mapping[str, int]: ...
 
 
-class LineRunner(Protocol):
-    """One line's task: a :class:`~pkwbus.master.scheduler.LineScheduler` (FC, USS) or a
-    :class:`~pkwbus.master.dp_scheduler.DpScheduler` (PROFIBUS DP)."""
+class LineTask(Protocol):
+    """One line's task: a :class:`~pkwbus.master.runner.LineRunner` of any bus."""
 
     name: str
 
@@ -93,14 +92,14 @@ class LineRunner(Protocol):
 class Runtime:
     def __init__(
         self,
-        schedulers: Iterable[LineRunner],
+        runners: Iterable[LineTask],
         drives: Iterable[DriveEntry],
         snapshot: Snapshot,
         registry: CollectorRegistry,
         *,
         job_timeout: float = 5.0,
     ) -> None:
-        self.schedulers = {s.name: s for s in schedulers}
+        self.runners = {s.name: s for s in runners}
         self.drives = {d.name: d for d in drives}
         self.snapshot = snapshot
         self.registry = registry
@@ -111,8 +110,8 @@ class Runtime:
         self.counts: dict[str, LineCounts] = {}
 
     async def start(self) -> None:
-        for scheduler in self.schedulers.values():
-            task = asyncio.create_task(scheduler.run(), name=f"line {scheduler.name}")
+        for runner in self.runners.values():
+            task = asyncio.create_task(runner.run(), name=f"line {runner.name}")
             task.add_done_callback(self._line_ended)
             self._tasks.append(task)
 
@@ -122,8 +121,8 @@ class Runtime:
 
     async def stop(self, grace: float = 3.0) -> None:
         """Stop taking jobs, let each line finish its exchange in flight, close the ports."""
-        for scheduler in self.schedulers.values():
-            scheduler.stop()
+        for runner in self.runners.values():
+            runner.stop()
         if self._tasks:
             _, pending = await asyncio.wait(self._tasks, timeout=grace)
             for task in pending:
@@ -161,9 +160,9 @@ class Runtime:
             parameter,
             index,
         )
-        scheduler = self.schedulers.get(entry.line)
-        if scheduler is None:
+        runner = self.runners.get(entry.line)
+        if runner is None:
             future.set_result(JobResult(Cancelled("no such line")))
         else:
-            scheduler.submit(job)
+            runner.submit(job)
         return future

@@ -1,0 +1,274 @@
+"""PROFIBUS DP lines under the runner: the slaves cycled in turn, the planner filling each
+slave's PKW slot.
+
+Every cycle sends one Data_Exchange (or start-up request) to each slave
+(:class:`~pkwbus.master.dp_master.DpMaster`). A slave whose PKW slot is idle
+gets the next job the planner gives it alone (:meth:`Planner.next_for`:
+writes, on-demand reads, due polls), so the jobs of different slaves run in
+parallel and a lagging slave delays only itself. The slot's decoded answer
+goes to the planner as it is (:class:`~pkwbus.master.transaction.PkwAnswer`);
+a job whose deadline passes ends as timed out.
+
+A slave's health is its state, told to the planner (a slave is up while it is
+in data exchange), not counted from missing PKW answers. The PZD of every
+Data_Exchange answer gives the drive's status word, without any PKW traffic.
+A slave that answers RS, asks for parameters, lost its watchdog or was
+power-cycled is parametrised again by its state machine; a job in flight goes
+on after that or ends at its deadline. When the port is lost every slave is
+offline and starts afresh once the port is back, after listening for other
+masters first. Closing sends Global_Control Clear, then closes the port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from pkwbus.link import Link
+from pkwbus.master.dp_line import DpLine, ForeignMaster
+from pkwbus.master.dp_master import DpMaster, SlaveRun
+from pkwbus.master.health import HealthPolicy
+from pkwbus.master.plan import DriveSpec, Send, StatusWord
+from pkwbus.master.planner import Planner
+from pkwbus.master.runner import LineRunner
+from pkwbus.master.transaction import ErrorKind, Failure, PkwAnswer, Reply
+from pkwbus.protocol.dp_slave import (
+    DiagnosisRead,
+    DpSlave,
+    Failed,
+    FailureKind,
+    Inputs,
+    Restarted,
+    RestartReason,
+    SlaveSetup,
+    SlaveState,
+    StateChanged,
+)
+from pkwbus.protocol.dp_slave import Event as SlaveEvent
+from pkwbus.protocol.ppo import JobDone, JobExpired, JobResult, PkwSlot, PpoType, pzd_words
+
+__all__ = ["CycleWire", "DpDriveSpec", "DpEvents", "NoDpEvents"]
+
+log = logging.getLogger(__name__)
+
+# A slave's health is its state machine's: the planner never counts it down.
+_FROM_THE_WIRE = HealthPolicy(from_answers=False)
+_ERROR_KINDS = {
+    FailureKind.TIMEOUT: ErrorKind.TIMEOUT,
+    FailureKind.GARBLED: ErrorKind.CHECKSUM,
+    FailureKind.REFUSED: ErrorKind.UNEXPECTED,
+    FailureKind.UNEXPECTED: ErrorKind.UNEXPECTED,
+}
+DEFAULT_POLL_DEADLINE = 2.0  # seconds: cycles of every slave, a lagging answer included
+
+
+class DpEvents(Protocol):
+    """What a DP line reports beyond the events of every line (the service's metrics)."""
+
+    def slave_state(self, drive: str, state: SlaveState) -> None: ...
+    def restarted(self, drive: str, reason: RestartReason) -> None: ...
+    def diagnosis(self, drive: str, flags: frozenset[str]) -> None: ...
+
+
+class NoDpEvents:
+    def slave_state(self, drive: str, state: SlaveState) -> None:
+        pass
+
+    def restarted(self, drive: str, reason: RestartReason) -> None:
+        pass
+
+    def diagnosis(self, drive: str, flags: frozenset[str]) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class DpDriveSpec:
+    """One slave: the planner's view of it (name, PKW target, polls) and its DP setup."""
+
+    spec: DriveSpec
+    setup: SlaveSetup
+    ppo: PpoType
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def slot(self) -> PkwSlot | None:
+        return PkwSlot(self.ppo, self.spec.target.dialect) if self.ppo.has_pkw else None
+
+
+class CycleWire:
+    """The :class:`~pkwbus.master.runner.Wire` of a PROFIBUS DP line."""
+
+    def __init__(
+        self,
+        line: DpLine,
+        drives: Sequence[DpDriveSpec],
+        *,
+        dp_events: DpEvents | None = None,
+        listen: float | None = None,
+    ) -> None:
+        self.line = line
+        self.drives = list(drives)
+        self.dp_events: DpEvents = dp_events or NoDpEvents()
+        self.listen = listen
+        self.master = DpMaster(
+            line, [(d.setup, d.slot()) for d in drives], on_event=self._on_event,
+            feed=self._feed, on_answered=self._on_answered,
+        )  # fmt: skip
+        self._runner: LineRunner | None = None
+        self._names = {d.setup.address: d.name for d in drives}
+        self._specs = {d.setup.address: d for d in drives}
+        self._sends: dict[str, Send] = {}
+        for d in drives:
+            self.dp_events.slave_state(d.name, SlaveState.OFFLINE)
+
+    @property
+    def link(self) -> Link:
+        return self.line.link
+
+    @property
+    def runner(self) -> LineRunner:
+        runner = self._runner
+        assert runner is not None  # attached at the runner's construction
+        return runner
+
+    def planner_for(
+        self,
+        drives: Sequence[DriveSpec],
+        retries: int,
+        policy: HealthPolicy | None,
+        poll_deadline: float | None,
+    ) -> Planner:
+        return Planner(
+            drives, poll_deadline=poll_deadline or DEFAULT_POLL_DEADLINE, retries=retries,
+            policy=_FROM_THE_WIRE, stale_answers=False,  # the PKW slot waits for AK 0 instead
+        )  # fmt: skip
+
+    def attach(self, runner: LineRunner) -> None:
+        self._runner = runner
+
+    async def started(self) -> None:
+        """Listen before sending; another master heard gives the port up at back-off."""
+        try:
+            await self.line.listen(self.listen)
+        except ForeignMaster as exc:
+            self._foreign(exc)
+
+    async def carry(self) -> float | None:
+        try:
+            await self.master.cycle()
+        except ForeignMaster as exc:
+            self._foreign(exc)
+        return None
+
+    def lost(self) -> None:
+        """Every slave offline and started afresh; every job in flight has ended."""
+        self._sends.clear()
+        self.line.foreign = None
+        for address, run in self.master.runs.items():
+            if run.slave.state is not SlaveState.OFFLINE:
+                self.dp_events.slave_state(self._names[address], SlaveState.OFFLINE)
+            spec = self._specs[address]
+            self.master.runs[address] = SlaveRun(DpSlave(spec.setup), spec.slot())
+
+    async def close(self) -> None:
+        await self.master.stop()  # Global_Control Clear to every slave, then close
+
+    # ------------------------------------------------------------ internals
+
+    def _foreign(self, exc: ForeignMaster) -> None:
+        log.error("line %s: %s", self.runner.name, exc, extra={"line": self.runner.name})
+        self.link.abort("another master is active on the line")
+
+    def _feed(self, run: SlaveRun, now: float) -> None:
+        """Fill an idle slot with the planner's next job for that slave alone."""
+        name = self._names[run.address]
+        slot, slave, runner = run.slot, run.slave, self.runner
+        if slot is None:
+            return
+        planner = runner.planner
+        if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
+            planner.expire_queued(name, now)  # nothing can go out: they end at deadline
+            runner.batch()
+            return
+        send = planner.next_for(name, now)
+        runner.batch()
+        tx = planner.active(name) if send is not None else None
+        if send is None or tx is None:  # (next_for gave a Send of its transaction)
+            return
+        slot.submit(tx.request, tx.deadline)
+        self._sends[name] = send
+
+    def _on_event(self, address: int, event: SlaveEvent | JobResult) -> None:
+        name = self._names[address]
+        runner, master = self.runner, self.master
+        now = asyncio.get_running_loop().time()
+        # The line was busy for as long as the exchange held it (its idle time before the
+        # request included); the answer took the time from the request written to it.
+        if isinstance(event, Inputs):
+            runner.exchanged(
+                name, Reply(address, event.data, master.answer_time), master.exchange_time
+            )
+            self._status(name, address, event.data)
+        elif isinstance(event, Failed):
+            failure = Failure(_ERROR_KINDS[event.kind], event.detail)
+            runner.exchanged(name, failure, master.exchange_time)
+        elif isinstance(event, StateChanged):
+            self._state(name, event, now)
+        elif isinstance(event, Restarted):
+            self.dp_events.restarted(name, event.reason)
+            log.warning(
+                "drive %s: parametrised again (%s)", name, event.reason, extra={"drive": name}
+            )
+        elif isinstance(event, DiagnosisRead):
+            if event.diagnosis.flags:
+                self.dp_events.diagnosis(name, event.diagnosis.flags)
+        elif isinstance(event, JobDone | JobExpired):
+            self._job(name, event, now)
+        runner.batch()
+
+    def _job(self, name: str, event: JobResult, now: float) -> None:
+        send = self._sends.pop(name, None)
+        if send is None:
+            return
+        if isinstance(event, JobExpired):
+            detail = f"no matching answer within the deadline ({event.cycles} cycles)"
+            self.runner.planner.exchanged(send, Failure(ErrorKind.TIMEOUT, detail), now)
+            return
+        pzd = event.read.pzd if event.read is not None else ()  # the answer as decoded
+        answer = PkwAnswer(
+            event.response, b"", pzd[0] if pzd else None, pzd[1] if len(pzd) > 1 else None,
+            self.master.answer_time,
+        )  # fmt: skip
+        self.runner.planner.exchanged(send, answer, now)
+
+    def _on_answered(self, address: int, answer: float, took: float) -> None:
+        """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held
+        the line, like a Data_Exchange."""
+        self.runner.exchanged(self._names[address], Reply(address, b"", answer), took)
+
+    def _state(self, name: str, event: StateChanged, now: float) -> None:
+        self.dp_events.slave_state(name, event.new)
+        planner = self.runner.planner
+        ctx = {"line": self.runner.name, "drive": name}
+        if event.new is SlaveState.DATA_EXCHANGE:
+            log.info("drive %s: in data exchange", name, extra=ctx)
+            planner.told_health(name, True, "", now)
+        elif event.old is SlaveState.DATA_EXCHANGE:
+            planner.told_health(name, False, f"left data exchange ({event.new})", now)
+        elif event.new is SlaveState.LOCKED:
+            log.error(
+                "drive %s: owned by another master: pkwbus does not parametrise it", name,
+                extra=ctx,
+            )  # fmt: skip
+
+    def _status(self, name: str, address: int, data: bytes) -> None:
+        """The PPO-read's PZD: status word (ZSW) and main actual value (HIW)."""
+        words = pzd_words(self._specs[address].ppo, data)
+        if words:
+            mav = words[1] if len(words) > 1 else None
+            self.runner.tell([StatusWord(name, words[0], mav)])
