@@ -1,4 +1,5 @@
-"""pkwbus: an RS-485 bus master for the PKW parameter channel of FC and USS drives."""
+"""pkwbus: an RS-485 bus master for the PKW parameter channel of drives on Danfoss FC,
+Siemens USS and PROFIBUS DP lines."""
 
 __all__ = ["__version__"]
 

@@ -256,9 +256,9 @@ class Window:
 
 async def window(svc: DpService, cycles: int) -> Window:
     """The wire over the next ``cycles`` cycles of the DP master: counts, not a duration."""
-    scheduler = svc.runtime.runners["dp"]
-    assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
-    master = scheduler.wire.master
+    runner = svc.runtime.runners["dp"]
+    assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
+    master = runner.wire.master
     first_cycle, first_frame = master.cycles, len(svc.wire.frames)
     await until(lambda: master.cycles >= first_cycle + cycles)
     frames = svc.wire.frames[first_frame:]
@@ -309,9 +309,9 @@ async def test_a_slave_owned_by_another_master_is_locked_and_costs_the_others_no
         reads = svc.reads("fan")
         await until(lambda: svc.reads("fan") >= reads + 2)
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
-        scheduler = svc.runtime.runners["dp"]
-        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
-        assert svc.sim.slaves[10].owner == scheduler.wire.line.master
+        runner = svc.runtime.runners["dp"]
+        assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
+        assert svc.sim.slaves[10].owner == runner.wire.line.master
         # Control word bit 10 clear in every PPO-write to every slave (also checked at exit).
         for address in ADDRESSES:
             outputs = [f for f in svc.wire.data_exchanges() if f.da == address]
@@ -551,9 +551,9 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
     slot = 0.2
     seen: list[tuple[str, ExchangeResult, float]] = []
     async with dp_service(tmp_path, slot_time=f"{slot * 1000:.0f}ms") as svc:
-        scheduler = svc.runtime.runners["dp"]
-        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
-        inner = scheduler.events
+        runner = svc.runtime.runners["dp"]
+        assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
+        inner = runner.events
 
         class Tap:
             def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
@@ -572,7 +572,7 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
             def value(self, key: ReadingKey, reading: Reading) -> None:
                 inner.value(key, reading)
 
-        scheduler.events = Tap()
+        runner.events = Tap()
         svc.sim.kill(10)
         await until(lambda: sum(isinstance(r, Failure) for _, r, _ in seen) >= 3)
         await svc.runtime.stop()
@@ -608,10 +608,10 @@ async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
     PPO-read it came in and the time that exchange took: no made-up telegram to split and
     decode again."""
     async with dp_service(tmp_path) as svc:
-        (scheduler,) = svc.runtime.runners.values()
-        assert isinstance(scheduler, LineRunner) and isinstance(scheduler.wire, CycleWire)
+        (runner,) = svc.runtime.runners.values()
+        assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
         seen: list[ExchangeResult] = []
-        planner = scheduler.planner
+        planner = runner.planner
         exchanged = planner.exchanged
 
         def spy(send: object, result: ExchangeResult, now: float) -> None:

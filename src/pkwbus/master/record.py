@@ -40,7 +40,7 @@ from pkwbus.protocol.pkw_length import AUTO, shown
 
 __all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
 
-log = logging.getLogger("pkwbus.master.scheduler")
+log = logging.getLogger("pkwbus.master.runner")  # what the runner records
 
 REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
 

@@ -44,7 +44,7 @@ from pkwbus.master.transaction import ExchangeResult
 
 __all__ = ["RECORD_EVERY", "LineRunner", "Wire"]
 
-log = logging.getLogger("pkwbus.master.scheduler")
+log = logging.getLogger(__name__)
 
 # Seconds at most between two batches of recorded polls and counters during a run.
 RECORD_EVERY = 0.05

@@ -1,4 +1,4 @@
-"""From a configuration to a runtime: simulated drives, links, lines, schedulers, metrics.
+"""From a configuration to a runtime: simulated drives, links, lines, runners, metrics.
 
 A ``sim://PROTOCOL?drives=...`` port starts built-in simulated drives on a
 pseudo-terminal; the line then opens that pty through pyserial like any

@@ -192,7 +192,7 @@ class DpMetrics:
 
 
 class LineMetrics:
-    """The scheduler's events for one line, turned into counter increments.
+    """A line runner's events, turned into counter increments.
 
     A labelled counter has no series until its first increment, and
     ``increase()``/``rate()`` cannot see that first step (no earlier sample).

@@ -1,4 +1,5 @@
-"""Simulated Danfoss FC and Siemens USS drives for demos, tests and benchmarks.
+"""Simulated drives for demos, tests and benchmarks: Danfoss FC and Siemens USS
+followers, and PROFIBUS DP slaves (:mod:`pkwbus.sim.dp_line`).
 
 ``Simulator`` holds the drives of one line; ``handle`` answers a request in
 process, ``serve_tcp`` and ``serve_pty`` put the line on a TCP port or a

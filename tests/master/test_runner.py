@@ -73,7 +73,7 @@ def drive_specs(
     return specs
 
 
-def scheduler(
+def runner(
     port: str, protocol: str, specs: list[DriveSpec], *, timeout: float = 0.03, **kw: Any
 ) -> tuple[LineRunner, Recorder, Trace]:
     trace = Trace()
@@ -96,7 +96,7 @@ async def run_until(s: LineRunner, check: Callable[[], bool]) -> None:
 async def test_polls_reach_the_snapshot_with_the_drives_values() -> None:
     sim = make_sim("fc", [1, 2])
     async with serve(sim, "tcp") as port:
-        s, events, _ = scheduler(port, "fc", drive_specs("fc", [1, 2], [341, 1530], 0.05))
+        s, events, _ = runner(port, "fc", drive_specs("fc", [1, 2], [341, 1530], 0.05))
         await run_until(s, lambda: all(events.polls_ok(f"d{a}") >= 4 for a in (1, 2)))
     for a in (1, 2):
         reading = s.snapshot.readings[(f"d{a}", "341", 0)]
@@ -109,7 +109,7 @@ async def test_polls_reach_the_snapshot_with_the_drives_values() -> None:
 async def test_two_lines_one_failing() -> None:
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
-        good, good_events, _ = scheduler(port, "fc", drive_specs("fc", [1], [1613], 0.01))
+        good, good_events, _ = runner(port, "fc", drive_specs("fc", [1], [1613], 0.01))
         bad_line = Line(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC)
         bad = LineRunner("line2", ExchangeWire(bad_line), drive_specs("fc", [1], [1613], 0.01))
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
@@ -132,7 +132,7 @@ async def test_stop_cancels_queued_jobs_and_returns() -> None:
     sim = make_sim("fc", [1], timing=SimTiming(response_delay=0.05))
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 1.0)
-        s, _, _ = scheduler(port, "fc", specs, timeout=0.2)
+        s, _, _ = runner(port, "fc", specs, timeout=0.2)
         task = asyncio.create_task(s.run())
         await asyncio.sleep(0.02)
         loop = asyncio.get_running_loop()
@@ -153,7 +153,7 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.01)
-        s, events, _ = scheduler(port, "fc", specs)
+        s, events, _ = runner(port, "fc", specs)
         line = s.wire.line  # type: ignore[attr-defined]
         real = line.start
         calls = 0
@@ -222,7 +222,7 @@ async def test_polls_are_recorded_in_batches_each_with_its_own_time_and_none_los
     sim = make_sim("fc", [1, 2])
     stamps = itertools.count(1000)
     async with serve(sim, "tcp") as port:
-        s, events, trace = scheduler(
+        s, events, trace = runner(
             port, "fc", drive_specs("fc", [1, 2], [1613, 1614], 0.0),
             wall_clock=lambda: float(next(stamps)),
         )  # fmt: skip
@@ -246,7 +246,7 @@ async def test_a_job_is_recorded_at_once_however_long_a_batch_may_last() -> None
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.0)
-        s, events, trace = scheduler(port, "fc", specs, record_every=3600.0)
+        s, events, trace = runner(port, "fc", specs, record_every=3600.0)
         task = asyncio.create_task(s.run())
         try:
             await until(lambda: len(trace.tx) >= 5)
@@ -272,7 +272,7 @@ async def test_a_batch_is_recorded_at_its_time_while_a_slow_exchange_is_out() ->
     sim = make_sim("fc", [1], timing=SimTiming(response_delay=1.0))
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.0)
-        s, _, trace = scheduler(port, "fc", specs, timeout=3.0, record_every=0.05)
+        s, _, trace = runner(port, "fc", specs, timeout=3.0, record_every=0.05)
         task = asyncio.create_task(s.run())
         try:
             await until(lambda: bool(s.snapshot.readings))
@@ -287,7 +287,7 @@ async def test_a_drive_going_down_is_recorded_at_once_however_long_a_batch_may_l
     sim = make_sim("fc", [1])  # drive 2 never answers
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1, 2], [1613], 0.0)  # drive 1 always due: no idle end
-        s, events, _ = scheduler(port, "fc", specs, record_every=3600.0)
+        s, events, _ = runner(port, "fc", specs, record_every=3600.0)
         task = asyncio.create_task(s.run())
         try:
             # drive 1 is always due, so the run never ends: only an at-once record shows it
