@@ -66,15 +66,25 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     infos: list[ParameterInfo] = []
     cleanups: list[Callable[[], object]] = []
     counts: dict[str, LineMetrics] = {}
-    for line in config.lines:
+    # Each drive's polls first: the exposition of their values is made before any line,
+    # so that every line's metrics are given it (a value is rendered as it lands).
+    planned = [
+        (line, [_drive(line, d, entries, infos) for d in line.drives]) for line in config.lines
+    ]
+    drives = {
+        d.name: DriveInfo(line.name, target_for(line, d).profile) for line, d in config.drives()
+    }
+    collector = SnapshotCollector(snapshot, drives, infos)
+    registry.register(collector)
+    for line, specs in planned:
         port = line.port
         if line.sim is not None:
             start = _start_dp_sim if line.protocol is Protocol.PROFIBUS else _start_sim
             port, close = await start(line, line.sim)
             cleanups.append(close)
-        specs = [_drive(line, drive, entries, infos) for drive in line.drives]
         dialects = {d.name: d.pkw_dialect for d in line.drives}
-        events = metrics.for_line(line.name, dialects, uss=line.protocol is Protocol.USS)
+        uss = line.protocol is Protocol.USS
+        events = metrics.for_line(line.name, dialects, collector.landed, uss=uss)
         counts[line.name] = events
         if line.protocol is Protocol.PROFIBUS:
             runners.append(_dp_runner(line, port, specs, snapshot, metrics, events))
@@ -85,13 +95,6 @@ async def build_runtime(config: cfg.Config) -> Runtime:
                 line.name, wire, specs, retries=line.retries, snapshot=snapshot, events=events
             )
         )
-    drives = {
-        d.name: DriveInfo(line.name, target_for(line, d).profile) for line, d in config.drives()
-    }
-    collector = SnapshotCollector(snapshot, drives, infos)
-    registry.register(collector)
-    for line_metrics in counts.values():
-        line_metrics.values = collector.landed
     runtime = Runtime(runners, entries, snapshot, registry)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)

@@ -56,6 +56,9 @@ DURATION_BUCKETS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0
 NO_FAULT_NUMBER = "-"
 
 
+Landed = Callable[[ReadingKey, Reading], object]  # a new reading, as it lands
+
+
 def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
     """The ``fault_code`` and ``fault`` labels of ``pkwbus_pkw_faults_total``."""
     return (NO_FAULT_NUMBER if fault is None else str(fault), short)
@@ -148,10 +151,18 @@ class ServiceMetrics:
             registry=registry,
         )
 
-    def for_line(self, line: str, drives: Mapping[str, Dialect], uss: bool = False) -> LineMetrics:
-        """The counters of ``line``; ``drives`` maps each configured drive to its dialect
-        (``uss``: a USS line, whose drives' PKW length can contradict the configuration)."""
-        return LineMetrics(self, line, drives, uss)
+    def for_line(
+        self,
+        line: str,
+        drives: Mapping[str, Dialect],
+        values: Landed | None = None,
+        *,
+        uss: bool = False,
+    ) -> LineMetrics:
+        """The counters of ``line``; ``drives`` maps each configured drive to its dialect,
+        ``values`` renders a new reading as it lands (the exposition's), ``uss``: a USS
+        line, whose drives' PKW length can contradict the configuration."""
+        return LineMetrics(self, line, drives, values, uss=uss)
 
     def for_dp_line(self, line: str, drives: Iterable[str]) -> DpMetrics:
         """The PROFIBUS DP gauges and counters of ``line``'s slaves."""
@@ -222,10 +233,19 @@ class LineMetrics:
     """
 
     def __init__(
-        self, m: ServiceMetrics, line: str, drives: Mapping[str, Dialect], uss: bool = False
+        self,
+        m: ServiceMetrics,
+        line: str,
+        drives: Mapping[str, Dialect],
+        values: Landed | None = None,
+        *,
+        uss: bool = False,
     ) -> None:
         self._m = m
         self._line = line
+        # Renders a new reading's lines as it lands (SnapshotCollector.landed), so
+        # that a scrape only joins them.
+        self.values = values
         if uss:  # at 0 from the start: an alert or a panel sees the first conflict
             for d in drives:
                 m.pkw_conflict.labels(line, d).set(0)
@@ -238,9 +258,6 @@ class LineMetrics:
         # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
         self.busy_total = 0.0
         self.telegram_total = 0
-        # Renders a new reading's lines as it lands (SnapshotCollector.landed), so
-        # that a scrape only joins them; set once the collector is built.
-        self.values: Callable[[ReadingKey, Reading], object] | None = None
         self.fault_counts: collections.Counter[str] = collections.Counter()
         self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
