@@ -147,3 +147,35 @@ def test_auto_finds_a_fixed_3_drive_by_a_short_probe() -> None:
     assert line.shown("d1") and line.polls_ok("d1") > 0
     last = line.sent[-1].telegram
     assert (len(last) - 4) // 2 - 2 == 3  # polls go out with 3 PKW words now
+
+
+async def test_arrays_eeprom_descriptions_and_texts_with_the_defaults(end: str) -> None:
+    """Every place the PKW length decides: an array element's change stored in EEPROM, a
+    description element, a text read and a text change, against a factory-set drive."""
+    array = ParamSpec(1001, "p1001", ValueType.U16, 0, "", 0.0, 100.0, True, array=3)
+    text = ParamSpec(199, "p0199", ValueType.TEXT, writable=True, initial="PUMP-7")
+    sim = make_sim("uss", [1], specs=(*SPECS, array, text), pkw_words=VARIABLE)
+    drive = sim.drives[1]
+    target = DriveTarget.create("uss", 1)
+    d = target.dialect
+    store = pkw.Store.EEPROM
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+        changed = await run_job(
+            line, target, pkw.write(d, 1001, 42, pkw.Width.WORD, index=2, store=store)
+        )
+        assert raw(changed) == 42
+        element = await run_job(line, target, pkw.read_description(d, 1120, 1))
+        assert isinstance(element, Answered) and isinstance(
+            element.response, pkw.DescriptionResponse
+        )
+        assert element.response.width is pkw.Width.WORD
+        named = await run_job(line, target, pkw.read_text(d, 199))
+        assert isinstance(named, Answered) and isinstance(named.response, pkw.TextResponse)
+        assert named.response.text == b"PUMP-7"
+        written = await run_job(line, target, pkw.write_text(d, 199, b"FAN-12"))
+        assert isinstance(written, Answered), written
+    assert drive.value(1001, 2) == 42 and drive.eeprom[1001, 2] == 42
+    assert drive.value(1001, 0) == 0  # the other elements untouched
+    assert drive.text(199) == b"FAN-12"
+    (change,) = write_telegrams(trace.tx, 1001)
+    assert (len(change) - 4) // 2 - 2 == 3  # PKE IND PWE1: the word in PWE1

@@ -92,8 +92,9 @@ def after_read(
         return Finished(d.name, job, NotSent(_refusal(d)))
     if gate is not Gate.SEND:
         reason = (
-            "the drive answered the parameter as a double word, so its PKW length is still"
-            " not known, and a word's place in PWE depends on it (set pkw_words, or the type)"
+            "the drive's answer to a read of the parameter fits both 4 fixed PKW words and"
+            " a variable length (a double word, or a text of 4 characters), and where a word"
+            " or a text goes depends on it: set pkw_words for this drive"
         )
         return Finished(d.name, job, NotSent(reason))
     tx = _transaction(d, job.request, job, retries=retries, stale=d.last_answer)
