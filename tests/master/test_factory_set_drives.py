@@ -11,11 +11,13 @@ from typing import Any
 import pytest
 
 from pkwbus.master.health import HealthPolicy
-from pkwbus.master.outcomes import Answered, Mismatch, NotSent
+from pkwbus.master.outcomes import Answered, Mismatch, NotSent, Rejected
 from pkwbus.master.plan import PkwLengthTold
 from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import PkwTransaction, Reply
 from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.params import ValueType
 from pkwbus.protocol.pkw_length import VARIABLE
 from pkwbus.protocol.telegram import BlockShape, split_block
@@ -179,3 +181,74 @@ async def test_arrays_eeprom_descriptions_and_texts_with_the_defaults(end: str) 
     assert drive.text(199) == b"FAN-12"
     (change,) = write_telegrams(trace.tx, 1001)
     assert (len(change) - 4) // 2 - 2 == 3  # PKE IND PWE1: the word in PWE1
+
+
+def down_then_back(sim: Simulator) -> FakeLine:
+    """Drive 1 dead for the first seconds of a line on a fake clock, then answering."""
+    sim.kill(1)
+    policy = HealthPolicy(down_after=3, probe_initial=1.0, probe_cap=2.0)
+    planner = Planner(drives("uss", [1], [52, 1120], 0.1), poll_deadline=0.5, policy=policy)
+    line = FakeLine(planner, sim)
+    line.run(5.0)
+    sim.revive(1)
+    line.run(5.0)
+    return line
+
+
+def test_a_factory_set_drive_found_by_a_short_probe_is_variable_not_fixed_3() -> None:
+    """A variable drive off at start-up answers the 3-word probe with another length than
+    3 words: it is learned variable (a fixed-3 drive would answer with 3)."""
+    sim = Simulator("uss", [1], specs=SPECS, timing=SimTiming(response_delay=0.0), seed=7)
+    line = down_then_back(sim)
+    told = [e.length for e in line.events if isinstance(e, PkwLengthTold)]
+    assert told and (told[-1].words, told[-1].known) == (VARIABLE, True)
+    assert all(t.words != 3 for t in told)
+    assert line.polls_ok("d1") > 0
+
+
+def test_a_double_word_change_to_a_fixed_3_drive_ends_unsent() -> None:
+    """What the drive's 3 PKW words cannot carry ends as not sent, the line going on (no
+    exception out of the planner, no job left unfinished)."""
+    sim = Simulator("uss", [1], specs=SPECS, pkw_words=3, timing=SimTiming(response_delay=0.0))
+    line = down_then_back(sim)
+    dialect = line.planner.drives[0].target.dialect
+    job = line.submit("d1", pkw.write(dialect, 1120, f32(12.5), pkw.Width.DWORD))
+    line.run(1.0)
+    (finished,) = line.finished(job)
+    assert isinstance(finished.outcome, NotSent), finished.outcome
+    assert "3 PKW words" in finished.outcome.reason
+    assert sim.drives[1].value(1120) == f32(10.0)
+    polls = line.polls_ok("d1")
+    line.run(1.0)
+    assert line.polls_ok("d1") > polls  # the line goes on
+
+
+def test_a_repeated_rejection_of_the_read_is_not_the_changes() -> None:
+    """The read before a change was refused; the same refusal repeated by a lagging drive
+    is "not yet" for the change, not its rejection."""
+    target = DriveTarget.create("uss", 1, pkw_words=VARIABLE)
+    d = target.dialect
+    refusal = pkw.encode_response(
+        pkw.Rejection(7, 2010, 0, 4, "", ""), d, target.ind_layout, VARIABLE
+    )
+    change = PkwTransaction(target, pkw.write(d, 2010, 9, pkw.Width.WORD), retries=2,
+                            deadline=10.0, stale=refusal)  # fmt: skip
+    repeated = Reply(1, refusal + bytes(4), 0.001)
+    assert change.feed(repeated, 0.0) is None and change.waiting
+    other = pkw.encode_response(
+        pkw.Rejection(7, 2010, 0, 2, "", ""), d, target.ind_layout, VARIABLE
+    )
+    outcome = change.feed(Reply(1, other + bytes(4), 0.001), 0.1)
+    assert isinstance(outcome, Rejected) and outcome.fault == 2
+
+
+async def test_the_read_before_a_change_of_element_0_reads_that_element(end: str) -> None:
+    array = ParamSpec(1001, "p1001", ValueType.U16, 0, "", 0.0, 100.0, True, array=3)
+    sim = make_sim("uss", [1], specs=(*SPECS, array), pkw_words=VARIABLE)
+    target = DriveTarget.create("uss", 1)
+    d = target.dialect
+    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+        assert raw(await run_job(line, target, pkw.write(d, 1001, 7, pkw.Width.WORD, index=0))) == 7
+    first = split_block(trace.tx[0][3:-1], BlockShape(None, 2)).pkw
+    read = pkw.decode_request(first, d, d.default_ind_layout, VARIABLE)
+    assert read.command is Command.READ_ARRAY and (read.pnu, read.subindex) == (1001, 0)

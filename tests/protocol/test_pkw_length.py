@@ -140,27 +140,56 @@ def test_auto_learns_keeps_and_forgets() -> None:
     word = pkw.ValueResponse(1, 52, 0, 7, pkw.Width.WORD)
     dword = pkw.ValueResponse(2, 1082, 0, 7, pkw.Width.DWORD)
     assert (length.words, length.known) == (4, False)
-    assert length.gate(word=True) is Gate.LEARN  # a word's place is not known yet
-    assert length.gate(word=False) is Gate.SEND  # a double word travels alike
+    assert length.gate(word=True)[0] is Gate.LEARN  # a word's place is not known yet
+    assert length.gate(word=False)[0] is Gate.SEND  # a double word travels alike
     assert not length.observe(4, 4, dword)  # tells nothing
     assert length.observe(4, 3, word)
     assert (length.words, length.known) == (VARIABLE, True)
-    assert length.gate(word=True) is Gate.SEND and length.gate(word=True, text=True) is Gate.SEND
+    assert length.gate(word=True)[0] is Gate.SEND
+    assert length.gate(word=True, text=True)[0] is Gate.SEND
     assert not length.observe(3, 3, word)  # agrees
     length.forget()
     assert (length.words, length.known) == (4, False)
     assert length.observe(4, 4, word) and length.words == 4
 
 
+@pytest.mark.parametrize(
+    ("words", "word", "text", "refused"),
+    [
+        (4, False, True, "a text needs a variable PKW length; the drive's is 4"),
+        (3, False, True, "a text needs a variable PKW length; the drive's is 3"),
+        (3, False, False, "a double word does not fit the drive's 3 PKW words"),
+    ],
+)
+def test_what_a_known_length_cannot_carry_is_refused(
+    words: int, word: bool, text: bool, refused: str
+) -> None:
+    length = PkwLength(AUTO)
+    length.words, length.known = words, True
+    assert length.gate(word=word, text=text) == (Gate.REFUSE, refused)
+    assert length.gate(word=True)[0] is Gate.SEND
+
+
 def test_a_configured_length_the_answers_contradict_refuses_changes() -> None:
     length = PkwLength(4)
     word = pkw.ValueResponse(1, 52, 0, 7, pkw.Width.WORD)
-    assert length.known and length.gate(word=True) is Gate.SEND
+    assert length.known and length.gate(word=True)[0] is Gate.SEND
     assert length.observe(4, 3, word) and length.in_conflict and length.conflict is VARIABLE
-    assert length.gate(word=True) is Gate.REFUSE and length.gate(word=False) is Gate.REFUSE
+    assert length.gate(word=True)[0] is Gate.REFUSE
+    assert length.gate(word=False)[0] is Gate.REFUSE
     assert length.words == 4  # the configuration stands: nothing is guessed
     assert length.observe(4, 4, word) and not length.in_conflict
-    assert length.gate(word=True) is Gate.SEND
+    assert length.gate(word=True)[0] is Gate.SEND
+
+
+def test_a_configured_3_agrees_again_once_the_drive_answers_with_3_words() -> None:
+    """A word in 3 words to 3 words fits 3 and variable alike: for a drive set to 3 it is
+    agreement, so a conflict told before (a double word in 4 words) clears."""
+    length = PkwLength(3)
+    word = pkw.ValueResponse(1, 52, 0, 7, pkw.Width.WORD)
+    dword = pkw.ValueResponse(2, 1082, 0, 7, pkw.Width.DWORD)
+    assert length.observe(3, 4, dword) and length.conflict is VARIABLE
+    assert length.observe(3, 3, word) and not length.in_conflict
 
 
 def test_a_learned_target_splits_answers_by_their_length() -> None:
@@ -175,3 +204,6 @@ def test_a_learned_target_splits_answers_by_their_length() -> None:
     request = learned.telegram(word_change(700, 5))
     assert request == frame(learned.adr, words("22BC 0000 0005") + bytes(4))
     assert learned.pkw_words_of(request) == 3
+    # a text checks and shows as the variable block it needs, before the length is known
+    text = target.telegram(pkw.write_text(USS, 199, b"FAN-12"))
+    assert text[3:13] == words("F0C7 0000") + b"FAN-12"

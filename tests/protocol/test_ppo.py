@@ -270,3 +270,16 @@ def test_slot_never_finishes_on_a_non_matching_answer(pnu: int, reads: list[byte
             assert pkw.matches(request, update.done.response, PCV)
             break
         assert update.done is None
+
+
+def test_without_the_ak0_handshake_another_value_is_not_yet_a_mismatch() -> None:
+    """A slave that never showed AK 0 before the job went out may still be telling an
+    earlier answer for the same parameter: not a mismatch, the request goes on."""
+    slot = PkwSlot(PPO1, PCV)
+    slot.submit(pkw.write(PCV, 302, 1500, pkw.Width.WORD), deadline=10.0)
+    for n in range(ppo.IDLE_WAIT_CYCLES):  # the slave keeps answering its poll of 302
+        assert slot.feed(value(302, 1400), n * 0.01).done is None
+    assert pkw_of(slot.outputs()).command is not Command.NONE  # the change goes out now
+    assert slot.feed(value(302, 1400), 0.2).done is None  # still an earlier answer, maybe
+    done = slot.feed(value(302, 1500), 0.3).done
+    assert isinstance(done, JobDone) and not done.mismatch

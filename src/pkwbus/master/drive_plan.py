@@ -87,12 +87,18 @@ class DrivePlan:
         short = self.target.with_pkw_words(3)
         return Send(self.name, short, short.probe(), True)
 
-    def probed(self, send: Send) -> PkwLengthTold | None:
-        """A probe was answered; the event when a 3-word one told a fixed-3 drive."""
+    def probed(self, send: Send, data: bytes) -> PkwLengthTold | None:
+        """A probe was answered (``data``: its telegram's data); the event when a 3-word one
+        told the drive's length: 3 words back is a fixed-3 drive (its 4-word requests went
+        unanswered), any other length a variable one."""
         length = self.pkw
         if length is None or length.known or send.target.shape.pkw_words != 3:
             return None
-        length.words, length.known = 3, True  # a 4-word request went unanswered before it
+        answer_words = len(data) // 2 - send.target.shape.pzd_words
+        if answer_words == 3:
+            length.words, length.known = 3, True
+        else:
+            length.observe(3, answer_words, pkw.NoResponse(0, 0, 0))
         return self.retarget()
 
     def heard(self, tx: PkwTransaction) -> PkwLengthTold | None:
@@ -112,7 +118,7 @@ class DrivePlan:
         return self.retarget()
 
     def forget_pkw(self) -> PkwLengthTold | None:
-        """The drive is back after it was away: a learned PKW length is learned again."""
+        """The drive went down: a learned PKW length is learned again when it answers."""
         length = self.pkw
         if length is None or not self.target.learn or not length.known:
             return None

@@ -224,7 +224,7 @@ class Planner:
         if send.probe:
             if isinstance(result, Reply):
                 self._status_from_reply(d, result)
-                self._tell(d.probed(send))
+                self._tell(d.probed(send, result.data))
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
@@ -322,8 +322,9 @@ class Planner:
             job = queue.popleft()
             order = float(next(self._job_seq))
             first = gate_write(d, job, order, retries=self.retries, read_first=self.stale_answers)
-            if isinstance(first, Finished):  # not to be sent
+            if isinstance(first, Finished):  # not to be sent: the drive goes on
                 self.events.append(first)
+                d.busy = False
                 self._index(d, now)
                 return None
             d.active = first
@@ -372,7 +373,6 @@ class Planner:
     def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
         if not isinstance(result, Failure):
             if d.health.answered():
-                self._tell(d.forget_pkw())
                 self._show(d, True, "answers again")
                 d.restart_polls(now)  # not overruns: the drive was away
             elif not d.shown_up:
@@ -382,6 +382,7 @@ class Planner:
             return
         if d.health.failed(now):
             self._show(d, False, result.kind.value)
+            self._tell(d.forget_pkw())  # learned again when it answers: it may have changed
             active = d.active
             if active is not None and isinstance(active.work, PollState):
                 self._complete(d, active, TimedOut("drive is down"), now)

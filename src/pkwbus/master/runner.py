@@ -198,7 +198,8 @@ class LineRunner:
     def exchanged(self, drive: str, result: ExchangeResult, busy: float) -> None:
         """An exchange with ``drive`` is over (it held the line ``busy`` seconds): recorded
         with its batch, at most :data:`RECORD_EVERY` seconds from now."""
-        self._arm()
+        if self._record_timer is None:  # a batch begins
+            self._arm()
         self._exchanges.append((drive, result, busy))
 
     def batch(self) -> None:
@@ -210,15 +211,15 @@ class LineRunner:
     def tell(self, events: list[Event]) -> None:
         """Events for the batch (the planner's, or a DP slave's status word from its PZD);
         what somebody waits for is recorded at once."""
-        self._arm()
+        if self._record_timer is None:  # a batch begins
+            self._arm()
         self._unrecorded.append((events, self._wall()))
         if _waited_for(events):
             self.flush()
 
     def _arm(self) -> None:
-        if self._record_timer is None:  # a batch begins
-            loop = asyncio.get_running_loop()
-            self._record_timer = loop.call_later(self._record_every, self._on_record_timer)
+        loop = asyncio.get_running_loop()
+        self._record_timer = loop.call_later(self._record_every, self._on_record_timer)
 
     def flush(self) -> None:
         """Record everything not recorded yet, in order: each exchange before the

@@ -121,8 +121,8 @@ class DriveTarget:
     def telegram(self, request: pkw.PkwRequest) -> bytes:
         """The whole request telegram: PKW, control word with bit 10 = 0, reference 0."""
         words = self.shape.pkw_words
-        if self.protocol is Protocol.FC and request.text:
-            words = None
+        if request.text and (self.protocol is Protocol.FC or self.learn):
+            words = None  # a text travels in a block as long as it is
         data = pkw.encode_request(request, self.dialect, self.ind_layout, words)
         if self.protocol is Protocol.PROFIBUS:  # the PPO-write; the DP master frames it
             return encode_block(data, self._idle_pzd)

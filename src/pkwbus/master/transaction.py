@@ -128,12 +128,15 @@ class PkwTransaction:
         tally = self.tally
         tally.telegrams += 1
         self.answer_pkw = self.response = None
-        if isinstance(result, Failure):
-            outcome = self._on_failure(result)
-        else:
+        if isinstance(result, Reply):
             tally.busy += result.duration
-            answer = self._decode(result) if isinstance(result, Reply) else result
-            outcome = self._on_failure(answer) if isinstance(answer, Failure) else self._on(answer)
+            outcome = self._on_reply(result)
+        elif isinstance(result, Failure):
+            outcome = self._on_failure(result)
+        else:  # decoded where it came in
+            tally.busy += result.duration
+            tally.status_word, tally.main_actual = result.status_word, result.main_actual
+            outcome = self._on(result.response, result.pkw)
         if outcome is None and now >= self.deadline:
             outcome = TimedOut("deadline passed" + self._last_error())
         if outcome is not None:
@@ -148,8 +151,8 @@ class PkwTransaction:
         kinds = ", ".join(f"{n} {k.value}" for k, n in self.tally.errors.most_common())
         return f" ({kinds})"
 
-    def _decode(self, reply: Reply) -> PkwAnswer | Failure:
-        """A telegram's data split by the drive's shape, its PKW part decoded."""
+    def _on_reply(self, reply: Reply) -> Outcome | None:
+        """A telegram's data split by the drive's shape, its PKW part decoded once."""
         target = self.target
         tally = self.tally
         tally.status_word = tally.main_actual = None
@@ -159,27 +162,26 @@ class PkwTransaction:
             tally.main_actual = block.main_actual
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
-            return Failure(ErrorKind.UNEXPECTED, str(exc))
-        return PkwAnswer(response, block.pkw, block.status_word, block.main_actual, reply.duration)
+            return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
+        return self._on(response, block.pkw)
 
-    def _on(self, answer: PkwAnswer) -> Outcome | None:
-        tally = self.tally
-        tally.status_word, tally.main_actual = answer.status_word, answer.main_actual
-        response = answer.response
-        self.answer_pkw, self.response = answer.pkw, response
+    def _on(self, response: pkw.PkwResponse, answer: bytes) -> Outcome | None:
+        self.answer_pkw, self.response = answer, response
         verdict = pkw.judge(self.request, response, self.target.dialect)
-        mismatch = verdict is pkw.Verdict.MISMATCH and answer.pkw != self.stale
+        if answer == self.stale and isinstance(response, pkw.Rejection):
+            verdict = pkw.Verdict.NOT_YET  # the read's rejection repeated, not the change's
+        if verdict is pkw.Verdict.ANSWER:
+            self.waiting = False
+            if isinstance(response, pkw.Rejection):
+                return Rejected(response.fault, response.text, response.short)
+            return Answered(response)
+        mismatch = verdict is pkw.Verdict.MISMATCH and answer != self.stale
         if mismatch and isinstance(response, pkw.ValueResponse):
             self.waiting = False
             return Mismatch(self.request.value, response.raw, response)
-        if verdict is not pkw.Verdict.ANSWER:
-            self.tally.errors[ErrorKind.UNEXPECTED] += 1
-            self.waiting = True
-            return None
-        self.waiting = False
-        if isinstance(response, pkw.Rejection):
-            return Rejected(response.fault, response.text, response.short)
-        return Answered(response)
+        self.tally.errors[ErrorKind.UNEXPECTED] += 1
+        self.waiting = True
+        return None
 
     def _on_failure(self, failure: Failure) -> Outcome | None:
         self.tally.errors[failure.kind] += 1

@@ -28,37 +28,58 @@ from pkwbus.master.outcomes import Cancelled, LineFailed, NotSent, Outcome, Time
 from pkwbus.master.plan import Finished, Send
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Command
+from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw_fields import Width
 from pkwbus.protocol.pkw_length import Gate, shown
 
 __all__ = ["after_read", "gate_write"]
 
 
-def _gate(d: DrivePlan, request: pkw.PkwRequest) -> Gate:
-    if d.pkw is None or (not request.is_write and not request.text):
-        return Gate.SEND
-    return d.pkw.gate(
-        word=request.width is Width.WORD and not request.text, text=bool(request.text)
-    )
+_ARRAY_CHANGES = frozenset(
+    {
+        Command.WRITE_ARRAY_WORD,
+        Command.WRITE_ARRAY_DWORD,
+        Command.WRITE_ARRAY_WORD_EEPROM,
+        Command.WRITE_ARRAY_DWORD_EEPROM,
+    }
+)
 
 
-def _refusal(d: DrivePlan) -> str:
+def _gate(d: DrivePlan, request: pkw.PkwRequest) -> tuple[Gate, str]:
+    """Whether ``request`` may go out to ``d`` now; why not, in words, when refused."""
     length = d.pkw
-    if length is None:  # not asked: only drives with a PKW length are refused
-        return ""
-    conflict = length.conflict
-    told = "?" if isinstance(conflict, str) else shown(conflict)
-    return (
-        f"the drive answers with a PKW length of {told}, the configuration says"
-        f" {shown(length.configured)}: no change until they agree (pkw_words)"
-    )
+    if length is None or (not request.is_write and not request.text):
+        return Gate.SEND, ""
+    word = request.width is Width.WORD and not request.text
+    gate, why = length.gate(word=word, text=bool(request.text))
+    if gate is Gate.REFUSE and length.in_conflict:
+        conflict = length.conflict
+        told = "?" if isinstance(conflict, str) else shown(conflict)
+        why = (
+            f"the drive answers with a PKW length of {told}, the configuration says"
+            f" {shown(length.configured)}: no change until they agree (pkw_words)"
+        )
+    return gate, why
 
 
-def _transaction(
-    d: DrivePlan, request: pkw.PkwRequest, job: Job, *, retries: int, stale: bytes | None
-) -> PkwTransaction:
-    """A transaction of ``job`` (its deadline) for ``request``."""
-    return PkwTransaction(d.target, request, retries=retries, deadline=job.deadline, stale=stale)
+def _read_of(d: DrivePlan, request: pkw.PkwRequest) -> pkw.PkwRequest:
+    """The read of the parameter (the element) a change is for."""
+    index = request.subindex if request.command in _ARRAY_CHANGES else None
+    return pkw.read_parameter(d.target.dialect, request.pnu, index, text=bool(request.text))
+
+
+def _active(
+    d: DrivePlan, request: pkw.PkwRequest, job: Job, order: float, first: bool, *, retries: int,
+    stale: bytes | None,
+) -> Active | Finished:  # fmt: skip
+    """``request`` of ``job`` in flight; a request the drive's PKW block cannot carry ends
+    the job unsent (its length learned meanwhile, say)."""
+    try:
+        tx = PkwTransaction(d.target, request, retries=retries, deadline=job.deadline, stale=stale)
+    except LocalProtocolError as exc:
+        return Finished(d.name, job, NotSent(str(exc)))
+    return Active(tx, job.priority, order, job, Send(d.name, d.target, tx.telegram), first)
 
 
 def gate_write(
@@ -67,17 +88,14 @@ def gate_write(
     """The job in flight, with the read before its change where one goes first; or the
     job finished unsent."""
     request = job.request
-    gate = _gate(d, request)
+    gate, why = _gate(d, request)
     if gate is Gate.REFUSE:
-        return Finished(d.name, job, NotSent(_refusal(d)))
+        return Finished(d.name, job, NotSent(why))
     changes = request.is_write or bool(request.text)
     first = changes and (read_first or gate is Gate.LEARN)
     if first:
-        request = pkw.read_parameter(
-            d.target.dialect, request.pnu, request.subindex or None, text=bool(request.text)
-        )
-    tx = _transaction(d, request, job, retries=retries, stale=None)
-    return Active(tx, job.priority, order, job, Send(d.name, d.target, tx.telegram), first)
+        request = _read_of(d, request)
+    return _active(d, request, job, order, first, retries=retries, stale=None)
 
 
 def after_read(
@@ -87,15 +105,14 @@ def after_read(
     one), or the job finished unsent (never as if the change had gone out: no tally)."""
     if isinstance(outcome, Cancelled | TimedOut | LineFailed):
         return Finished(d.name, job, outcome)  # no answer to go by
-    gate = _gate(d, job.request)
-    if gate is Gate.REFUSE:
-        return Finished(d.name, job, NotSent(_refusal(d)))
-    if gate is not Gate.SEND:
-        reason = (
+    gate, why = _gate(d, job.request)
+    if gate is Gate.LEARN:
+        why = (
             "the drive's answer to a read of the parameter fits both 4 fixed PKW words and"
             " a variable length (a double word, or a text of 4 characters), and where a word"
             " or a text goes depends on it: set pkw_words for this drive"
         )
-        return Finished(d.name, job, NotSent(reason))
-    tx = _transaction(d, job.request, job, retries=retries, stale=d.last_answer)
-    return Active(tx, active.priority, active.order, job, Send(d.name, d.target, tx.telegram))
+    if gate is not Gate.SEND:
+        return Finished(d.name, job, NotSent(why))
+    order = active.order
+    return _active(d, job.request, job, order, False, retries=retries, stale=d.last_answer)

@@ -127,29 +127,38 @@ class PkwLength:
     def observe(self, sent_words: int, answer_words: int, response: PkwResponse) -> bool:
         """Take what an answer told; True when ``words`` or ``conflict`` changed."""
         verdict = told(sent_words, answer_words, response)
-        if isinstance(verdict, str):
-            return False
         if self.configured != AUTO:
-            conflict: PkwWords | Literal["?"] = "?" if verdict == self.configured else verdict
+            # A configured 3 is never told apart from variable by a word: it agrees.
+            agrees = verdict == self.configured or (
+                verdict == "?" and answer_words == sent_words == self.configured
+            )
+            conflict: PkwWords | Literal["?"] = "?" if agrees else verdict
+            if isinstance(conflict, str) and not agrees:
+                return False  # tells nothing either way
             changed = conflict != self.conflict
             self.conflict = conflict
             return changed
+        if isinstance(verdict, str):
+            return False
         changed = not self.known or verdict != self.words
         self.words, self.known = verdict, True
         return changed
 
-    def gate(self, *, word: bool, text: bool = False) -> Gate:
-        """May a change of a word (``word``), a double word or a text go out now?
+    def gate(self, *, word: bool, text: bool = False) -> tuple[Gate, str]:
+        """May a change of a word (``word``), a double word or a text go out now, and why not?
 
         A double word travels alike with 4 words and variable length, and a
         fixed-3 drive does not answer a 4-word request: it may go out before
-        the length is known. A word's place depends on the length, so it waits
-        until the length is known; a text needs a variable length.
+        the length is known, but never to a fixed-3 drive. A word's place
+        depends on the length, so it waits until the length is known; a text
+        needs a variable length.
         """
         if self.in_conflict:
-            return Gate.REFUSE
-        if self.known:
-            return Gate.SEND
-        if word or text:
-            return Gate.LEARN
-        return Gate.SEND
+            return Gate.REFUSE, "conflict"
+        if not self.known:
+            return (Gate.LEARN, "") if word or text else (Gate.SEND, "")
+        if text and self.words is not None:
+            return Gate.REFUSE, f"a text needs a variable PKW length; the drive's is {self.words}"
+        if not word and not text and self.words == 3:
+            return Gate.REFUSE, "a double word does not fit the drive's 3 PKW words"
+        return Gate.SEND, ""

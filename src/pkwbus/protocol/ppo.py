@@ -297,10 +297,12 @@ class PkwSlot:
             else:
                 self._idle_cycles += 1
             return SlotUpdate(read, self.expire(now))
-        verdict = (
-            pkw.Verdict.NOT_YET if response is None else pkw.judge(sent, response, self.dialect)
-        )
-        if response is not None and verdict is not pkw.Verdict.NOT_YET:  # an answer, or a mismatch
+        verdict = pkw.Verdict.NOT_YET
+        if response is not None:
+            verdict = pkw.judge(sent, response, self.dialect)
+        if verdict is pkw.Verdict.MISMATCH and not self._idle_seen:
+            verdict = pkw.Verdict.NOT_YET  # no AK 0 seen first: it may be an earlier answer
+        if response is not None and verdict is not pkw.Verdict.NOT_YET:  # answer, or mismatch
             done = JobDone(sent, response, self.cycles, verdict is pkw.Verdict.MISMATCH, read)
             self._finish()
             return SlotUpdate(read, done)
