@@ -187,10 +187,16 @@ def test_a_pty_path_in_use_is_refused(tmp_path: pathlib.Path) -> None:
 def test_a_stale_link_of_a_killed_simulator_is_replaced(tmp_path: pathlib.Path) -> None:
     link = tmp_path / "ttySIM0"
     first, _ = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    # Hold the pty's number while it is stale: another test worker's simulator would
+    # otherwise be given it, and the link would point at a pty served (truly in use).
+    hold = os.open(os.readlink(link), os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
     first.kill()
     first.wait(timeout=10)
     assert os.path.islink(link)  # left behind
-    second, lines = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    try:
+        second, lines = start("--protocol", "fc", "--pty", str(link), "--drives", "1")
+    finally:
+        os.close(hold)
     try:
         assert lines[-1].endswith(f"{link} -> {os.readlink(link)}")
         assert read_json(str(link), "fc", "16-13")["unit"] == "Hz"

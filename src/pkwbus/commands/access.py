@@ -1,4 +1,5 @@
-"""`pkwbus read` and `pkwbus write`: one parameter of one drive.
+"""`pkwbus read` and `pkwbus write`: one parameter of one drive, the same on every bus
+(:mod:`pkwbus.commands.drive_access`).
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad input or
 a port that cannot be opened.
@@ -7,38 +8,22 @@ a port that cannot be opened.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from pkwbus import durations, link
-from pkwbus.catalog.description import ParameterDescription
-from pkwbus.commands import dp_access
-from pkwbus.commands.answers import catalog_entry, drive_name, finish, report_value, show_read
+from pkwbus.commands.answers import finish, report_value, show_read
 from pkwbus.commands.common import (
-    DEFAULT_CATALOG,
-    PROFIBUS,
     CommandError,
     Exit,
     add_drive_options,
     add_line_options,
-    build_line,
-    build_target,
     duration_option,
 )
 from pkwbus.commands.dp import add_dp_options
-from pkwbus.link import PortError
-from pkwbus.master.outcomes import Outcome
-from pkwbus.master.single_job import run_job
-from pkwbus.master.target import DriveTarget
+from pkwbus.commands.drive_access import checked, drive_access, resolve
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import (
-    ParameterRef,
-    encode_text,
-    parse_parameter,
-    parse_type,
-)
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.params import encode_text
 
 __all__ = [
     "add_parsers",
@@ -73,68 +58,31 @@ def _common(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _resolve(args: argparse.Namespace) -> tuple[DriveTarget, ParameterRef, ParameterDescription]:
-    try:
-        ref = parse_parameter(args.parameter)
-        target = build_target(args)
-        target.dialect.check_pnu(ref.pnu)
-        vtype = parse_type(args.type) if args.type else None
-    except LocalProtocolError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    known = _known(args, ref)
-    try:
-        ref = drive_name(ref, target, known)
-    except LocalProtocolError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return target, ref, known.with_type(vtype)
-
-
-def _known(args: argparse.Namespace, ref: ParameterRef) -> ParameterDescription:
-    """What the catalog named on the command line says of ``ref`` (nothing with 'none')."""
-    return catalog_entry(args.catalog or DEFAULT_CATALOG[Protocol(args.protocol)], ref.pnu)
-
-
-async def _perform(args: argparse.Namespace, target: DriveTarget, req: pkw.PkwRequest) -> Outcome:
-    line = build_line(args)
-    try:
-        await line.open()
-    except PortError as exc:
-        raise CommandError(str(exc), Exit.PORT) from None
-    try:
-        deadline = asyncio.get_running_loop().time() + args.deadline
-        return await run_job(line, target, req, retries=args.retries, deadline=deadline)
-    finally:
-        await line.close()
-
-
 def run_read(args: argparse.Namespace) -> int:
-    if args.protocol == PROFIBUS:
-        return dp_access.run_read(args)
-    target, ref, fmt = _resolve(args)
-    try:
-        req = pkw.read_parameter(target.dialect, ref.pnu, ref.index, text=fmt.is_text)
-        target.telegram(req)
-    except LocalProtocolError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    return show_read(args, ref, fmt, link.run(_perform(args, target, req)))
+    access = drive_access(args)
+    ref, fmt = resolve(args, access)
+    text = fmt.is_text and access.texts
+    (req,) = checked(access, [pkw.read_parameter(access.dialect, ref.pnu, ref.index, text=text)])
+    (outcome,) = link.run(access.run([req]))
+    return show_read(args, ref, fmt, outcome)
 
 
 def run_write(args: argparse.Namespace) -> int:
-    if args.protocol == PROFIBUS:
-        return dp_access.run_write(args)
-    target, ref, fmt = _resolve(args)
+    access = drive_access(args)
+    ref, fmt = resolve(args, access)
     store = pkw.Store(args.store)
+    d = access.dialect
     try:
         if fmt.is_text:
-            req = pkw.write_text(target.dialect, ref.pnu, encode_text(args.value), ref.index or 0)
+            req = pkw.write_text(d, ref.pnu, encode_text(args.value), ref.index or 0)
             raw: int | None = None
         else:
             raw, width = fmt.encode(args.value, str(ref))
-            req = pkw.write(target.dialect, ref.pnu, raw, width, index=ref.index, store=store)
-        target.telegram(req)
+            req = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=store)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    response = finish(link.run(_perform(args, target, req)))
+    (outcome,) = link.run(access.run(checked(access, [req])))
+    response = finish(outcome)
     try:
         raw, value = fmt.value_of(response)
     except RemoteProtocolError:

@@ -15,8 +15,8 @@ from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.commands.failures import command_failure
 from pkwbus.master.outcomes import Answered, Outcome
-from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.params import ParameterRef, canonical
 
@@ -35,12 +35,12 @@ def catalog_entry(catalog: str, pnu: int) -> ParameterDescription:
 
 
 def drive_name(
-    ref: ParameterRef, target: DriveTarget, known: ParameterDescription | None
+    ref: ParameterRef, dialect: Dialect, known: ParameterDescription | None
 ) -> ParameterRef:
     """The drive's one name for ``ref`` (3-41 on an FC drive, r/p refused there);
     elsewhere the catalog's r/p, else the one given on the command line."""
     prefix = known.prefix if known is not None and known.prefix else ref.prefix
-    return canonical(ref, danfoss=target.dialect.danfoss_numbers, prefix=prefix)
+    return canonical(ref, danfoss=dialect.danfoss_numbers, prefix=prefix)
 
 
 def finish(outcome: Outcome) -> pkw.PkwResponse:

@@ -21,8 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pkwbus import durations, limits
-from pkwbus.catalog.description import ParameterDescription
-from pkwbus.commands.answers import catalog_entry
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster
@@ -33,17 +31,17 @@ from pkwbus.protocol import dp_timing, gsd, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, canonical, parse_parameter, parse_type
 from pkwbus.protocol.ppo import PkwSlot, PpoType
 
 __all__ = [
     "DEFAULT_BAUDRATE",
+    "DEFAULT_DEADLINE",
+    "DP_CATALOGS",
     "MAX_DP_RETRIES",
     "DpContext",
     "add_dp_options",
     "build_context",
     "dp_line",
-    "resolve",
     "session",
 ]
 
@@ -223,30 +221,3 @@ async def session(
     finally:
         await master.stop()
     return outcomes
-
-
-def _known(args: argparse.Namespace, dia: Dialect, ref: ParameterRef) -> ParameterDescription:
-    name = getattr(args, "catalog", None) or DP_CATALOGS.get(dia.name) or "none"
-    return catalog_entry(name, ref.pnu)
-
-
-def resolve(
-    args: argparse.Namespace, ctx: DpContext, *, typed: bool = True
-) -> tuple[ParameterRef, ParameterDescription]:
-    """The parameter named on the command line, in the dialect's notation, and its format."""
-    try:
-        ref = parse_parameter(args.parameter)
-        ctx.dialect.check_pnu(ref.pnu)
-        vtype = parse_type(args.type) if typed and args.type else None
-    except LocalProtocolError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    known = _known(args, ctx.dialect, ref) if typed else ParameterDescription()
-    prefix = known.prefix or ref.prefix
-    try:
-        ref = canonical(ref, danfoss=ctx.dialect.danfoss_numbers, prefix=prefix)
-    except LocalProtocolError as exc:
-        raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    fmt = known.with_type(vtype)
-    if fmt.is_text:
-        raise CommandError("a text parameter does not fit the 4 PKW words of a PPO", Exit.BAD_INPUT)
-    return ref, fmt
