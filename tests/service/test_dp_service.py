@@ -33,7 +33,7 @@ from pkwbus.service.api import create_app
 from pkwbus.service.audit import AuditLog
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
-from pkwbus.service.metrics import ERROR_KINDS
+from pkwbus.service.metrics.instrumentation import ERROR_KINDS
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpFaults, DpSimulator

@@ -26,7 +26,6 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.service import exposition
 from pkwbus.service.api_models import (
     ERRORS,
     DriveView,
@@ -39,7 +38,8 @@ from pkwbus.service.api_models import (
     WriteResult,
 )
 from pkwbus.service.audit import AuditError, AuditLog, as_dict
-from pkwbus.service.metrics import api_metrics
+from pkwbus.service.metrics import exposition
+from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
 from pkwbus.service.recorder import AuditRecorder
 from pkwbus.service.runtime import Runtime

@@ -33,7 +33,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Final, TypeVar
 
 from pkwbus.service.audit import AuditEntry, AuditError, AuditLog
-from pkwbus.service.metrics import ApiMetrics
+from pkwbus.service.metrics.instrumentation import ApiMetrics
 
 __all__ = ["MAX_UNSAVED", "PROBE_INTERVAL", "RETRY_DELAYS", "AuditRecorder", "AuditUnavailable"]
 
