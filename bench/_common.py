@@ -264,7 +264,7 @@ class Service:
 
         from pkwbus.service.api import create_app
         from pkwbus.service.app import bind, settle_heap
-        from pkwbus.service.audit import AuditLog
+        from pkwbus.service.audit.log import AuditLog
         from pkwbus.service.build import build_runtime
         from pkwbus.service.config import parse_config
 

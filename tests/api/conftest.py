@@ -22,7 +22,7 @@ import pytest
 
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.service.api import create_app
-from pkwbus.service.audit import AuditLog
+from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import Config, parse_config
 from pkwbus.service.runtime import Runtime

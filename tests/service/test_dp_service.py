@@ -30,7 +30,7 @@ from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
 from pkwbus.service.api import create_app
-from pkwbus.service.audit import AuditLog
+from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.metrics.instrumentation import ERROR_KINDS

@@ -20,7 +20,7 @@ from pkwbus.service.config import Config, ConfigError, load_config
 from pkwbus.service.load import check_config_report
 
 if TYPE_CHECKING:
-    from pkwbus.service.audit import AuditLog
+    from pkwbus.service.audit.log import AuditLog
 
 __all__ = ["add_parsers", "load", "open_audit", "run_audit", "run_check", "run_service"]
 
@@ -64,7 +64,7 @@ def load(path: str, listen: str | None = None) -> Config:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from pkwbus.service.audit import path_problem
+    from pkwbus.service.audit.log import path_problem
 
     config = load(args.file)
     problem = path_problem(config.audit_db)
@@ -100,7 +100,7 @@ def run_service(args: argparse.Namespace) -> int:
 def open_audit(config: Config) -> AuditLog:
     """The audit log of a starting service; a place that cannot hold it is a configuration
     error (exit 2), never an internal one."""
-    from pkwbus.service.audit import AuditError, AuditLog, path_problem
+    from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
 
     problem = path_problem(config.audit_db)
     if problem is not None:
@@ -140,7 +140,7 @@ async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
 
 def run_audit(args: argparse.Namespace) -> int:
     from pkwbus.commands.audit_table import table, units_from
-    from pkwbus.service.audit import AuditError, AuditLog, as_dict
+    from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 
     config = load(args.config)
     if not config.audit_db.exists():

@@ -37,11 +37,11 @@ from pkwbus.service.api_models import (
     WriteBody,
     WriteResult,
 )
-from pkwbus.service.audit import AuditError, AuditLog, as_dict
+from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
+from pkwbus.service.audit.recorder import AuditRecorder
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
-from pkwbus.service.recorder import AuditRecorder
 from pkwbus.service.runtime import Runtime
 
 __all__ = [

@@ -27,7 +27,8 @@ from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, encode_text
-from pkwbus.service.audit import AuditEntry
+from pkwbus.service.audit.log import AuditEntry
+from pkwbus.service.audit.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.outcome_answers import audit_outcome
 from pkwbus.service.parameter_checks import (
     INCOMPLETE,
@@ -43,7 +44,6 @@ from pkwbus.service.parameter_checks import (
     raise_for,
 )
 from pkwbus.service.parameter_reads import Reads
-from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 __all__ = ["WriteOrder", "Writes"]

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from pkwbus.service.audit.recorder import AuditRecorder
 from pkwbus.service.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
@@ -37,7 +38,6 @@ from pkwbus.service.parameter_checks import (
 )
 from pkwbus.service.parameter_reads import MAX_READS_PER_DRIVE, Reads
 from pkwbus.service.parameter_writes import WriteOrder, Writes
-from pkwbus.service.recorder import AuditRecorder
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
