@@ -262,11 +262,11 @@ class Service:
 
         import uvicorn
 
-        from pkwbus.service.api import create_app
         from pkwbus.service.app import bind, settle_heap
         from pkwbus.service.audit.log import AuditLog
         from pkwbus.service.build import build_runtime
         from pkwbus.service.config import parse_config
+        from pkwbus.service.http.api import create_app
 
         config = parse_config(self.config_text)
         self.runtime = await build_runtime(config)

@@ -16,7 +16,7 @@ MAY_IMPORT = {
     "catalog": {"protocol", "problems", "yamlfile"},
     "link": {"protocol"},
     # master knows neither HTTP nor the command line: their exit codes and answers
-    # live with the commands and the service (commands.failures, service.outcome_answers)
+    # live with the commands and the service (commands.failures, service.http.outcome_answers)
     "master": {"protocol", "catalog", "link"},
     "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus"},
 }

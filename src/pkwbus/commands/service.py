@@ -112,9 +112,9 @@ def open_audit(config: Config) -> AuditLog:
 
 
 async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
-    from pkwbus.service.api import create_app
     from pkwbus.service.app import serve
     from pkwbus.service.build import build_runtime
+    from pkwbus.service.http.api import create_app
 
     runtime = await build_runtime(config)
     token = config.write_token()

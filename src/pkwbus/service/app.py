@@ -23,7 +23,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from pkwbus.service.config import LISTEN_ENV
-from pkwbus.service.http import ConnectionLimit, bounded_protocol
+from pkwbus.service.http.connections import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
