@@ -17,7 +17,7 @@ from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit, int_option
 from pkwbus.limits import MAX_AUDIT_LIMIT
 from pkwbus.service.config import Config, ConfigError, load_config
-from pkwbus.service.load import check_config_report
+from pkwbus.service.config.line_load import check_config_report
 
 if TYPE_CHECKING:
     from pkwbus.service.audit.log import AuditLog
