@@ -21,8 +21,8 @@ import httpx
 import pytest
 
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
-from pkwbus.service.build import build_runtime
 from pkwbus.service.config import Config, parse_config
 from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime

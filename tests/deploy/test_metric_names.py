@@ -27,7 +27,7 @@ import pytest
 import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.metrics.exposition import CounterFamily
 from pkwbus.service.metrics.instrumentation import ServiceMetrics

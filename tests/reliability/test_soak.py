@@ -25,7 +25,7 @@ import pytest
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimFaults, SimTiming, Simulator

@@ -29,8 +29,8 @@ from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
-from pkwbus.service.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.http.api import create_app
 from pkwbus.service.metrics.instrumentation import ERROR_KINDS

@@ -10,7 +10,7 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
-from pkwbus.service.app import bind
+from pkwbus.service.assembly.serve import bind
 from pkwbus.service.http import connections
 
 

@@ -20,7 +20,7 @@ from pkwbus.master.transaction import (
 )
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.metrics.instrumentation import ServiceMetrics
 
