@@ -262,11 +262,11 @@ class Service:
 
         import uvicorn
 
-        from pkwbus.service.api import create_app
-        from pkwbus.service.app import bind, settle_heap
-        from pkwbus.service.audit import AuditLog
-        from pkwbus.service.build import build_runtime
+        from pkwbus.service.assembly.build import build_runtime
+        from pkwbus.service.assembly.serve import bind, settle_heap
+        from pkwbus.service.audit.log import AuditLog
         from pkwbus.service.config import parse_config
+        from pkwbus.service.http.api import create_app
 
         config = parse_config(self.config_text)
         self.runtime = await build_runtime(config)
@@ -297,7 +297,8 @@ class Service:
 
 def _tcp_socket() -> object:
     """A listening socket made with IPPROTO_TCP, so that asyncio sets TCP_NODELAY on accepted
-    connections (``pkwbus.service.app.bind`` passes proto 0, and asyncio then leaves Nagle on)."""
+    connections (``pkwbus.service.assembly.serve.bind`` passes proto 0, and asyncio then
+    leaves Nagle on)."""
     import socket
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM, socket.IPPROTO_TCP)

@@ -41,7 +41,8 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, Reply
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import Profile
-from pkwbus.service.metrics import DriveInfo, ParameterInfo, ServiceMetrics, SnapshotCollector
+from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
+from pkwbus.service.metrics.instrumentation import ServiceMetrics
 
 BAUDRATE = 115200
 

@@ -60,7 +60,7 @@ def _telegrams(runtime: Any) -> float:
 async def _render(registry: Any) -> bytes:
     """The service's /metrics renderer, or generate_latest for a service without one."""
     try:
-        from pkwbus.service.exposition import render
+        from pkwbus.service.metrics.exposition import render
     except ImportError:
         from prometheus_client import generate_latest
 

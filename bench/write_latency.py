@@ -11,7 +11,7 @@ and two audit updates; for the master's share alone, the same number of
 write jobs also goes straight to ``Runtime.submit``. Latency is reported in
 units of one theoretical exchange time.
 
-``pkwbus.service.app.bind`` creates its socket with protocol 0, so asyncio
+``pkwbus.service.assembly.serve.bind`` creates its socket with protocol 0, so asyncio
 does not set TCP_NODELAY on the connections and every answer whose body
 goes out after its headers waits for the client's delayed ACK (40 ms on
 Linux). The PUT is therefore measured twice: on ``bind``'s socket, and on a

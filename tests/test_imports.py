@@ -1,6 +1,6 @@
 """The import graph of pkwbus: no cycle between modules, and the layers of
 docs/architecture.md (``protocol`` below everything, only ``service`` and the
-commands wire the layers together)."""
+commands wire the layers together), and the order of the rooms of ``service``."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ MAY_IMPORT = {
     "catalog": {"protocol", "problems", "yamlfile"},
     "link": {"protocol"},
     # master knows neither HTTP nor the command line: their exit codes and answers
-    # live with the commands and the service (commands.failures, service.outcome_answers)
+    # live with the commands and the service (commands.failures, service.http.outcome_answers)
     "master": {"protocol", "catalog", "link"},
     "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus"},
 }
@@ -89,6 +89,31 @@ def test_each_layer_imports_only_the_layers_below_it() -> None:
         if layer(dep) != layer(name) and layer(dep) not in MAY_IMPORT[layer(name)]
     )
     assert not wrong
+
+
+# The rooms of service/, lowest first: each imports only rooms before it, and runtime.
+SERVICE_ROOMS = ["config", "metrics", "audit", "http", "assembly"]
+
+
+def service_room(name: str) -> str | None:
+    parts = name.split(".")
+    if parts[:2] != ["pkwbus", "service"] or len(parts) < 3:
+        return None
+    return parts[2]
+
+
+def test_each_service_room_imports_only_the_rooms_below_it() -> None:
+    assert {service_room(n) for n in MODULES} - {None} == {*SERVICE_ROOMS, "runtime"}
+    wrong = sorted(
+        f"{name} imports {dep}"
+        for name, deps in GRAPH.items()
+        if (room := service_room(name)) in SERVICE_ROOMS
+        for dep in deps
+        if (other := service_room(dep)) not in (None, room, "runtime")
+        and (other not in SERVICE_ROOMS[: SERVICE_ROOMS.index(room)])
+    )
+    assert not wrong
+    assert not {service_room(dep) for dep in GRAPH["pkwbus.service.runtime"]} - {None}
 
 
 def test_nothing_in_master_prints() -> None:

@@ -21,10 +21,10 @@ import httpx
 import pytest
 
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
-from pkwbus.service.api import create_app
-from pkwbus.service.audit import AuditLog
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import Config, parse_config
+from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 

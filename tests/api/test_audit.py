@@ -15,7 +15,7 @@ import pytest
 
 from pkwbus.cli import main
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
-from pkwbus.service.audit import AuditEntry, AuditError, AuditLog, as_dict
+from pkwbus.service.audit.log import AuditEntry, AuditError, AuditLog, as_dict
 from tests.api.conftest import AUTH, POLLED_WRITABLES, TOKEN, fc_drives, service
 
 WRONG = "Bearer guess-of-the-token-XYZ"

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from pkwbus.service.audit import AuditLog
+from pkwbus.service.audit.log import AuditLog
 from tests.api.conftest import Service, service
 
 FULL = "database or disk is full"

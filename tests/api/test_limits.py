@@ -12,8 +12,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from pkwbus.service.audit import MAX_SOURCES_PER_MINUTE, OTHER_SOURCES, AuditLog
-from pkwbus.service.parameters import MAX_READS_PER_DRIVE
+from pkwbus.service.audit.log import MAX_SOURCES_PER_MINUTE, OTHER_SOURCES, AuditLog
+from pkwbus.service.http.parameters import MAX_READS_PER_DRIVE
 from pkwbus.sim import SimTiming
 from tests.api.conftest import AUTH, TOKEN, Service, service
 from tests.api.test_audit_store import metric

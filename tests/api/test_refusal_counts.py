@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.service.audit import WAL_BYTES, WAL_PAGES, AuditEntry, AuditError, AuditLog
-from pkwbus.service.audit_refusals import RefusalTallies
+from pkwbus.service.audit.log import WAL_BYTES, WAL_PAGES, AuditEntry, AuditError, AuditLog
+from pkwbus.service.audit.refusals import RefusalTallies
 from tests.api.test_audit_store import FULL, failing
 
 NOW = 1_700_000_000.0  # 20 s into a minute

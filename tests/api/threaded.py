@@ -14,7 +14,7 @@ from typing import Any
 
 import uvicorn
 
-from pkwbus.service.api import create_app
+from pkwbus.service.http.api import create_app
 from tests.api.conftest import service
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from pkwbus.cli import main
 from pkwbus.commands.audit_table import stamp, table, units_from
-from pkwbus.service.audit import AuditEntry, AuditLog
+from pkwbus.service.audit.log import AuditEntry, AuditLog
 from pkwbus.service.config import load_config
 
 NOW = 1_700_000_000.0  # 2023-11-14T22:13:20Z

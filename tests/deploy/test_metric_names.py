@@ -27,10 +27,10 @@ import pytest
 import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
-from pkwbus.service.exposition import CounterFamily
-from pkwbus.service.metrics import ServiceMetrics
+from pkwbus.service.metrics.exposition import CounterFamily
+from pkwbus.service.metrics.instrumentation import ServiceMetrics
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.dp_line import DpSimulator
 from tests.deploy.conftest import DP_DRIVES, DRIVES, service_config

@@ -15,7 +15,7 @@ import httpx
 import pytest
 
 from pkwbus import cli
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.sim import SimTiming, Simulator
 from tests.service.test_config import BAD, EXPECTED
@@ -121,8 +121,8 @@ async def api() -> AsyncIterator[httpx.AsyncClient]:
     """The app behind a real uvicorn server (chunked bodies need a real HTTP parser)."""
     import uvicorn
 
-    from pkwbus.service.api import create_app
-    from pkwbus.service.app import bind
+    from pkwbus.service.assembly.serve import bind
+    from pkwbus.service.http.api import create_app
 
     sim = Simulator("fc", [1], timing=SimTiming(0.001), seed=1, catalog="danfoss-fc")
     end = await sim.serve_tcp("127.0.0.1", 0)

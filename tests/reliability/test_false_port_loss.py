@@ -27,7 +27,7 @@ from typing import Any
 import pytest
 
 from pkwbus.link import LinkState
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 
 from .helpers import config_text, fc_line, uss_line, wait_for

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator

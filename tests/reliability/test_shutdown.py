@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.service.audit import AuditLog
+from pkwbus.service.audit.log import AuditLog
 from pkwbus.sim import SimTiming, Simulator
 
 from .service import TOKEN, Service, wait_for

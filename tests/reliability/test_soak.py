@@ -25,7 +25,7 @@ import pytest
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimFaults, SimTiming, Simulator
@@ -140,7 +140,7 @@ async def run_soak(seconds: float) -> None:
 def reconcile(soak: Soak) -> None:
     """Master counters against the simulator's, per drive.
 
-    How the master counts (service/metrics.py, master/line.py): every exchange
+    How the master counts (service/metrics/instrumentation.py, master/line.py): every exchange
     that put a telegram on the wire adds 1 to ``pkwbus_telegrams_total``; one
     without a usable answer adds 1 to ``pkwbus_telegram_errors_total`` of its
     kind (timeout, checksum, length, address); ``unexpected`` (an answer that

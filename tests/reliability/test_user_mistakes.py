@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from pkwbus.commands.common import Exit
-from pkwbus.service.audit import AuditLog
+from pkwbus.service.audit.log import AuditLog
 
 LIMIT_SECONDS = 30  # generous for a loaded machine; a hang still fails the case
 ADDRESS_SPACE = 2 << 30  # bytes: far more than pkwbus needs, far less than the machine has

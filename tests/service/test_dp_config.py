@@ -127,7 +127,7 @@ lines:
 
 def test_check_config_estimates_the_dp_cycle_and_warns_of_polls_it_cannot_carry() -> None:
     from pkwbus.protocol import dp_timing
-    from pkwbus.service.load import DP_JOB_CYCLES, check_config_report, line_load
+    from pkwbus.service.config.line_load import DP_JOB_CYCLES, check_config_report, line_load
 
     config = parse_config(SIM_LINE.format(baud=19200, every="50ms"), environ={})
     load = line_load(config.lines[0])

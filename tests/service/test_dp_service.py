@@ -29,11 +29,11 @@ from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.protocol import fdl, pkw, ppo, pzd
 from pkwbus.protocol.dp_services import Service
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
-from pkwbus.service.api import create_app
-from pkwbus.service.audit import AuditLog
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import parse_config
-from pkwbus.service.metrics import ERROR_KINDS
+from pkwbus.service.http.api import create_app
+from pkwbus.service.metrics.instrumentation import ERROR_KINDS
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpFaults, DpSimulator

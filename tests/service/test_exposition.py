@@ -19,16 +19,10 @@ from pkwbus.master.snapshot import DriveState, Reading, Snapshot
 from pkwbus.master.transaction import ErrorKind, Failure, Rejected, TimedOut
 from pkwbus.protocol.dialects import FC
 from pkwbus.protocol.pzd import Profile
-from pkwbus.service import device_metrics, exposition
-from pkwbus.service.exposition import MetricsRegistry, format_value, render
-from pkwbus.service.metrics import (
-    DriveInfo,
-    LineMetrics,
-    ParameterInfo,
-    ServiceMetrics,
-    SnapshotCollector,
-    api_metrics,
-)
+from pkwbus.service.metrics import devices, exposition
+from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
+from pkwbus.service.metrics.exposition import MetricsRegistry, format_value, render
+from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
 
 PROMTOOL = shutil.which("promtool") or "/usr/bin/promtool"
 # Label values a configuration may bring: quotes, backslashes, a newline, non-ASCII.
@@ -183,7 +177,7 @@ def test_values_are_rendered_when_their_poll_lands_so_the_scrape_only_joins(
         formatted += 1
         return format_value(value)
 
-    monkeypatch.setattr(device_metrics, "format_value", counting)
+    monkeypatch.setattr(devices, "format_value", counting)
     text = _text(plant)
     assert text == generate_latest(plant.registry).decode()
     drives_lines = 2 * len(plant.snapshot.drives)  # status word, main actual value

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import gc
 
-from pkwbus.service.app import settle_heap
+from pkwbus.service.assembly.serve import settle_heap
 
 
 def test_start_up_objects_leave_the_collectors_generations_and_later_ones_do_not() -> None:

@@ -10,8 +10,8 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
-from pkwbus.service import http
-from pkwbus.service.app import bind
+from pkwbus.service.assembly.serve import bind
+from pkwbus.service.http import connections
 
 
 @contextlib.asynccontextmanager
@@ -26,7 +26,7 @@ async def server(limit: int) -> AsyncIterator[int]:
     port = sock.getsockname()[1]
     config = uvicorn.Config(
         app, log_config=None, access_log=False, lifespan="off",
-        http=http.bounded_protocol(http.ConnectionLimit(limit)),
+        http=connections.bounded_protocol(connections.ConnectionLimit(limit)),
     )  # fmt: skip
     srv = uvicorn.Server(config)
     task = asyncio.create_task(srv.serve(sockets=[sock]))
@@ -49,7 +49,7 @@ async def closed_by_server(reader: asyncio.StreamReader) -> bool:
 async def test_a_request_whose_headers_never_end_is_closed(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(http, "HEADER_TIMEOUT", 0.3)
+    monkeypatch.setattr(connections, "HEADER_TIMEOUT", 0.3)
     async with server(5) as port:
         reader, writer = await asyncio.open_connection("127.0.0.1", port)
         writer.write(b"GET /ping HTTP/1.1\r\nHost: x\r\n")  # and never the blank line

@@ -20,9 +20,9 @@ from pkwbus.master.transaction import (
 )
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
-from pkwbus.service.metrics import ServiceMetrics
+from pkwbus.service.metrics.instrumentation import ServiceMetrics
 
 FAULTS = "pkwbus_pkw_faults_total"
 

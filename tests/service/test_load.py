@@ -8,7 +8,7 @@ import pytest
 
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service.config import Config, load_config
-from pkwbus.service.load import (
+from pkwbus.service.config.line_load import (
     check_config_report,
     config_load,
     exchange_seconds,

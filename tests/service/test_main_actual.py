@@ -20,8 +20,8 @@ from pkwbus.protocol import pzd
 from pkwbus.protocol.dialects import FC, IndLayout
 from pkwbus.protocol.pzd import Profile
 from pkwbus.protocol.telegram import FC_PROCESS, BlockShape, Protocol, split_block
-from pkwbus.service.exposition import MetricsRegistry, render
-from pkwbus.service.metrics import DriveInfo, SnapshotCollector
+from pkwbus.service.metrics.devices import DriveInfo, SnapshotCollector
+from pkwbus.service.metrics.exposition import MetricsRegistry, render
 
 MAV = "pkwbus_drive_main_actual_percent"
 WORD = "pkwbus_drive_status_word"

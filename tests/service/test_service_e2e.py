@@ -20,9 +20,9 @@ from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import ref_to_percent
-from pkwbus.service.api import create_app
-from pkwbus.service.build import build_runtime
+from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
+from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 from tests.master.conftest import until

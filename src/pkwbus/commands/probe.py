@@ -26,7 +26,7 @@ from pkwbus.master.transaction import Failure, Reply
 from pkwbus.protocol.pkw_length import AUTO, shown
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.build import line_for, target_for
+from pkwbus.service.assembly.build import line_for, target_for
 
 __all__ = ["probe", "run_probe"]
 

@@ -1,4 +1,7 @@
-"""`pkwbus run`, `pkwbus check-config` and `pkwbus audit`.
+"""`pkwbus run`, `pkwbus check-config` and `pkwbus audit`: their command lines.
+
+``pkwbus run`` loads the configuration and hands it to the service's composition
+root (:mod:`pkwbus.service.assembly.root`).
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for a
 configuration or audit log that cannot be used.
@@ -7,24 +10,16 @@ configuration or audit log that cannot be used.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
-import logging
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit, int_option
 from pkwbus.limits import MAX_AUDIT_LIMIT
 from pkwbus.service.config import Config, ConfigError, load_config
-from pkwbus.service.load import check_config_report
+from pkwbus.service.config.line_load import check_config_report
 
-if TYPE_CHECKING:
-    from pkwbus.service.audit import AuditLog
-
-__all__ = ["add_parsers", "load", "open_audit", "run_audit", "run_check", "run_service"]
-
-log = logging.getLogger("pkwbus")
+__all__ = ["add_parsers", "load", "run_audit", "run_check", "run_service"]
 
 
 def add_parsers(sub: Any) -> None:
@@ -64,7 +59,7 @@ def load(path: str, listen: str | None = None) -> Config:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from pkwbus.service.audit import path_problem
+    from pkwbus.service.audit.log import path_problem
 
     config = load(args.file)
     problem = path_problem(config.audit_db)
@@ -80,67 +75,19 @@ def run_check(args: argparse.Namespace) -> int:
 
 
 def run_service(args: argparse.Namespace) -> int:
-    from pkwbus.service.app import ListenError, bind
-    from pkwbus.service.logs import setup_logging
+    from pkwbus.service.assembly import root
 
     config = load(args.config, args.listen)
-    setup_logging(args.log_format or config.log_format, debug=args.debug)
-    audit = open_audit(config)
     try:
-        try:
-            sock = bind(config.listen.host, config.listen.port)
-        except ListenError as exc:
-            raise CommandError(str(exc), Exit.BAD_INPUT) from None
-        link.run(_serve(config, sock, audit))
-    finally:
-        audit.close()
+        root.run_service(config, log_format=args.log_format or config.log_format, debug=args.debug)
+    except root.StartError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
     return Exit.OK
-
-
-def open_audit(config: Config) -> AuditLog:
-    """The audit log of a starting service; a place that cannot hold it is a configuration
-    error (exit 2), never an internal one."""
-    from pkwbus.service.audit import AuditError, AuditLog, path_problem
-
-    problem = path_problem(config.audit_db)
-    if problem is not None:
-        raise CommandError(f"audit_db: {problem}", Exit.BAD_INPUT)
-    try:
-        return AuditLog(config.audit_db)
-    except AuditError as exc:
-        raise CommandError(f"audit_db: {exc}", Exit.BAD_INPUT) from None
-
-
-async def _serve(config: Config, sock: Any, audit: AuditLog) -> None:
-    from pkwbus.service.api import create_app
-    from pkwbus.service.app import serve
-    from pkwbus.service.build import build_runtime
-
-    runtime = await build_runtime(config)
-    token = config.write_token()
-    app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
-    recorder = app.state.recorder
-    interrupted = await recorder.close_interrupted()
-    if interrupted:
-        log.warning(
-            "audit log: %d write(s) had no recorded outcome (the service stopped before"
-            " the answer, or could not store it): marked interrupted",
-            interrupted,
-        )
-    host = config.listen.host
-    shown = f"[{host}]" if ":" in host else host
-    port = sock.getsockname()[1]  # the one the system chose for listen port 0
-    log.info("pkwbus: metrics on http://%s:%d/metrics", shown, port)
-    log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
-    try:
-        await serve(runtime, app, sock, max_connections=config.api.max_connections)
-    finally:
-        await asyncio.to_thread(recorder.save_late)
 
 
 def run_audit(args: argparse.Namespace) -> int:
     from pkwbus.commands.audit_table import table, units_from
-    from pkwbus.service.audit import AuditError, AuditLog, as_dict
+    from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 
     config = load(args.config)
     if not config.audit_db.exists():

@@ -1,7 +1,7 @@
 """The running service's object graph: lines with their runners, drives, snapshot, metrics.
 
-Built from the configuration by :mod:`pkwbus.service.build`; started and
-stopped by :mod:`pkwbus.service.app`. The HTTP API reads the snapshot and
+Built from the configuration by :mod:`pkwbus.service.assembly.build`; started and
+stopped by :mod:`pkwbus.service.assembly.serve`. The HTTP API reads the snapshot and
 queues jobs through :meth:`Runtime.submit`.
 """
 

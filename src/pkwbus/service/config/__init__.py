@@ -25,7 +25,9 @@ what the file said; the resolved values are the properties
 The package's modules: :mod:`.base` (the error, the base model, constants),
 :mod:`.fields` (field types), :mod:`.catalogs`, :mod:`.parameters`
 (overrides and polls), :mod:`.drive`, :mod:`.line`, :mod:`.model` (the whole
-file), :mod:`.loading`. Problems are worded by :mod:`pkwbus.problems`, shared
+file), :mod:`.loading`; and :mod:`.line_load`, how busy each line of a valid
+configuration would be (``pkwbus check-config``'s estimate, not re-exported
+here). Problems are worded by :mod:`pkwbus.problems`, shared
 with the catalogs; ``sim://`` ports are parsed by :mod:`pkwbus.sim.url`.
 """
 

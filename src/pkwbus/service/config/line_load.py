@@ -21,6 +21,11 @@ adds to each answer. A slave's PKW channel completes at most one job every
 :data:`DP_JOB_CYCLES` cycles (the request, then AK 0 before the next one),
 so its polls are refreshed at most ``1 / (DP_JOB_CYCLES * cycle)`` times a
 second between them; polls that ask for more are warned about.
+
+The estimate lives with the configuration: it is arithmetic over the
+configuration's models (lines, drives, polls, bus timing), done before anything
+runs. The running service never asks it, and the master, which plans at run
+time from its own poll specs, imports nothing of the service's.
 """
 
 from __future__ import annotations
@@ -34,7 +39,10 @@ from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol import dp_timing, fdl, timing
 from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
-from pkwbus.service.config import Catalogs, Config, Drive, Line, builtin_catalogs
+from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
+from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.line import Line
+from pkwbus.service.config.model import Config
 
 __all__ = [
     "DEFAULT_RESPONSE_DELAY",

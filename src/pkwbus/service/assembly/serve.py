@@ -1,4 +1,6 @@
-"""The composition root of `pkwbus run`: lines, HTTP server, signals, shutdown.
+"""The running service from start to stop: the HTTP address bound, the lines and the
+HTTP server started, signals, shutdown in order (:func:`serve`); what
+:mod:`pkwbus.service.assembly.root` runs once it has built them.
 
 SIGTERM, SIGINT or SIGHUP: stop taking new jobs, let every line finish the
 exchange in flight, close the ports, stop the HTTP server, exit 0. SIGHUP
@@ -23,7 +25,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from pkwbus.service.config import LISTEN_ENV
-from pkwbus.service.http import ConnectionLimit, bounded_protocol
+from pkwbus.service.http.connections import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
@@ -36,7 +38,7 @@ __all__ = [
     "settle_heap",
 ]
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("pkwbus.service.app")  # the name its log lines have always carried
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 

@@ -31,16 +31,10 @@ from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.pkw_length import AUTO
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.exposition import MetricsRegistry
-from pkwbus.service.metrics import (
-    DriveInfo,
-    LineMetrics,
-    ParameterInfo,
-    ServiceMetrics,
-    SnapshotCollector,
-    api_metrics,
-)
-from pkwbus.service.parameter_table import parameter_table
+from pkwbus.service.assembly.parameter_table import parameter_table
+from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
+from pkwbus.service.metrics.exposition import MetricsRegistry
+from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.dp_line import DpSimulator, SlaveKind

@@ -1,7 +1,7 @@
 """The tallies of requests refused for want of a valid token: one row per address and minute.
 
 A flood of such requests can neither grow the audit database nor cost a write
-each: they are counted here, in memory, and :class:`~pkwbus.service.audit.AuditLog`
+each: they are counted here, in memory, and :class:`~pkwbus.service.audit.log.AuditLog`
 writes each address's tally once its minute has ended (and at shutdown, and
 before an authorised read of the log). Past :data:`MAX_SOURCES_PER_MINUTE`
 addresses in a minute the rest share the tally of :data:`OTHER_SOURCES`.

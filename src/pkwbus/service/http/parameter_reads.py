@@ -3,9 +3,9 @@
 They go ahead of polls and need no token: a bound of
 :data:`MAX_READS_PER_DRIVE` waiting reads per drive keeps a flood of them from
 starving the drive's polls. Raises
-:class:`~pkwbus.service.parameter_checks.ApiError`: 429 when the bound is
+:class:`~pkwbus.service.http.parameter_checks.ApiError`: 429 when the bound is
 reached, 404 for a parameter the dialect cannot encode, and those of the
-checks (:mod:`pkwbus.service.parameter_checks`) and of the job's outcome.
+checks (:mod:`pkwbus.service.http.parameter_checks`) and of the job's outcome.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef
-from pkwbus.service.parameter_checks import ApiError, check_names, fit_index, locate, raise_for
+from pkwbus.service.http.parameter_checks import ApiError, check_names, fit_index, locate, raise_for
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 __all__ = ["MAX_READS_PER_DRIVE", "Reads", "read_request"]

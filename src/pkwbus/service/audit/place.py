@@ -9,7 +9,7 @@ import os
 import stat
 from pathlib import Path
 
-from pkwbus.service.audit_key import key_path
+from pkwbus.service.audit.key import key_path
 
 __all__ = ["path_problem"]
 

@@ -14,9 +14,9 @@ runs to its end and its row is completed even if the HTTP client goes away. A
 drive or parameter name longer than any can be is refused before it is looked
 up.
 
-The reads are in :mod:`pkwbus.service.parameter_reads`, the writes in
-:mod:`pkwbus.service.parameter_writes`, the checks of names, token and index in
-:mod:`pkwbus.service.parameter_checks`; this module joins them in
+The reads are in :mod:`pkwbus.service.http.parameter_reads`, the writes in
+:mod:`pkwbus.service.http.parameter_writes`, the checks of names, token and index in
+:mod:`pkwbus.service.http.parameter_checks`; this module joins them in
 :class:`ParameterService` and re-exports their public names. Everything raises
 :class:`ApiError` (an HTTP status, a kind and a message), nothing else.
 """
@@ -25,7 +25,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from pkwbus.service.parameter_checks import (
+from pkwbus.service.audit.recorder import AuditRecorder
+from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     MAX_PARAMETER_TEXT,
@@ -35,9 +36,8 @@ from pkwbus.service.parameter_checks import (
     check_names,
     clip,
 )
-from pkwbus.service.parameter_reads import MAX_READS_PER_DRIVE, Reads
-from pkwbus.service.parameter_writes import WriteOrder, Writes
-from pkwbus.service.recorder import AuditRecorder
+from pkwbus.service.http.parameter_reads import MAX_READS_PER_DRIVE, Reads
+from pkwbus.service.http.parameter_writes import WriteOrder, Writes
 from pkwbus.service.runtime import Runtime
 
 __all__ = [

@@ -32,12 +32,12 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Final, TypeVar
 
-from pkwbus.service.audit import AuditEntry, AuditError, AuditLog
-from pkwbus.service.metrics import ApiMetrics
+from pkwbus.service.audit.log import AuditEntry, AuditError, AuditLog
+from pkwbus.service.metrics.instrumentation import ApiMetrics
 
 __all__ = ["MAX_UNSAVED", "PROBE_INTERVAL", "RETRY_DELAYS", "AuditRecorder", "AuditUnavailable"]
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("pkwbus.service.recorder")  # the name its log lines have always carried
 
 RETRY_DELAYS: Final = (0.05, 0.2, 0.5)  # seconds before each further try of an outcome
 PROBE_INTERVAL: Final = 5.0  # seconds between probes while the log is failing

@@ -21,7 +21,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 __all__ = ["HEADER_TIMEOUT", "LOG_EVERY", "ConnectionLimit", "bounded_protocol"]
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("pkwbus.service.http")  # the name its log lines have always carried
 
 LOG_EVERY = 10.0
 HEADER_TIMEOUT = 10.0

@@ -6,7 +6,7 @@ bus traffic and values that disappear also disappear from the output.
 made once. A value's lines are made when its reading lands in the snapshot
 (:meth:`SnapshotCollector.landed`, called by the line's metrics), so that a
 scrape only joins them; a drive's lines are made again only when its state
-changed (see :mod:`pkwbus.service.exposition`).
+changed (see :mod:`pkwbus.service.metrics.exposition`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from prometheus_client.registry import Collector
 
 from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
-from pkwbus.service.exposition import CHUNK, format_value, head, header
+from pkwbus.service.metrics.exposition import CHUNK, format_value, head, header
 
 __all__ = ["DriveInfo", "ParameterInfo", "SnapshotCollector"]
 

@@ -4,7 +4,7 @@ Reading the audit log needs a token: the write token, or the read token named
 by ``api.read_token_env``. An error body quotes at most :data:`MAX_MESSAGE`
 characters of what it complains about.
 
-The endpoints answer every :class:`~pkwbus.service.parameter_checks.ApiError` as a JSON
+The endpoints answer every :class:`~pkwbus.service.http.parameter_checks.ApiError` as a JSON
 error body with its status.
 """
 
@@ -26,8 +26,9 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.service import exposition
-from pkwbus.service.api_models import (
+from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
+from pkwbus.service.audit.recorder import AuditRecorder
+from pkwbus.service.http.models import (
     ERRORS,
     DriveView,
     Health,
@@ -38,10 +39,15 @@ from pkwbus.service.api_models import (
     WriteBody,
     WriteResult,
 )
-from pkwbus.service.audit import AuditError, AuditLog, as_dict
-from pkwbus.service.metrics import api_metrics
-from pkwbus.service.parameters import INCOMPLETE, ApiError, Caller, ParameterService, WriteOrder
-from pkwbus.service.recorder import AuditRecorder
+from pkwbus.service.http.parameters import (
+    INCOMPLETE,
+    ApiError,
+    Caller,
+    ParameterService,
+    WriteOrder,
+)
+from pkwbus.service.metrics import exposition
+from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
 
 __all__ = [

@@ -25,10 +25,10 @@ secret kept beside the database (``<audit_db>.key``, mode 0600, made on the
 first start): the same token has the same id across restarts, and nobody
 without the key can test a guess of the token against it.
 
-The key is in :mod:`pkwbus.service.audit_key`, the refusal tallies in
-:mod:`pkwbus.service.audit_refusals`, the row and its values in
-:mod:`pkwbus.service.audit_rows`, the check of its place in
-:mod:`pkwbus.service.audit_place`; this module is the store, and re-exports
+The key is in :mod:`pkwbus.service.audit.key`, the refusal tallies in
+:mod:`pkwbus.service.audit.refusals`, the row and its values in
+:mod:`pkwbus.service.audit.rows`, the check of its place in
+:mod:`pkwbus.service.audit.place`; this module is the store, and re-exports
 their public names. Raises :class:`AuditError` (and :class:`ValueError` from
 :meth:`AuditLog.update` for a column it does not complete).
 """
@@ -44,7 +44,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
 
-from pkwbus.service.audit_key import (
+from pkwbus.service.audit.key import (
     KEY_BYTES,
     TOKEN_ID_HEX,
     fingerprint,
@@ -52,15 +52,15 @@ from pkwbus.service.audit_key import (
     load_key,
     new_key,
 )
-from pkwbus.service.audit_place import path_problem
-from pkwbus.service.audit_refusals import (
+from pkwbus.service.audit.place import path_problem
+from pkwbus.service.audit.refusals import (
     MAX_SOURCES_PER_MINUTE,
     OTHER_SOURCES,
     RefusalTallies,
     Tally,
     minute_of,
 )
-from pkwbus.service.audit_rows import (
+from pkwbus.service.audit.rows import (
     COLUMNS,
     INTERRUPTED,
     MAX_TEXT,
@@ -92,7 +92,7 @@ __all__ = [
     "path_problem",
 ]
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("pkwbus.service.audit")  # the name its log lines have always carried
 
 FLUSH_DELAY: Final = 1.0  # seconds after a minute's end before its refusal counts are written
 WAL_PAGES: Final = 64  # the write-ahead log is checkpointed once it holds this many pages

@@ -1,10 +1,13 @@
-"""Prometheus metrics with exactly the names and labels the README documents.
+"""The service's own metrics (its instrumentation), with exactly the names and labels
+the README documents: exchanges, faults, jobs, line time and overruns per line
+(:class:`LineMetrics`), DP slave states (:class:`DpMetrics`), the audit log's and the
+API's refusals (:class:`ApiMetrics`).
 
-Device values (parameter values, drive and line state, status words) come
-from :class:`~pkwbus.service.device_metrics.SnapshotCollector`, built from a
-copy of the snapshot at each scrape. The service's own counters are
-:class:`~pkwbus.service.exposition.CounterFamily` series that keep their
-rendered line (see :mod:`pkwbus.service.exposition`), plus a Histogram; which
+Device values (parameter values, drive and line state, status words) are not here:
+they come from :class:`~pkwbus.service.metrics.devices.SnapshotCollector`, built from
+a copy of the snapshot at each scrape. The counters are
+:class:`~pkwbus.service.metrics.exposition.CounterFamily` series that keep their
+rendered line (see :mod:`pkwbus.service.metrics.exposition`), plus a Histogram; which
 label values exist at 0 from the start is said at :class:`LineMetrics`.
 """
 
@@ -25,12 +28,7 @@ from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
-
-# Re-exported: built with the others in pkwbus.service.build.
-from pkwbus.service.device_metrics import DriveInfo as DriveInfo
-from pkwbus.service.device_metrics import ParameterInfo as ParameterInfo
-from pkwbus.service.device_metrics import SnapshotCollector as SnapshotCollector
-from pkwbus.service.exposition import CounterFamily
+from pkwbus.service.metrics.exposition import CounterFamily
 
 __all__ = [
     "AUDIT_STAGES",
@@ -38,11 +36,8 @@ __all__ = [
     "ERROR_KINDS",
     "REFUSAL_REASONS",
     "ApiMetrics",
-    "DriveInfo",
     "LineMetrics",
-    "ParameterInfo",
     "ServiceMetrics",
-    "SnapshotCollector",
     "api_metrics",
     "fault_labels",
 ]

@@ -9,10 +9,10 @@ as a count per address and minute); a write is sent only once its row is
 stored, and once queued it runs to its end and its row is completed even if
 the HTTP client goes away.
 
-Raises :class:`~pkwbus.service.parameter_checks.ApiError`: 401/403 for the
+Raises :class:`~pkwbus.service.http.parameter_checks.ApiError`: 401/403 for the
 token, 403 for a parameter that is not writable, 422 for a value that does
 not fit, 503 when the audit log cannot store the row (nothing sent), those of
-the checks (:mod:`pkwbus.service.parameter_checks`) and of the job's outcome.
+the checks (:mod:`pkwbus.service.http.parameter_checks`) and of the job's outcome.
 """
 
 from __future__ import annotations
@@ -27,9 +27,10 @@ from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, encode_text
-from pkwbus.service.audit import AuditEntry
-from pkwbus.service.outcome_answers import audit_outcome
-from pkwbus.service.parameter_checks import (
+from pkwbus.service.audit.log import AuditEntry
+from pkwbus.service.audit.recorder import AuditRecorder, AuditUnavailable
+from pkwbus.service.http.outcome_answers import audit_outcome
+from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     MAX_PARAMETER_TEXT,
@@ -42,8 +43,7 @@ from pkwbus.service.parameter_checks import (
     locate,
     raise_for,
 )
-from pkwbus.service.parameter_reads import Reads
-from pkwbus.service.recorder import AuditRecorder, AuditUnavailable
+from pkwbus.service.http.parameter_reads import Reads
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 __all__ = ["WriteOrder", "Writes"]

@@ -1,0 +1,83 @@
+"""The composition root of ``pkwbus run``: from a valid configuration to a running
+service, and back.
+
+In order: logging; the audit log, its place checked first; the HTTP address
+bound; the runtime built from the configuration (:mod:`.build`); the HTTP app
+over it (:mod:`pkwbus.service.http.api`); writes an earlier run left without an
+outcome marked interrupted; then :func:`~.serve.serve` until a stop signal. On
+the way out the outcomes kept in memory are stored and the audit log is closed.
+
+Raises :class:`StartError` (one line) when the audit log's place or the HTTP
+address cannot be used, before any line or the HTTP server has started.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+
+from pkwbus import link
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.logs import setup_logging
+from pkwbus.service.assembly.serve import ListenError, bind, serve
+from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
+from pkwbus.service.config import Config
+from pkwbus.service.http.api import create_app
+
+__all__ = ["StartError", "open_audit", "run_service"]
+
+log = logging.getLogger("pkwbus")  # the service's start-up lines, under the command's name
+
+
+class StartError(Exception):
+    """The service cannot start: its audit log's place or its HTTP address is unusable."""
+
+
+def run_service(config: Config, *, log_format: str, debug: bool = False) -> None:
+    """Run the service of ``config`` until SIGTERM, SIGINT or SIGHUP."""
+    setup_logging(log_format, debug=debug)
+    audit = open_audit(config)
+    try:
+        try:
+            sock = bind(config.listen.host, config.listen.port)
+        except ListenError as exc:
+            raise StartError(str(exc)) from None
+        link.run(_serve(config, sock, audit))
+    finally:
+        audit.close()
+
+
+def open_audit(config: Config) -> AuditLog:
+    """The audit log of a starting service; a place that cannot hold it is a
+    :class:`StartError`, never an internal error."""
+    problem = path_problem(config.audit_db)
+    if problem is not None:
+        raise StartError(f"audit_db: {problem}")
+    try:
+        return AuditLog(config.audit_db)
+    except AuditError as exc:
+        raise StartError(f"audit_db: {exc}") from None
+
+
+async def _serve(config: Config, sock: socket.socket, audit: AuditLog) -> None:
+    runtime = await build_runtime(config)
+    token = config.write_token()
+    app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
+    recorder = app.state.recorder
+    interrupted = await recorder.close_interrupted()
+    if interrupted:
+        log.warning(
+            "audit log: %d write(s) had no recorded outcome (the service stopped before"
+            " the answer, or could not store it): marked interrupted",
+            interrupted,
+        )
+    host = config.listen.host
+    shown = f"[{host}]" if ":" in host else host
+    port = sock.getsockname()[1]  # the one the system chose for listen port 0
+    log.info("pkwbus: metrics on http://%s:%d/metrics", shown, port)
+    log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
+    try:
+        await serve(runtime, app, sock, max_connections=config.api.max_connections)
+    finally:
+        await asyncio.to_thread(recorder.save_late)
