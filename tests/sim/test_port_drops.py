@@ -55,8 +55,8 @@ async def test_a_tcp_end_cuts_its_connections_for_the_outage_then_serves_again()
         assert await cut(reader)
         writer.close()
         assert not lost.done()
-        lost.cancel()
-        end._lost_until = 0.0  # the outage over (rather than wait its 60 s)
+        lost.cancel()  # the port is back at once
+        await asyncio.gather(lost, return_exceptions=True)
         reader, writer = await asyncio.open_connection("127.0.0.1", end.port)
         assert await answered(reader, writer)
         writer.close()
@@ -98,6 +98,24 @@ async def test_a_pty_end_removes_its_pty_for_the_outage_and_makes_a_new_one(
         os.close(old)
         await end.close()
     assert not os.path.lexists(link)
+
+
+async def test_a_pty_lost_is_back_at_once_when_the_loss_is_cancelled(
+    tmp_path: pathlib.Path,
+) -> None:
+    link = str(tmp_path / "ttySIM")
+    end = await simulator().serve_pty(link)
+    try:
+        lost = asyncio.create_task(end.interrupt(3600.0))
+        await wait_until(lambda: not os.path.lexists(link))
+        lost.cancel()
+        await asyncio.gather(lost, return_exceptions=True)
+        assert os.path.islink(link) and os.readlink(link) == end.device
+        reader, writer = await serial_asyncio.open_serial_connection(url=link, baudrate=19200)
+        assert await answered(reader, writer)
+        writer.close()
+    finally:
+        await end.close()
 
 
 async def wait_until(check: Callable[[], bool]) -> None:

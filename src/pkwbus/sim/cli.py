@@ -41,7 +41,6 @@ __all__ = [
 
 EXIT_USAGE = 2
 EXIT_PORT = 4
-PORT_OUTAGE = DurationRange("a port outage", 0.0, 3600.0)
 FAULT_OPTIONS = ("drop", "corrupt", "truncate", "garbage", "wrong_address", "late", "stale")
 
 
@@ -276,7 +275,7 @@ def _plan(args: argparse.Namespace, sim: Simulator | DpSimulator) -> Plan:
         _duration("--stats-interval", args.stats_interval, durations.STATS_INTERVAL),
         parse_host_port(args.stats_listen) if args.stats_listen else None,
         args.drop_port_per_hour,
-        _duration("--port-outage", args.port_outage, PORT_OUTAGE),
+        _duration("--port-outage", args.port_outage, durations.SIM_PORT_OUTAGE),
         args.seed,
     )
 

@@ -169,12 +169,15 @@ class TcpEnd:
     async def interrupt(self, outage: float) -> None:
         """Lose the port for ``outage`` seconds, as a gateway that restarts: every
         connection is cut, and one made meanwhile is cut at once. Returns when the
-        port is back. The listening socket stays ours, so the port number cannot
-        go to another program meanwhile."""
+        port is back; cancelled, the port is back at once. The listening socket
+        stays ours, so the port number cannot go to another program meanwhile."""
         loop = asyncio.get_running_loop()
         self._lost_until = loop.time() + outage
-        await self._cut_clients()
-        await asyncio.sleep(max(0.0, self._lost_until - loop.time()))
+        try:
+            await self._cut_clients()
+            await asyncio.sleep(max(0.0, self._lost_until - loop.time()))
+        finally:
+            self._lost_until = 0.0
 
     async def _cut_clients(self) -> None:
         clients = dict(self._clients)
@@ -243,11 +246,13 @@ class PtyEnd:
     async def interrupt(self, outage: float) -> None:
         """Lose the port for ``outage`` seconds, as a USB adapter pulled and plugged in
         again: the pty and its link go (a client's reads and writes fail), then a new
-        pty is linked at the same path. Returns when it is there; raises as
-        :meth:`start` when it cannot be made again."""
+        pty is linked at the same path. Returns when it is there (cancelled: at
+        once); raises as :meth:`start` when it cannot be made again."""
         await self.close()
-        await asyncio.sleep(outage)
-        await self.start()
+        try:
+            await asyncio.sleep(outage)
+        finally:
+            await self.start()
 
     async def close(self) -> None:
         if self._fds is None:
