@@ -80,6 +80,8 @@ async def soak(settings: Settings) -> Soak:
     folder = settings.folder or Path(tempfile.mkdtemp(prefix="pkwbus-soak-"))
     folder.mkdir(parents=True, exist_ok=True)
     result = Soak(settings, folder)
+    if settings.say:
+        print(f"soak of {settings.minutes:g} min on {settings.lines} lines; logs in {folder}")
     lines = soak_lines(settings.lines)
     sims, started = await procs.start_sims(folder, [
         "--lines", str(settings.lines), "--seed", str(settings.seed),
