@@ -17,7 +17,7 @@ from collections.abc import Callable
 import pytest
 import serial_asyncio
 
-from pkwbus.sim import ModelConfig, SimTiming, Simulator
+from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 from pkwbus.sim.ends import drop_at_random
 from tests.sim.test_ends import READ, Telegrams
 
@@ -116,6 +116,33 @@ async def test_a_pty_lost_is_back_at_once_when_the_loss_is_cancelled(
         writer.close()
     finally:
         await end.close()
+
+
+async def test_a_late_answer_of_a_lost_pty_never_reaches_whatever_has_its_number_now(
+    tmp_path: pathlib.Path,
+) -> None:
+    faults = SimFaults(late=1.0, late_seconds=0.3)
+    sim = Simulator("fc", [1], timing=SimTiming(0.0), seed=1, faults=faults, model=QUIET)
+    end = await sim.serve_pty(str(tmp_path / "ttySIM"))
+    controller = end._fds[0] if end._fds else -1
+    client = os.open(end.path, os.O_RDWR | os.O_NOCTTY)
+    try:
+        os.write(client, READ)
+        await wait_until(lambda: sim.stats.line["responses"] == 1)  # the answer is due later
+        await end.close()
+        # The lowest free descriptors go to the next file opened: now a socket's.
+        mine, other = socket.socketpair()
+        try:
+            assert mine.fileno() == controller
+            other.setblocking(False)
+            await asyncio.sleep(0.6)  # past the late answer's time
+            with pytest.raises(BlockingIOError):
+                other.recv(64)
+        finally:
+            mine.close()
+            other.close()
+    finally:
+        os.close(client)
 
 
 async def wait_until(check: Callable[[], bool]) -> None:

@@ -85,6 +85,7 @@ class Session:
         self._queue: asyncio.Queue[tuple[object, float]] = asyncio.Queue()
         self._loop = asyncio.get_running_loop()
         self._started = 0.0
+        self._late: set[asyncio.TimerHandle] = set()  # late answers still to send
         self._task = self._loop.create_task(self._answer_in_turn())
 
     def feed(self, chunk: bytes) -> None:
@@ -110,11 +111,19 @@ class Session:
             )
             delay = started + wire + timing.response_delay - self._loop.time()
             if answer.late:
-                self._loop.call_later(max(delay, 0.0) + answer.late, self._send, answer)
+                self._send_later(max(delay, 0.0) + answer.late, answer)
                 continue
             if delay > 0:
                 await asyncio.sleep(delay)
             self._send(answer)
+
+    def _send_later(self, delay: float, answer: Answer) -> None:
+        def send() -> None:
+            self._late.discard(handle)
+            self._send(answer)
+
+        handle = self._loop.call_later(delay, send)
+        self._late.add(handle)
 
     def _send(self, answer: Answer) -> None:
         try:
@@ -123,6 +132,11 @@ class Session:
             self.sim.stats.count("unsent")
 
     async def close(self) -> None:
+        """Stop answering; late answers not yet sent never are (the end they were for
+        is gone, and its descriptor's number may be another's by then)."""
+        for handle in self._late:
+            handle.cancel()
+        self._late.clear()
         self._task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await self._task
