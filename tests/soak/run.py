@@ -72,6 +72,8 @@ class Soak:
         lines = [table(self.samples), ""]
         lines += [f"{key}: {value}" for key, value in self.counts.items()]
         lines.append(f"events: {json.dumps(self.events, sort_keys=True)}")
+        if self.problems.counts:
+            lines.append(f"problems found, by kind: {self.problems.counts}")
         lines.append(f"folder: {self.folder}")
         return "\n".join(lines)
 
@@ -121,8 +123,16 @@ async def _with_service(
         code = await procs.stop(service)
     if code != 0:
         result.problems.add("exit", f"pkwbus run ended with {code} on SIGTERM")
-    if "Traceback" in log.read_text(errors="replace"):
+    text = log.read_text(errors="replace")
+    if "Traceback" in text:
         result.problems.add("log", f"a traceback in the service's log: {log}")
+    said = text.splitlines()
+    result.counts |= {
+        "service log lines": len(said),
+        "service log warnings": sum(" warning " in line for line in said),
+        "service log errors": sum(" error " in line for line in said),
+        "ports lost, as the service logged them": sum(": lost " in line for line in said),
+    }
 
 
 async def _drive(
