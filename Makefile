@@ -3,7 +3,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: test test-long lint typecheck pytest run bench fuzz clean status-page
+.PHONY: test test-long lint typecheck pytest run bench fuzz clean status-page soak
 
 # The runtime dependencies at the exact versions of constraints.txt (the
 # image's); the test tools, which it does not list, resolve freely.
@@ -30,10 +30,19 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
-# The minute-long forms (60 s soak, schemathesis over the API); .ci/run runs them
-# after make test.
+# The minute-long forms (60 s soak, schemathesis over the API, 5 minutes of make soak);
+# .ci/run runs them after make test.
 test-long: $(STAMP)
 	$(BIN)/python -m pytest -q -m long
+
+# An hour of pkwbus run on simulated lines with faults, lost ports and restarts, measured
+# (README.md, "Measuring and fuzzing"); not in make test. SOAK_MINUTES=5 SOAK_LINES=3: a
+# short one.
+SOAK_MINUTES ?= 60
+SOAK_LINES ?= 8
+
+soak: $(STAMP)
+	$(BIN)/python -m tests.soak.run --minutes $(SOAK_MINUTES) --lines $(SOAK_LINES)
 
 # docs/status-page.png: the status page in headless chromium (deploy/browser-setup).
 status-page: $(STAMP)

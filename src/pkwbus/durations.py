@@ -27,6 +27,7 @@ __all__ = [
     "RS485_DELAY",
     "SIM_LAG",
     "SIM_LATE",
+    "SIM_PORT_OUTAGE",
     "STATS_INTERVAL",
     "TELEGRAM_TIMEOUT",
     "DurationRange",
@@ -71,6 +72,7 @@ POLL_INTERVAL: Final = DurationRange("a poll interval", 0.001, 86400.0)
 JOB_DEADLINE: Final = DurationRange("a job deadline", 0.001, 3600.0)
 SIM_LAG: Final = DurationRange("a simulated PKW lag", 0.0, 3600.0)
 SIM_LATE: Final = DurationRange("the delay of a late answer", 0.0, 3600.0)
+SIM_PORT_OUTAGE: Final = DurationRange("a port outage", 0.0, 3600.0)
 STATS_INTERVAL: Final = DurationRange("a stats interval", 0.01, 3600.0)
 # The kernel caps the RTS delays of RS-485 mode at 100 ms (serial_rs485, RS485_MAX_RTS_DELAY).
 RS485_DELAY: Final = DurationRange("an RS-485 RTS delay", 0.0, 0.1)
@@ -91,6 +93,7 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("`read`/`write --deadline`", JOB_DEADLINE),
     ("`simulate --lag` (as a duration)", SIM_LAG),
     ("`simulate --late-after`", SIM_LATE),
+    ("`simulate --port-outage`", SIM_PORT_OUTAGE),
     ("`simulate --stats-interval`", STATS_INTERVAL),
     ("line `rs485` `delay_before_tx`, `delay_before_rx` (whole milliseconds)", RS485_DELAY),
     ("profibus line `slot_time`, `--slot-time`", DP_SLOT_TIME),

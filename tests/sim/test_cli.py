@@ -98,6 +98,11 @@ def test_pty_end_from_the_command_line(tmp_path: pathlib.Path) -> None:
         ["--listen", "tcp://127.0.0.1:0", "--warnings-per-hour", "-1"],
         ["--listen", "tcp://127.0.0.1:0", "--trips-per-hour", "nan"],
         ["--listen", "tcp://127.0.0.1:0", "--protocol", "uss", "--pkw-words", "5"],
+        ["--listen", "tcp://127.0.0.1:0", "--drop-port-per-hour", "-1"],
+        ["--listen", "tcp://127.0.0.1:0", "--drop-port-per-hour", "3601"],
+        ["--listen", "tcp://127.0.0.1:0", "--drop-port-per-hour", "nan"],
+        ["--listen", "tcp://127.0.0.1:0", "--drop-port-per-hour", "1", "--port-outage", "2h"],
+        ["--listen", "tcp://127.0.0.1:0", "--port-outage", "soon"],
     ],
 )
 def test_bad_options_say_one_line_and_exit_2(

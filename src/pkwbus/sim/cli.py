@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
+import random
 import signal
 import sys
 from dataclasses import dataclass
@@ -18,7 +18,7 @@ from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
 from pkwbus.sim.dp_line import DpFaults, DpSimulator
-from pkwbus.sim.ends import PathInUseError
+from pkwbus.sim.ends import PathInUseError, PtyEnd, TcpEnd, drop_at_random
 from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR, ModelConfig
 from pkwbus.sim.simulator import Simulator
 from pkwbus.sim.statsout import StatsServer, keep_stats_file
@@ -111,6 +111,17 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="how often a drive trips (default %(default)g; 0: never)",
     )
+    faults.add_argument(
+        "--drop-port-per-hour",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="how often the port is lost at random: TCP connections cut, the pty removed"
+        " and made again at the same path (default 0: never; at most 3600)",
+    )
+    faults.add_argument(
+        "--port-outage", default="1s", help="how long a lost port stays lost (default 1s)"
+    )
     faults.add_argument("--late-after", default="1s", help="how late a late answer is")
     faults.add_argument("--dead", default="", help="addresses that never answer: 3,4")
     stats = parser.add_argument_group("stats")
@@ -178,6 +189,9 @@ class Plan:
     stats_file: str | None
     stats_interval: float
     stats_listen: tuple[str, int] | None
+    drop_port_per_hour: float = 0.0
+    port_outage: float = 1.0
+    seed: int | None = None
 
 
 def plan(args: argparse.Namespace) -> Plan:
@@ -255,6 +269,8 @@ def _dp_simulator(
 def _plan(args: argparse.Namespace, sim: Simulator | DpSimulator) -> Plan:
     if not sim.drives:
         raise ValueError("--drives names no drive")
+    if not 0 <= args.drop_port_per_hour <= 3600:  # also refuses NaN
+        raise ValueError(f"--drop-port-per-hour: {args.drop_port_per_hour:g} is not 0-3600")
     return Plan(
         sim,
         parse_host_port(args.listen, "tcp://") if args.listen else None,
@@ -262,6 +278,9 @@ def _plan(args: argparse.Namespace, sim: Simulator | DpSimulator) -> Plan:
         args.stats_file,
         _duration("--stats-interval", args.stats_interval, durations.STATS_INTERVAL),
         parse_host_port(args.stats_listen) if args.stats_listen else None,
+        args.drop_port_per_hour,
+        _duration("--port-outage", args.port_outage, durations.SIM_PORT_OUTAGE),
+        args.seed,
     )
 
 
@@ -292,15 +311,15 @@ async def serve(p: Plan) -> int:
     sim = p.sim
     drives = ",".join(str(a) for a in sim.drives)
     closers = []
+    end: TcpEnd | PtyEnd
     if p.listen is not None:
-        tcp = await sim.serve_tcp(*p.listen)
-        closers.append(tcp.close)
-        where = tcp.url
+        end = await sim.serve_tcp(*p.listen)
+        where = end.url
     else:
         assert p.pty is not None
-        pty = await sim.serve_pty(p.pty)
-        closers.append(pty.close)
-        where = f"{pty.path} -> {pty.device}"
+        end = await sim.serve_pty(p.pty)
+        where = f"{end.path} -> {end.device}"
+    closers.append(end.close)
     tasks = []
     if p.stats_listen is not None:
         server = StatsServer(sim.stats)
@@ -317,14 +336,28 @@ async def serve(p: Plan) -> int:
     else:
         what = f"{sim.protocol.value} drives {drives} ({sim.dialect.name})"
     print(f"simulating {what} on {where}", flush=True)
-    await stop.wait()
-    for task in tasks:
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-    for close in reversed(closers):
-        await close()
+    watched: list[asyncio.Task[Any]] = [asyncio.create_task(stop.wait())]
+    if p.drop_port_per_hour > 0:
+        rng = random.Random(p.seed)
+        drops = drop_at_random(end, p.drop_port_per_hour, p.port_outage, rng, _say)
+        watched.append(asyncio.create_task(drops))
+    try:
+        await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for task in [*tasks, *watched]:
+            task.cancel()
+        ended = await asyncio.gather(*tasks, *watched, return_exceptions=True)
+        for close in reversed(closers):
+            await close()
+    # A port that could not be made again after a loss ends the simulator (exit 2 or 4).
+    for outcome in ended:
+        if isinstance(outcome, Exception):  # not CancelledError, a BaseException
+            raise outcome
     return 0
+
+
+def _say(text: str) -> None:
+    print(text, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -11,6 +11,10 @@ that instant: the master gets its last byte when a real line would deliver
 it, never earlier. Requests are answered one at a time, in order (half
 duplex). A late answer (fault) is written later without holding the line.
 
+An end can lose its port for a while (:meth:`TcpEnd.interrupt`,
+:meth:`PtyEnd.interrupt`), at random with :func:`drop_at_random`: a gateway
+that restarts, a USB adapter pulled and plugged in again.
+
 Raises: :class:`PathInUseError` when a pty's link path is taken;
 :class:`OSError` when a pty or a TCP port cannot be had.
 """
@@ -22,6 +26,7 @@ import contextlib
 import errno
 import fcntl
 import os
+import random
 import struct
 import tty
 from collections.abc import Callable, Sequence
@@ -32,8 +37,8 @@ from pkwbus.sim.faults import Answer
 from pkwbus.sim.stats import SimStats
 
 __all__ = [
-    "Answerer", "PathInUseError", "PtyEnd", "Session", "TcpEnd", "check_link_free",
-    "serve_pty", "serve_tcp",
+    "Answerer", "Interruptible", "PathInUseError", "PtyEnd", "Session", "TcpEnd",
+    "check_link_free", "drop_at_random", "serve_pty", "serve_tcp",
 ]  # fmt: skip
 
 Write = Callable[[bytes], None]
@@ -80,6 +85,7 @@ class Session:
         self._queue: asyncio.Queue[tuple[object, float]] = asyncio.Queue()
         self._loop = asyncio.get_running_loop()
         self._started = 0.0
+        self._late: set[asyncio.TimerHandle] = set()  # late answers still to send
         self._task = self._loop.create_task(self._answer_in_turn())
 
     def feed(self, chunk: bytes) -> None:
@@ -105,11 +111,19 @@ class Session:
             )
             delay = started + wire + timing.response_delay - self._loop.time()
             if answer.late:
-                self._loop.call_later(max(delay, 0.0) + answer.late, self._send, answer)
+                self._send_later(max(delay, 0.0) + answer.late, answer)
                 continue
             if delay > 0:
                 await asyncio.sleep(delay)
             self._send(answer)
+
+    def _send_later(self, delay: float, answer: Answer) -> None:
+        def send() -> None:
+            self._late.discard(handle)
+            self._send(answer)
+
+        handle = self._loop.call_later(delay, send)
+        self._late.add(handle)
 
     def _send(self, answer: Answer) -> None:
         try:
@@ -118,6 +132,11 @@ class Session:
             self.sim.stats.count("unsent")
 
     async def close(self) -> None:
+        """Stop answering; late answers not yet sent never are (the end they were for
+        is gone, and its descriptor's number may be another's by then)."""
+        for handle in self._late:
+            handle.cancel()
+        self._late.clear()
         self._task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await self._task
@@ -132,6 +151,7 @@ class TcpEnd:
         self.port = 0
         self._server: asyncio.Server | None = None
         self._clients: dict[asyncio.Task[None], asyncio.StreamWriter] = {}
+        self._lost_until = 0.0  # loop time until which the port is lost (interrupt)
 
     @property
     def url(self) -> str:
@@ -143,6 +163,9 @@ class TcpEnd:
         self.host, self.port = self._server.sockets[0].getsockname()[:2]
 
     async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        if asyncio.get_running_loop().time() < self._lost_until:
+            writer.transport.abort()  # the port is lost: cut at once
+            return
         task = asyncio.current_task()
         assert task is not None
         self._clients[task] = writer
@@ -157,13 +180,29 @@ class TcpEnd:
             await session.close()
             writer.close()
 
-    async def close(self) -> None:
-        if self._server is not None:
-            self._server.close()
+    async def interrupt(self, outage: float) -> None:
+        """Lose the port for ``outage`` seconds, as a gateway that restarts: every
+        connection is cut, and one made meanwhile is cut at once. Returns when the
+        port is back; cancelled, the port is back at once. The listening socket
+        stays ours, so the port number cannot go to another program meanwhile."""
+        loop = asyncio.get_running_loop()
+        self._lost_until = loop.time() + outage
+        try:
+            await self._cut_clients()
+            await asyncio.sleep(max(0.0, self._lost_until - loop.time()))
+        finally:
+            self._lost_until = 0.0
+
+    async def _cut_clients(self) -> None:
         clients = dict(self._clients)
         for writer in clients.values():
             writer.transport.abort()  # the handler sees the end of the stream and cleans up
         await asyncio.gather(*clients, return_exceptions=True)
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+        await self._cut_clients()
         if self._server is not None:
             await self._server.wait_closed()
 
@@ -217,6 +256,17 @@ class PtyEnd:
         except OSError:  # EIO: nobody holds the follower side; wait for the next user
             return
         self._session.feed(data)
+
+    async def interrupt(self, outage: float) -> None:
+        """Lose the port for ``outage`` seconds, as a USB adapter pulled and plugged in
+        again: the pty and its link go (a client's reads and writes fail), then a new
+        pty is linked at the same path. Returns when it is there (cancelled: at
+        once); raises as :meth:`start` when it cannot be made again."""
+        await self.close()
+        try:
+            await asyncio.sleep(outage)
+        finally:
+            await self.start()
 
     async def close(self) -> None:
         if self._fds is None:
@@ -307,6 +357,31 @@ def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
         view = view[os.write(fd, view) :]
+
+
+class Interruptible(Protocol):
+    """An end that can lose its port for a while."""
+
+    async def interrupt(self, outage: float) -> None: ...
+
+
+async def drop_at_random(
+    end: Interruptible,
+    per_hour: float,
+    outage: float,
+    rng: random.Random,
+    said: Callable[[str], None] | None = None,
+) -> None:
+    """Lose ``end``'s port at random, on average ``per_hour`` times an hour of port
+    time (a Poisson process), each time for ``outage`` seconds; until cancelled.
+    ``said`` is told of each loss. Raises as the end's ``interrupt``."""
+    if per_hour <= 0:
+        await asyncio.Event().wait()  # never
+    while True:
+        await asyncio.sleep(rng.expovariate(per_hour / 3600))
+        if said is not None:
+            said(f"port lost for {outage:g} s")
+        await end.interrupt(outage)
 
 
 async def serve_tcp(line: Answerer, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:
