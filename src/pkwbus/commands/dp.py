@@ -22,16 +22,23 @@ from pathlib import Path
 
 from pkwbus import durations, limits
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
-from pkwbus.link import PortError, PortSettings
-from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
-from pkwbus.master.outcomes import Outcome
+from pkwbus.link import LinkState, PortError, PortSettings
+from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec, NoDpEvents
+from pkwbus.master.dp_line import DpLine
+from pkwbus.master.dp_master import SlaveLocked, SlaveRun
+from pkwbus.master.outcomes import Outcome, TimedOut
+from pkwbus.master.plan import DriveSpec
+from pkwbus.master.record import NoEvents
+from pkwbus.master.single_job import DriveSession, SessionEnded
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, gsd, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.dp_slave import SlaveSetup
+from pkwbus.protocol.dp_slave import SlaveSetup, SlaveState
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.ppo import PkwSlot, PpoType
+from pkwbus.protocol.telegram import BlockShape, Protocol
 
 __all__ = [
     "DEFAULT_BAUDRATE",
@@ -197,27 +204,69 @@ def dp_line(args: argparse.Namespace) -> DpLine:
 async def session(
     args: argparse.Namespace, ctx: DpContext, address: int, jobs: Sequence[pkw.PkwRequest]
 ) -> list[Outcome]:
-    """Start the master, run ``jobs`` one after the other on slave ``address``, stop."""
+    """Run ``jobs`` one after the other on slave ``address`` through the line runner (the
+    master listens first, parametrises the slave, and clears it at the end)."""
     if not ctx.ppo.has_pkw:
         raise CommandError(f"PPO {ctx.ppo.number} has no parameter channel", Exit.BAD_INPUT)
-    line = dp_line(args)
-    master = DpMaster(line, [(ctx.setup(address), ctx.slot())])
-    try:
-        await master.start()
-    except PortError as exc:
-        raise CommandError(str(exc), Exit.PORT) from None
-    except ForeignMaster as exc:
-        raise CommandError(str(exc), Exit.NO_ANSWER, kind="line_error") from None
+    shape = BlockShape(ctx.ppo.pkw_words, ctx.ppo.pzd_words)
+    target = DriveTarget(Protocol.PROFIBUS, address, ctx.dialect, ppo.LAYOUT, shape)
+    spec = DriveSpec("drive", target)
+    watch = _Watch(address)
+    wire = CycleWire(
+        dp_line(args), [DpDriveSpec(spec, ctx.setup(address), ctx.ppo)], dp_events=watch
+    )
+    drive = watch.session = DriveSession(wire, spec, retries=ctx.retries, events=watch)
+    watch.wire = wire
+    wire.link.reconnect.add_listener(watch.port)
     loop = asyncio.get_running_loop()
     outcomes: list[Outcome] = []
     try:
+        await drive.open()
         for request in jobs:
             deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
-            outcomes.append(await run_dp_job(master, address, request, deadline=deadline))
-    except SlaveLocked as exc:
-        raise CommandError(str(exc), Exit.NO_ANSWER, kind="locked") from None
-    except ForeignMaster as exc:
-        raise CommandError(str(exc), Exit.NO_ANSWER, kind="line_error") from None
+            outcomes.append((await drive.job(request, deadline)).outcome)
+    except PortError as exc:
+        raise CommandError(str(exc), Exit.PORT) from None
+    except SessionEnded as exc:
+        if exc.kind == "timeout":  # the slave does not answer: no valid answer
+            outcomes.append(TimedOut(str(exc)))
+        else:
+            raise CommandError(str(exc), Exit.NO_ANSWER, kind=exc.kind) from None
     finally:
-        await master.stop()
+        await drive.close()
     return outcomes
+
+
+class _Watch(NoEvents, NoDpEvents):
+    """Ends a command's session early: the slave owned by another master, the slave not
+    answering at all, another master heard on the line."""
+
+    def __init__(self, address: int) -> None:
+        self.address = address
+        self.session: DriveSession | None = None
+        self.wire: CycleWire | None = None
+
+    def _run(self) -> SlaveRun | None:
+        return self.wire.master.runs.get(self.address) if self.wire is not None else None
+
+    def _end(self, kind: str, reason: str) -> None:
+        if self.session is not None:
+            self.session.end(kind, reason)
+
+    def slave_state(self, drive: str, state: SlaveState) -> None:
+        run = self._run()
+        if state is SlaveState.LOCKED and run is not None:
+            diagnosis = run.slave.diagnosis
+            owner = diagnosis.master if diagnosis is not None else None
+            self._end("locked", str(SlaveLocked(self.address, owner)))
+
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+        run = self._run()
+        if not isinstance(result, Failure) or result.kind is not ErrorKind.TIMEOUT or run is None:
+            return
+        if run.slave.state is SlaveState.OFFLINE and not run.slave.waiting:
+            self._end("timeout", f"slave {self.address} does not answer ({result.detail})")
+
+    def port(self, state: LinkState, error: str | None) -> None:
+        if state is LinkState.FAILED and error:
+            self._end("line_error", error)

@@ -2,10 +2,11 @@
 
 :func:`drive_access` gives the drive's dialect, its catalog, how a request is
 checked before anything is sent, and how requests run on it one after the
-other, in one opening of the port: on FC and USS by the planner over the line
-(:mod:`pkwbus.master.single_job`), over PROFIBUS DP through the slave's start-up
-and its PKW slot (:func:`pkwbus.commands.dp.session`). The commands themselves
-are the same for every bus.
+other, in one opening of the port, by the one line runner
+(:class:`pkwbus.master.single_job.DriveSession`): on FC and USS over the
+line's exchange wire, over PROFIBUS DP over the cycle wire, through the
+slave's start-up and its PKW slot (:func:`pkwbus.commands.dp.session`). The
+commands themselves are the same for every bus.
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad
 input or a port that cannot be opened.
@@ -31,8 +32,10 @@ from pkwbus.commands.common import (
 )
 from pkwbus.commands.dp import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
 from pkwbus.link import PortError
+from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.outcomes import Outcome
-from pkwbus.master.single_job import run_job
+from pkwbus.master.plan import DriveSpec
+from pkwbus.master.single_job import DriveSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw, ppo
 from pkwbus.protocol.dialects import Dialect
@@ -83,9 +86,12 @@ def drive_access(args: argparse.Namespace) -> DriveAccess:
 async def _jobs(
     args: argparse.Namespace, target: DriveTarget, requests: Sequence[pkw.PkwRequest]
 ) -> list[Outcome]:
-    line = build_line(args)
+    """``requests`` one after the other through the line runner, over the line's wire."""
+    drive = DriveSession(
+        ExchangeWire(build_line(args)), DriveSpec("drive", target), retries=args.retries
+    )
     try:
-        await line.open()
+        await drive.open()
     except PortError as exc:
         raise CommandError(str(exc), Exit.PORT) from None
     loop = asyncio.get_running_loop()
@@ -93,10 +99,9 @@ async def _jobs(
     try:
         for request in requests:
             deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
-            outcome = await run_job(line, target, request, retries=args.retries, deadline=deadline)
-            outcomes.append(outcome)
+            outcomes.append((await drive.job(request, deadline)).outcome)
     finally:
-        await line.close()
+        await drive.close()
     return outcomes
 
 

@@ -182,7 +182,7 @@ class CycleWire:
 
     def _foreign(self, exc: ForeignMaster) -> None:
         log.error("line %s: %s", self.runner.name, exc, extra={"line": self.runner.name})
-        self.link.abort("another master is active on the line")
+        self.link.abort(str(exc))
 
     def _feed(self, run: SlaveRun, now: float) -> None:
         """Fill an idle slot with the planner's next job for that slave alone."""

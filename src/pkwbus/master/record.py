@@ -82,8 +82,8 @@ def job_result(
     """
     if not isinstance(outcome, Answered):
         return JobResult(outcome, tally=tally)
-    if request.is_write and not isinstance(outcome.response, pkw.ValueResponse | pkw.TextResponse):
-        return JobResult(outcome, tally=tally)
+    if not isinstance(outcome.response, pkw.ValueResponse | pkw.TextResponse):
+        return JobResult(outcome, tally=tally)  # a description element, a count: no value
     raw, value = fmt.value_of(outcome.response)
     return JobResult(outcome, raw, value, tally)
 

@@ -1,23 +1,103 @@
-"""One job on an open FC or USS line by the planner, for a caller that runs no service.
+"""Jobs on one drive through the one line runner, for a caller that runs no service.
 
-The command line's ``read``, ``write``, ``describe`` and ``scan`` use it: the
-same planner and PKW transaction as the service (the read before a change,
-the PKW length learned), one drive, no polls, each exchange awaited.
+The command line's ``read``, ``write`` and ``describe`` run their jobs so, on
+every bus: the port opened (the wire's start included: a DP line listens for
+other masters first), the runner started over the wire with this one drive
+and no polls, the jobs submitted one after the other, then the runner stopped
+(the wire closes the port, a DP line after Global_Control Clear). A watcher
+may end the session early with a reason (a DP slave owned by another master,
+one that does not answer, another master heard). :func:`run_job` and
+:func:`perform` drive one job by the planner on a line already open (the
+commands' scans, the line benchmarks).
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
-from pkwbus.master.jobs import Job, JobKind, Priority
+from pkwbus.link import PortError
+from pkwbus.master.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
 from pkwbus.master.outcomes import Outcome
 from pkwbus.master.plan import DriveSpec, Finished, Send
 from pkwbus.master.planner import Planner
+from pkwbus.master.record import LineEvents
+from pkwbus.master.runner import LineRunner, Wire
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 
-__all__ = ["perform", "run_job"]
+__all__ = ["DriveSession", "SessionEnded", "perform", "run_job"]
+
+
+class SessionEnded(Exception):
+    """The session cannot go on (``kind``: the command's error kind, the reason in words)."""
+
+    def __init__(self, kind: str, reason: str) -> None:
+        super().__init__(reason)
+        self.kind = kind
+
+
+class DriveSession:
+    """One drive's line, driven by the one runner, for jobs one after the other."""
+
+    def __init__(
+        self, wire: Wire, spec: DriveSpec, *, retries: int, events: LineEvents | None = None
+    ) -> None:
+        self.wire = wire
+        self.drive = spec.name
+        self.runner = LineRunner("command line", wire, [spec], retries=retries, events=events)
+        # Set (to SessionEnded) by the watcher; a job waits for it beside its own result.
+        self.ended: asyncio.Future[JobResult] | None = None
+        self._task: asyncio.Task[None] | None = None
+
+    def end(self, kind: str, reason: str) -> None:
+        """What the session's watcher says: it cannot go on (the job waiting ends with it)."""
+        if self.ended is not None and not self.ended.done():
+            self.ended.set_exception(SessionEnded(kind, reason))
+
+    async def open(self) -> None:
+        """Open the port and start the runner; PortError when the port cannot be opened,
+        :class:`SessionEnded` when the wire gave it up while starting."""
+        loop = asyncio.get_running_loop()
+        self.ended = loop.create_future()
+        link = self.wire.link
+        await link.open()
+        await self.wire.started()
+        if self.ended.done():
+            self.ended.result()  # raises what ended it
+        if not link.is_open:
+            raise PortError(link.reconnect.last_error or f"{link.settings.url} was given up")
+        self._task = asyncio.create_task(self.runner.run(), name="line command line")
+        await asyncio.sleep(0)  # the runner takes the line as up before any job comes
+
+    async def job(self, request: pkw.PkwRequest, deadline: float) -> JobResult:
+        """One job; :class:`SessionEnded` when the watcher ended the session first."""
+        ended = self.ended
+        assert ended is not None  # opened
+        loop = asyncio.get_running_loop()
+        write = request.is_write or bool(request.text)
+        kind = JobKind.WRITE if write else JobKind.READ
+        priority = Priority.WRITE if write else Priority.READ
+        job = Job(self.drive, request, kind, priority, deadline, future=loop.create_future())
+        self.runner.submit(job)
+        assert job.future is not None
+        await asyncio.wait([job.future, ended], return_when=asyncio.FIRST_COMPLETED)
+        if job.future.done():
+            return job.future.result()
+        return ended.result()  # raises what ended the session
+
+    async def close(self) -> None:
+        ended = self.ended
+        if ended is not None and ended.done():
+            ended.exception()  # told (or to be told) by the caller: not left unretrieved
+        self.runner.stop()
+        task = self._task
+        if task is not None:
+            with contextlib.suppress(Exception):
+                await task
+        elif self.wire.link.is_open:
+            await self.wire.close()
 
 
 async def run_job(
