@@ -13,7 +13,7 @@ import pytest
 
 from pkwbus.link import PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.master.dp_master import DpMaster, SlaveLocked, run_dp_job
+from pkwbus.master.dp_master import DpMaster, SlaveLocked
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, fdl, pkw, ppo
@@ -30,6 +30,7 @@ from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.faults import Answer
 from tests.master.conftest import serve
+from tests.master.dp_jobs import run_dp_job
 from tests.master.dp_wire import DpWire, fake_master, record_dp_wire
 
 MASTER = 2
