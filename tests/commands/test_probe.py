@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import re
 import socket
 import socketserver
@@ -14,21 +15,27 @@ from pathlib import Path
 import pytest
 
 
-@pytest.fixture
-def pty(tmp_path: Path) -> Iterator[str]:
-    path = str(tmp_path / "ttySIM")
+@contextlib.contextmanager
+def simulated(path: Path, protocol: str) -> Iterator[str]:
+    """`pkwbus simulate` with drives 1 and 2 on a pty at ``path``."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "fc", "--pty", path,
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", protocol, "--pty", str(path),
          "--drives", "1,2", "--response-delay", "1ms"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
         assert proc.stdout is not None
         assert "simulating" in proc.stdout.readline()
-        yield path
+        yield str(path)
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+@pytest.fixture
+def pty(tmp_path: Path) -> Iterator[str]:
+    with simulated(tmp_path / "ttySIM", "fc") as path:
+        yield path
 
 
 def config(tmp_path: Path, port: str, addresses: list[int]) -> Path:
@@ -135,15 +142,7 @@ def test_no_echo_warning_without_an_echo(pty: str, tmp_path: Path) -> None:
 
 def test_a_uss_drive_is_reported_with_its_pkw_length(tmp_path: Path) -> None:
     """A factory-set drive (127) answers: auto shows 127, and pkw_words: 4 is a conflict."""
-    path = str(tmp_path / "ttyUSS")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "uss", "--pty", path,
-         "--drives", "1,2", "--response-delay", "1ms"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        assert proc.stdout is not None
-        assert "simulating" in proc.stdout.readline()
+    with simulated(tmp_path / "ttyUSS", "uss") as path:
         conf = tmp_path / "uss.yaml"
         conf.write_text(
             f"audit_db: {tmp_path / 'audit.sqlite'}\n"
@@ -153,9 +152,6 @@ def test_a_uss_drive_is_reported_with_its_pkw_length(tmp_path: Path) -> None:
             f"      - {{name: d2, address: 2, pkw_words: 4}}\n"
         )
         done = check(conf)
-    finally:
-        proc.terminate()
-        proc.wait(10)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "d1 (address 1): answers, PKW length 127 (variable) (pkw_words: auto)" in done.stdout
     assert "d2 (address 2): answers, PKW length 127 (variable), but pkw_words is 4" in done.stdout
