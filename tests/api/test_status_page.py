@@ -62,9 +62,10 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             ramp = fan1.locator('[data-parameter="3-41"] .value')
             sync_api.expect(ramp).to_have_text(re.compile(r"^\d+(\.\d+)? s$"), timeout=20_000)
             sync_api.expect(fan1.locator(".state")).to_have_text("up")
-            sync_api.expect(fan1.locator('[data-parameter="16-13"] .value')).to_have_text(
-                re.compile(r" Hz$")
-            )
+            # to the resolution of its conversion index (-1), with the catalog's name
+            frequency = fan1.locator('[data-parameter="16-13"]')
+            sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
+            sync_api.expect(frequency.locator(".title")).to_have_text("Frequency")
             sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
             sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
             sync_api.expect(fan1.locator(".bits")).to_contain_text("running")

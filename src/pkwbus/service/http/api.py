@@ -25,6 +25,7 @@ from fastapi_offline import FastAPIOffline
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.recorder import AuditRecorder
@@ -46,6 +47,7 @@ from pkwbus.service.http.parameters import (
     ParameterService,
     WriteOrder,
 )
+from pkwbus.service.http.readable import readable
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
@@ -324,18 +326,24 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
     counts = runtime.counts.get(entry.line)
     state = snap.drives.get(name)
     word = state.status_word if state else None
-    values = [
-        ParameterReading(
-            parameter=parameter,
-            index=index,
-            value=reading.value,
-            raw=reading.raw,
-            unit=entry.unit_of(parameter),
-            timestamp=reading.timestamp,
+    formats = {(p.parameter, p.index): p.fmt for p in entry.polls}
+    values = []
+    for (drive, parameter, index), reading in list(snap.readings.items()):
+        if drive != name:
+            continue
+        fmt = formats.get((parameter, index), ParameterDescription())
+        values.append(
+            ParameterReading(
+                parameter=parameter,
+                index=index,
+                value=reading.value,
+                raw=reading.raw,
+                unit=entry.unit_of(parameter),
+                timestamp=reading.timestamp,
+                name=fmt.name,
+                shown=readable(reading.value, fmt),
+            )
         )
-        for (drive, parameter, index), reading in list(snap.readings.items())
-        if drive == name
-    ]
     return DriveView(
         name=name,
         line=entry.line,

@@ -26,10 +26,12 @@ __all__ = [
 class ParameterReading(BaseModel):
     parameter: str
     index: int
-    value: float | int | str
+    value: float | int | str  # full precision
     raw: int | None
     unit: str
     timestamp: float
+    name: str = ""  # as the catalog or the configuration names it; empty when neither does
+    shown: str = ""  # the value to its resolution, for people (the status page)
 
 
 class DriveView(BaseModel):

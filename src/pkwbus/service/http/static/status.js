@@ -49,10 +49,12 @@ function drawDrive(drive, now) {
     .map(([name]) => el("span", { class: ALARM_BITS.has(name) ? "alarm" : "" }, words(name)));
   const rows = drive.values.map((v) => {
     const seconds = now - v.timestamp;
-    const value = v.unit ? `${v.value} ${v.unit}` : `${v.value}`;
+    const shown = v.shown || `${v.value}`;  // to its resolution; the API keeps full precision
+    const value = v.unit ? `${shown} ${v.unit}` : shown;
     const name = v.index ? `${v.parameter}[${v.index}]` : v.parameter;
     return el("tr", { class: seconds > STALE_SECONDS || !drive.up ? "stale" : "", "data-parameter": name },
-      el("td", {}, name), el("td", { class: "num value" }, value),
+      el("td", {}, name), el("td", { class: "title" }, v.name || ""),
+      el("td", { class: "num value", title: `${v.value}` }, value),
       el("td", { class: "num age" }, age(seconds)));
   });
   const word = drive.status_word === null ? "no status word"
@@ -65,7 +67,7 @@ function drawDrive(drive, now) {
       el("span", { class: drive.telegram_errors ? "alarm" : "" },
         `${drive.telegram_errors} telegram errors`), " since the service started"),
     el("div", { class: "bits" }, ...bits),
-    el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"),
+    el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
 }
 
