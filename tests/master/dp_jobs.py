@@ -10,11 +10,11 @@ from pkwbus.link import PortError
 from pkwbus.master.dp_master import DpMaster, SlaveLocked
 from pkwbus.master.outcomes import Answered, LineFailed, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dp_slave import Event, Failed, FailureKind, SlaveState, StateChanged
-from pkwbus.protocol.ppo import JobDone, JobExpired, JobResult
+from pkwbus.protocol.dp_slave import Failed, FailureKind, SlaveEvent, SlaveState, StateChanged
+from pkwbus.protocol.ppo import JobDone, JobExpired, SlotResult
 
 
-def outcome_of(result: JobResult) -> Outcome:
+def outcome_of(result: SlotResult) -> Outcome:
     """What a slot's finished job comes to, as for FC and USS jobs."""
     if isinstance(result, JobExpired):
         return TimedOut(f"no matching answer within the deadline ({result.cycles} cycles)")
@@ -40,11 +40,11 @@ async def run_dp_job(
         raise ValueError(f"slave {address} has no parameter channel")
     loop = asyncio.get_running_loop()
     slot.submit(request, deadline)
-    result: list[JobResult] = []
+    result: list[SlotResult] = []
     gone: list[str] = []
     hook = master.on_event
 
-    def watch(addr: int, event: Event | JobResult) -> None:
+    def watch(addr: int, event: SlaveEvent | SlotResult) -> None:
         if hook is not None:
             hook(addr, event)
         if addr != address:

@@ -15,7 +15,6 @@ from pkwbus.protocol.dp_services import Diagnosis, Parameters, Service
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
-    Event,
     Failed,
     FailureKind,
     Garbled,
@@ -23,6 +22,7 @@ from pkwbus.protocol.dp_slave import (
     NoAnswer,
     Restarted,
     RestartReason,
+    SlaveEvent,
     SlaveSetup,
     SlaveState,
     StateChanged,
@@ -337,7 +337,7 @@ def test_setup_checks() -> None:
         SlaveSetup(SLAVE, MASTER, PRM, b"")
 
 
-def _changed(old: SlaveState, new: SlaveState) -> Event:
+def _changed(old: SlaveState, new: SlaveState) -> SlaveEvent:
     return StateChanged(old, new)
 
 

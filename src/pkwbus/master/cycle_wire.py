@@ -43,12 +43,12 @@ from pkwbus.protocol.dp_slave import (
     Inputs,
     Restarted,
     RestartReason,
+    SlaveEvent,
     SlaveSetup,
     SlaveState,
     StateChanged,
 )
-from pkwbus.protocol.dp_slave import Event as SlaveEvent
-from pkwbus.protocol.ppo import JobDone, JobExpired, JobResult, PkwSlot, PpoType, pzd_words
+from pkwbus.protocol.ppo import JobDone, JobExpired, PkwSlot, PpoType, SlotResult, pzd_words
 
 __all__ = ["CycleWire", "DpDriveSpec", "DpEvents", "NoDpEvents"]
 
@@ -203,7 +203,7 @@ class CycleWire:
         slot.submit(tx.request, tx.deadline)
         self._sends[name] = send
 
-    def _on_event(self, address: int, event: SlaveEvent | JobResult) -> None:
+    def _on_event(self, address: int, event: SlaveEvent | SlotResult) -> None:
         name = self._names[address]
         runner, master = self.runner, self.master
         now = asyncio.get_running_loop().time()
@@ -231,7 +231,7 @@ class CycleWire:
             self._job(name, event, now)
         runner.batch()
 
-    def _job(self, name: str, event: JobResult, now: float) -> None:
+    def _job(self, name: str, event: SlotResult, now: float) -> None:
         send = self._sends.pop(name, None)
         if send is None:
             return

@@ -21,13 +21,13 @@ from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.protocol.dp_services import global_control_clear
 from pkwbus.protocol.dp_slave import (
     DpSlave,
-    Event,
     Failed,
     Inputs,
+    SlaveEvent,
     SlaveSetup,
     SlaveState,
 )
-from pkwbus.protocol.ppo import JobResult, PkwSlot
+from pkwbus.protocol.ppo import PkwSlot, SlotResult
 
 __all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
 
@@ -58,7 +58,7 @@ class SlaveRun:
         return self.slave.setup.address
 
 
-EventHook = Callable[[int, "Event | JobResult"], None]
+EventHook = Callable[[int, "SlaveEvent | SlotResult"], None]
 # A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
 # address, how long the answer took and how long the request held the line.
 AnsweredHook = Callable[[int, float, float], None]
@@ -146,6 +146,6 @@ class DpMaster:
             await asyncio.sleep(IDLE_STEP)
         return sent
 
-    def _emit(self, run: SlaveRun, event: Event | JobResult) -> None:
+    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotResult) -> None:
         if self.on_event is not None:
             self.on_event(run.address, event)

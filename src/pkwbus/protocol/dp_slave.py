@@ -34,7 +34,6 @@ __all__ = [
     "Answer",
     "DiagnosisRead",
     "DpSlave",
-    "Event",
     "Failed",
     "FailureKind",
     "Garbled",
@@ -42,6 +41,7 @@ __all__ = [
     "NoAnswer",
     "RestartReason",
     "Restarted",
+    "SlaveEvent",
     "SlaveSetup",
     "SlaveState",
     "StateChanged",
@@ -140,7 +140,7 @@ class Failed:
     detail: str
 
 
-Event = StateChanged | Restarted | Inputs | DiagnosisRead | Failed
+SlaveEvent = StateChanged | Restarted | Inputs | DiagnosisRead | Failed
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,7 +190,7 @@ class DpSlave:
         self._tries = 0
         self._due = float("-inf")
         self._last_answer: float | None = None
-        self._events: list[Event] = []
+        self._events: list[SlaveEvent] = []
         self._probe_wait = setup.probe_interval  # doubles while offline or locked
 
     # ----------------------------------------------------------- sending
@@ -215,7 +215,7 @@ class DpSlave:
         self._pending = frame
         return frame
 
-    def take_events(self) -> list[Event]:
+    def take_events(self) -> list[SlaveEvent]:
         """Events produced by :meth:`poll` (a watchdog restart) since the last call."""
         events, self._events = self._events, []
         return events
@@ -249,7 +249,7 @@ class DpSlave:
 
     # --------------------------------------------------------- receiving
 
-    def feed(self, answer: Answer, now: float) -> list[Event]:
+    def feed(self, answer: Answer, now: float) -> list[SlaveEvent]:
         """Account for the answer to the pending request (or its absence); the events since
         the last call (a watchdog restart found by :meth:`poll` included)."""
         if self._pending is None:

@@ -36,10 +36,10 @@ __all__ = [
     "PPO_TYPES",
     "JobDone",
     "JobExpired",
-    "JobResult",
     "PkwSlot",
     "PpoRead",
     "PpoType",
+    "SlotResult",
     "SlotUpdate",
     "decode_ppo_read",
     "dp_dialect",
@@ -209,7 +209,7 @@ class JobExpired:
     cycles: int
 
 
-JobResult = JobDone | JobExpired
+SlotResult = JobDone | JobExpired
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,7 +217,7 @@ class SlotUpdate:
     """What one PPO-read brought: the decoded read (None when undecodable) and a finished job."""
 
     read: PpoRead | None
-    done: JobResult | None
+    done: SlotResult | None
     error: str = ""
 
 
