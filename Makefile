@@ -30,10 +30,11 @@ pytest: $(STAMP)
 
 test: lint typecheck pytest
 
-# The minute-long forms (60 s soak, schemathesis over the API, 5 minutes of make soak);
-# .ci/run runs them after make test.
+# The minute-long forms (60 s soak, a minute of three faulty pty lines on a busy machine,
+# schemathesis over the API, 5 minutes of make soak); .ci/run runs them after make test,
+# on two workers: the five minutes of make soak beside the others.
 test-long: $(STAMP)
-	$(BIN)/python -m pytest -q -m long
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) -m long
 
 # An hour of pkwbus run on simulated lines with faults, lost ports and restarts, measured
 # (README.md, "Measuring and fuzzing"); not in make test. SOAK_MINUTES=5 SOAK_LINES=3: a
