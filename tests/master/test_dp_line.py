@@ -5,13 +5,15 @@ on the line. Every PPO-write on the wire has control word bit 10 = 0."""
 from __future__ import annotations
 
 import asyncio
+import gc
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
 
 import pytest
 
-from pkwbus.link import PortSettings
+from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.master.dp_master import DpMaster, SlaveLocked
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
@@ -243,3 +245,24 @@ async def test_a_late_answer_of_one_slave_is_not_taken_for_the_next_slaves(end: 
     failures = [(a, e) for a, e in events if isinstance(e, Failed)]
     assert [(a, e.kind) for a, e in failures] == [(8, FailureKind.TIMEOUT)]
     assert sum(1 for a, e in events if a == 9 and isinstance(e, Inputs)) == 4
+
+
+async def test_a_port_lost_while_the_request_goes_out_leaves_no_unretrieved_error(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The loss is raised by the request's own send; the answer's waiter, which the loss
+    also ended, is not left with an error nobody reads (asyncio would log it)."""
+    caplog.set_level(logging.ERROR, logger="asyncio")
+    line = DpLine(PortSettings("socket://127.0.0.1:9", baudrate=19200), MASTER, slot_time=SLOT)
+
+    async def lost_while_sending(raw: bytes) -> None:
+        line._on_lost("lost socket://127.0.0.1:9: the port was closed at its other end")
+        raise PortError("socket://127.0.0.1:9 is not open")
+
+    line.link.send = lost_while_sending  # type: ignore[method-assign]
+    frame = fdl.DataFrame(8, MASTER, fdl.request_fc(fdl.Function.SRD_HIGH), data=b"\x00")
+    with pytest.raises(PortError):
+        await line.exchange(frame)
+    gc.collect()
+    await asyncio.sleep(0)
+    assert "never retrieved" not in caplog.text

@@ -175,6 +175,8 @@ class DpLine:
             return await waiter
         finally:
             self._waiter = None
+            if waiter.done() and not waiter.cancelled():
+                waiter.exception()  # a loss while the request went out: raised there, not here
             if self._timer is not None:
                 self._timer.cancel()
                 self._timer = None
