@@ -6,15 +6,15 @@ import asyncio
 import ctypes
 import json
 import os
+import re
 import signal
-import socket
 import sys
 from pathlib import Path
 from typing import Any
 
 import httpx
 
-__all__ = ["TOKEN", "TOKEN_ENV", "free_port", "start_service", "start_sims", "stop"]
+__all__ = ["LISTENING", "TOKEN", "TOKEN_ENV", "start_service", "start_sims", "stop"]
 
 TOKEN = "soak-Wr1te-T0ken-0815"
 TOKEN_ENV = "PKWBUS_SOAK_WRITE_TOKEN"
@@ -30,10 +30,8 @@ def _end_with_the_soak() -> None:
     libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+# The service's log line naming where it listens: the port the system gave --listen ...:0.
+LISTENING = re.compile(r"metrics on (http://127\.0\.0\.1:\d+)/metrics")
 
 
 async def start_sims(folder: Path, argv: list[str]) -> tuple[asyncio.subprocess.Process, Any]:
@@ -51,48 +49,44 @@ async def start_sims(folder: Path, argv: list[str]) -> tuple[asyncio.subprocess.
     return proc, json.loads(line)
 
 
-async def start_service(
-    config: Path, log: Path, port: int
-) -> tuple[asyncio.subprocess.Process, str] | None:
-    """``pkwbus run`` on ``port``, ready to answer; None when another program took the
-    port before it could listen (then try another)."""
-    base = f"http://127.0.0.1:{port}"
+async def start_service(config: Path, log: Path) -> tuple[asyncio.subprocess.Process, str]:
+    """``pkwbus run`` on a port the system gives it (read back from its log), ready to
+    answer; no port is chosen before the bind, so none can be taken meanwhile."""
     logged = log.stat().st_size if log.exists() else 0
     with log.open("ab") as err:
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "pkwbus", "run", "--config", str(config),
-            "--listen", f"127.0.0.1:{port}",
+            "--listen", "127.0.0.1:0",
             stdout=asyncio.subprocess.DEVNULL, stderr=err,
             env={**os.environ, TOKEN_ENV: TOKEN}, preexec_fn=_end_with_the_soak,
         )  # fmt: skip
     try:
-        return await _ready(proc, base, log, logged)
+        return await _ready(proc, log, logged)
     except BaseException:
         await stop(proc)
         raise
 
 
 async def _ready(
-    proc: asyncio.subprocess.Process, base: str, log: Path, logged: int
-) -> tuple[asyncio.subprocess.Process, str] | None:
+    proc: asyncio.subprocess.Process, log: Path, logged: int
+) -> tuple[asyncio.subprocess.Process, str]:
     loop = asyncio.get_running_loop()
     end = loop.time() + READY_WITHIN
-    async with httpx.AsyncClient(base_url=base, timeout=5) as client:
-        while True:
-            said = log.read_bytes()[logged:].decode(errors="replace")
-            if proc.returncode is not None:
-                if "cannot listen on" in said:
-                    return None
-                raise RuntimeError(f"pkwbus run ended with {proc.returncode}: {said}")
-            if f"metrics on {base}/metrics" in said:
+    while True:
+        said = log.read_bytes()[logged:].decode(errors="replace")
+        if proc.returncode is not None:
+            raise RuntimeError(f"pkwbus run ended with {proc.returncode}: {said}")
+        found = LISTENING.search(said)
+        if found is not None:
+            async with httpx.AsyncClient(base_url=found.group(1), timeout=5) as client:
                 try:
                     if (await client.get("/healthz")).status_code == 200:
-                        return proc, base
+                        return proc, found.group(1)
                 except httpx.TransportError:
                     pass
-            if loop.time() > end:
-                raise RuntimeError(f"pkwbus run was not ready within {READY_WITHIN} s: {said}")
-            await asyncio.sleep(0.1)
+        if loop.time() > end:
+            raise RuntimeError(f"pkwbus run was not ready within {READY_WITHIN} s: {said}")
+        await asyncio.sleep(0.1)
 
 
 async def stop(proc: asyncio.subprocess.Process, timeout: float = 60.0) -> int:

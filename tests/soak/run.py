@@ -107,16 +107,10 @@ async def _with_service(
     folder = result.folder
     log, config = folder / "service.log", folder / "config.yaml"
     audit = folder / "audit.sqlite"
-    for _ in range(5):
-        port = procs.free_port()
-        body = service_config(lines, ports, listen=f"127.0.0.1:{port}", audit_db=str(audit),
-                              token_env=procs.TOKEN_ENV)  # fmt: skip
-        config.write_text(json.dumps(body, indent=1))
-        if (started := await procs.start_service(config, log, port)) is not None:
-            break
-    else:
-        raise RuntimeError("no free port for pkwbus run after 5 tries")
-    service, base = started
+    body = service_config(lines, ports, listen="127.0.0.1:0", audit_db=str(audit),
+                          token_env=procs.TOKEN_ENV)  # fmt: skip
+    config.write_text(json.dumps(body, indent=1))
+    service, base = await procs.start_service(config, log)
     try:
         await _drive(result, lines, service.pid, base, control)
     finally:
