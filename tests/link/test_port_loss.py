@@ -18,7 +18,7 @@ import select
 import socket
 import sys
 import tty
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 
 import pytest
 
@@ -97,13 +97,22 @@ async def turns(n: int = 3) -> None:
         await asyncio.sleep(0)
 
 
+@contextlib.asynccontextmanager
+async def opened(path: str) -> AsyncIterator[Watched]:
+    """The link of ``path`` opened and watched for losses; closed at the end."""
+    watched = Watched(path)
+    await watched.link.open()
+    try:
+        yield watched
+    finally:
+        await watched.link.close()
+
+
 async def test_input_discarded_between_the_readiness_and_the_read_is_no_loss(
     pty: tuple[int, str],
 ) -> None:
     controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await turns()
         transport = watched.transport
         reads: list[bytes] = []
@@ -126,45 +135,33 @@ async def test_input_discarded_between_the_readiness_and_the_read_is_no_loss(
         assert reads[0] == b"\x55" * 8 and reads[-1] == b"", reads  # the due read found nothing
         assert not watched.got  # the stray input was dropped, not handed over
         await watched.receives(controller, b"\x68\x03")  # and the port is still read
-    finally:
-        await watched.link.close()
     assert not watched.lost
 
 
 async def test_the_far_end_of_a_pty_closing_is_a_loss(pty: tuple[int, str]) -> None:
     controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await watched.receives(controller, b"\x01")
         os.close(controller)
         assert "hung up" in await watched.wait_lost()
         assert watched.link.state is LinkState.FAILED
-    finally:
-        await watched.link.close()
     assert len(watched.lost) == 1
 
 
 async def test_a_hung_up_tty_is_a_loss(pty: tuple[int, str]) -> None:
     """What the kernel leaves of an unplugged USB adapter: reads give 0 bytes, polls HUP."""
     _controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         try:
             fcntl.ioctl(watched.link._fd, TIOCVHANGUP)
         except OSError as exc:
             pytest.skip(f"cannot hang a tty up here: {os.strerror(exc.errno or 0)}")
         assert "hung up" in await watched.wait_lost()
-    finally:
-        await watched.link.close()
 
 
 async def test_a_read_failing_with_eio_is_a_loss(pty: tuple[int, str]) -> None:
     controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await turns()
 
         def unplugged(size: int) -> bytes:
@@ -173,25 +170,19 @@ async def test_a_read_failing_with_eio_is_a_loss(pty: tuple[int, str]) -> None:
         watched.transport._read = unplugged  # type: ignore[method-assign]
         os.write(controller, b"\x01")
         assert await watched.wait_lost() == f"lost {path}: {os.strerror(errno.EIO)}"
-    finally:
-        await watched.link.close()
 
 
 async def test_a_port_lost_at_a_write_is_told_once_without_a_traceback(
     pty: tuple[int, str], caplog: pytest.LogCaptureFixture
 ) -> None:
     controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await turns()
         os.close(controller)
         with caplog.at_level(logging.DEBUG):
             watched.link.write_now(b"\x02\x04", discard=False)  # EIO: the tty is hung up
             await watched.wait_lost()
             await turns()
-    finally:
-        await watched.link.close()
     assert len(watched.lost) == 1
     assert not [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]
 
@@ -212,9 +203,7 @@ async def test_a_tty_readable_without_input_for_the_time_set_is_a_loss(
 ) -> None:
     """An adapter gone without a hang-up: every read finds nothing, every poll says readable."""
     _controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await turns()
         transport = watched.transport
         now = 100.0
@@ -236,17 +225,13 @@ async def test_a_tty_readable_without_input_for_the_time_set_is_a_loss(
         transport._read_ready()
         assert transport.is_closing()
         assert "readable but gave nothing" in await watched.wait_lost()
-    finally:
-        await watched.link.close()
 
 
 async def test_data_between_empty_reads_starts_the_run_again(
     pty: tuple[int, str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     controller, path = pty
-    watched = Watched(path)
-    await watched.link.open()
-    try:
+    async with opened(path) as watched:
         await turns()
         transport = watched.transport
         now = 100.0
@@ -259,8 +244,6 @@ async def test_data_between_empty_reads_starts_the_run_again(
         now += EMPTY_READS_LOST_AFTER * 0.9
         transport._read_ready()
         assert not transport.is_closing()
-    finally:
-        await watched.link.close()
     assert not watched.lost
 
 
