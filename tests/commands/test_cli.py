@@ -192,8 +192,44 @@ def test_describe_reads_the_drives_own_description(
     held = Simulator("fc", [17], catalog=DEFAULT_CATALOGS["fc"]).drives[17].params.specs[341]
     assert info["data_type"] == {"code": 7, "name": "UInt32"}
     assert info["conversion_index"] == held.conversion == -2
-    assert info["name"] == held.name[:16]
+    # Danfoss FC 300 Design Guide, "Read parameter description": element 4's low byte is
+    # the unit index, 4 time (seconds at conversion 0); the name a text as long as it is.
+    assert (info["unit_index"], info["unit"]) == (4, held.unit) == (4, "s")
+    assert info["name"] == held.name
+    assert "read_only" not in info  # the FC form does not say
     assert (info["min"], info["max"]) == (held.minimum, held.maximum)
+
+
+@pytest.mark.parametrize(("parameter", "pnu"), [("r0027", 27), ("p1120", 1120)])
+def test_describe_a_uss_drive_in_the_profidrive_form(
+    capsys: pytest.CaptureFixture[str], uss_port: str, parameter: str, pnu: int
+) -> None:
+    """Danfoss VLT PROFIBUS manual MG.33.C4.02, section 5 "Parameter description":
+    identifier bit 9 read-only; variable attribute, first byte the size index (22
+    current, 4 time), second the conversion index; limits as 32 bits (a float's bits)."""
+    code, out, err = run(
+        capsys, "describe", "--port", uss_port, "--protocol", "uss", "--address", "3",
+        parameter, "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    info = json.loads(out)
+    held = Simulator("uss", [3], catalog=DEFAULT_CATALOGS["uss"]).drives[3].params.specs[pnu]
+    assert info["data_type"] == {"code": 8, "name": "FloatingPoint32"}
+    assert info["conversion_index"] == held.conversion == 0
+    assert (info["unit_index"], info["unit"]) == {27: (22, "A"), 1120: (4, "s")}[pnu]
+    assert info["unit"] == held.unit
+    assert info["read_only"] is (pnu == 27)  # r0027 is a reading, p1120 a setting
+    assert info["name"] == held.name[:16].strip()
+    if pnu == 1120:
+        assert (info["min"], info["max"]) == (held.minimum, held.maximum) == (0.0, 650.0)
+    else:
+        assert "min" not in info and "max" not in info  # a reading has no limits here
+    code, out, _ = run(
+        capsys, "describe", "--port", uss_port, "--protocol", "uss", "--address", "3", parameter
+    )
+    assert code == 0
+    assert f"unit: {held.unit}" in out
+    assert f"read only: {'yes' if pnu == 27 else 'no'}" in out
 
 
 def test_describe_needs_a_dialect_with_ak_4(capsys: pytest.CaptureFixture[str]) -> None:

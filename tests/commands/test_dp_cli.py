@@ -138,7 +138,12 @@ def test_describe_over_dp(capsys: pytest.CaptureFixture[str], danfoss: Served) -
     code, out, err = run(capsys, "describe", *dp(danfoss, "--address", "8", "3-41", "--json"))
     assert code == 0, err
     info = json.loads(out)
+    # The PCV channel's PROFIdrive form (Danfoss VLT PROFIBUS manual MG.33.C4.02): size
+    # index 4 (time) in the first byte, conversion -2 in the second; bit 9 clear.
     assert info["pnu"] == 341 and info["conversion_index"] == -2
+    assert (info["unit_index"], info["unit"]) == (4, "s")
+    assert info["read_only"] is False
+    assert (info["min"], info["max"]) == (0.0, 3600.0)  # the danfoss-fc catalog's limits
 
 
 def test_a_slave_owned_by_another_master_is_left_alone(

@@ -211,6 +211,70 @@ def test_a_stale_link_of_a_killed_simulator_is_replaced(tmp_path: pathlib.Path) 
 
 
 @pytest.mark.parametrize("protocol", ["fc", "uss", "profibus"])
+def test_refuse_descriptions_reaches_the_drives_named(protocol: str) -> None:
+    def described(*options: str) -> dict[int, bool]:
+        args = make_parser().parse_args(
+            ["--protocol", protocol, "--listen", "tcp://127.0.0.1:0", "--drives", "3-6", *options]
+        )
+        return {a: d.params.described for a, d in plan(args).sim.drives.items()}
+
+    assert described() == {3: True, 4: True, 5: True, 6: True}
+    assert described("--refuse-descriptions", "3,5") == {3: False, 4: True, 5: False, 6: True}
+    assert described("--refuse-descriptions", "4-6") == {3: True, 4: False, 5: False, 6: False}
+
+
+@pytest.mark.parametrize(
+    ("refusing", "says"),
+    [
+        ("x", "'x' is not an address"),
+        ("3;5", "'3;5' is not an address"),
+        ("200", "address 200 is outside"),
+        ("5-3", "runs backwards"),
+        ("3,9", "9 is not among --drives 3-5"),
+    ],
+)
+def test_bad_refuse_descriptions(
+    refusing: str, says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    options = ["--listen", "tcp://127.0.0.1:0", "--drives", "3-5"]
+    assert main([*options, "--refuse-descriptions", refusing]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pkwbus simulate: error: --refuse-descriptions: ")
+    assert says in err and err.count("\n") == 1
+
+
+def describe(
+    url: str, protocol: str, address: int, parameter: str
+) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "pkwbus", "describe", "--port", url, "--protocol", protocol,
+         "--address", str(address), parameter, "--json"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+
+
+def test_a_drive_served_with_refuse_descriptions_answers_no_description() -> None:
+    """Over TCP from ``python -m pkwbus.sim``: `pkwbus describe` of the refusing drive
+    fails as a rejection, the other drive describes."""
+    proc, lines = start(
+        "--protocol", "uss", "--listen", "tcp://127.0.0.1:0", "--drives", "1,2",
+        "--refuse-descriptions", "2", "--response-delay", "0",
+    )  # fmt: skip
+    try:
+        url = lines[-1].split(" on ")[-1]
+        done = {address: describe(url, "uss", address, "p1120") for address in (1, 2)}
+    finally:
+        stop(proc)
+        for pipe in (proc.stdout, proc.stderr):
+            if pipe is not None:
+                pipe.close()
+    assert done[1].returncode == 0, done[1].stderr
+    assert json.loads(done[1].stdout)["unit"] == "s"
+    assert done[2].returncode == 1
+    assert "describes none of its elements" in done[2].stderr
+
+
+@pytest.mark.parametrize("protocol", ["fc", "uss", "profibus"])
 def test_warning_and_trip_rates_reach_every_drive(protocol: str) -> None:
     def models(*options: str) -> set[tuple[float, float]]:
         args = make_parser().parse_args(

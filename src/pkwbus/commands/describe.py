@@ -1,9 +1,10 @@
 """`pkwbus describe`: a parameter's type, conversion index, name and limits, from the drive.
 
-FC 300-style drives (and PROFIdrive ones) answer description elements (AK 4):
-1 data type, 2 number of array elements, 4 conversion index (high byte) and
-unit index (low byte), 6 name, 7 low limit, 8 high limit. The same on every
-bus (:mod:`pkwbus.commands.drive_access`).
+Drives answer description elements (AK 4): 1 data type (PROFIdrive: the
+identifier), 2 number of array elements, 4 conversion and unit index, 6 name,
+7 low limit, 8 high limit; in the Danfoss FC form over the FC protocol, in the
+PROFIdrive form over USS and PROFIBUS (:mod:`pkwbus.commands.descriptions`).
+The same requests on every bus (:mod:`pkwbus.commands.drive_access`).
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad input, a
 port that cannot be opened or an answer that is a fault.
@@ -55,4 +56,4 @@ def run_describe(args: argparse.Namespace) -> int:
             failure = command_failure(outcome)
             assert failure is not None  # only an answer has none
             raise CommandError(failure.message, failure.code)
-    return report(args, ref, found)
+    return report(args, ref, found, access.dialect)

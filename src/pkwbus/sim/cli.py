@@ -124,6 +124,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     faults.add_argument("--late-after", default="1s", help="how late a late answer is")
     faults.add_argument("--dead", default="", help="addresses that never answer: 3,4")
+    faults.add_argument(
+        "--refuse-descriptions",
+        default="",
+        metavar="ADDRESSES",
+        help="drives that answer every description request (AK 4) with the dialect's"
+        " 'description not available' fault: 3,5",
+    )
     stats = parser.add_argument_group("stats")
     stats.add_argument("--stats-file", metavar="PATH", help="rewrite counters as JSON here")
     stats.add_argument("--stats-interval", default="1s")
@@ -210,8 +217,9 @@ def plan(args: argparse.Namespace) -> Plan:
     late = _duration("--late-after", args.late_after, durations.SIM_LATE)
     faults = SimFaults(**probabilities, late_seconds=late, dead=dead)
     model = _model(args)
+    refusing = _refusing(args.refuse_descriptions, args.drives)
     if args.protocol == "profibus":
-        return _plan(args, _dp_simulator(args, timing, faults, model))
+        return _plan(args, _dp_simulator(args, timing, faults, model, refusing))
     pkw_words = _pkw_words(args.pkw_words)
     sim = Simulator(
         args.protocol,
@@ -225,8 +233,26 @@ def plan(args: argparse.Namespace) -> Plan:
         seed=args.seed,
         catalog=catalog_for(args.protocol, args.catalog),
         model=model,
+        refuse_descriptions=refusing,
     )
     return _plan(args, sim)
+
+
+def _refusing(text: str, drives: str) -> frozenset[int]:
+    """``--refuse-descriptions``: addresses among ``--drives``."""
+    try:
+        refusing = frozenset(parse_addresses(text))
+    except ValueError as exc:
+        raise ValueError(f"--refuse-descriptions: {exc}") from None
+    try:
+        simulated = set(parse_addresses(drives))
+    except ValueError:
+        return refusing  # --drives says what is wrong with it
+    strangers = sorted(refusing - simulated)
+    if strangers:
+        names = ",".join(str(a) for a in strangers)
+        raise ValueError(f"--refuse-descriptions: {names} is not among --drives {drives[:40]}")
+    return refusing
 
 
 def _model(args: argparse.Namespace) -> ModelConfig:
@@ -240,7 +266,11 @@ def _model(args: argparse.Namespace) -> ModelConfig:
 
 
 def _dp_simulator(
-    args: argparse.Namespace, timing: SimTiming, faults: SimFaults, model: ModelConfig
+    args: argparse.Namespace,
+    timing: SimTiming,
+    faults: SimFaults,
+    model: ModelConfig,
+    refusing: frozenset[int],
 ) -> DpSimulator:
     unused = [name for name in ("truncate", "wrong_address") if getattr(args, name)]
     if unused:
@@ -262,7 +292,7 @@ def _dp_simulator(
     return DpSimulator(
         parse_addresses(args.drives), dialect=args.dialect or "profidrive", ppo_number=args.ppo,
         ident=ident, timing=timing, faults=dp_faults, seed=args.seed, catalog=catalog,
-        model=model,
+        model=model, refuse_descriptions=refusing,
     )  # fmt: skip
 
 

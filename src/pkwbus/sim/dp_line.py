@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from pkwbus.protocol import fdl, ppo
@@ -38,6 +38,7 @@ from pkwbus.sim.drive import SimDrive
 from pkwbus.sim.ends import PtyEnd, TcpEnd
 from pkwbus.sim.faults import Answer
 from pkwbus.sim.model import ModelConfig
+from pkwbus.sim.simulator import check_refusing
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
 
@@ -117,8 +118,12 @@ class DpSimulator:
         clock: Clock = time.monotonic,
         each: Mapping[int, SlaveKind] | None = None,
         model: ModelConfig | None = None,
+        refuse_descriptions: Collection[int] = (),
     ) -> None:
-        """``each``: slaves of another dialect, ident or catalog than the line's, by address."""
+        """``each``: slaves of another dialect, ident or catalog than the line's, by address;
+        ``refuse_descriptions``: slaves whose drives answer every description request (AK 4)
+        with the dialect's "description not available" fault (ValueError for an address
+        that is not a slave here)."""
         try:
             self.dialect = ppo.dp_dialect(dialect)
             self.ppo = ppo.ppo_type(ppo_number)
@@ -138,6 +143,8 @@ class DpSimulator:
         self.slaves: dict[int, SimDpSlave] = {}
         self._last: dict[int, bytes] = {}
         line_kind = SlaveKind(dialect, self.ident, catalog)
+        refusing = frozenset(refuse_descriptions)
+        check_refusing(refusing, self.stats.drives)
         for address in self.stats.drives:
             if not 0 <= address <= MAX_ADDRESS:
                 raise ValueError(f"profibus slave address {address} is outside 0-{MAX_ADDRESS}")
@@ -151,7 +158,7 @@ class DpSimulator:
             rng = random.Random(None if seed is None else seed * 1000 + address)
             drive = SimDrive(
                 address, drive_protocol, ppo.dp_dialect(name), IndLayout.PROFIDRIVE, shape, specs,
-                self.timing, rng, model,
+                self.timing, rng, model, described=address not in refusing,
             )  # fmt: skip
             drive.model.now = clock()
             self.drives[address] = drive

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import random
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command, Dialect, IndLayout, Reply
@@ -50,7 +50,10 @@ class SimDrive:
         timing: SimTiming,
         rng: random.Random,
         config: ModelConfig | None = None,
+        *,
+        described: bool = True,
     ) -> None:
+        """``described``: False for a drive that refuses every description request (AK 4)."""
         self.address = address
         self.dialect = dialect
         self.layout = layout
@@ -65,7 +68,7 @@ class SimDrive:
         self.pkw_words = 4 if self.fc else shape.pkw_words
         log = max((s.array for s in specs if s.live == "alarm_log"), default=10)
         self.model = DriveModel(self.profile, rng, config or ModelConfig(), log_length=log)
-        self.params = ParameterStore(specs, dialect, self._live)
+        self.params = ParameterStore(specs, dialect, self._live, described=described)
         self.params.running = lambda: self.running
         self._steering = MODEL_PARAMS[protocol]
         self._limits = self.limits()
@@ -201,10 +204,17 @@ class SimDrive:
         if words is None or fc_block:
             return pkw.encode_response(resp, self.dialect, self.layout, None)
         room = 2 * words - 4
-        too_wide = isinstance(resp, ValueResponse) and resp.width is Width.DWORD and room < 4
+        too_wide = (
+            isinstance(resp, ValueResponse | pkw.DescriptionResponse)
+            and resp.width is Width.DWORD
+            and room < 4
+        )
         if too_wide or (isinstance(resp, TextResponse) and len(resp.text) > room):
             ak = pkw.response_id(self.dialect, Reply.REJECTED)
             resp = Rejection(ak, resp.pnu, resp.subindex, self.params.faults.channel, "", "")
+        if isinstance(resp, pkw.DescriptionResponse) and named and room < 4:
+            # A name in one PWE word: its first two characters.
+            resp = replace(resp, raw=int.from_bytes(resp.data[:2].ljust(2, b"\0"), "big"))
         if isinstance(resp, TextResponse):
             resp = TextResponse(resp.ak, resp.pnu, resp.subindex, resp.text.ljust(room, b"\0"))
         return pkw.encode_response(resp, self.dialect, self.layout, words)

@@ -10,9 +10,12 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import form_of
 from pkwbus.protocol.dialects import WRITE_COMMANDS, Command, Dialect, Reply
 from pkwbus.protocol.params import ValueType, decode_value, encode_value
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse, Width
+from pkwbus.sim import descriptions
+from pkwbus.sim.descriptions import TYPE_CODES
 from pkwbus.sim.table import ParamSpec
 
 __all__ = [
@@ -44,9 +47,6 @@ ARRAY_COMMANDS = frozenset(
         Command.WRITE_ARRAY_DWORD_EEPROM,
     }
 )
-# Danfoss data type numbers (FC 202 Design Manual, PKW and data types) for description element 1.
-TYPE_CODES = {ValueType.I16: 3, ValueType.I32: 4, ValueType.U16: 6, ValueType.U32: 7}
-TYPE_CODES |= {ValueType.TEXT: 9, ValueType.F32: 8}
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,11 +81,18 @@ class Refused(Exception):
 
 
 class ParameterStore:
-    """Values (raw numbers as on the wire), texts, EEPROM copies; live ones read the model."""
+    """Values (raw numbers as on the wire), texts, EEPROM copies; live ones read the model.
 
-    def __init__(self, specs: Iterable[ParamSpec], dialect: Dialect, live: Live) -> None:
+    ``described``: False for a drive that answers every description request (AK 4)
+    with the dialect's "description not available" fault.
+    """
+
+    def __init__(
+        self, specs: Iterable[ParamSpec], dialect: Dialect, live: Live, *, described: bool = True
+    ) -> None:
         self.specs = {s.pnu: s for s in specs}
         self.dialect = dialect
+        self.described = described
         self.faults = FaultNumbers.of(dialect)
         self.live = live
         self.raw: dict[tuple[int, int], int] = {}
@@ -198,31 +205,20 @@ class ParameterStore:
         return pkw.TextResponse(ak, req.pnu, req.subindex, self.texts[spec.pnu])
 
     def _description(self, spec: ParamSpec, req: PkwRequest) -> PkwResponse:
-        """FC 300-style elements: 1 data type (Danfoss numbers), 2 number of array
-        elements, 4 conversion index (high byte, signed) and unit index (low byte,
-        0 here), 6 name (text), 7 and 8 low and high limit as raw numbers."""
-        element = req.subindex
-        data = b""
-        width = Width.WORD  # one PWE word in a variable-length block; limits as the value
-        if element == 1:
-            raw = TYPE_CODES[spec.vtype]
-        elif element == 2:
-            raw = spec.array
-        elif element == 4 and spec.scale is None and -128 <= spec.conversion <= 127:
-            raw = (spec.conversion & 0xFF) << 8
-        elif element == 6:
-            data = spec.name.encode("latin-1", "replace")[:16].ljust(16, b" ")
-            raw = int.from_bytes(data[:4], "big")
-        elif element in (7, 8) and spec.vtype not in (ValueType.TEXT, ValueType.F32):
-            limit = spec.minimum if element == 7 else spec.maximum
-            if limit is None:
-                raise Refused(self.faults.no_description)
-            raw = encode_value(limit, spec.vtype, spec.scaling)
-            width = spec.vtype.width or Width.DWORD
-        else:
+        """Element ``req.subindex`` in the form of the drive's dialect
+        (:mod:`pkwbus.sim.descriptions`); refused by a drive or a parameter that has no
+        description, and for an element the parameter does not have."""
+        form = form_of(self.dialect)
+        if form is None or not (self.described and spec.described):
+            raise Refused(self.faults.no_description)
+        text_length = len(self.texts.get(spec.pnu, b""))
+        found = descriptions.element(spec, req.subindex, form, text_length=text_length)
+        if found is None:
             raise Refused(self.faults.no_description)
         ak = pkw.response_id(self.dialect, Reply.DESCRIPTION)
-        return pkw.DescriptionResponse(ak, req.pnu, element, raw, data, width)
+        return pkw.DescriptionResponse(
+            ak, req.pnu, req.subindex, found.raw, found.data, found.width
+        )
 
 
 def _value_reply(width: Width, array: bool) -> Reply:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import random
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 
 from pkwbus.protocol.buses import address_range, default_dialect
 from pkwbus.protocol.dialects import IndLayout
@@ -34,13 +34,20 @@ from pkwbus.sim.table import TABLES, ParamSpec
 __all__ = [
     "Clock",
     "Simulator",
+    "check_refusing",
 ]
 
 Clock = Callable[[], float]
 
 
 class Simulator:
-    """Simulated drives on one line. ``handle`` is the in-process end (no timing)."""
+    """Simulated drives on one line. ``handle`` is the in-process end (no timing).
+
+    ``refuse_descriptions``: addresses of drives that answer every description
+    request (AK 4) with the dialect's "description not available" fault.
+    Raises ValueError for an address outside the protocol's range, or one in
+    ``refuse_descriptions`` that is not among ``addresses``.
+    """
 
     def __init__(
         self,
@@ -58,6 +65,7 @@ class Simulator:
         clock: Clock = time.monotonic,
         model: ModelConfig | None = None,
         specs: tuple[ParamSpec, ...] | None = None,
+        refuse_descriptions: Collection[int] = (),
     ) -> None:
         self.protocol = Protocol(protocol)
         self.dialect = get_dialect(dialect or default_dialect(self.protocol))
@@ -76,6 +84,8 @@ class Simulator:
         self._drive_faults: dict[int, SimFaults] = {}
         self._dead = set(self.faults.dead)
         table = specs if specs is not None else _specs(self.protocol, catalog)
+        refusing = frozenset(refuse_descriptions)
+        check_refusing(refusing, self.stats.drives)
         self.drives: dict[int, SimDrive] = {}
         for address in self.stats.drives:
             self._check_address(address)
@@ -83,6 +93,7 @@ class Simulator:
             self.drives[address] = SimDrive(
                 address, self.protocol, self.dialect, self.layout, self.shape,
                 table, self.timing, rng, model,
+                described=address not in refusing,
             )  # fmt: skip
             self.drives[address].model.now = clock()
 
@@ -216,6 +227,14 @@ class Simulator:
         if answer is not None:
             self.stats.count("responses", drive.address)
         return answer
+
+
+def check_refusing(refusing: Collection[int], drives: Collection[int]) -> None:
+    """ValueError when an address that is to refuse descriptions is not a simulated drive."""
+    strangers = sorted(set(refusing) - set(drives))
+    if strangers:
+        names = ", ".join(str(a) for a in strangers)
+        raise ValueError(f"refuse descriptions: no simulated drive at address {names}")
 
 
 def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:

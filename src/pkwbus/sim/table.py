@@ -36,7 +36,8 @@ class ParamSpec:
     """How one parameter of a simulated drive behaves: its initial value, the model
     quantity it reads (``live``), whether it changes only while stopped, and the
     type, scaling, unit, limits and writability it answers with. Limits are
-    engineering values.
+    engineering values. ``described``: False for a parameter whose description
+    elements (AK 4) the drive refuses ("description not available").
 
     It describes the simulated drive, not what the master knows of a parameter
     (that is :class:`pkwbus.catalog.ParameterDescription`); a catalog's entries
@@ -57,6 +58,7 @@ class ParamSpec:
     live: str | None = None
     scale: float | None = None  # instead of the conversion index
     unit_factor: float = 1.0  # model units (table.py) -> this parameter's unit
+    described: bool = True  # answers description requests (AK 4)
 
     @property
     def scaling(self) -> Scaling:
