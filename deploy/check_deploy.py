@@ -69,6 +69,7 @@ BEYOND_INTERFACE = {
     "pkwbus_api_refusals_total",
     "pkwbus_drive_main_actual_percent",
     "pkwbus_drive_pkw_length_conflict",
+    "pkwbus_catalog_mismatch",
 }
 
 # Status word bit names (bit label of pkwbus_drive_status_bit).

@@ -20,6 +20,8 @@ from typing import Any
 import httpx
 import pytest
 
+from pkwbus.master.drive_identity import identity_requests
+from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
@@ -36,13 +38,16 @@ FC_DRIVES = ("fan1", "fan2", "fan3")
 
 @dataclass
 class Recorder:
-    """Every PKW request each simulated drive executed, decoded, in order."""
+    """Every PKW request each simulated drive executed, decoded, in order; the requests the
+    service makes at its start to describe the drives (their identity, then AK 4) apart."""
 
     requests: list[tuple[int, PkwRequest]] = field(default_factory=list)
+    descriptions: list[tuple[int, PkwRequest]] = field(default_factory=list)
     # called after a request is executed: (address, request, response) -> None
     after: list[Callable[[int, PkwRequest, PkwResponse], None]] = field(default_factory=list)
 
     def attach(self, sim: Simulator) -> None:
+        identity = set(identity_requests(sim.dialect))
         for address, drive in sim.drives.items():
             params = drive.params
             original = params.execute
@@ -52,7 +57,8 @@ class Recorder:
                 _address: int = address,
                 _original: Callable[[PkwRequest], PkwResponse] = original,
             ) -> PkwResponse:
-                self.requests.append((_address, req))
+                described = req.command is Command.READ_DESCRIPTION or req in identity
+                (self.descriptions if described else self.requests).append((_address, req))
                 resp = _original(req)
                 for hook in self.after:
                     hook(_address, req, resp)
@@ -128,6 +134,8 @@ def line_yaml(
             lines += [f'          - {{parameter: "{p}", every: {e}}}' for p, e in polls]
         writable = ", ".join(f'"{w}"' for w in d.get("writable", []))
         lines.append(f"        writable: [{writable}]")
+        if "describe" in d:
+            lines.append(f"        describe: {d['describe']}")
     return "\n".join(lines)
 
 
@@ -245,15 +253,16 @@ async def service(
 
 
 async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
-    """Until every line's port is open and every polled parameter has a first value
-    (generous: the machine may be loaded)."""
+    """Until every line's port is open, every drive has described its parameters (AK 4) and
+    every polled parameter has a first value (generous: the machine may be loaded)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout
     polled = {(d.name, p.parameter, p.index) for d in runtime.drives.values() for p in d.polls}
     while loop.time() < end:
         lines = runtime.snapshot.lines
         up = lines and all(lines.values()) and len(lines) == len(runtime.runners)
-        if up and polled <= runtime.snapshot.readings.keys():
+        described = not any(r.describing() for r in runtime.runners.values())
+        if up and described and polled <= runtime.snapshot.readings.keys():
             return
         await asyncio.sleep(0.01)
     raise AssertionError(f"lines not up after {timeout} s: {dict(runtime.snapshot.lines)}")

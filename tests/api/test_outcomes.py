@@ -28,13 +28,33 @@ async def test_not_while_running_is_409_with_fault_17(tmp_path: Path) -> None:
         assert row.detail == error["text"]
 
 
-async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path) -> None:
-    # the catalog gives 3-41 no maximum; the drive's is 3600 s
+async def test_outside_the_limits_the_drive_describes_is_422_and_nothing_is_sent(
+    tmp_path: Path,
+) -> None:
+    # the catalog gives 3-41 no maximum; the drive describes its own (AK 4, element 8)
     async with service(tmp_path) as svc:
+        drive = svc.sim.drives[1]
+        highest = drive.params.specs[341].maximum
+        assert highest is not None
+        r = await svc.put("fan1", "3-41", {"value": highest + 1})
+        assert r.status_code == 422, r.text
+        assert r.json()["error"]["kind"] == "invalid_value"
+        assert f"{highest:g}" in r.json()["error"]["message"]
+        assert svc.recorder.for_pnu(1, 341) == []  # not even the read before a change
+        assert drive.value(341) == 500
+        r = await svc.put("fan1", "3-41", {"value": highest})  # the limit itself is allowed
+        assert r.status_code == 200, r.text
+
+
+async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path) -> None:
+    # not described (describe: off): only the drive knows its maximum of 3-41 and refuses
+    drives = [{**d, "describe": "off"} for d in fc_drives()]
+    async with service(tmp_path, fc=drives) as svc:
         r = await svc.put("fan1", "3-41", {"value": 5000})
         assert r.status_code == 409, r.text
         assert r.json()["error"]["fault"] == 2
         assert svc.sim.drives[1].value(341) == 500
+        assert svc.recorder.descriptions == []
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "rejected"
 

@@ -29,6 +29,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
+from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
 from pkwbus.service.metrics.instrumentation import ServiceMetrics
 from pkwbus.sim import SimTiming, Simulator
@@ -134,7 +135,8 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> Exported:
 
 def declared_counters() -> Exported:
     """The counters of the service whose series come with their first step, and their labels;
-    and the gauge whose series come with a USS line (this scrape has FC and DP lines)."""
+    the gauge whose series come with a USS line (this scrape has FC and DP lines), and the
+    gauge whose series come with a drive that contradicts its catalog."""
     metrics = ServiceMetrics(prometheus_client.CollectorRegistry())
     families = [getattr(metrics, name) for name in vars(metrics)]
     declared = {
@@ -142,6 +144,8 @@ def declared_counters() -> Exported:
     }
     conflict = metrics.pkw_conflict
     declared[conflict._name] = set(conflict._labelnames)
+    # A series for each field a drive contradicts its catalog on: none while all agree.
+    declared[MISMATCH[0]] = set(MISMATCH_LABELS)
     return declared
 
 

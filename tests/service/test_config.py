@@ -110,7 +110,7 @@ def test_demo_loads_with_its_defaults() -> None:
     config = load_config(DEMO, environ={}, catalogs=FAKE)
     assert [line.name for line in config.lines] == ["fc_line", "uss_line", "dp_line"]
     fc_line, uss_line, dp_line = config.lines
-    assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003)
+    assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003, (3,))  # 3 refuses AK 4
     assert uss_line.sim == SimPort(Protocol.USS, (1, 2), 0.005)
     assert dp_line.sim == SimPort(Protocol.PROFIBUS, (8, 9, 10))
     assert [d.pkw_dialect.name for d in dp_line.drives] == [
@@ -539,6 +539,9 @@ def test_sim_ports() -> None:
     assert parse_sim_port("sim://USS?drives=0&response_delay=3ms") == SimPort(
         Protocol.USS, (0,), 0.003
     )
+    assert parse_sim_port("sim://fc?drives=1-3&refuse_descriptions=3") == SimPort(
+        Protocol.FC, (1, 2, 3), None, (3,)
+    )
 
 
 @pytest.mark.parametrize(
@@ -553,6 +556,8 @@ def test_sim_ports() -> None:
         "sim://fc?drives=1&response_delay=soon",
         "sim://fc/x?drives=1",
         "sim://fc?drives",
+        "sim://fc?drives=1&refuse_descriptions=2",  # not a simulated drive
+        "sim://fc?drives=1&refuse_descriptions=x",
     ],
 )
 def test_bad_sim_ports(url: str) -> None:
@@ -691,3 +696,18 @@ def test_garbage_text_only_ever_raises_config_error(text: str) -> None:
         parse(text)
     except ConfigError as exc:
         assert exc.problems
+
+
+@pytest.mark.parametrize(("given", "kept"), [("auto", "auto"), ("off", "off"), ("false", "off")])
+def test_describe_is_auto_or_off_on_a_line_and_a_drive(given: str, kept: str) -> None:
+    """A bare YAML ``off`` reads as false: it means off."""
+    text = MINIMAL.replace("    drives:\n", f"    describe: {given}\n    drives:\n", 1)
+    (line,) = parse(text).lines
+    assert line.describe == kept
+    assert all(d.describe is None for d in line.drives)
+
+
+def test_describe_takes_no_other_word() -> None:
+    text = MINIMAL.replace("    drives:\n", "    describe: sometimes\n    drives:\n", 1)
+    (problem,) = problems_of(text)
+    assert problem.startswith("lines[0].describe: must be auto or off")

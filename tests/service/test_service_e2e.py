@@ -226,8 +226,8 @@ async def test_readyz_says_which_line_is_down(caplog: pytest.LogCaptureFixture) 
     assert ready.status_code == 503
     assert ready.json()["lines"] == {"good": True, "gone": False}
     assert [d["name"] for d in drives] == ["d1", "d2"]
-    # No catalog: the value is the raw number the drive sent.
-    assert drives[0]["values"][0]["value"] == sim.drives[1].value(341)
+    # No catalog: the value is scaled as the drive describes the parameter (AK 4).
+    assert drives[0]["values"][0]["value"] == sim.drives[1].params.number(341)
     failures = [r for r in caplog.records if "cannot open socket://127.0.0.1:1" in r.getMessage()]
     assert len(failures) == 1, "a port that stays down is reported once, not at every retry"
 

@@ -7,13 +7,19 @@ import itertools
 from collections import deque
 from dataclasses import dataclass, replace
 
+from pkwbus.catalog.precedence import resolve
+from pkwbus.master.describing import DescribeStep, DriveDescriber, Settled
+from pkwbus.master.drive_identity import identity_requests
 from pkwbus.master.health import DriveHealth, HealthPolicy
 from pkwbus.master.jobs import Job, Priority
-from pkwbus.master.plan import DriveSpec, PkwLengthTold, PollSpec, Send
+from pkwbus.master.outcomes import Outcome
+from pkwbus.master.plan import Described, DriveSpec, PkwLengthTold, PollSpec, Send, StatusWord
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
+from pkwbus.protocol.dialects import Command, Dialect
+from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw_length import PkwLength
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.telegram import Protocol, split_block
 
 __all__ = ["Active", "DrivePlan", "PollState"]
 
@@ -36,7 +42,7 @@ class Active:
     tx: PkwTransaction
     priority: Priority
     order: float
-    work: Job | PollState
+    work: Job | PollState | DescribeStep
     send: Send
     # The read of a change's parameter before the change (master.write_gate).
     read_first: bool = False
@@ -44,8 +50,26 @@ class Active:
 
 class DrivePlan:
     __slots__ = (
-        "active", "busy", "health", "lagging", "last_answer", "name", "pkw", "polls", "probe",
-        "probes", "reads", "seq", "served", "shown_up", "slot", "spec", "target", "version",
+        "active",
+        "busy",
+        "describer",
+        "health",
+        "held",
+        "lagging",
+        "last_answer",
+        "name",
+        "pkw",
+        "polls",
+        "probe",
+        "probes",
+        "reads",
+        "seq",
+        "served",
+        "shown_up",
+        "slot",
+        "spec",
+        "target",
+        "version",
         "writes",
     )  # fmt: skip
 
@@ -66,9 +90,22 @@ class DrivePlan:
         self.probe = Send(spec.name, spec.target, spec.target.probe(), True)
         self.seq = itertools.count()
         self.polls: list[tuple[float, int, PollState]] = []
+        self.describer: DriveDescriber | None = None
+        if spec.form is not None and spec.describe:
+            wanted = ((t.pnu, t.elements) for t in spec.describe)
+            dialect, dp = spec.target.dialect, spec.target.protocol is Protocol.PROFIBUS
+            self.describer = DriveDescriber(
+                dialect, spec.form, wanted, book=spec.book,
+                identity=identity_requests(dialect, texts=not dp),
+            )  # fmt: skip
+        # Polls waiting for their parameter's description, by PNU.
+        self.held: dict[int, list[PollState]] = {}
         for p in spec.polls:
             send = Send(spec.name, spec.target, spec.target.telegram(p.request))
-            self.push_poll(PollState(p, 0.0, send))
+            if self.describer is not None and self.describer.waiting(p.request.pnu):
+                self.held.setdefault(p.request.pnu, []).append(PollState(p, 0.0, send))
+            else:
+                self.push_poll(PollState(p, 0.0, send))
         # USS: the drive's PKW length, configured or told by its answers.
         target = spec.target
         uss = target.protocol is Protocol.USS and target.has_pkw
@@ -138,10 +175,93 @@ class DrivePlan:
                 poll.send = Send(self.name, target, target.telegram(poll.spec.request))
         return PkwLengthTold(self.name, replace(length))
 
+    def first_due(self) -> float | None:
+        """When the drive's next poll or description request is due (None: never)."""
+        due = self.polls[0][0] if self.polls else None
+        ask = self.describer.due() if self.describer is not None else None
+        if ask is not None and (due is None or ask <= due):
+            return ask
+        return due
+
+    def describe_step(self, now: float) -> DescribeStep | None:
+        """The description request that goes before the drive's next poll, if one is due."""
+        describer = self.describer
+        if describer is None or (ask := describer.due()) is None or ask > now:
+            return None
+        if self.polls and self.polls[0][0] < ask:
+            return None
+        return describer.next_request(now)
+
+    def described(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Described]:
+        """What came of a description request; the parameters it settled."""
+        describer = self.describer
+        assert describer is not None  # it made the request
+        settled = describer.took(step, outcome, now)
+        if describer.changed:  # another drive now: its values wait for its description
+            describer.changed = False
+            self._hold_again()
+        return self.settle(settled, now)
+
+    def _hold_again(self) -> None:
+        describer = self.describer
+        assert describer is not None
+        kept = []
+        for entry in self.polls:
+            poll = entry[2]
+            if describer.waiting(poll.spec.request.pnu):
+                self.held.setdefault(poll.spec.request.pnu, []).append(poll)
+            else:
+                kept.append(entry)
+        self.polls[:] = kept
+        heapq.heapify(self.polls)
+
+    def settle(self, settled: list[Settled], now: float) -> list[Described]:
+        """Parameters whose description settled: their polls, decoded as now described,
+        go out from now on (those that waited are due now)."""
+        events = []
+        targets = {t.pnu: t for t in self.spec.describe}
+        for done in settled:
+            polls = self.held.pop(done.pnu, [])
+            waiting = {id(p) for p in polls}
+            polls += [e[2] for e in self.polls if e[2].spec.request.pnu == done.pnu]
+            work = self.active.work if self.active is not None else None
+            if isinstance(work, PollState) and work.spec.request.pnu == done.pnu:
+                polls.append(work)
+            for poll in polls:
+                poll.spec = _described(poll.spec, done, self.target.dialect)
+                poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
+            for poll in polls:
+                if id(poll) in waiting:
+                    poll.due = now
+                    self.push_poll(poll)
+            specs = tuple(p.spec for p in polls)
+            events.append(
+                Described(self.name, targets[done.pnu], done.description, specs, done.why,
+                          done.first, done.identity, done.from_book)
+            )  # fmt: skip
+        if any(e.polls for e in events):
+            heapq.heapify(self.polls)
+        return events
+
+    def status_of(self, data: bytes) -> StatusWord | None:
+        """The status word of a probe's answer (its telegram's ``data``), when it has one."""
+        try:
+            block = split_block(data, self.target.response_shape(len(data)))
+        except RemoteProtocolError:
+            return None
+        return StatusWord(self.name, block.pzd[0], block.main_actual) if block.pzd else None
+
     def push_poll(self, poll: PollState) -> None:
         if poll.send.target is not self.target:  # built before the PKW length was learned
             poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
+
+    def back(self, now: float) -> None:
+        """The drive answers again after it was away: its polls are due now, and its
+        identity is read again (it may have been replaced by another drive)."""
+        self.restart_polls(now)
+        if self.describer is not None:
+            self.describer.recheck()
 
     def restart_polls(self, now: float) -> None:
         """Every poll due now: after the drive or its line was away, none of them is late."""
@@ -150,3 +270,16 @@ class DrivePlan:
         for poll in polls:
             poll.due = now
             self.push_poll(poll)
+
+
+def _described(spec: PollSpec, settled: Settled, dialect: Dialect) -> PollSpec:
+    """``spec`` decoded (and read: text or value) as its parameter is now described."""
+    if spec.layers is None:
+        return spec
+    fmt = resolve(spec.layers, settled.description).description
+    request = spec.request
+    if fmt.is_text != spec.fmt.is_text:
+        indexed = request.subindex or request.command is Command.READ_ARRAY
+        index = request.subindex if indexed else None
+        request = pkw.read_parameter(dialect, request.pnu, index, text=fmt.is_text)
+    return replace(spec, fmt=fmt, request=request)

@@ -11,14 +11,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.catalog.precedence import Layers
+from pkwbus.master.drive_identity import DescriptionBook
 from pkwbus.master.jobs import Job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome, Tally
 from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import DescriptionForm, DriveDescription
 from pkwbus.protocol.pkw_length import PkwLength
 
 __all__ = [
     "Action",
+    "DescribeTarget",
+    "Described",
     "DriveSpec",
     "Event",
     "Finished",
@@ -41,6 +46,19 @@ class PollSpec:
     request: pkw.PkwRequest
     every: float
     fmt: ParameterDescription = field(default_factory=ParameterDescription)
+    # What the configuration and the catalog say of it, for the drive's description to
+    # be put in between (None: the drive is not asked to describe it).
+    layers: Layers | None = None
+
+
+@dataclass(frozen=True)
+class DescribeTarget:
+    """A parameter the drive is asked to describe before its first value (AK 4)."""
+
+    pnu: int
+    parameter: str  # the drive's name for it: the metric label
+    elements: tuple[int, ...]
+    catalog: ParameterDescription | None = None  # its catalog entry, to cross-check
 
 
 @dataclass(frozen=True)
@@ -48,6 +66,10 @@ class DriveSpec:
     name: str
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
+    describe: tuple[DescribeTarget, ...] = ()
+    form: DescriptionForm | None = None  # how the drive describes (None: it is not asked)
+    # Descriptions by drive identity, shared by every drive (None: none are kept).
+    book: DescriptionBook | None = None
 
 
 # ------------------------------------------------------------------ actions
@@ -120,4 +142,19 @@ class PkwLengthTold:
     length: PkwLength  # a copy, as it was then
 
 
-Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold
+@dataclass(frozen=True, slots=True)
+class Described:
+    """A parameter's description settled: what the drive said (None: nothing, ``why``), its
+    polls as they go out from now on, and its catalog entry (to cross-check)."""
+
+    drive: str
+    target: DescribeTarget
+    description: DriveDescription | None
+    polls: tuple[PollSpec, ...]
+    why: str = ""
+    first: bool = True
+    identity: str | None = None  # the drive's model and software, when known
+    from_book: bool = False  # known from a drive of that identity, or an earlier run
+
+
+Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

@@ -33,6 +33,7 @@ import itertools
 from collections import deque
 from collections.abc import Sequence
 
+from pkwbus.master.describing import DescribeStep
 from pkwbus.master.drive_plan import Active, DrivePlan, PollState
 from pkwbus.master.health import HealthPolicy
 from pkwbus.master.jobs import Cancelled, Job, Priority
@@ -59,8 +60,6 @@ from pkwbus.master.transaction import (
     TimedOut,
 )
 from pkwbus.master.write_gate import after_read, gate_write
-from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.telegram import split_block
 
 __all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
 
@@ -100,6 +99,10 @@ class Planner:
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
+
+    def describing(self) -> bool:
+        """Whether a drive's parameter is still being described for the first time."""
+        return any(d.describer is not None and d.describer.busy for d in self.drives)
 
     def take_events(self) -> list[Event]:
         events, self.events = self.events, []
@@ -206,7 +209,7 @@ class Planner:
         d = self._by_name[drive]
         self._show(d, up, reason)
         if up:
-            d.restart_polls(now)
+            d.back(now)
             self._index(d, now)
 
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
@@ -223,7 +226,8 @@ class Planner:
         self._health(d, result, now)
         if send.probe:
             if isinstance(result, Reply):
-                self._status_from_reply(d, result)
+                if (status := d.status_of(result.data)) is not None:
+                    self.events.append(status)
                 self._tell(d.probed(send, result.data))
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
@@ -262,12 +266,10 @@ class Planner:
             if d.health.probe_due(now):
                 return (Priority.POLL, 0, d.health.next_probe, d.served, d.slot), None
             return None, d.health.next_probe
-        if d.polls:
-            due = d.polls[0][0]
-            if due <= now:
-                return (Priority.POLL, 0, due, d.served, d.slot), None
-            return None, due
-        return None, None
+        due = d.first_due()
+        if due is not None and due <= now:
+            return (Priority.POLL, 0, due, d.served, d.slot), None
+        return None, due
 
     def _index(self, d: DrivePlan, now: float) -> None:
         """Put the drive in the heap it belongs to now (its older entries go stale)."""
@@ -331,13 +333,17 @@ class Planner:
             return first.send
         if not d.health.up:
             return d.next_probe()
+        deadline = now + self.poll_deadline
+        if (step := d.describe_step(now)) is not None:
+            tx = PkwTransaction(d.target, step.request, retries=self.retries, deadline=deadline)
+            d.active = Active(tx, Priority.POLL, now, step, Send(d.name, d.target, tx.telegram))
+            return d.active.send
         _, _, poll = heapq.heappop(d.polls)
         spec = poll.spec
         if now - poll.due > spec.every:
             self.events.append(Overrun(d.name))
         # Long enough for the retries and a lagging answer; never the poll's whole
         # interval, which would hold the drive's parameter channel for minutes.
-        deadline = now + self.poll_deadline
         tx = PkwTransaction(
             d.target,
             spec.request,
@@ -363,7 +369,9 @@ class Planner:
             else:
                 d.active = after
             return
-        if isinstance(work, PollState):
+        if isinstance(work, DescribeStep):
+            self.events.extend(d.described(work, outcome, now))
+        elif isinstance(work, PollState):
             self.events.append(Finished(d.name, work.spec, outcome, active.tx.tally))
             work.due = max(work.due + work.spec.every, now)
             d.push_poll(work)
@@ -374,7 +382,7 @@ class Planner:
         if not isinstance(result, Failure):
             if d.health.answered():
                 self._show(d, True, "answers again")
-                d.restart_polls(now)  # not overruns: the drive was away
+                d.back(now)  # not overruns: the drive was away
             elif not d.shown_up:
                 self._show(d, True, "")  # back after its line was down
             return
@@ -390,11 +398,3 @@ class Planner:
     def _show(self, d: DrivePlan, up: bool, reason: str) -> None:
         d.shown_up = up
         self.events.append(HealthChanged(d.name, up, reason))
-
-    def _status_from_reply(self, d: DrivePlan, reply: Reply) -> None:
-        try:
-            block = split_block(reply.data, d.target.response_shape(len(reply.data)))
-        except RemoteProtocolError:
-            return
-        if block.pzd:
-            self.events.append(StatusWord(d.name, block.pzd[0], block.main_actual))

@@ -14,8 +14,10 @@ from dataclasses import replace
 from typing import Protocol
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.catalog.precedence import Disagreement, disagreements
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult
 from pkwbus.master.plan import (
+    Described,
     DriveSpec,
     Event,
     Finished,
@@ -54,6 +56,7 @@ class LineEvents(Protocol):
     def overrun(self, drive: str) -> None: ...
     def value(self, key: ReadingKey, reading: Reading) -> None: ...
     def pkw_length(self, drive: str, conflict: bool) -> None: ...
+    def described(self, event: Described, found: list[Disagreement]) -> None: ...
 
 
 class NoEvents:
@@ -70,6 +73,9 @@ class NoEvents:
         pass
 
     def pkw_length(self, drive: str, conflict: bool) -> None:
+        pass
+
+    def described(self, event: Described, found: list[Disagreement]) -> None:
         pass
 
 
@@ -107,6 +113,8 @@ class LineRecord:
         # A poll the drive refuses, by (drive, parameter, index): when it was last told.
         self._refused: dict[tuple[str, str, int], float] = {}
         self._polls = {d.name: d.polls for d in drives}
+        # Parameters whose description is awaited: no value of theirs lands before it.
+        self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
         snapshot.lines[line] = False
         for d in drives:
             snapshot.drives[d.name] = DriveState()
@@ -129,6 +137,36 @@ class LineRecord:
                 self.events.overrun(event.drive)
             elif isinstance(event, PkwLengthTold):
                 self._pkw_length(event)
+            elif isinstance(event, Described):
+                self._described(event)
+
+    def _described(self, event: Described) -> None:
+        """A parameter's description settled: its polls decode as it says from now on; one
+        log line when the drive gave none, one per field it contradicts the catalog on."""
+        drive, target, found = event.drive, event.target, event.description
+        self._waiting.discard((drive, target.pnu))
+        new = {(p.parameter, p.index): p for p in event.polls}
+        self._polls[drive] = tuple(
+            new.get((p.parameter, p.index), p) for p in self._polls.get(drive, ())
+        )
+        ctx = {"line": self.line, "drive": drive}
+        contradicts: list[Disagreement] = []
+        if found is None:
+            if event.why.startswith("no answer"):
+                log.warning("drive %s: %s: %s; the catalog's description is used until it"
+                            " answers", drive, target.parameter, event.why, extra=ctx)  # fmt: skip
+            elif event.first:
+                log.info("drive %s: %s: %s; the catalog's description is used", drive,
+                         target.parameter, event.why, extra=ctx)  # fmt: skip
+        elif target.catalog is not None:
+            contradicts = disagreements(found, target.catalog)
+            for d in contradicts:
+                log.warning(
+                    "drive %s: %s: the drive gives its %s as %s, the catalog as %s; the"
+                    " drive's is used", drive, target.parameter, d.field, d.drive, d.catalog,
+                    extra=ctx,
+                )  # fmt: skip
+        self.events.described(event, contradicts)
 
     def _pkw_length(self, event: PkwLengthTold) -> None:
         """One log line per change of what a drive's PKW length is known to be."""
@@ -225,6 +263,8 @@ class LineRecord:
     def _show_confirmed(self, drive: str, job: Job, reading: Reading) -> None:
         """A polled parameter shows what a read or an acknowledged write confirmed,
         when the job decoded it as the poll does."""
+        if (drive, job.request.pnu) in self._waiting:
+            return  # decoded as the catalog says, before the drive described it
         for spec in self._polls.get(drive, ()):
             same = spec.request.pnu == job.request.pnu
             if same and spec.request.subindex == job.request.subindex and spec.fmt == job.fmt:

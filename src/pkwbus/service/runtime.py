@@ -17,11 +17,13 @@ from typing import Protocol
 from prometheus_client import CollectorRegistry
 
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
+from pkwbus.catalog.precedence import Layers, resolve
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.plan import PollSpec
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.params import ParameterRef
 
 __all__ = ["DriveEntry", "LineCounts", "LineTask", "Runtime"]
@@ -42,16 +44,36 @@ class DriveEntry:
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
     parameters: ParameterTable = field(default_factory=ParameterTable)
-    # The unit of each polled parameter, by its name on the drive.
-    units: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    # The unit of each polled parameter, by its name on the drive (as now described).
+    units: dict[str, str] = field(default_factory=dict)
+    # What the configuration and the catalog say of each polled (PNU, index).
+    layers: Mapping[tuple[int, int], Layers] = field(default_factory=lambda: MappingProxyType({}))
+    # What the drive described of its parameters, by PNU, as their descriptions settle.
+    described: dict[int, DriveDescription] = field(default_factory=dict)
+    # Where each polled parameter's description came from (catalog.precedence.SOURCES).
+    sources: dict[str, str] = field(default_factory=dict)
+    # Each polled (parameter, index) as it is decoded now.
+    formats: dict[tuple[str, int], ParameterDescription] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for poll in self.polls:
+            self.formats.setdefault((poll.parameter, poll.index), poll.fmt)
 
     def may_write(self, ref: ParameterRef) -> bool:
         """Whether the drive's ``writable`` list allows writing ``ref``."""
         return self.parameters.describe(ref).writable
 
     def format_of(self, ref: ParameterRef) -> ParameterDescription:
-        """What is known of ``ref``: type, scaling, unit, limits (empty when nothing)."""
-        return self.parameters.describe(ref)
+        """What is known of ``ref``: type, scaling, unit, limits (empty when nothing); the
+        configuration first, then what the drive described, then the catalog."""
+        known = self.parameters.describe(ref)
+        drive = self.described.get(ref.pnu)
+        if drive is None:
+            return known
+        layers = self.layers.get((ref.pnu, ref.index or 0))
+        if layers is None:  # not polled: no explicit configuration of its own
+            layers = Layers(known, catalog=self.parameters.catalog.get(ref.pnu))
+        return resolve(layers, drive).description
 
     def canonical(self, ref: ParameterRef) -> ParameterRef:
         """The drive's one name for ``ref`` (3-41 for 341); LocalProtocolError for a
@@ -85,6 +107,7 @@ class LineTask(Protocol):
     name: str
 
     def submit(self, job: Job) -> None: ...
+    def describing(self) -> bool: ...
     def stop(self) -> None: ...
     async def run(self) -> None: ...
 

@@ -89,6 +89,7 @@ FC_TABLE: Final = (
     ParamSpec(1502, "15-02", U32, 0, "kWh", live="energy"),
     ParamSpec(1530, "15-30", U16, array=10, live="alarm_log"),
     ParamSpec(1540, "15-40", TEXT, writable=False, initial="FC-102"),
+    ParamSpec(1543, "15-43", TEXT, writable=False, initial="05.11"),  # software version
     ParamSpec(1600, "16-00", U16, live="control_word"),
     ParamSpec(1603, "16-03", U16, live="status_word"),
     ParamSpec(1610, "16-10", I32, -2, "kW", live="power"),
@@ -111,6 +112,8 @@ USS_TABLE: Final = (
     ParamSpec(199, "p0199", TEXT, writable=True, initial="PUMP"),
     ParamSpec(304, "p0304", U16, 0, "V", 10.0, 2000.0, True, True, initial=400.0),
     ParamSpec(947, "r0947", U16, array=8, live="alarm_log"),
+    # Device identification: company (42), device type, firmware version (identity of a drive).
+    ParamSpec(964, "r0964", U16, array=3, initial=(42.0, 1.0, 4710.0)),
     ParamSpec(1082, "p1082", F32, 0, "Hz", 0.0, 650.0, True, initial=50.0),
     ParamSpec(1120, "p1120", F32, 0, "s", 0.0, 650.0, True, initial=10.0),
     ParamSpec(1121, "p1121", F32, 0, "s", 0.0, 650.0, True, initial=10.0),

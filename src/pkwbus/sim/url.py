@@ -1,4 +1,5 @@
-"""``sim://PROTOCOL?drives=1,2,3&response_delay=3ms``: a port that starts simulated drives.
+"""``sim://PROTOCOL?drives=1,2,3&response_delay=3ms&refuse_descriptions=3``: a port that
+starts simulated drives (``refuse_descriptions``: drives that answer no description element).
 
 :func:`parse_sim_port` raises ValueError with a plain message when the URL is malformed.
 """
@@ -22,6 +23,7 @@ class SimPort:
     protocol: Protocol
     drives: tuple[int, ...]
     response_delay: float | None = None
+    refuse_descriptions: tuple[int, ...] = ()
 
 
 def parse_sim_port(url: str) -> SimPort:
@@ -37,13 +39,22 @@ def parse_sim_port(url: str) -> SimPort:
     if "drives" not in options:
         raise ValueError(f"{url!r}: list the simulated drives, e.g. ?drives=1,2,3")
     drives = _address_list(url, options["drives"])
+    refusing: tuple[int, ...] = ()
+    if "refuse_descriptions" in options:
+        refusing = _address_list(url, options["refuse_descriptions"], "refuse_descriptions")
+        if strangers := sorted(set(refusing) - set(drives)):
+            raise ValueError(f"{url!r}: refuse_descriptions names {strangers}, not in drives")
     delay = options.get("response_delay")
     if delay is None:
-        return SimPort(protocol, drives)
+        return SimPort(protocol, drives, None, refusing)
     try:
-        return SimPort(protocol, drives, parse_duration(delay, durations.RESPONSE_DELAY))
+        seconds = parse_duration(delay, durations.RESPONSE_DELAY)
     except ValueError as exc:
         raise ValueError(f"{url!r}: response_delay {exc}") from None
+    return SimPort(protocol, drives, seconds, refusing)
+
+
+_OPTIONS = ("drives", "response_delay", "refuse_descriptions")
 
 
 def _sim_options(url: str, query: str) -> dict[str, str]:
@@ -53,19 +64,20 @@ def _sim_options(url: str, query: str) -> dict[str, str]:
         raise ValueError(f"{url!r}: options must be key=value&key=value") from None
     options: dict[str, str] = {}
     for key, value in pairs:
-        if key not in ("drives", "response_delay"):
-            raise ValueError(f"{url!r}: unknown option {key!r} (known: drives, response_delay)")
+        if key not in _OPTIONS:
+            known = ", ".join(_OPTIONS)
+            raise ValueError(f"{url!r}: unknown option {key!r} (known: {known})")
         if key in options:
             raise ValueError(f"{url!r}: option {key!r} is given twice")
         options[key] = value
     return options
 
 
-def _address_list(url: str, text: str) -> tuple[int, ...]:
+def _address_list(url: str, text: str, key: str = "drives") -> tuple[int, ...]:
     try:
         addresses = limits.parse_addresses(text, 0, limits.MAX_ADDRESS)
     except ValueError as exc:
-        raise ValueError(f"{url!r}: drives must be addresses like 1,2,5-7: {exc}") from None
+        raise ValueError(f"{url!r}: {key} must be addresses like 1,2,5-7: {exc}") from None
     if not addresses:
-        raise ValueError(f"{url!r}: drives must be addresses like 1,2,5-7, not {text!r}")
+        raise ValueError(f"{url!r}: {key} must be addresses like 1,2,5-7, not {text!r}")
     return tuple(addresses)

@@ -10,28 +10,32 @@ from __future__ import annotations
 import tempfile
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from types import MappingProxyType
 
 import prometheus_client
 
-from pkwbus.catalog.description import ParameterDescription
+from pkwbus.catalog.description import ParameterDescription, ParameterTable
+from pkwbus.catalog.precedence import Layers
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec
 from pkwbus.master.dp_line import DpLine
+from pkwbus.master.drive_identity import DescriptionBook
 from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.line import Line
-from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import dp_services, dp_timing, pkw
+from pkwbus.protocol.descriptions import NAME, DescriptionForm, elements_to_read, form_of
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.pkw_length import AUTO
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.parameter_table import parameter_table
+from pkwbus.service.assembly.described import DescriptionSink
+from pkwbus.service.assembly.description_file import DescriptionFile
+from pkwbus.service.assembly.parameter_table import layers_of, parameter_table
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
@@ -42,6 +46,8 @@ from pkwbus.sim.dp_line import DpSimulator, SlaveKind
 __all__ = [
     "DEFAULT_SIM_DELAY",
     "build_runtime",
+    "describe_targets",
+    "description_form",
     "line_for",
     "target_for",
 ]
@@ -49,7 +55,9 @@ __all__ = [
 DEFAULT_SIM_DELAY = 0.003
 
 
-async def build_runtime(config: cfg.Config) -> Runtime:
+async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None) -> Runtime:
+    """The runtime of ``config``; ``kept``: the drives' descriptions of earlier runs, stored
+    again as drives describe more (None: kept in memory only, for this runtime)."""
     prometheus_client.disable_created_metrics()  # type: ignore[no-untyped-call]
     registry = MetricsRegistry()
     metrics = ServiceMetrics(registry)
@@ -62,14 +70,17 @@ async def build_runtime(config: cfg.Config) -> Runtime:
     counts: dict[str, LineMetrics] = {}
     # Each drive's polls first: the exposition of their values is made before any line,
     # so that every line's metrics are given it (a value is rendered as it lands).
+    book = kept.book if kept is not None else DescriptionBook()
     planned = [
-        (line, [_drive(line, d, entries, infos) for d in line.drives]) for line in config.lines
+        (line, [_drive(line, d, entries, infos, book) for d in line.drives])
+        for line in config.lines
     ]
     drives = {
         d.name: DriveInfo(line.name, target_for(line, d).profile) for line, d in config.drives()
     }
     collector = SnapshotCollector(snapshot, drives, infos)
     registry.register(collector)
+    descriptions = DescriptionSink({e.name: e for e in entries}, collector, kept)
     for line, specs in planned:
         port = line.port
         if line.sim is not None:
@@ -78,7 +89,9 @@ async def build_runtime(config: cfg.Config) -> Runtime:
             cleanups.append(close)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss = line.protocol is Protocol.USS
-        events = metrics.for_line(line.name, dialects, collector.landed, uss=uss)
+        events = metrics.for_line(
+            line.name, dialects, collector.landed, uss=uss, descriptions=descriptions
+        )
         counts[line.name] = events
         if line.protocol is Protocol.PROFIBUS:
             runners.append(_dp_runner(line, port, specs, snapshot, metrics, events))
@@ -168,21 +181,34 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
 
 
 def _drive(
-    line: cfg.Line, drive: cfg.Drive, entries: list[DriveEntry], infos: list[ParameterInfo]
+    line: cfg.Line,
+    drive: cfg.Drive,
+    entries: list[DriveEntry],
+    infos: list[ParameterInfo],
+    book: DescriptionBook | None = None,
 ) -> DriveSpec:
     target = target_for(line, drive)
     table = parameter_table(drive)
+    form = description_form(line, drive)
     polls = []
     units: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    layers: dict[tuple[int, int], Layers] = {}
     for entry in drive.poll:
         ref = entry.ref
         index = entry.index if entry.index is not None else ref.index
         # Labels are the drive's one name for the parameter: "1613" polls 16-13.
         ref = table.canonical(ParameterRef(ref.pnu, index, ref.name))
         fmt = table.describe(ref)
-        polls.append(PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt))
+        found = layers[(ref.pnu, index or 0)] = layers_of(drive, table, ref)
+        polls.append(
+            PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt,
+                     found if form is not None else None)
+        )  # fmt: skip
         units[ref.name] = fmt.unit
-        infos.append(_info(line, drive, ref, fmt))
+        info = _info(line, drive, ref, fmt, found.catalog)
+        infos.append(info)
+        sources[ref.name] = info.source
     entries.append(
         DriveEntry(
             drive.name,
@@ -190,10 +216,41 @@ def _drive(
             target,
             tuple(polls),
             parameters=table,
-            units=MappingProxyType(units),
+            units=units,
+            layers=layers,
+            sources=sources,
         )
     )
-    return DriveSpec(drive.name, target, tuple(polls))
+    describe = describe_targets(target, drive, table) if form is not None else ()
+    return DriveSpec(drive.name, target, tuple(polls), describe, form, book)
+
+
+def description_form(line: cfg.Line, drive: cfg.Drive) -> DescriptionForm | None:
+    """How the drive describes its parameters, when it is asked to (``describe: auto``)."""
+    if (drive.describe or line.describe) == "off":
+        return None
+    return form_of(drive.pkw_dialect)
+
+
+def describe_targets(
+    target: DriveTarget, drive: cfg.Drive, table: ParameterTable
+) -> tuple[DescribeTarget, ...]:
+    """The polled and writable parameters, each once: polled ones for their type, scaling,
+    unit, size and name; writable ones also for their limits. A PPO's four PKW words
+    carry no name of 16 characters: over PROFIBUS the name is not asked."""
+    wanted: dict[int, tuple[str, bool]] = {}
+    for entry in drive.poll:
+        ref = table.canonical(entry.ref)
+        wanted.setdefault(ref.pnu, (ref.name, False))
+    for ref in drive.writable:
+        ref = table.canonical(ref)
+        wanted[ref.pnu] = (wanted.get(ref.pnu, (ref.name, True))[0], True)
+    dp = target.protocol is Protocol.PROFIBUS
+    targets = []
+    for pnu, (name, limits) in wanted.items():
+        elements = tuple(e for e in elements_to_read(limits=limits) if not (dp and e == NAME))
+        targets.append(DescribeTarget(pnu, name, elements, table.catalog.get(pnu)))
+    return tuple(targets)
 
 
 def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterDescription) -> pkw.PkwRequest:
@@ -201,8 +258,14 @@ def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterDescription) -> 
 
 
 def _info(
-    line: cfg.Line, drive: cfg.Drive, ref: ParameterRef, fmt: ParameterDescription
+    line: cfg.Line,
+    drive: cfg.Drive,
+    ref: ParameterRef,
+    fmt: ParameterDescription,
+    catalog: ParameterDescription | None,
 ) -> ParameterInfo:
+    given = drive.overrides_for(ref).changes().keys() & {"type", "scale", "conversion"}
+    source = "config" if given else ("catalog" if catalog is not None else "none")
     return ParameterInfo(
         line.name,
         drive.name,
@@ -212,6 +275,7 @@ def _info(
         fmt.name,
         fmt.unit,
         fmt.vtype.value if fmt.vtype else "raw",
+        source,
     )
 
 
@@ -232,6 +296,7 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
             else DEFAULT_SIM_DELAY
         ),
         catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
+        refuse_descriptions=sim.refuse_descriptions,
     )
     return await _serve_on_pty(simulator, line.name)
 
@@ -255,6 +320,7 @@ async def _start_dp_sim(
             response_delay=sim.response_delay if sim.response_delay is not None else 0.0
         ),
         each=each,
+        refuse_descriptions=sim.refuse_descriptions,
     )
     return await _serve_on_pty(simulator, line.name)
 

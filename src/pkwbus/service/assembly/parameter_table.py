@@ -22,10 +22,15 @@ from pkwbus.catalog.description import (
     ParameterKey,
     ParameterTable,
 )
-from pkwbus.protocol.params import MAX_INDEX, ParameterRef
+from pkwbus.catalog.precedence import Layers
+from pkwbus.protocol.params import MAX_INDEX, UNSCALED, ParameterRef, ValueType
 from pkwbus.service import config as cfg
 
-__all__ = ["parameter_table"]
+__all__ = ["layers_of", "parameter_table"]
+
+# A configuration field -> the name of what it sets, as catalog.precedence.Layers.given says.
+_GIVEN = {"type": "type", "scale": "scaling", "conversion": "scaling", "unit": "unit",
+          "min": "min", "max": "max", "name": "name"}  # fmt: skip
 
 
 def parameter_table(drive: cfg.Drive) -> ParameterTable:
@@ -64,3 +69,20 @@ def _catalog(name: str) -> Mapping[int, ParameterDescription]:
             for pnu, spec in load_catalog(name).parameters.items()
         }
     )
+
+
+def layers_of(drive: cfg.Drive, table: ParameterTable, ref: ParameterRef) -> Layers:
+    """What the configuration sets explicitly of ``ref`` (with its index) and its catalog
+    entry: where the drive's own description goes in between."""
+    merged = table.describe(ref)
+    overrides = drive.overrides_for(ref)
+    given = frozenset(_GIVEN[key] for key in overrides.changes())
+    config = ParameterDescription(
+        name=overrides.name or "",
+        vtype=ValueType(overrides.type) if overrides.type is not None else None,
+        scaling=overrides.scaling or UNSCALED,
+        unit=overrides.unit or "",
+        minimum=overrides.min,
+        maximum=overrides.max,
+    )
+    return Layers(merged, config, given, table.catalog.get(ref.pnu))

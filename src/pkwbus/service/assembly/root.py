@@ -19,6 +19,7 @@ import socket
 
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.description_file import DescriptionFile, description_path
 from pkwbus.service.assembly.logs import setup_logging
 from pkwbus.service.assembly.serve import ListenError, bind, serve
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
@@ -61,7 +62,9 @@ def open_audit(config: Config) -> AuditLog:
 
 
 async def _serve(config: Config, sock: socket.socket, audit: AuditLog) -> None:
-    runtime = await build_runtime(config)
+    # The drives' descriptions of an earlier run, beside the audit database.
+    kept = DescriptionFile(description_path(config.audit_db))
+    runtime = await build_runtime(config, kept)
     token = config.write_token()
     app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
     recorder = app.state.recorder

@@ -30,7 +30,7 @@ from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
-from pkwbus.service.config.fields import Name, Notation, PkwWords
+from pkwbus.service.config.fields import Describe, Name, Notation, PkwWords
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
 from pkwbus.service.config.profibus import DpDrive, hex_bytes, ident_number, resolve_gsd_path
 
@@ -60,6 +60,8 @@ class Drive(Model):
     pkw_words: PkwWords = AUTO  # USS: learned from the drive's answers (protocol.pkw_length)
     pzd_words: StrictInt = Field(default=2, ge=0, le=16)
     catalog: str | None = Field(default=None, strict=True)
+    # The drive's own description elements (AK 4) over the catalog; None: the line's setting.
+    describe: Describe | None = None
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)

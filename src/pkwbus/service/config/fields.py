@@ -28,6 +28,7 @@ from pkwbus.protocol.pkw_length import PkwSetting
 __all__ = [
     "CharTimeout",
     "Delay",
+    "Describe",
     "Interval",
     "Name",
     "Notation",
@@ -109,3 +110,18 @@ Name = Annotated[str, Field(pattern=_NAME, min_length=1, max_length=_NAME_MAX, s
 
 class Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _describe(value: object) -> str:
+    """``auto`` or ``off`` (YAML reads a bare ``off`` as false, ``on`` as true)."""
+    if value is False:
+        return "off"
+    if value is True:
+        return "auto"
+    if value in ("auto", "off"):
+        return str(value)
+    raise ValueError(f"must be auto or off, not {short(repr(value))}")
+
+
+# Whether the drive's own description elements (AK 4) are read: auto, or off.
+Describe = Annotated[str, PlainValidator(_describe)]

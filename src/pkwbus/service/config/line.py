@@ -37,6 +37,7 @@ from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import (
     CharTimeout,
     Delay,
+    Describe,
     Name,
     Pause,
     Rs485Delay,
@@ -99,6 +100,8 @@ class Line(Model):
     master_address: StrictInt = Field(default=2, ge=0, le=DP_MAX_ADDRESS)
     slot_time: SlotTime | None = None
     watchdog: Watchdog | None = None
+    # The drives' own description elements (AK 4) over their catalogs; a drive may say otherwise.
+    describe: Describe = "auto"
     drives: list[Drive] = Field(min_length=1)
 
     @field_validator("port")

@@ -326,7 +326,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
     counts = runtime.counts.get(entry.line)
     state = snap.drives.get(name)
     word = state.status_word if state else None
-    formats = {(p.parameter, p.index): p.fmt for p in entry.polls}
+    formats = entry.formats
     values = []
     for (drive, parameter, index), reading in list(snap.readings.items()):
         if drive != name:
@@ -342,6 +342,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
                 timestamp=reading.timestamp,
                 name=fmt.name,
                 shown=readable(reading.value, fmt),
+                source=entry.sources.get(parameter, "none"),
             )
         )
     return DriveView(

@@ -30,8 +30,10 @@ class ParameterReading(BaseModel):
     raw: int | None
     unit: str
     timestamp: float
-    name: str = ""  # as the catalog or the configuration names it; empty when neither does
+    name: str = ""  # as the configuration, the drive or the catalog names it; else empty
     shown: str = ""  # the value to its resolution, for people (the status page)
+    # Where its type and scaling came from: config, drive (its own description), catalog, none.
+    source: str = "catalog"
 
 
 class DriveView(BaseModel):

@@ -2,8 +2,10 @@
 
 Built from a copy of the snapshot at each scrape, so a scrape never causes
 bus traffic and values that disappear also disappear from the output.
-``pkwbus_parameter_info`` does not change while the service runs: its text is
-made once. A value's lines are made when its reading lands in the snapshot
+``pkwbus_parameter_info`` changes only when a drive's description of a
+parameter settles (:meth:`SnapshotCollector.described`): its text is made
+then, with ``pkwbus_catalog_mismatch``, the fields on which a drive
+contradicts its catalog. A value's lines are made when its reading lands in the snapshot
 (:meth:`SnapshotCollector.landed`, called by the line's metrics), so that a
 scrape only joins them; a drive's lines are made again only when its state
 changed (see :mod:`pkwbus.service.metrics.exposition`).
@@ -23,15 +25,23 @@ from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
 from pkwbus.service.metrics.exposition import CHUNK, format_value, head, header
 
-__all__ = ["DriveInfo", "ParameterInfo", "SnapshotCollector"]
+__all__ = ["MISMATCH_LABELS", "DriveInfo", "Mismatch", "ParameterInfo", "SnapshotCollector"]
 
 _PV = ("line", "drive", "parameter", "index")
-_INFO = (*_PV, "pnu", "name", "unit", "type")
+_INFO = (*_PV, "pnu", "name", "unit", "type", "source")
+MISMATCH_LABELS = ("line", "drive", "parameter", "field", "drive_value", "catalog_value")
 _LD = ("line", "drive")
 
 VALUE = ("pkwbus_parameter_value", "Latest value read from the drive, scaled")
 STAMP = ("pkwbus_parameter_last_update_timestamp_seconds", "When the value was read (Unix time)")
-INFO = ("pkwbus_parameter_info", "PNU, name, unit and type of each polled parameter")
+INFO = (
+    "pkwbus_parameter_info",
+    "PNU, name, unit and type of each polled parameter, and where its description came from",
+)
+MISMATCH = (
+    "pkwbus_catalog_mismatch",
+    "1 for each field on which a drive's description of a parameter contradicts its catalog",
+)
 DRIVE_UP = ("pkwbus_drive_up", "1 while the drive answers, else 0")
 WORD = ("pkwbus_drive_status_word", "Last raw status word")
 BIT = ("pkwbus_drive_status_bit", "Each named bit of the last status word")
@@ -54,10 +64,31 @@ class ParameterInfo:
     name: str
     unit: str
     type: str
+    source: str = "catalog"  # config, drive, catalog, none (catalog.precedence.SOURCES)
 
     def labels(self) -> list[str]:
         return [self.line, self.drive, self.parameter, str(self.index), str(self.pnu),
-                self.name, self.unit, self.type]  # fmt: skip
+                self.name, self.unit, self.type, self.source]  # fmt: skip
+
+    @property
+    def key(self) -> ReadingKey:
+        return (self.drive, self.parameter, self.index)
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """One field on which a drive contradicts its catalog (``pkwbus_catalog_mismatch``)."""
+
+    line: str
+    drive: str
+    parameter: str
+    field: str
+    drive_value: str
+    catalog_value: str
+
+    def labels(self) -> list[str]:
+        return [self.line, self.drive, self.parameter, self.field, self.drive_value,
+                self.catalog_value]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -114,19 +145,43 @@ class SnapshotCollector(Collector):
     ) -> None:
         self._snapshot = snapshot
         self._drives = dict(drives)
-        self._parameters = list(parameters)
-        self._line_of = {p.drive: p.line for p in self._parameters}
+        self._parameters = {p.key: p for p in parameters}
+        self._mismatches: dict[tuple[str, str, str], Mismatch] = {}
+        self._line_of = {p.drive: p.line for p in self._parameters.values()}
         self._line_of.update({name: d.line for name, d in self._drives.items()})
-        self._info_text = header(*INFO, "gauge") + "".join(
-            f"{head(INFO[0], dict(zip(_INFO, p.labels(), strict=True)))}1.0\n"
-            for p in self._parameters
-        )
+        self._info_text = self._render_info()
         self._heads: dict[ReadingKey, tuple[str, str]] = {}
-        for p in self._parameters:
+        for p in self._parameters.values():
             self._head((p.drive, p.parameter, p.index))
         self._readings: dict[ReadingKey, _Rendered] = {}
         self._drive_lines: dict[str, tuple[_DriveKey, _DriveLines]] = {}
         self._drive_heads = {name: self._heads_of(name, d.line) for name, d in self._drives.items()}
+
+    def described(self, info: ParameterInfo, mismatches: Iterable[Mismatch]) -> None:
+        """A polled parameter's description settled (``info``), and the fields on which its
+        drive contradicts the catalog (none when it agrees)."""
+        if info.key in self._parameters:
+            self._parameters[info.key] = info
+        key = (info.drive, info.parameter)
+        for old in [k for k in self._mismatches if k[:2] == key]:
+            del self._mismatches[old]
+        for m in mismatches:
+            self._mismatches[(m.drive, m.parameter, m.field)] = m
+        self._info_text = self._render_info()
+
+    def _render_info(self) -> str:
+        info = header(*INFO, "gauge") + "".join(
+            f"{head(INFO[0], dict(zip(_INFO, p.labels(), strict=True)))}1.0\n"
+            for p in self._parameters.values()
+        )
+        return (
+            info
+            + header(*MISMATCH, "gauge")
+            + "".join(
+                f"{head(MISMATCH[0], dict(zip(MISMATCH_LABELS, m.labels(), strict=True)))}1.0\n"
+                for m in self._mismatches.values()
+            )
+        )
 
     def _line(self, drive: str) -> str:
         info = self._drives.get(drive)
@@ -152,9 +207,13 @@ class SnapshotCollector(Collector):
         yield value
         yield stamp
         info = GaugeMetricFamily(*INFO, labels=_INFO)
-        for p in self._parameters:
+        for p in self._parameters.values():
             info.add_metric(p.labels(), 1.0)
         yield info
+        mismatch = GaugeMetricFamily(*MISMATCH, labels=MISMATCH_LABELS)
+        for m in self._mismatches.values():
+            mismatch.add_metric(m.labels(), 1.0)
+        yield mismatch
         up = GaugeMetricFamily(*DRIVE_UP, labels=_LD)
         word = GaugeMetricFamily(*WORD, labels=_LD)
         bits = GaugeMetricFamily(*BIT, labels=[*_LD, "bit"])

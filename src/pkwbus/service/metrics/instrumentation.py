@@ -21,8 +21,10 @@ from collections.abc import Callable, Iterable, Mapping
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from pkwbus import __version__
+from pkwbus.catalog.precedence import Disagreement
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
+from pkwbus.master.plan import Described
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
@@ -52,6 +54,8 @@ NO_FAULT_NUMBER = "-"
 
 
 Landed = Callable[[ReadingKey, Reading], object]  # a new reading, as it lands
+# A parameter's description settled (line, the event, where the drive contradicts its catalog).
+Descriptions = Callable[[str, Described, list[Disagreement]], object]
 
 
 def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
@@ -153,11 +157,13 @@ class ServiceMetrics:
         values: Landed | None = None,
         *,
         uss: bool = False,
+        descriptions: Descriptions | None = None,
     ) -> LineMetrics:
         """The counters of ``line``; ``drives`` maps each configured drive to its dialect,
         ``values`` renders a new reading as it lands (the exposition's), ``uss``: a USS
-        line, whose drives' PKW length can contradict the configuration."""
-        return LineMetrics(self, line, drives, values, uss=uss)
+        line, whose drives' PKW length can contradict the configuration; ``descriptions``
+        takes each parameter's description as it settles."""
+        return LineMetrics(self, line, drives, values, uss=uss, descriptions=descriptions)
 
     def for_dp_line(self, line: str, drives: Iterable[str]) -> DpMetrics:
         """The PROFIBUS DP gauges and counters of ``line``'s slaves."""
@@ -235,12 +241,15 @@ class LineMetrics:
         values: Landed | None = None,
         *,
         uss: bool = False,
+        descriptions: Descriptions | None = None,
     ) -> None:
         self._m = m
         self._line = line
         # Renders a new reading's lines as it lands (SnapshotCollector.landed), so
         # that a scrape only joins them.
         self.values = values
+        # Takes a parameter's settled description to the drive's table and the info metric.
+        self.descriptions = descriptions
         if uss:  # at 0 from the start: an alert or a panel sees the first conflict
             for d in drives:
                 m.pkw_conflict.labels(line, d).set(0)
@@ -312,6 +321,10 @@ class LineMetrics:
     def value(self, key: ReadingKey, reading: Reading) -> None:
         if self.values is not None:
             self.values(key, reading)
+
+    def described(self, event: Described, found: list[Disagreement]) -> None:
+        if self.descriptions is not None:
+            self.descriptions(self._line, event, found)
 
 
 AUDIT_STAGES = ("attempt", "outcome", "refusals")

@@ -1,0 +1,232 @@
+"""Reading a drive's description of its parameters (AK 4) before their first value.
+
+One :class:`DriveDescriber` per drive whose dialect has description elements.
+It gives the planner one element request at a time (:meth:`next_request`),
+parameter by parameter, and folds each answer in (:meth:`took`). A parameter
+is *settled* when every element it needs was answered or refused, when the
+drive refuses its first element (it has no description: the rest is not
+asked), or when the drive left :data:`UNANSWERED_AT_MOST` description
+requests in a row unanswered (each after its retries; a down drive is not
+asked): then the catalog stands for every parameter still waiting, with one
+log line each, and they are asked again :data:`ASK_AGAIN` seconds later.
+A parameter's polls wait until it settles, so that no value goes out with a
+scaling about to change.
+
+Pure: time passed in, no I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+from pkwbus.master.drive_identity import DescriptionBook, identity_of
+from pkwbus.master.outcomes import Answered, Outcome, Rejected
+from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import (
+    DATA_TYPE,
+    DescriptionForm,
+    DriveDescription,
+    read_elements,
+)
+from pkwbus.protocol.dialects import Dialect
+
+__all__ = ["ASK_AGAIN", "UNANSWERED_AT_MOST", "DescribeStep", "DriveDescriber", "Settled"]
+
+ASK_AGAIN: Final = 600.0  # seconds until a drive that did not describe is asked again
+UNANSWERED_AT_MOST: Final = 2  # requests of one parameter left unanswered before the catalog
+
+
+@dataclass(frozen=True, slots=True)
+class DescribeStep:
+    """One element request of one parameter, or one read of the drive's identity
+    (``identity``): what an :class:`~.drive_plan.Active` carries."""
+
+    pnu: int
+    element: int
+    request: pkw.PkwRequest
+    identity: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Settled:
+    """A parameter's description is known, or known not to come.
+
+    ``description`` is None when the drive gave none (``why`` says why: it
+    refuses, or did not answer in time).
+    """
+
+    pnu: int
+    description: DriveDescription | None
+    why: str = ""
+    first: bool = True  # its first settling (its polls were waiting for it)
+    identity: str | None = None  # the drive's model and software, when known
+    from_book: bool = False  # known from another drive of that identity, or an earlier run
+
+
+@dataclass
+class _Parameter:
+    pnu: int
+    elements: tuple[int, ...]
+    found: dict[int, pkw.DescriptionResponse | None] = field(default_factory=dict)
+    since: float | None = None  # its first request
+    due: float = 0.0  # when it may be asked (again)
+    settled: bool = False
+
+    def next_element(self) -> int | None:
+        return next((e for e in self.elements if e not in self.found), None)
+
+
+class DriveDescriber:
+    """What is still to be described of one drive's parameters, and what was."""
+
+    def __init__(
+        self,
+        dialect: Dialect,
+        form: DescriptionForm,
+        wanted: Iterable[tuple[int, tuple[int, ...]]],  # (PNU, elements to read)
+        *,
+        book: DescriptionBook | None = None,
+        identity: Sequence[pkw.PkwRequest] = (),  # the reads that identify the drive
+    ) -> None:
+        self.dialect = dialect
+        self.form = form
+        self._params = {pnu: _Parameter(pnu, elements) for pnu, elements in wanted}
+        self.described: dict[int, DriveDescription | None] = {}
+        self.unanswered = 0  # description requests in a row that ended without an answer
+        self.book = book
+        self._identify = tuple(identity) if book is not None else ()
+        self._answers: list[Outcome] = []
+        self._identify_due: float | None = 0.0 if self._identify else None
+        self.identity: str | None = None
+        self.changed = False  # the drive's identity changed: every parameter waits again
+
+    def recheck(self) -> None:
+        """The drive answers again after it was away: it may have been replaced."""
+        if self._identify:
+            self._answers, self._identify_due = [], 0.0
+
+    def waiting(self, pnu: int) -> bool:
+        """Whether the polls of ``pnu`` wait for its description."""
+        param = self._params.get(pnu)
+        return param is not None and not param.settled and pnu not in self.described
+
+    @property
+    def busy(self) -> bool:
+        """Whether a parameter is still being described for the first time."""
+        return any(self.waiting(pnu) for pnu in self._params)
+
+    def due(self) -> float | None:
+        """When the next element request may go out; None when nothing is left."""
+        if self._identify_due is not None:
+            return self._identify_due
+        dues = [p.due for p in self._params.values() if not p.settled]
+        return min(dues) if dues else None
+
+    def next_request(self, now: float) -> DescribeStep | None:
+        """The next element to ask, of the parameter due first; None when none is due."""
+        if self._identify_due is not None:
+            if self._identify_due > now:
+                return None
+            request = self._identify[len(self._answers)]
+            return DescribeStep(request.pnu, request.subindex, request, identity=True)
+        param = min(
+            (p for p in self._params.values() if not p.settled and p.due <= now),
+            key=lambda p: p.due,
+            default=None,
+        )
+        if param is None:
+            return None
+        element = param.next_element()
+        assert element is not None  # a parameter with all its elements has settled
+        if param.since is None:
+            param.since = now
+        request = pkw.read_description(self.dialect, param.pnu, element)
+        return DescribeStep(param.pnu, element, request)
+
+    def took(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Settled]:
+        """Fold in what came of ``step``; the parameters that settled by it."""
+        if step.identity:
+            self._answers.append(outcome)
+            return self._identified(now) if len(self._answers) == len(self._identify) else []
+        param = self._params[step.pnu]
+        if param.settled:
+            return []
+        response = outcome.response if isinstance(outcome, Answered) else None
+        if isinstance(response, pkw.DescriptionResponse):
+            param.found[step.element] = response
+        elif isinstance(outcome, Rejected | Answered):  # refused, or no description in it
+            if step.element == DATA_TYPE and not param.found:
+                why = f"the drive has no description of it ({_said(outcome)})"
+                return [self._settle(param, None, why, now)]
+            param.found[step.element] = None
+        else:  # no answer within the request's retries, or the line went away
+            self.unanswered += 1
+            if self.unanswered >= UNANSWERED_AT_MOST:
+                why = f"no answer to {self.unanswered} description requests in a row"
+                self.unanswered = 0
+                return [
+                    self._settle(p, None, why, now, retry=True)
+                    for p in self._params.values()
+                    if p is param or self.waiting(p.pnu)
+                ]
+            return []
+        self.unanswered = 0
+        if param.next_element() is None:
+            found = read_elements(self.form, param.found)
+            return [self._settle(param, None if found.empty else found, "", now)]
+        return []
+
+    def _identified(self, now: float) -> list[Settled]:
+        """The identity is read: a drive replaced by another is described afresh; what the
+        book knows of this identity settles at once."""
+        identity = identity_of(self.dialect, self._answers)
+        previous, self.identity = self.identity, identity
+        self._answers, self._identify_due = [], None
+        if previous is not None and identity != previous:
+            self.again()
+            self.described.clear()
+            self.changed = True
+        book = self.book
+        if identity is None or book is None:
+            return []
+        settled = []
+        for param in self._params.values():
+            known, found = book.get(identity, param.pnu)
+            if known and self.waiting(param.pnu):
+                settled.append(self._settle(param, found, "", now, from_book=True))
+        return settled
+
+    def again(self, pnus: Iterable[int] | None = None) -> None:
+        """Describe ``pnus`` (all when None) afresh: the drive may have changed."""
+        for param in self._params.values():
+            if pnus is None or param.pnu in pnus:
+                param.found.clear()
+                param.settled, param.since, param.due = False, None, 0.0
+
+    def _settle(
+        self,
+        param: _Parameter,
+        found: DriveDescription | None,
+        why: str,
+        now: float,
+        *,
+        retry: bool = False,
+        from_book: bool = False,
+    ) -> Settled:
+        first = param.pnu not in self.described
+        param.settled, param.since = True, None
+        if retry:  # not answered in time: the catalog stands; the drive is asked again later
+            param.settled, param.found, param.due = False, {}, now + ASK_AGAIN
+        elif self.identity is not None and self.book is not None and not from_book:
+            self.book.put(self.identity, param.pnu, found)
+        if found is not None or first:
+            self.described[param.pnu] = found
+        return Settled(param.pnu, found, why, first, self.identity, from_book)
+
+
+def _said(outcome: Outcome) -> str:
+    if isinstance(outcome, Rejected):
+        return outcome.text or outcome.short or f"fault {outcome.fault}"
+    return "no description element in its answer"
