@@ -16,11 +16,11 @@ import pytest
 
 
 @contextlib.contextmanager
-def simulated(path: Path, protocol: str) -> Iterator[str]:
+def simulated(path: Path, protocol: str, *options: str) -> Iterator[str]:
     """`pkwbus simulate` with drives 1 and 2 on a pty at ``path``."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "pkwbus", "simulate", "--protocol", protocol, "--pty", str(path),
-         "--drives", "1,2", "--response-delay", "1ms"],
+         "--drives", "1,2", "--response-delay", "1ms", *options],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
@@ -156,3 +156,29 @@ def test_a_uss_drive_is_reported_with_its_pkw_length(tmp_path: Path) -> None:
     assert "d1 (address 1): answers, PKW length 127 (variable) (pkw_words: auto)" in done.stdout
     assert "d2 (address 2): answers, PKW length 127 (variable), but pkw_words is 4" in done.stdout
     assert "CONFLICT" in done.stdout
+
+
+def test_each_parameter_as_the_drive_describes_it_against_the_catalog(tmp_path: Path) -> None:
+    """Simulated without the catalog, the FC drive keeps its own 1-20 in hundredths of a kW
+    where the catalog says conversion index 1 (W): the probe names the difference; 16-14
+    agrees; a drive with describe: off is not asked."""
+    with simulated(tmp_path / "ttyFC", "fc", "--catalog", "none") as path:
+        conf = tmp_path / "fc.yaml"
+        conf.write_text(
+            f"audit_db: {tmp_path / 'audit.sqlite'}\n"
+            f"lines:\n  - name: hall\n    port: {path}\n    protocol: fc\n"
+            f"    baudrate: 19200\n    timeout: 50ms\n    retries: 1\n    drives:\n"
+            f"      - {{name: d1, address: 1, catalog: danfoss-fc,"
+            f' poll: [{{parameter: "16-14", every: 1s}}], writable: ["1-20"]}}\n'
+            f"      - {{name: d2, address: 2, catalog: danfoss-fc, describe: off,"
+            f' poll: [{{parameter: "16-14", every: 1s}}]}}\n'
+        )
+        done = check(conf)
+    assert done.returncode == 0, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    (current,) = [line for line in lines if line.strip().startswith("16-14:")]
+    assert "Int32" in current and "x0.01" in current and "the catalog agrees" in current
+    (power,) = [line for line in lines if line.strip().startswith("1-20:")]
+    assert "CATALOG DIFFERS" in power
+    assert "scaling: drive x0.01, catalog x10" in power
+    assert sum(line.strip().startswith("16-14:") for line in lines) == 1  # d2 not described

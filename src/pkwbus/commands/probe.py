@@ -3,9 +3,11 @@
 Each FC or USS line's port is opened briefly and every drive gets one short
 telegram (the one a down drive is probed with), retried as the line says. A
 drive that answers is listed (a USS drive with the PKW length its answer to a
-word read shows, against the configured one); one that does not, with what
-came back instead. An adapter that echoes the requests while the line's
-``echo`` is off is named. Simulated (``sim://``) lines are not probed, nor
+word read shows, against the configured one), and with ``describe: auto``
+each of its polled and writable parameters as the drive describes it (AK 4),
+against its catalog entry; one that does not, with what came back instead.
+An adapter that echoes the requests while the line's ``echo`` is off is
+named. Simulated (``sim://``) lines are not probed, nor
 are PROFIBUS lines: ``pkwbus scan --protocol profibus`` shows their live list.
 
 Raises :class:`~pkwbus.commands.common.CommandError` (exit 3) when a drive does not
@@ -17,16 +19,24 @@ from __future__ import annotations
 import asyncio
 
 from pkwbus import link
+from pkwbus.catalog.precedence import disagreements
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
 from pkwbus.master.line import Line
-from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
+from pkwbus.master.pkw_probe import NO_ANSWER, ask_description, ask_pkw_length
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Failure, Reply
+from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.pkw_length import AUTO, shown
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.build import line_for, target_for
+from pkwbus.service.assembly.build import (
+    describe_targets,
+    description_form,
+    line_for,
+    target_for,
+)
+from pkwbus.service.assembly.parameter_table import parameter_table
 
 __all__ = ["probe", "run_probe"]
 
@@ -76,6 +86,7 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
             if isinstance(result, Reply):
                 told = await _pkw_length(bus, line, target)
                 out.append(f"  {drive.name} (address {drive.address}): answers{told}")
+                out += await _descriptions(bus, line, drive, target)
             else:
                 every = False
                 why = result.detail if isinstance(result, Failure) else "no answer"
@@ -102,6 +113,44 @@ async def _pkw_length(bus: Line, line: cfg.Line, target: DriveTarget) -> str:
     if configured == AUTO or words == "?" or words == configured:
         return f", PKW length {seen} (pkw_words: {shown(configured)})"
     return f", PKW length {seen}, but pkw_words is {shown(configured)}: CONFLICT, no write goes out"
+
+
+async def _descriptions(
+    bus: Line, line: cfg.Line, drive: cfg.Drive, target: DriveTarget
+) -> list[str]:
+    """Each polled and writable parameter as the drive describes it, against its catalog."""
+    if description_form(line, drive) is None:
+        return []
+    out = []
+    table = parameter_table(drive)
+    for wanted in describe_targets(target, drive, table):
+        said = await ask_description(
+            bus, target, wanted.pnu, retries=line.retries, timeout=line.timeout * 3 + 0.5
+        )
+        name = f"    {wanted.parameter}:"
+        if said == NO_ANSWER:
+            out.append(f"{name} no answer to its description (the catalog is used)")
+        elif said is None:
+            out.append(f"{name} the drive has no description of it (the catalog is used)")
+        elif wanted.catalog is None:
+            out.append(f"{name} {_said(said)}; not in the catalog: the drive's is used")
+        elif found := disagreements(said, wanted.catalog):
+            differ = "; ".join(f"{d.field}: drive {d.drive}, catalog {d.catalog}" for d in found)
+            out.append(f"{name} {_said(said)}; the CATALOG DIFFERS ({differ}): the drive's is used")
+        else:
+            out.append(f"{name} {_said(said)}; the catalog agrees")
+    return out
+
+
+def _said(said: DriveDescription) -> str:
+    parts = [said.type_name or "no type"]
+    if said.scaling is not None:
+        parts.append(f"x{float(said.scaling.factor):g}")
+    if said.unit:
+        parts.append(said.unit)
+    if said.name:
+        parts.append(repr(said.name))
+    return "the drive says " + ", ".join(parts)
 
 
 def run_probe(config: cfg.Config) -> int:

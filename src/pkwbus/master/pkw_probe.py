@@ -1,4 +1,5 @@
-"""Ask a USS drive once what its PKW length is: a word read, and the length of its answer.
+"""Ask a drive once, on a line opened for it alone: what its PKW length is (USS: a word
+read, and the length of its answer), and how it describes a parameter (AK 4).
 
 For ``pkwbus scan`` and ``pkwbus check-config --probe``. The read goes out
 with the target's PKW length (4 words while a length is learned: both a
@@ -15,15 +16,36 @@ import asyncio
 from typing import Final, Literal
 
 from pkwbus.master.line import Line
+from pkwbus.master.outcomes import Answered, Outcome, Rejected
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import (
+    DATA_TYPE,
+    DriveDescription,
+    elements_to_read,
+    form_of,
+    read_elements,
+)
 from pkwbus.protocol.pkw_length import PkwWords, told
 
-__all__ = ["LENGTH_PNU", "NO_ANSWER", "ask_pkw_length"]
+__all__ = ["LENGTH_PNU", "NO_ANSWER", "ask", "ask_description", "ask_pkw_length"]
 
 LENGTH_PNU: Final = 2
 NO_ANSWER: Final = "no answer"
+
+
+async def ask(
+    line: Line, target: DriveTarget, request: pkw.PkwRequest, *, retries: int, deadline: float
+) -> tuple[Outcome, PkwTransaction]:
+    """One PKW job, repeated until its matching answer, its retries or its deadline."""
+    tx = PkwTransaction(target, request, retries=retries, deadline=deadline)
+    loop = asyncio.get_running_loop()
+    while True:
+        result = await line.exchange(target, tx.telegram)
+        outcome = tx.feed(result, loop.time())
+        if outcome is not None:
+            return outcome, tx
 
 
 async def ask_pkw_length(
@@ -33,16 +55,36 @@ async def ask_pkw_length(
     than one (a double word), :data:`NO_ANSWER` when no answer came (or there is no PKW)."""
     if not target.has_pkw:
         return NO_ANSWER
-    tx = PkwTransaction(
-        target, pkw.read(target.dialect, LENGTH_PNU), retries=retries, deadline=deadline
-    )
-    sent = target.pkw_words_of(tx.telegram)
+    request = pkw.read(target.dialect, LENGTH_PNU)
+    _, tx = await ask(line, target, request, retries=retries, deadline=deadline)
+    answer, response = tx.answer_pkw, tx.response
+    if answer is not None and response is not None:
+        return told(target.pkw_words_of(tx.telegram), len(answer) // 2, response)
+    return NO_ANSWER
+
+
+async def ask_description(
+    line: Line, target: DriveTarget, pnu: int, *, retries: int, timeout: float
+) -> DriveDescription | Literal["no answer"] | None:
+    """How the drive describes ``pnu`` (None: it has no description of it), or
+    :data:`NO_ANSWER`; None too where its dialect has no description elements."""
+    form = form_of(target.dialect)
+    if form is None or not target.has_pkw:
+        return None
+    found: dict[int, pkw.DescriptionResponse | None] = {}
     loop = asyncio.get_running_loop()
-    while True:
-        result = await line.exchange(target, tx.telegram)
-        outcome = tx.feed(result, loop.time())
-        answer, response = tx.answer_pkw, tx.response
-        if answer is not None and response is not None and outcome is not None:
-            return told(sent, len(answer) // 2, response)
-        if outcome is not None:
+    for element in elements_to_read(limits=True):
+        request = pkw.read_description(target.dialect, pnu, element)
+        deadline = loop.time() + timeout
+        outcome, _ = await ask(line, target, request, retries=retries, deadline=deadline)
+        response = outcome.response if isinstance(outcome, Answered) else None
+        if isinstance(response, pkw.DescriptionResponse):
+            found[element] = response
+        elif not isinstance(outcome, Answered | Rejected):
             return NO_ANSWER
+        elif element == DATA_TYPE:
+            return None  # refused: the drive has no description of it
+        else:
+            found[element] = None
+    said = read_elements(form, found)
+    return None if said.empty else said
