@@ -22,6 +22,7 @@ from pkwbus.service.metrics.devices import SnapshotCollector
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.catalogs import specs_from_catalog
+from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.table import ParamSpec
 from tests.master.conftest import until
 from tests.service.test_service_e2e import running, sample, samples
@@ -241,3 +242,49 @@ async def test_describe_off_asks_nothing() -> None:
         await server.close()
     assert {r.ak for r in asked} == {1}
     assert found["source"] == "catalog"
+
+
+async def test_danfoss_pcv_over_profibus_describes_itself_in_the_ppo() -> None:
+    """Simulated without the catalog, the PROFIBUS slaves keep 1-20 in hundredths of a kW
+    (conversion index -2) where the catalog says 1 (W): slave 8 describes it through the
+    PPO's PKW words and is decoded so; slave 9 refuses AK 4 and keeps the catalog."""
+    catalog = load_catalog("danfoss-fc").get(120)
+    assert catalog is not None and catalog.conversion == 1
+    sim = DpSimulator([8, 9], dialect="danfoss-pcv", timing=SimTiming(response_delay=0.001),
+                      catalog=None, refuse_descriptions=[9])  # fmt: skip
+    assert sim.drives[8].params.specs[120].conversion == -2
+    server = await sim.serve_tcp("127.0.0.1", 0)
+    drives = "\n".join(
+        f"""      - name: s{a}
+        address: {a}
+        dialect: danfoss-pcv
+        ident: 0x0402
+        catalog: danfoss-fc
+        poll: [{{parameter: "1-20", every: 50ms}}]"""
+        for a in (8, 9)
+    )
+    text = f"""
+lines:
+  - name: dp
+    port: "{server.url}"
+    protocol: profibus
+    baudrate: 19200
+    slot_time: 20ms
+    watchdog: 2s
+    drives:
+{drives}"""
+    try:
+        with landed_values() as seen:
+            async with running(text) as runtime:
+                await described(runtime)
+                await until(lambda: len({k for k, _ in seen}) == 2, timeout=30)
+                sources = {d: info(runtime, d, "1-20")["source"] for d in ("s8", "s9")}
+                mismatch = sample(runtime, "pkwbus_catalog_mismatch", drive="s8", field="scaling")
+    finally:
+        await server.close()
+    for (drive, _, _), reading in seen:
+        assert reading.raw is not None
+        factor = 0.01 if drive == "s8" else 10
+        assert reading.value == pytest.approx(reading.raw * factor), drive
+    assert sources == {"s8": "drive", "s9": "catalog"}
+    assert mismatch == 1.0
