@@ -7,11 +7,19 @@ import logging
 import pytest
 
 from pkwbus.master.outcomes import Answered, Rejected
-from pkwbus.master.plan import DriveSpec, Finished, HealthChanged, PollSpec
+from pkwbus.master.plan import (
+    Described,
+    DescribeTarget,
+    DriveSpec,
+    Finished,
+    HealthChanged,
+    PollSpec,
+)
 from pkwbus.master.record import REFUSAL_RETELL, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.descriptions import DriveDescription
 
 TARGET = DriveTarget.create("fc", 1)
 POLL = PollSpec("19-99", 0, pkw.read(TARGET.dialect, 1999), 1.0)
@@ -57,3 +65,19 @@ def test_a_drive_that_answers_again_is_told_at_info(caplog: pytest.LogCaptureFix
         "drive fan is down: no answer to 3 exchanges (probing at back-off)"
     ]
     assert lines(caplog, logging.INFO) == ["drive fan answers again"]
+
+
+def test_a_drive_silent_on_its_descriptions_is_one_warning_not_one_per_parameter(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO)
+    rec = record([0.0])
+    why = "no answer to 2 description requests in a row"
+    targets = [DescribeTarget(pnu, f"16-{pnu % 100:02d}", (1, 2, 4, 6)) for pnu in (1613, 1614)]
+    rec.apply([Described("fan", t, None, (), why, unanswered=True) for t in targets])
+    assert len(lines(caplog, logging.WARNING)) == 1
+    assert why in lines(caplog, logging.WARNING)[0]
+    described = DriveDescription(type_code=3, conversion=-1, unit="Hz")
+    rec.apply([Described("fan", targets[0], described, ())])  # it answers again
+    rec.apply([Described("fan", targets[1], None, (), why, first=False, unanswered=True)])
+    assert len(lines(caplog, logging.WARNING)) == 2  # told again after it had answered

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.params import Scaling
 from pkwbus.service.assembly.build import build_runtime
@@ -141,3 +142,17 @@ async def test_a_drive_replaced_while_running_is_described_before_its_next_value
     assert len(requests) > before  # described afresh
     assert scaled_by(seen[:changed], -3)
     assert scaled_by(seen[changed:], -1)  # not one value of the new drive in the old scaling
+
+
+def test_a_file_that_cannot_be_written_is_one_warning(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    kept = DescriptionFile(blocker / "audit.sqlite.descriptions.json")
+    caplog.set_level(logging.INFO)
+    for conversion in (-1, -2, -3):
+        kept.book.put("fc:FC-302|05.11", 1614, DriveDescription(type_code=4, conversion=conversion))
+        kept.save()
+    stores = [r for r in caplog.records if "cannot store" in r.getMessage()]
+    assert len(stores) == 1 and stores[0].levelno == logging.WARNING

@@ -63,6 +63,7 @@ class Settled:
     first: bool = True  # its first settling (its polls were waiting for it)
     identity: str | None = None  # the drive's model and software, when known
     from_book: bool = False  # known from another drive of that identity, or an earlier run
+    unanswered: bool = False  # left unanswered: the catalog stands, asked again later
 
 
 @dataclass
@@ -223,7 +224,7 @@ class DriveDescriber:
             self.book.put(self.identity, param.pnu, found)
         if found is not None or first:
             self.described[param.pnu] = found
-        return Settled(param.pnu, found, why, first, self.identity, from_book)
+        return Settled(param.pnu, found, why, first, self.identity, from_book, retry)
 
 
 def _said(outcome: Outcome) -> str:

@@ -237,7 +237,7 @@ class DrivePlan:
             specs = tuple(p.spec for p in polls)
             events.append(
                 Described(self.name, targets[done.pnu], done.description, specs, done.why,
-                          done.first, done.identity, done.from_book)
+                          done.first, done.identity, done.from_book, done.unanswered)
             )  # fmt: skip
         if any(e.polls for e in events):
             heapq.heapify(self.polls)

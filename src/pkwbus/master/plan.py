@@ -155,6 +155,7 @@ class Described:
     first: bool = True
     identity: str | None = None  # the drive's model and software, when known
     from_book: bool = False  # known from a drive of that identity, or an earlier run
+    unanswered: bool = False  # left unanswered: the catalog stands, asked again later
 
 
 Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

@@ -15,6 +15,7 @@ from typing import Protocol
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Disagreement, disagreements
+from pkwbus.master.describing import ASK_AGAIN
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult
 from pkwbus.master.plan import (
     Described,
@@ -115,6 +116,7 @@ class LineRecord:
         self._polls = {d.name: d.polls for d in drives}
         # Parameters whose description is awaited: no value of theirs lands before it.
         self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
+        self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
         snapshot.lines[line] = False
         for d in drives:
             snapshot.drives[d.name] = DriveState()
@@ -152,13 +154,19 @@ class LineRecord:
         ctx = {"line": self.line, "drive": drive}
         contradicts: list[Disagreement] = []
         if found is None:
-            if event.why.startswith("no answer"):
-                log.warning("drive %s: %s: %s; the catalog's description is used until it"
-                            " answers", drive, target.parameter, event.why, extra=ctx)  # fmt: skip
+            if event.unanswered and drive not in self._silent:
+                self._silent.add(drive)  # one line for all its parameters still waiting
+                log.warning("drive %s: %s: the catalog's descriptions are used for the"
+                            " parameters still waiting, and it is asked again in %d minutes",
+                            drive, event.why, ASK_AGAIN // 60, extra=ctx)  # fmt: skip
+            elif event.unanswered:
+                pass
             elif event.first:
                 log.info("drive %s: %s: %s; the catalog's description is used", drive,
                          target.parameter, event.why, extra=ctx)  # fmt: skip
-        elif target.catalog is not None:
+        else:
+            self._silent.discard(drive)
+        if found is not None and target.catalog is not None:
             contradicts = disagreements(found, target.catalog)
             for d in contradicts:
                 log.warning(

@@ -34,6 +34,7 @@ class DescriptionFile:
         self.path = path
         self.book = self._load()
         self._failed = False
+        self._written = ""  # the text last written: drives of one kind tell the same
 
     def _load(self) -> DescriptionBook:
         try:
@@ -53,10 +54,13 @@ class DescriptionFile:
 
     def save(self) -> None:
         """Write the book (a new file renamed over the old one: never half a file)."""
+        text = json.dumps(self.book.to_json(), indent=1)
+        if text == self._written:
+            return
         temporary = self.path.with_name(self.path.name + ".new")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            temporary.write_text(json.dumps(self.book.to_json(), indent=1), encoding="utf-8")
+            temporary.write_text(text, encoding="utf-8")
             os.replace(temporary, self.path)
         except OSError as exc:
             if not self._failed:
@@ -68,3 +72,4 @@ class DescriptionFile:
         if self._failed:
             log.info("the drives' descriptions are stored in %s again", self.path)
         self._failed = False
+        self._written = text

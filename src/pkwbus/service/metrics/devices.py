@@ -149,7 +149,7 @@ class SnapshotCollector(Collector):
         self._mismatches: dict[tuple[str, str, str], Mismatch] = {}
         self._line_of = {p.drive: p.line for p in self._parameters.values()}
         self._line_of.update({name: d.line for name, d in self._drives.items()})
-        self._info_text = self._render_info()
+        self._info_text: str | None = None  # made at the next scrape after a change
         self._heads: dict[ReadingKey, tuple[str, str]] = {}
         for p in self._parameters.values():
             self._head((p.drive, p.parameter, p.index))
@@ -167,7 +167,7 @@ class SnapshotCollector(Collector):
             del self._mismatches[old]
         for m in mismatches:
             self._mismatches[(m.drive, m.parameter, m.field)] = m
-        self._info_text = self._render_info()
+        self._info_text = None  # a start-up settles thousands: rendered once, when scraped
 
     def _render_info(self) -> str:
         info = header(*INFO, "gauge") + "".join(
@@ -263,6 +263,8 @@ class SnapshotCollector(Collector):
         yield header(*STAMP, "gauge")
         for start in range(0, len(stamps), CHUNK):
             yield "".join(stamps[start : start + CHUNK])
+        if self._info_text is None:
+            self._info_text = self._render_info()
         yield self._info_text
         ups: list[str] = []
         words: list[str] = []
