@@ -12,6 +12,7 @@ from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
 from pkwbus.master.describing import ASK_AGAIN, UNANSWERED_AT_MOST
+from pkwbus.master.drive_identity import DescriptionBook
 from pkwbus.master.outcomes import Answered
 from pkwbus.master.plan import Described, DescribeTarget, DriveSpec, Finished, PollSpec, Send
 from pkwbus.master.planner import Planner
@@ -115,3 +116,43 @@ def test_a_drive_silent_on_descriptions_keeps_the_catalog_and_is_asked_again() -
     ]  # fmt: skip
     assert again, "asked again later"
     assert polls_of(fake, "d2")
+
+
+def described_spec(address: int, book: DescriptionBook) -> DriveSpec:
+    return replace(spec(address, describe=True), book=book)
+
+
+def ak4(fake: FakeLine, drive: str | None = None) -> list[Send]:
+    return [
+        s for s in fake.sent
+        if (drive is None or s.drive == drive) and s.telegram[3] >> 4 == 4
+    ]  # fmt: skip
+
+
+def test_drives_of_one_kind_are_described_once() -> None:
+    book = DescriptionBook()
+    sim = Simulator("fc", [1, 2, 3], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    for drive in sim.drives.values():
+        drive.params.specs[CURRENT] = replace(drive.params.specs[CURRENT], conversion=-3)
+    planner = Planner([described_spec(a, book) for a in (1, 2, 3)], poll_deadline=0.5)
+    fake = FakeLine(planner, sim)
+    fake.run(2.0)
+    assert len(ak4(fake)) == len(elements_to_read(limits=False))  # one drive asked, once
+    for name in ("d1", "d2", "d3"):
+        polls = polls_of(fake, name)
+        assert polls and {factor(p) for p in polls} == {Fraction(1, 1000)}, name
+
+
+def test_another_drive_of_the_kind_describes_when_the_first_goes_away() -> None:
+    book = DescriptionBook()
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    planner = Planner([described_spec(a, book) for a in (1, 2)], poll_deadline=0.5)
+    fake = FakeLine(planner, sim)
+    while not ak4(fake):
+        fake.step(fake.now + 1.0)
+    (first,) = ak4(fake)
+    sim.kill(int(first.drive[1:]))  # the drive that claimed the description goes away
+    fake.run(5.0)
+    other = "d2" if first.drive == "d1" else "d1"
+    assert len(ak4(fake, other)) == len(elements_to_read(limits=False))
+    assert polls_of(fake, other)

@@ -89,6 +89,8 @@ async def test_fc_drive_scaling_wins_and_no_value_goes_out_with_the_catalogs_fir
     assert catalog is not None and catalog.conversion == -2
     sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.0), specs=fc_specs(-3),
                     refuse_descriptions=[2])  # fmt: skip
+    # Another model (15-40): drives of one kind describe alike, so it would share drive 1's.
+    sim.drives[2].params.texts[1540] = b"FC-202"
     server = await sim.serve_tcp("127.0.0.1", 0)
     drives = """
       - name: described

@@ -32,10 +32,18 @@ from pkwbus.protocol.descriptions import (
 )
 from pkwbus.protocol.dialects import Dialect
 
-__all__ = ["ASK_AGAIN", "UNANSWERED_AT_MOST", "DescribeStep", "DriveDescriber", "Settled"]
+__all__ = [
+    "ASK_AGAIN",
+    "CLAIM_RECHECK",
+    "UNANSWERED_AT_MOST",
+    "DescribeStep",
+    "DriveDescriber",
+    "Settled",
+]
 
 ASK_AGAIN: Final = 600.0  # seconds until a drive that did not describe is asked again
 UNANSWERED_AT_MOST: Final = 2  # requests of one parameter left unanswered before the catalog
+CLAIM_RECHECK: Final = 0.2  # s: a drive waiting for another of its kind to describe looks again
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,10 +110,18 @@ class DriveDescriber:
         self._identify_due: float | None = 0.0 if self._identify else None
         self.identity: str | None = None
         self.changed = False  # the drive's identity changed: every parameter waits again
+        self.ready: list[Settled] = []  # settled from the book, for the planner to tell
+        self._blocked: float | None = None  # all it could ask, another drive is asking
+
+    def release(self) -> None:
+        """The drive is away: another drive of its kind describes what it was describing."""
+        if self.book is not None:
+            self.book.release(self)
 
     def recheck(self) -> None:
         """The drive answers again after it was away: it may have been replaced."""
         if self._identify:
+            self.release()
             self._answers, self._identify_due = [], 0.0
 
     def waiting(self, pnu: int) -> bool:
@@ -123,7 +139,11 @@ class DriveDescriber:
         if self._identify_due is not None:
             return self._identify_due
         dues = [p.due for p in self._params.values() if not p.settled]
-        return min(dues) if dues else None
+        if not dues:
+            return None
+        if self._blocked is not None:
+            return max(min(dues), self._blocked)
+        return min(dues)
 
     def next_request(self, now: float) -> DescribeStep | None:
         """The next element to ask, of the parameter due first; None when none is due."""
@@ -132,19 +152,32 @@ class DriveDescriber:
                 return None
             request = self._identify[len(self._answers)]
             return DescribeStep(request.pnu, request.subindex, request, identity=True)
-        param = min(
+        self._blocked = None
+        book, identity = self.book, self.identity
+        for param in sorted(
             (p for p in self._params.values() if not p.settled and p.due <= now),
             key=lambda p: p.due,
-            default=None,
-        )
-        if param is None:
-            return None
-        element = param.next_element()
-        assert element is not None  # a parameter with all its elements has settled
-        if param.since is None:
-            param.since = now
-        request = pkw.read_description(self.dialect, param.pnu, element)
-        return DescribeStep(param.pnu, element, request)
+        ):
+            if book is not None and identity is not None:
+                known, found = book.get(identity, param.pnu)
+                if known:  # another drive of its kind told it
+                    self.ready.append(self._settle(param, found, "", now, from_book=True))
+                    continue
+                if not book.claim(identity, param.pnu, self):
+                    continue  # another drive of its kind is asking: its answer will do
+            element = param.next_element()
+            assert element is not None  # a parameter with all its elements has settled
+            if param.since is None:
+                param.since = now
+            request = pkw.read_description(self.dialect, param.pnu, element)
+            return DescribeStep(param.pnu, element, request)
+        if any(not p.settled and p.due <= now for p in self._params.values()):
+            self._blocked = now + CLAIM_RECHECK
+        return None
+
+    def take_ready(self) -> list[Settled]:
+        ready, self.ready = self.ready, []
+        return ready
 
     def took(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Settled]:
         """Fold in what came of ``step``; the parameters that settled by it."""
@@ -201,6 +234,7 @@ class DriveDescriber:
 
     def again(self, pnus: Iterable[int] | None = None) -> None:
         """Describe ``pnus`` (all when None) afresh: the drive may have changed."""
+        self.release()
         for param in self._params.values():
             if pnus is None or param.pnu in pnus:
                 param.found.clear()
@@ -218,6 +252,8 @@ class DriveDescriber:
     ) -> Settled:
         first = param.pnu not in self.described
         param.settled, param.since = True, None
+        if self.book is not None:
+            self.book.release(self, param.pnu)
         if retry:  # not answered in time: the catalog stands; the drive is asked again later
             param.settled, param.found, param.due = False, {}, now + ASK_AGAIN
         elif self.identity is not None and self.book is not None and not from_book:

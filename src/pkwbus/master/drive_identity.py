@@ -69,12 +69,31 @@ def identity_of(dialect: Dialect, outcomes: Sequence[Outcome]) -> str | None:
 
 class DescriptionBook:
     """Descriptions by drive identity and PNU; None where the drive has none (it refuses
-    AK 4 for that parameter). Shared by the drives of every line."""
+    AK 4 for that parameter). Shared by the drives of every line.
+
+    A drive that starts describing a parameter claims it for its identity
+    (:meth:`claim`): the other drives of that kind wait for its answer instead
+    of asking the same, until it releases the claim (described, given up, or
+    away).
+    """
 
     def __init__(self, entries: Mapping[str, Mapping[int, DriveDescription | None]] = {}) -> None:
         self.entries: dict[str, dict[int, DriveDescription | None]] = {
             identity: dict(found) for identity, found in entries.items()
         }
+        self._claims: dict[tuple[str, int], object] = {}
+
+    def claim(self, identity: str, pnu: int, owner: object) -> bool:
+        """Whether ``owner`` may describe ``pnu`` for drives of ``identity`` (it holds the
+        claim now), or another drive of that kind is describing it."""
+        holder = self._claims.setdefault((identity, pnu), owner)
+        return holder is owner
+
+    def release(self, owner: object, pnu: int | None = None) -> None:
+        """``owner``'s claims (of ``pnu``, or all) end."""
+        for key in [k for k, held in self._claims.items() if held is owner]:
+            if pnu is None or key[1] == pnu:
+                del self._claims[key]
 
     def get(self, identity: str, pnu: int) -> tuple[bool, DriveDescription | None]:
         """(whether it is known, the description) of ``pnu`` on drives of ``identity``."""

@@ -13,7 +13,16 @@ from pkwbus.master.drive_identity import identity_requests
 from pkwbus.master.health import DriveHealth, HealthPolicy
 from pkwbus.master.jobs import Job, Priority
 from pkwbus.master.outcomes import Outcome
-from pkwbus.master.plan import Described, DriveSpec, PkwLengthTold, PollSpec, Send, StatusWord
+from pkwbus.master.plan import (
+    Described,
+    DriveSpec,
+    Event,
+    Overrun,
+    PkwLengthTold,
+    PollSpec,
+    Send,
+    StatusWord,
+)
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command, Dialect
@@ -183,14 +192,43 @@ class DrivePlan:
             return ask
         return due
 
-    def describe_step(self, now: float) -> DescribeStep | None:
-        """The description request that goes before the drive's next poll, if one is due."""
+    def start_poll(
+        self, now: float, deadline: float, retries: int
+    ) -> tuple[Active | None, list[Event]]:
+        """The drive's next description request or due poll as a transaction in flight
+        (None: nothing to send now), and the events of starting it (an overrun; parameters
+        another drive of its kind described meanwhile)."""
+        events: list[Event] = []
         describer = self.describer
-        if describer is None or (ask := describer.due()) is None or ask > now:
-            return None
-        if self.polls and self.polls[0][0] < ask:
-            return None
-        return describer.next_request(now)
+        ask = describer.due() if describer is not None else None
+        first = not self.polls or (ask is not None and self.polls[0][0] >= ask)  # no poll before
+        if describer is not None and ask is not None and ask <= now and first:
+            step = describer.next_request(now)
+            events += self.settle(describer.take_ready(), now)
+            if step is not None:
+                tx = PkwTransaction(self.target, step.request, retries=retries, deadline=deadline)
+                send = Send(self.name, self.target, tx.telegram)
+                return Active(tx, Priority.POLL, now, step, send), events
+        if not self.polls or self.polls[0][0] > now:
+            return None, events
+        _, _, poll = heapq.heappop(self.polls)
+        spec = poll.spec
+        if now - poll.due > spec.every:
+            events.append(Overrun(self.name))
+        # Long enough for the retries and a lagging answer; never the poll's whole
+        # interval, which would hold the drive's parameter channel for minutes.
+        tx = PkwTransaction(
+            self.target, spec.request, retries=retries, deadline=deadline,
+            telegram=poll.send.telegram,
+        )  # fmt: skip
+        return Active(tx, Priority.POLL, poll.due, poll, poll.send), events
+
+    def went_down(self) -> PkwLengthTold | None:
+        """The drive is down: another drive of its kind describes what it was describing;
+        a learned PKW length is learned again when it answers."""
+        if self.describer is not None:
+            self.describer.release()
+        return self.forget_pkw()
 
     def described(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Described]:
         """What came of a description request; the parameters it settled."""

@@ -44,7 +44,6 @@ from pkwbus.master.plan import (
     Finished,
     HealthChanged,
     Idle,
-    Overrun,
     PkwLengthTold,
     Send,
     StatusWord,
@@ -136,6 +135,8 @@ class Planner:
         self._lagging.clear()
         for d in self.drives:
             d.busy = d.lagging = False
+            if d.describer is not None:
+                d.describer.release()  # another line's drive of its kind describes instead
             if d.active is not None:
                 self._complete(d, d.active, LineFailed(PORT_CLOSED), now)
             for queue in (d.writes, d.reads):
@@ -333,26 +334,14 @@ class Planner:
             return first.send
         if not d.health.up:
             return d.next_probe()
-        deadline = now + self.poll_deadline
-        if (step := d.describe_step(now)) is not None:
-            tx = PkwTransaction(d.target, step.request, retries=self.retries, deadline=deadline)
-            d.active = Active(tx, Priority.POLL, now, step, Send(d.name, d.target, tx.telegram))
-            return d.active.send
-        _, _, poll = heapq.heappop(d.polls)
-        spec = poll.spec
-        if now - poll.due > spec.every:
-            self.events.append(Overrun(d.name))
-        # Long enough for the retries and a lagging answer; never the poll's whole
-        # interval, which would hold the drive's parameter channel for minutes.
-        tx = PkwTransaction(
-            d.target,
-            spec.request,
-            retries=self.retries,
-            deadline=deadline,
-            telegram=poll.send.telegram,
-        )
-        d.active = Active(tx, Priority.POLL, poll.due, poll, poll.send)
-        return poll.send
+        active, events = d.start_poll(now, now + self.poll_deadline, self.retries)
+        self.events.extend(events)
+        if active is None:  # its descriptions are another drive's to ask
+            d.busy = False
+            self._index(d, now)
+            return None
+        d.active = active
+        return active.send
 
     def _tell(self, event: PkwLengthTold | None) -> None:
         if event is not None:
@@ -390,7 +379,7 @@ class Planner:
             return
         if d.health.failed(now):
             self._show(d, False, result.kind.value)
-            self._tell(d.forget_pkw())  # learned again when it answers: it may have changed
+            self._tell(d.went_down())  # its PKW length and identity are asked again
             active = d.active
             if active is not None and isinstance(active.work, PollState):
                 self._complete(d, active, TimedOut("drive is down"), now)
