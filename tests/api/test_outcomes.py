@@ -90,3 +90,21 @@ async def test_a_write_whose_client_goes_away_is_still_audited(tmp_path: Path) -
         row = audit.latest(1)[0]
         assert row.outcome == "ok", row
         assert svc.sim.drives[1].value(342) == 700
+
+
+async def test_a_parameter_not_described_yet_is_503_and_nothing_is_sent(tmp_path: Path) -> None:
+    """While the drive describes a parameter (at start, or when it is another drive now), a
+    write or read of it would be scaled as the catalog says: refused until it has."""
+    async with service(tmp_path) as svc:
+        entry = svc.runtime.drives["fan1"]
+        entry.pending.add(341)  # as the service marks it while the drive describes 3-41
+        written = await svc.put("fan1", "3-41", {"value": 10})
+        read = await svc.client.get("/api/v1/drives/fan1/parameters/3-41")
+        entry.pending.discard(341)
+        after = await svc.put("fan1", "3-41", {"value": 10})
+    for r in (written, read):
+        assert r.status_code == 503, r.text
+        assert r.json()["error"]["kind"] == "not_described"
+        assert "3-41" in r.json()["error"]["message"]
+    assert after.status_code == 200, after.text
+    assert len(svc.recorder.writes(1, 341)) == 1  # only the one after it was described

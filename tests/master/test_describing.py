@@ -11,15 +11,24 @@ from fractions import Fraction
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
-from pkwbus.master.describing import ASK_AGAIN, UNANSWERED_AT_MOST
-from pkwbus.master.drive_identity import DescriptionBook
-from pkwbus.master.outcomes import Answered
-from pkwbus.master.plan import Described, DescribeTarget, DriveSpec, Finished, PollSpec, Send
+from pkwbus.master.describing import ASK_AGAIN, UNANSWERED_AT_MOST, DriveDescriber
+from pkwbus.master.drive_identity import DescriptionBook, identity_requests
+from pkwbus.master.outcomes import Answered, LineFailed, Outcome, TimedOut
+from pkwbus.master.plan import (
+    Described,
+    DescribeTarget,
+    DriveSpec,
+    Finished,
+    HealthChanged,
+    Overrun,
+    PollSpec,
+    Send,
+)
 from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DescriptionForm, elements_to_read
+from pkwbus.protocol.descriptions import DescriptionForm, DriveDescription, elements_to_read
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.telegram import Telegram
 from pkwbus.sim import SimTiming, Simulator
@@ -156,3 +165,100 @@ def test_another_drive_of_the_kind_describes_when_the_first_goes_away() -> None:
     other = "d2" if first.drive == "d1" else "d1"
     assert len(ak4(fake, other)) == len(elements_to_read(limits=False))
     assert polls_of(fake, other)
+
+
+def test_a_drive_silent_on_descriptions_is_never_shown_down() -> None:
+    fake = line(SilentOnDescriptions)
+    fake.run(ASK_AGAIN + 10.0)
+    downs = [e for e in fake.events if isinstance(e, HealthChanged) and not e.up]
+    assert downs == []
+
+
+def test_no_overrun_for_polls_that_waited_for_their_description() -> None:
+    """Two parameters: the first one's poll (every 4 ms) waits while the second is described
+    (four requests of 2 ms): late, but not an overrun: it was never due before."""
+    target = DriveTarget.create("fc", 1)
+    catalog = load_catalog("danfoss-fc")
+    polls, wanted = [], []
+    for pnu, name in ((1613, "16-13"), (1614, "16-14")):
+        entry = ParameterDescription.from_spec(catalog.get(pnu))
+        request = pkw.read(target.dialect, pnu)
+        polls.append(PollSpec(name, 0, request, 0.004, entry, Layers(entry, catalog=entry)))
+        wanted.append(DescribeTarget(pnu, name, elements_to_read(limits=False), entry))
+    drive = DriveSpec("d1", target, tuple(polls), tuple(wanted), DescriptionForm.DANFOSS_FC)
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    fake = FakeLine(Planner([drive], poll_deadline=0.5), sim)
+    fake.run(0.1)
+    assert polls_of(fake, "d1")
+    assert not [e for e in fake.events if isinstance(e, Overrun)]
+
+
+def test_a_drive_away_while_described_is_described_when_back_before_its_values() -> None:
+    book = DescriptionBook()
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    drive = sim.drives[1]
+    drive.params.specs[CURRENT] = replace(drive.params.specs[CURRENT], conversion=-3)
+    fake = FakeLine(Planner([described_spec(1, book)], poll_deadline=0.5), sim)
+    while not ak4(fake):  # identified; its first description request goes out
+        fake.step(fake.now + 1.0)
+    sim.kill(1)
+    fake.run(5.0)
+    assert not [p for p in polls_of(fake, "d1") if isinstance(p.outcome, Answered)]
+    sim.revive(1)
+    fake.run(5.0)
+    answered = [p for p in polls_of(fake, "d1") if isinstance(p.outcome, Answered)]
+    assert answered and {factor(p) for p in answered} == {Fraction(1, 1000)}
+
+
+def describer(book: DescriptionBook | None = None) -> DriveDescriber:
+    dialect = DriveTarget.create("fc", 1).dialect
+    return DriveDescriber(dialect, DescriptionForm.DANFOSS_FC, [(CURRENT, (1, 2, 4, 6))],
+                          book=book or DescriptionBook(),
+                          identity=identity_requests(dialect))  # fmt: skip
+
+
+def text(value: bytes) -> Answered:
+    return Answered(pkw.TextResponse(15, 1540, 0, value))
+
+
+def identify(d: DriveDescriber, *answers: Outcome) -> None:
+    for answer in answers:
+        step = d.next_request(0.0)
+        assert step is not None and step.identity
+        d.took(step, answer, 0.0)
+
+
+def test_an_identity_that_cannot_be_read_keeps_the_one_known() -> None:
+    d = describer()
+    identify(d, text(b"FC-302"), text(b"05.11"))
+    assert d.identity == "fc:FC-302|05.11"
+    assert d.recheck() == []
+    identify(d, TimedOut("no answer"), TimedOut("no answer"))
+    assert d.identity == "fc:FC-302|05.11" and not d.changed
+
+
+def test_an_identity_answer_of_before_the_drive_was_away_is_not_taken() -> None:
+    d = describer()
+    stale = d.next_request(0.0)
+    assert stale is not None and stale.identity
+    d.recheck()  # the drive was away meanwhile: the identity is read afresh
+    d.took(stale, text(b"05.11"), 0.0)  # the old round's answer comes late
+    identify(d, text(b"FC-302"), text(b"05.11"))
+    assert d.identity == "fc:FC-302|05.11"
+
+
+def test_a_lost_line_is_not_the_drive_left_unanswered() -> None:
+    d = describer()
+    identify(d, text(b"FC-302"), text(b"05.11"))
+    for _ in range(UNANSWERED_AT_MOST + 2):
+        step = d.next_request(0.0)
+        assert step is not None and not step.identity
+        assert d.took(step, LineFailed("the line's port is not open"), 0.0) == []
+    assert d.waiting(CURRENT)
+
+
+def test_a_description_read_without_limits_does_not_serve_a_write() -> None:
+    book = DescriptionBook()
+    book.put("fc:x", CURRENT, DriveDescription(type_code=4, conversion=-2), (1, 2, 4, 6))
+    assert book.get("fc:x", CURRENT, (1, 2, 4, 6)) is not None
+    assert book.get("fc:x", CURRENT, (1, 2, 4, 6, 7, 8)) is None

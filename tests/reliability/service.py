@@ -93,12 +93,21 @@ class Service:
             while True:
                 try:
                     if (await client.get("/readyz")).status_code == 200:
-                        return
+                        break
                 except httpx.TransportError:
                     pass
                 assert self.proc.returncode is None, self.log.read_text()
                 assert loop.time() < end, "the service did not become ready"
                 await asyncio.sleep(0.1)
+            # Writes wait until the drive has described the parameters (AK 4): until then
+            # the API answers 503 not_described.
+            for parameter in ("3-41", "3-42"):
+                while True:
+                    r = await client.get(f"/api/v1/drives/l1_d1/parameters/{parameter}")
+                    if r.status_code != 503 or r.json()["error"]["kind"] != "not_described":
+                        break
+                    assert loop.time() < end + 20, "the drive was not described"
+                    await asyncio.sleep(0.1)
 
     def signal(self, sig: int) -> None:
         assert self.proc is not None

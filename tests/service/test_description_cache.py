@@ -81,10 +81,11 @@ async def test_a_restart_describes_nothing_again_and_another_model_is_described(
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), specs=fc_specs(-3))
     first, seen = await run_once(sim, path)
     assert first and scaled_by(seen, -3)
-    kept = json.loads(path.read_text())
+    kept = json.loads(path.read_text())["drives"]
     (identity,) = kept
     assert identity.startswith("fc:FC-102")
-    assert kept[identity]["1614"]["conversion"] == -3
+    assert kept[identity]["1614"]["description"]["conversion"] == -3
+    assert kept[identity]["1614"]["elements"] == [1, 2, 4, 6]
 
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), specs=fc_specs(-3))
     again, seen = await run_once(sim, path)
@@ -94,21 +95,21 @@ async def test_a_restart_describes_nothing_again_and_another_model_is_described(
     sim.drives[1].params.texts[1540] = b"FC-302"  # another model at the same address
     other, seen = await run_once(sim, path)
     assert other and scaled_by(seen, -1)
-    assert len(json.loads(path.read_text())) == 2
+    assert len(json.loads(path.read_text())["drives"]) == 2
 
 
 async def test_a_file_that_is_not_descriptions_is_logged_and_started_afresh(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     path = tmp_path / "descriptions.json"
-    path.write_text('{"fc:FC-102|05.11": {"1614": {"conversion": 99}}}')
+    path.write_text('{"format": 1, "drives": {"fc:FC-102|05.11": {"1614": {"conversion": 99}}}}')
     caplog.set_level(logging.WARNING)
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), specs=fc_specs(-3))
     requests, seen = await run_once(sim, path)
     assert requests and scaled_by(seen, -3)
     assert any("not a file of drive descriptions" in r.getMessage() for r in caplog.records)
-    (kept,) = json.loads(path.read_text()).values()  # written afresh
-    assert kept["1614"]["conversion"] == -3
+    (kept,) = json.loads(path.read_text())["drives"].values()  # written afresh
+    assert kept["1614"]["description"]["conversion"] == -3
 
 
 async def test_a_drive_replaced_while_running_is_described_before_its_next_value(
@@ -152,7 +153,40 @@ def test_a_file_that_cannot_be_written_is_one_warning(
     kept = DescriptionFile(blocker / "audit.sqlite.descriptions.json")
     caplog.set_level(logging.INFO)
     for conversion in (-1, -2, -3):
-        kept.book.put("fc:FC-302|05.11", 1614, DriveDescription(type_code=4, conversion=conversion))
+        described = DriveDescription(type_code=4, conversion=conversion)
+        kept.book.put("fc:FC-302|05.11", 1614, described, (1, 2, 4, 6))
         kept.save()
     stores = [r for r in caplog.records if "cannot store" in r.getMessage()]
     assert len(stores) == 1 and stores[0].levelno == logging.WARNING
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "[" * 100_000,  # nested past the parser's recursion
+        '{"format": 2, "drives": {}}',
+        '{"format": 1, "drives": {"x": {"1614": {"elements": [1], "description": {}}}}}',
+        '{"format": 1, "drives": {"x": {"a": {"elements": [1], "description": null}}}}',
+    ],
+)
+def test_no_cache_file_stops_the_service(text: str, tmp_path: Path) -> None:
+    path = tmp_path / "descriptions.json"
+    path.write_text(text)
+    assert DescriptionFile(path).book.entries == {}
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("low_raw", "NaN"), ("high_raw", "Infinity"), ("array", 0), ("array", 1.5),
+     ("type_code", 300), ("conversion", 99), ("read_only", 1)],
+)  # fmt: skip
+def test_a_cache_files_values_are_checked(field: str, value: object, tmp_path: Path) -> None:
+    good = dataclasses.asdict(DriveDescription(type_code=4, conversion=-2, low_raw=0))
+    entry = {"elements": [1, 2, 4, 6], "description": {**good, field: value}}
+    text = json.dumps({"format": 1, "drives": {"fc:x": {"1614": entry}}})
+    path = tmp_path / "descriptions.json"
+    path.write_text(text.replace('"NaN"', "NaN").replace('"Infinity"', "Infinity"))
+    assert DescriptionFile(path).book.entries == {}
+    path.write_text(json.dumps({"format": 1, "drives": {"fc:x": {"1614": {**entry,
+                    "description": good}}}}))  # fmt: skip
+    assert DescriptionFile(path).book.get("fc:x", 1614) is not None

@@ -66,9 +66,12 @@ def resolve(layers: Layers, drive: DriveDescription | None) -> Resolved:
         return Resolved(merged, _source(given, False, catalog))
     vtype = config.vtype if "type" in given else (drive.vtype or merged.vtype)
     scaling = config.scaling if "scaling" in given else (drive.scaling or merged.scaling)
-    unit = config.unit if "unit" in given else (drive.unit or merged.unit)
-    low = config.minimum if "min" in given else _first(drive.minimum, merged.minimum)
-    high = config.maximum if "max" in given else _first(drive.maximum, merged.maximum)
+    unit = config.unit if "unit" in given else _unit(drive, merged)
+    # The drive's limits are raw numbers as it sends them: scaled as its values are.
+    low = config.minimum if "min" in given else _first(_scaled(drive.low_raw, scaling),
+                                                       merged.minimum)  # fmt: skip
+    high = config.maximum if "max" in given else _first(_scaled(drive.high_raw, scaling),
+                                                        merged.maximum)  # fmt: skip
     name = config.name if "name" in given else _name(drive.name, merged.name)
     array = drive.array if drive.array is not None else merged.array
     described = drive.vtype is not None or drive.scaling is not None
@@ -113,6 +116,20 @@ def _name(drive: str, known: str) -> str:
     if drive and not known.casefold().startswith(drive.casefold()):
         return drive
     return known or drive
+
+
+def _unit(drive: DriveDescription, known: ParameterDescription) -> str:
+    """The drive's unit; else the catalog's where the drive's scaling is the catalog's (or
+    it gave none); else none: a unit that belongs to another scaling would be wrong."""
+    if drive.unit:
+        return drive.unit
+    if drive.scaling is None or drive.scaling == known.scaling:
+        return known.unit
+    return ""
+
+
+def _scaled(raw: int | float | None, scaling: Scaling) -> float | None:
+    return None if raw is None else float(raw * scaling.factor)
 
 
 def _first(a: float | None, b: float | None) -> float | None:

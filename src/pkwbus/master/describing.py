@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from pkwbus.master.drive_identity import DescriptionBook, identity_of
-from pkwbus.master.outcomes import Answered, Outcome, Rejected
+from pkwbus.master.outcomes import Answered, Cancelled, LineFailed, Outcome, Rejected
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import (
     DATA_TYPE,
@@ -55,6 +55,7 @@ class DescribeStep:
     element: int
     request: pkw.PkwRequest
     identity: bool = False
+    round: int = 0  # of the identity reads: an answer of an earlier round is not this one's
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +83,7 @@ class _Parameter:
     since: float | None = None  # its first request
     due: float = 0.0  # when it may be asked (again)
     settled: bool = False
+    unanswered: bool = False  # settled for want of answers: the catalog stands for now
 
     def next_element(self) -> int | None:
         return next((e for e in self.elements if e not in self.found), None)
@@ -108,6 +110,7 @@ class DriveDescriber:
         self._identify = tuple(identity) if book is not None else ()
         self._answers: list[Outcome] = []
         self._identify_due: float | None = 0.0 if self._identify else None
+        self._round = 0
         self.identity: str | None = None
         self.changed = False  # the drive's identity changed: every parameter waits again
         self.ready: list[Settled] = []  # settled from the book, for the planner to tell
@@ -118,11 +121,21 @@ class DriveDescriber:
         if self.book is not None:
             self.book.release(self)
 
-    def recheck(self) -> None:
-        """The drive answers again after it was away: it may have been replaced."""
+    def recheck(self) -> list[int]:
+        """The drive answers again after it was away: it may have been replaced, and what
+        it left unanswered (it was away) waits for its description again, so that no value
+        goes out with a description it may not have. The PNUs waiting again."""
         if self._identify:
             self.release()
             self._answers, self._identify_due = [], 0.0
+            self._round += 1
+        again = []
+        for param in self._params.values():
+            if param.unanswered and self.described.get(param.pnu, 0) is None:
+                del self.described[param.pnu]
+                param.settled, param.found, param.due, param.unanswered = False, {}, 0.0, False
+                again.append(param.pnu)
+        return again
 
     def waiting(self, pnu: int) -> bool:
         """Whether the polls of ``pnu`` wait for its description."""
@@ -151,7 +164,7 @@ class DriveDescriber:
             if self._identify_due > now:
                 return None
             request = self._identify[len(self._answers)]
-            return DescribeStep(request.pnu, request.subindex, request, identity=True)
+            return DescribeStep(request.pnu, request.subindex, request, True, self._round)
         self._blocked = None
         book, identity = self.book, self.identity
         for param in sorted(
@@ -159,8 +172,8 @@ class DriveDescriber:
             key=lambda p: p.due,
         ):
             if book is not None and identity is not None:
-                known, found = book.get(identity, param.pnu)
-                if known:  # another drive of its kind told it
+                found = book.get(identity, param.pnu, param.elements)
+                if found is not None:  # another drive of its kind told it
                     self.ready.append(self._settle(param, found, "", now, from_book=True))
                     continue
                 if not book.claim(identity, param.pnu, self):
@@ -182,6 +195,8 @@ class DriveDescriber:
     def took(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Settled]:
         """Fold in what came of ``step``; the parameters that settled by it."""
         if step.identity:
+            if step.round != self._round or self._identify_due is None:
+                return []  # asked before the drive was away: not this round's answer
             self._answers.append(outcome)
             return self._identified(now) if len(self._answers) == len(self._identify) else []
         param = self._params[step.pnu]
@@ -195,7 +210,9 @@ class DriveDescriber:
                 why = f"the drive has no description of it ({_said(outcome)})"
                 return [self._settle(param, None, why, now)]
             param.found[step.element] = None
-        else:  # no answer within the request's retries, or the line went away
+        elif isinstance(outcome, LineFailed | Cancelled):
+            return []  # the line went away, or the service stops: not the drive's silence
+        else:  # no answer within the request's retries
             self.unanswered += 1
             if self.unanswered >= UNANSWERED_AT_MOST:
                 why = f"no answer to {self.unanswered} description requests in a row"
@@ -216,8 +233,11 @@ class DriveDescriber:
         """The identity is read: a drive replaced by another is described afresh; what the
         book knows of this identity settles at once."""
         identity = identity_of(self.dialect, self._answers)
-        previous, self.identity = self.identity, identity
+        previous = self.identity
         self._answers, self._identify_due = [], None
+        if identity is None:  # not told this time: the drive is still the one it was
+            return []
+        self.identity = identity
         if previous is not None and identity != previous:
             self.again()
             self.described.clear()
@@ -227,8 +247,8 @@ class DriveDescriber:
             return []
         settled = []
         for param in self._params.values():
-            known, found = book.get(identity, param.pnu)
-            if known and self.waiting(param.pnu):
+            found = book.get(identity, param.pnu, param.elements)
+            if found is not None and self.waiting(param.pnu):
                 settled.append(self._settle(param, found, "", now, from_book=True))
         return settled
 
@@ -254,10 +274,12 @@ class DriveDescriber:
         param.settled, param.since = True, None
         if self.book is not None:
             self.book.release(self, param.pnu)
+        param.unanswered = retry
         if retry:  # not answered in time: the catalog stands; the drive is asked again later
             param.settled, param.found, param.due = False, {}, now + ASK_AGAIN
-        elif self.identity is not None and self.book is not None and not from_book:
-            self.book.put(self.identity, param.pnu, found)
+        elif self.identity and self.book is not None and found is not None and not from_book:
+            # (A refusal is not kept: it may be the drive's state, not its kind.)
+            self.book.put(self.identity, param.pnu, found, param.elements)
         if found is not None or first:
             self.described[param.pnu] = found
         return Settled(param.pnu, found, why, first, self.identity, from_book, retry)

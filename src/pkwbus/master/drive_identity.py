@@ -20,7 +20,8 @@ service keeps it in a file (:meth:`DescriptionBook.to_json`). Pure: no I/O.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, Final
 
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
@@ -38,6 +39,7 @@ _IDENTITY: Final[Mapping[str, tuple[tuple[int, int | None, bool], ...]]] = {
     "profidrive": ((964, 0, False), (964, 1, False), (964, 2, False)),
 }
 _FIELDS: Final = tuple(f.name for f in dataclasses.fields(DriveDescription))
+FORMAT: Final = 1  # of the book's file: another format is read as no book
 
 
 def identity_requests(dialect: Dialect, *, texts: bool = True) -> tuple[pkw.PkwRequest, ...]:
@@ -77,11 +79,23 @@ class DescriptionBook:
     away).
     """
 
-    def __init__(self, entries: Mapping[str, Mapping[int, DriveDescription | None]] = {}) -> None:
-        self.entries: dict[str, dict[int, DriveDescription | None]] = {
-            identity: dict(found) for identity, found in entries.items()
-        }
+    def __init__(self) -> None:
+        # identity -> PNU -> (its description, the elements read of it)
+        self.entries: dict[str, dict[int, tuple[DriveDescription, frozenset[int]]]] = {}
         self._claims: dict[tuple[str, int], object] = {}
+
+    def get(self, identity: str, pnu: int, elements: Iterable[int] = ()) -> DriveDescription | None:
+        """How drives of ``identity`` describe ``pnu``, when the elements read of it cover
+        ``elements`` (a parameter described for polling lacks the limits a write needs)."""
+        found = self.entries.get(identity, {}).get(pnu)
+        if found is None or not set(elements) <= found[1]:
+            return None
+        return found[0]
+
+    def put(
+        self, identity: str, pnu: int, description: DriveDescription, elements: Iterable[int]
+    ) -> None:
+        self.entries.setdefault(identity, {})[pnu] = (description, frozenset(elements))
 
     def claim(self, identity: str, pnu: int, owner: object) -> bool:
         """Whether ``owner`` may describe ``pnu`` for drives of ``identity`` (it holds the
@@ -95,46 +109,62 @@ class DescriptionBook:
             if pnu is None or key[1] == pnu:
                 del self._claims[key]
 
-    def get(self, identity: str, pnu: int) -> tuple[bool, DriveDescription | None]:
-        """(whether it is known, the description) of ``pnu`` on drives of ``identity``."""
-        found = self.entries.get(identity, {})
-        return pnu in found, found.get(pnu)
-
-    def put(self, identity: str, pnu: int, description: DriveDescription | None) -> None:
-        self.entries.setdefault(identity, {})[pnu] = description
-
     def to_json(self) -> dict[str, Any]:
         return {
-            identity: {
-                str(pnu): None if d is None else dataclasses.asdict(d) for pnu, d in found.items()
-            }
-            for identity, found in self.entries.items()
+            "format": FORMAT,
+            "drives": {
+                identity: {
+                    str(pnu): {"elements": sorted(read), "description": dataclasses.asdict(d)}
+                    for pnu, (d, read) in found.items()
+                }
+                for identity, found in self.entries.items()
+            },
         }
 
     @classmethod
     def from_json(cls, data: object) -> DescriptionBook:
         """The book a :meth:`to_json` made; ValueError for anything else."""
-        if not isinstance(data, dict):
-            raise ValueError("not a mapping of drive identities")
-        entries: dict[str, dict[int, DriveDescription | None]] = {}
-        for identity, found in data.items():
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise ValueError(f"not a book of drive descriptions of format {FORMAT}")
+        drives = data.get("drives")
+        if not isinstance(drives, dict):
+            raise ValueError("no mapping of drive identities")
+        book = cls()
+        for identity, found in drives.items():
             if not isinstance(identity, str) or not isinstance(found, dict):
                 raise ValueError(f"entry {identity!r} is not a mapping of parameters")
-            entries[identity] = {int(pnu): _description(d) for pnu, d in found.items()}
-        return cls(entries)
+            for pnu, entry in found.items():
+                if not isinstance(entry, dict) or set(entry) != {"elements", "description"}:
+                    raise ValueError(f"{identity} {pnu}: not an entry of a description")
+                read = entry["elements"]
+                if not isinstance(read, list) or not all(type(e) is int for e in read):
+                    raise ValueError(f"{identity} {pnu}: elements {read!r} are not numbers")
+                book.put(identity, int(pnu), _description(entry["description"]), read)
+        return book
 
 
-def _description(data: object) -> DriveDescription | None:
-    if data is None:
-        return None
+def _description(data: object) -> DriveDescription:
+    """A description as :meth:`DescriptionBook.to_json` wrote it; ValueError for anything
+    else (a file may have been edited: nothing in it is trusted)."""
     if not isinstance(data, dict) or set(data) != set(_FIELDS):
         raise ValueError(f"not a description: {data!r}")
-    checks = {"unit": (str, type(None)), "name": (str,), "read_only": (bool, type(None))}
-    for key, value in data.items():
-        allowed = checks.get(key, (int, float, type(None)))
-        if (isinstance(value, bool) and key != "read_only") or not isinstance(value, allowed):
-            raise ValueError(f"{key}: {value!r} is not a description's value")
-    conversion = data["conversion"]
+    for key in ("type_code", "array", "conversion"):
+        value = data[key]
+        if value is not None and type(value) is not int:
+            raise ValueError(f"{key}: {value!r} is not a whole number")
+    for key in ("low_raw", "high_raw"):
+        value = data[key]
+        if value is not None and (type(value) not in (int, float) or not math.isfinite(value)):
+            raise ValueError(f"{key}: {value!r} is not a finite number")
+    if not isinstance(data["name"], str) or not isinstance(data["unit"], str | None):
+        raise ValueError("name and unit must be texts")
+    if data["read_only"] is not None and type(data["read_only"]) is not bool:
+        raise ValueError("read_only must be true, false or null")
+    conversion, array, code = data["conversion"], data["array"], data["type_code"]
     if conversion is not None and conversion not in CONVERSION_FACTORS:
         raise ValueError(f"conversion index {conversion!r} is not one pkwbus knows")
+    if array is not None and array < 1:
+        raise ValueError(f"array of {array} elements")
+    if code is not None and not 0 <= code <= 0xFF:
+        raise ValueError(f"data type {code} is not a byte")
     return DriveDescription(**data)

@@ -36,12 +36,14 @@ __all__ = ["Active", "DrivePlan", "PollState"]
 class PollState:
     """A poll and when it is due; its request telegram is built once."""
 
-    __slots__ = ("due", "send", "spec")
+    __slots__ = ("due", "fresh", "send", "spec")
 
     def __init__(self, spec: PollSpec, due: float, send: Send) -> None:
         self.spec = spec
         self.due = due
         self.send = send
+        # Waited for its parameter's description: its first start is never an overrun.
+        self.fresh = False
 
 
 @dataclass(eq=False, slots=True)
@@ -213,8 +215,9 @@ class DrivePlan:
             return None, events
         _, _, poll = heapq.heappop(self.polls)
         spec = poll.spec
-        if now - poll.due > spec.every:
+        if now - poll.due > spec.every and not poll.fresh:
             events.append(Overrun(self.name))
+        poll.fresh = False
         # Long enough for the retries and a lagging answer; never the poll's whole
         # interval, which would hold the drive's parameter channel for minutes.
         tx = PkwTransaction(
@@ -222,6 +225,13 @@ class DrivePlan:
             telegram=poll.send.telegram,
         )  # fmt: skip
         return Active(tx, Priority.POLL, poll.due, poll, poll.send), events
+
+    @property
+    def describing(self) -> bool:
+        """Whether its exchange in flight is a description request (AK 4): some drives
+        leave those unanswered and answer everything else."""
+        work = self.active.work if self.active is not None else None
+        return isinstance(work, DescribeStep) and not work.identity
 
     def went_down(self) -> PkwLengthTold | None:
         """The drive is down: another drive of its kind describes what it was describing;
@@ -235,10 +245,17 @@ class DrivePlan:
         describer = self.describer
         assert describer is not None  # it made the request
         settled = describer.took(step, outcome, now)
+        forgotten: list[Described] = []
         if describer.changed:  # another drive now: its values wait for its description
             describer.changed = False
             self._hold_again()
-        return self.settle(settled, now)
+            why = f"another drive now ({describer.identity})"
+            forgotten = [
+                Described(self.name, t, None, (), why, identity=describer.identity,
+                          forgotten=True)
+                for t in self.spec.describe
+            ]  # fmt: skip
+        return forgotten + self.settle(settled, now)
 
     def _hold_again(self) -> None:
         describer = self.describer
@@ -270,7 +287,7 @@ class DrivePlan:
                 poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
             for poll in polls:
                 if id(poll) in waiting:
-                    poll.due = now
+                    poll.due, poll.fresh = now, True
                     self.push_poll(poll)
             specs = tuple(p.spec for p in polls)
             events.append(
@@ -294,12 +311,17 @@ class DrivePlan:
             poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
 
-    def back(self, now: float) -> None:
-        """The drive answers again after it was away: its polls are due now, and its
-        identity is read again (it may have been replaced by another drive)."""
+    def back(self, now: float) -> list[Described]:
+        """The drive answers again after it was away: its polls are due now, its identity
+        is read again (it may have been replaced by another drive), and what it left
+        undescribed while away waits for its description again."""
         self.restart_polls(now)
-        if self.describer is not None:
-            self.describer.recheck()
+        if self.describer is None or not (again := self.describer.recheck()):
+            return []
+        self._hold_again()
+        targets = [t for t in self.spec.describe if t.pnu in again]
+        why = "back after it was away"
+        return [Described(self.name, t, None, (), why, forgotten=True) for t in targets]
 
     def restart_polls(self, now: float) -> None:
         """Every poll due now: after the drive or its line was away, none of them is late."""

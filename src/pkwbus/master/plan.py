@@ -156,6 +156,9 @@ class Described:
     identity: str | None = None  # the drive's model and software, when known
     from_book: bool = False  # known from a drive of that identity, or an earlier run
     unanswered: bool = False  # left unanswered: the catalog stands, asked again later
+    # The drive is another one now (its identity changed): described afresh, its values
+    # waiting for it (``description`` is None).
+    forgotten: bool = False
 
 
 Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

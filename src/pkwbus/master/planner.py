@@ -210,7 +210,7 @@ class Planner:
         d = self._by_name[drive]
         self._show(d, up, reason)
         if up:
-            d.back(now)
+            self.events.extend(d.back(now))
             self._index(d, now)
 
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
@@ -371,11 +371,11 @@ class Planner:
         if not isinstance(result, Failure):
             if d.health.answered():
                 self._show(d, True, "answers again")
-                d.back(now)  # not overruns: the drive was away
+                self.events.extend(d.back(now))  # not overruns: the drive was away
             elif not d.shown_up:
                 self._show(d, True, "")  # back after its line was down
             return
-        if result.kind is ErrorKind.PORT:
+        if result.kind is ErrorKind.PORT or d.describing:  # a drive may ignore AK 4 alone
             return
         if d.health.failed(now):
             self._show(d, False, result.kind.value)

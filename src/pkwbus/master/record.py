@@ -117,6 +117,7 @@ class LineRecord:
         # Parameters whose description is awaited: no value of theirs lands before it.
         self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
         self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
+        self._targets = {d.name: d.describe for d in drives}
         snapshot.lines[line] = False
         for d in drives:
             snapshot.drives[d.name] = DriveState()
@@ -146,12 +147,19 @@ class LineRecord:
         """A parameter's description settled: its polls decode as it says from now on; one
         log line when the drive gave none, one per field it contradicts the catalog on."""
         drive, target, found = event.drive, event.target, event.description
+        ctx = {"line": self.line, "drive": drive}
+        if event.forgotten:  # another drive now: no value of its parameters until described
+            if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
+                log.warning("drive %s is %s: its parameters are described afresh", drive,
+                            event.why, extra=ctx)  # fmt: skip
+            self._waiting.add((drive, target.pnu))
+            self.events.described(event, [])
+            return
         self._waiting.discard((drive, target.pnu))
         new = {(p.parameter, p.index): p for p in event.polls}
         self._polls[drive] = tuple(
             new.get((p.parameter, p.index), p) for p in self._polls.get(drive, ())
         )
-        ctx = {"line": self.line, "drive": drive}
         contradicts: list[Disagreement] = []
         if found is None:
             if event.unanswered and drive not in self._silent:

@@ -162,7 +162,14 @@ class PkwTransaction:
             tally.main_actual = block.main_actual
             response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
         except RemoteProtocolError as exc:
-            return self._on_failure(Failure(ErrorKind.UNEXPECTED, str(exc)))
+            # The right drive, but an answer that cannot be read (a block too short for
+            # the answer, say): a try of the job's retries, not "not yet" forever.
+            self.tally.errors[ErrorKind.UNEXPECTED] += 1
+            self.waiting = True
+            self._failures += 1
+            if self._failures > self.retries:
+                return TimedOut(f"no answer that can be read after {self._failures} tries: {exc}")
+            return None
         return self._on(response, block.pkw)
 
     def _on(self, response: pkw.PkwResponse, answer: bytes) -> Outcome | None:

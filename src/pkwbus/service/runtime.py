@@ -16,7 +16,12 @@ from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 
-from pkwbus.catalog.description import ParameterDescription, ParameterTable
+from pkwbus.catalog.description import (
+    OTHER_INDEX,
+    ParameterDescription,
+    ParameterKey,
+    ParameterTable,
+)
 from pkwbus.catalog.precedence import Layers, resolve
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.plan import PollSpec
@@ -46,10 +51,13 @@ class DriveEntry:
     parameters: ParameterTable = field(default_factory=ParameterTable)
     # The unit of each polled parameter, by its name on the drive (as now described).
     units: dict[str, str] = field(default_factory=dict)
-    # What the configuration and the catalog say of each polled (PNU, index).
-    layers: Mapping[tuple[int, int], Layers] = field(default_factory=lambda: MappingProxyType({}))
+    # What the configuration sets explicitly and the catalog says, of each parameter the
+    # configuration names, keyed as ParameterTable.configured.
+    layers: Mapping[ParameterKey, Layers] = field(default_factory=lambda: MappingProxyType({}))
     # What the drive described of its parameters, by PNU, as their descriptions settle.
     described: dict[int, DriveDescription] = field(default_factory=dict)
+    # PNUs the drive is describing: no API read or write of theirs until it has.
+    pending: set[int] = field(default_factory=set)
     # Where each polled parameter's description came from (catalog.precedence.SOURCES).
     sources: dict[str, str] = field(default_factory=dict)
     # Each polled (parameter, index) as it is decoded now.
@@ -70,8 +78,11 @@ class DriveEntry:
         drive = self.described.get(ref.pnu)
         if drive is None:
             return known
-        layers = self.layers.get((ref.pnu, ref.index or 0))
-        if layers is None:  # not polled: no explicit configuration of its own
+        keys: tuple[ParameterKey, ...] = ((ref.pnu, ref.index),)
+        if ref.index is not None:
+            keys += ((ref.pnu, OTHER_INDEX), (ref.pnu, None))
+        layers = next((self.layers[k] for k in keys if k in self.layers), None)
+        if layers is None:  # the configuration says nothing of it
             layers = Layers(known, catalog=self.parameters.catalog.get(ref.pnu))
         return resolve(layers, drive).description
 

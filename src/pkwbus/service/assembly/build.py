@@ -14,7 +14,6 @@ from pathlib import Path
 import prometheus_client
 
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
-from pkwbus.catalog.precedence import Layers
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec
@@ -35,7 +34,11 @@ from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
-from pkwbus.service.assembly.parameter_table import layers_of, parameter_table
+from pkwbus.service.assembly.parameter_table import (
+    explicit_layers,
+    layers_of,
+    parameter_table,
+)
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
@@ -193,14 +196,13 @@ def _drive(
     polls = []
     units: dict[str, str] = {}
     sources: dict[str, str] = {}
-    layers: dict[tuple[int, int], Layers] = {}
     for entry in drive.poll:
         ref = entry.ref
         index = entry.index if entry.index is not None else ref.index
         # Labels are the drive's one name for the parameter: "1613" polls 16-13.
         ref = table.canonical(ParameterRef(ref.pnu, index, ref.name))
         fmt = table.describe(ref)
-        found = layers[(ref.pnu, index or 0)] = layers_of(drive, table, ref)
+        found = layers_of(drive, table, ref)
         polls.append(
             PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt,
                      found if form is not None else None)
@@ -209,6 +211,7 @@ def _drive(
         info = _info(line, drive, ref, fmt, found.catalog)
         infos.append(info)
         sources[ref.name] = info.source
+    describe = describe_targets(target, drive, table) if form is not None else ()
     entries.append(
         DriveEntry(
             drive.name,
@@ -217,11 +220,11 @@ def _drive(
             tuple(polls),
             parameters=table,
             units=units,
-            layers=layers,
+            layers=explicit_layers(drive, table),
+            pending={t.pnu for t in describe},
             sources=sources,
         )
     )
-    describe = describe_targets(target, drive, table) if form is not None else ()
     return DriveSpec(drive.name, target, tuple(polls), describe, form, book)
 
 
@@ -236,8 +239,8 @@ def describe_targets(
     target: DriveTarget, drive: cfg.Drive, table: ParameterTable
 ) -> tuple[DescribeTarget, ...]:
     """The polled and writable parameters, each once: polled ones for their type, scaling,
-    unit, size and name; writable ones also for their limits. A PPO's four PKW words
-    carry no name of 16 characters: over PROFIBUS the name is not asked."""
+    unit, size and name; writable ones also for their limits. The name is not asked
+    where it does not fit the PKW block: a PPO's four words, a fixed USS length."""
     wanted: dict[int, tuple[str, bool]] = {}
     for entry in drive.poll:
         ref = table.canonical(entry.ref)
@@ -245,10 +248,13 @@ def describe_targets(
     for ref in drive.writable:
         ref = table.canonical(ref)
         wanted[ref.pnu] = (wanted.get(ref.pnu, (ref.name, True))[0], True)
-    dp = target.protocol is Protocol.PROFIBUS
+    # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block.
+    short = target.protocol is Protocol.PROFIBUS or (
+        target.protocol is Protocol.USS and drive.pkw_words in (3, 4)
+    )
     targets = []
     for pnu, (name, limits) in wanted.items():
-        elements = tuple(e for e in elements_to_read(limits=limits) if not (dp and e == NAME))
+        elements = tuple(e for e in elements_to_read(limits=limits) if not (short and e == NAME))
         targets.append(DescribeTarget(pnu, name, elements, table.catalog.get(pnu)))
     return tuple(targets)
 

@@ -35,6 +35,11 @@ class DescriptionSink:
         entry = self._entries.get(event.drive)
         if entry is None:
             return
+        if event.forgotten:  # another drive now: nothing goes to it until it is described
+            entry.pending.add(event.target.pnu)
+            entry.described.pop(event.target.pnu, None)
+            return
+        entry.pending.discard(event.target.pnu)
         if event.description is not None:
             entry.described[event.target.pnu] = event.description
         else:

@@ -47,7 +47,7 @@ class DescriptionFile:
             return DescriptionBook()
         try:
             return DescriptionBook.from_json(json.loads(text))
-        except ValueError as exc:  # json.JSONDecodeError is one
+        except (ValueError, TypeError, RecursionError) as exc:  # JSONDecodeError is a ValueError
             log.warning("%s is not a file of drive descriptions (%s): the drives are"
                         " described afresh", self.path, exc)  # fmt: skip
             return DescriptionBook()

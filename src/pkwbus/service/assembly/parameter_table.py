@@ -26,7 +26,7 @@ from pkwbus.catalog.precedence import Layers
 from pkwbus.protocol.params import MAX_INDEX, UNSCALED, ParameterRef, ValueType
 from pkwbus.service import config as cfg
 
-__all__ = ["layers_of", "parameter_table"]
+__all__ = ["explicit_layers", "layers_of", "parameter_table"]
 
 # A configuration field -> the name of what it sets, as catalog.precedence.Layers.given says.
 _GIVEN = {"type": "type", "scale": "scaling", "conversion": "scaling", "unit": "unit",
@@ -86,3 +86,21 @@ def layers_of(drive: cfg.Drive, table: ParameterTable, ref: ParameterRef) -> Lay
         maximum=overrides.max,
     )
     return Layers(merged, config, given, table.catalog.get(ref.pnu))
+
+
+def explicit_layers(drive: cfg.Drive, table: ParameterTable) -> dict[ParameterKey, Layers]:
+    """The layers of every parameter the configuration names, keyed as ``table.configured``
+    (an index it does not name under :data:`OTHER_INDEX`): what API reads and writes
+    resolve a drive's description against."""
+    found: dict[ParameterKey, Layers] = {}
+    for pnu, index in table.configured:
+        if index == OTHER_INDEX:
+            named = {i for p, i in table.configured if p == pnu}
+            index_of = next((i for i in range(MAX_INDEX + 1) if i not in named), None)
+            if index_of is None:
+                continue
+            ref = ParameterRef(pnu, index_of, str(pnu))
+        else:
+            ref = ParameterRef(pnu, index, str(pnu))
+        found[(pnu, index)] = layers_of(drive, table, drive.canonical(ref))
+    return found

@@ -31,6 +31,7 @@ __all__ = [
     "TokenCheck",
     "check_names",
     "clip",
+    "described_format",
     "fit_index",
     "locate",
     "raise_for",
@@ -64,6 +65,17 @@ def check_names(drive: str, parameter: str) -> None:
         raise ApiError(
             404, "unknown_parameter", f"no parameter is written in {len(parameter)} characters"
         )
+
+
+def described_format(entry: DriveEntry, ref: ParameterRef) -> ParameterDescription:
+    """What ``ref`` is on the drive; 503 while the drive has not described it yet (a value
+    written or read now would be scaled as the catalog says, maybe not as the drive does)."""
+    if ref.pnu in entry.pending:
+        raise ApiError(
+            503, "not_described",
+            f"{entry.name} has not described {ref.name} yet: try again in a few seconds",
+        )  # fmt: skip
+    return entry.format_of(ref)
 
 
 def clip(name: str, limit: int) -> str:

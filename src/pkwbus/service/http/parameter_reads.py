@@ -19,7 +19,14 @@ from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef
-from pkwbus.service.http.parameter_checks import ApiError, check_names, fit_index, locate, raise_for
+from pkwbus.service.http.parameter_checks import (
+    ApiError,
+    check_names,
+    described_format,
+    fit_index,
+    locate,
+    raise_for,
+)
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 __all__ = ["MAX_READS_PER_DRIVE", "Reads", "read_request"]
@@ -46,7 +53,7 @@ class Reads:
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
         check_names(drive, parameter)
         entry, ref = locate(self.runtime, drive, parameter, index)
-        fmt = entry.format_of(ref)
+        fmt = described_format(entry, ref)
         ref = fit_index(ref, fmt)
         request = read_request(entry, ref, fmt)
         if self._waiting[entry.name] >= MAX_READS_PER_DRIVE:
