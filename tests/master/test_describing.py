@@ -262,3 +262,23 @@ def test_a_description_read_without_limits_does_not_serve_a_write() -> None:
     book.put("fc:x", CURRENT, DriveDescription(type_code=4, conversion=-2), (1, 2, 4, 6))
     assert book.get("fc:x", CURRENT, (1, 2, 4, 6)) is not None
     assert book.get("fc:x", CURRENT, (1, 2, 4, 6, 7, 8)) is None
+
+
+def test_the_book_keeps_no_limits_a_drive_may_change() -> None:
+    """A writable parameter's limits are read from the drive at each start (FC 4-14 follows
+    4-19): the book keeps its type and scaling for the next drive of the kind, not them."""
+    book = DescriptionBook()
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    target = DriveTarget.create("fc", 1)
+    entry = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341))
+    wanted = DescribeTarget(341, "3-41", elements_to_read(limits=True), entry)
+    drive = DriveSpec("d1", target, (), (wanted,), DescriptionForm.DANFOSS_FC, book)
+    fake = FakeLine(Planner([drive], poll_deadline=0.5), sim)
+    fake.run(1.0)
+    (done,) = [e for e in fake.events if isinstance(e, Described)]
+    assert done.description is not None and done.description.high_raw is not None
+    (identity,) = book.entries
+    kept = book.get(identity, 341)
+    assert kept is not None and kept.conversion == done.description.conversion
+    assert (kept.low_raw, kept.high_raw) == (None, None)
+    assert book.get(identity, 341, elements_to_read(limits=True)) is None

@@ -18,7 +18,7 @@ Pure: time passed in, no I/O.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 from pkwbus.master.drive_identity import DescriptionBook, identity_of
@@ -26,6 +26,7 @@ from pkwbus.master.outcomes import Answered, Cancelled, LineFailed, Outcome, Rej
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import (
     DATA_TYPE,
+    LIMITS,
     DescriptionForm,
     DriveDescription,
     read_elements,
@@ -278,8 +279,12 @@ class DriveDescriber:
         if retry:  # not answered in time: the catalog stands; the drive is asked again later
             param.settled, param.found, param.due = False, {}, now + ASK_AGAIN
         elif self.identity and self.book is not None and found is not None and not from_book:
-            # (A refusal is not kept: it may be the drive's state, not its kind.)
-            self.book.put(self.identity, param.pnu, found, param.elements)
+            # A refusal is not kept: it may be the drive's state, not its kind. Nor are the
+            # limits: a drive's may follow its other settings (FC 4-14 follows 4-19), so a
+            # writable parameter is described by each start afresh.
+            kept = replace(found, low_raw=None, high_raw=None)
+            read = [e for e in param.elements if e not in LIMITS]
+            self.book.put(self.identity, param.pnu, kept, read)
         if found is not None or first:
             self.described[param.pnu] = found
         return Settled(param.pnu, found, why, first, self.identity, from_book, retry)
