@@ -282,3 +282,27 @@ def test_the_book_keeps_no_limits_a_drive_may_change() -> None:
     assert kept is not None and kept.conversion == done.description.conversion
     assert (kept.low_raw, kept.high_raw) == (None, None)
     assert book.get(identity, 341, elements_to_read(limits=True)) is None
+
+
+def test_a_drive_of_a_described_kind_reads_only_its_own_limits() -> None:
+    book = DescriptionBook()
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    entry = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341))
+    wanted = DescribeTarget(341, "3-41", elements_to_read(limits=True), entry)
+    drives = [
+        DriveSpec(f"d{a}", DriveTarget.create("fc", a), (), (wanted,),
+                  DescriptionForm.DANFOSS_FC, book)
+        for a in (1, 2)
+    ]  # fmt: skip
+    highest = sim.drives[2].params.specs[341].maximum
+    assert highest is not None
+    sim.drives[2].params.specs[341] = replace(sim.drives[2].params.specs[341], maximum=highest / 2)
+    fake = FakeLine(Planner(drives, poll_deadline=0.5), sim)
+    fake.run(1.0)
+    assert len(ak4(fake)) == len(elements_to_read(limits=True)) + 2  # then 7 and 8 alone
+    done = {e.drive: e.description for e in fake.events if isinstance(e, Described)}
+    first, second = (done[d] for d in sorted(done, key=lambda d: len(ak4(fake, d)), reverse=True))
+    assert first is not None and second is not None
+    assert second.conversion == first.conversion
+    assert second.high_raw is not None and first.high_raw is not None
+    assert second.high_raw * 2 == first.high_raw  # each drive's own limit

@@ -85,6 +85,8 @@ class _Parameter:
     due: float = 0.0  # when it may be asked (again)
     settled: bool = False
     unanswered: bool = False  # settled for want of answers: the catalog stands for now
+    # What another drive of its kind described of it (the book): only its limits are read.
+    base: DriveDescription | None = None
 
     def next_element(self) -> int | None:
         return next((e for e in self.elements if e not in self.found), None)
@@ -135,6 +137,7 @@ class DriveDescriber:
             if param.unanswered and self.described.get(param.pnu, 0) is None:
                 del self.described[param.pnu]
                 param.settled, param.found, param.due, param.unanswered = False, {}, 0.0, False
+                param.base = None
                 again.append(param.pnu)
         return again
 
@@ -172,12 +175,18 @@ class DriveDescriber:
             (p for p in self._params.values() if not p.settled and p.due <= now),
             key=lambda p: p.due,
         ):
-            if book is not None and identity is not None:
-                found = book.get(identity, param.pnu, param.elements)
-                if found is not None:  # another drive of its kind told it
+            if book is not None and identity is not None and param.base is None:
+                found = book.get(identity, param.pnu, _shared(param.elements))
+                if found is not None and _shared(param.elements) == param.elements:
                     self.ready.append(self._settle(param, found, "", now, from_book=True))
                     continue
-                if not book.claim(identity, param.pnu, self):
+                if found is not None:  # its kind is known: its own limits are read alone
+                    param.base = found
+                    param.found = {
+                        e: _type_element(param.pnu, found) if e == DATA_TYPE else None
+                        for e in _shared(param.elements)
+                    }
+                elif not book.claim(identity, param.pnu, self):
                     continue  # another drive of its kind is asking: its answer will do
             element = param.next_element()
             assert element is not None  # a parameter with all its elements has settled
@@ -227,6 +236,8 @@ class DriveDescriber:
         self.unanswered = 0
         if param.next_element() is None:
             found = read_elements(self.form, param.found)
+            if param.base is not None:  # the kind's description, with this drive's limits
+                found = replace(param.base, low_raw=found.low_raw, high_raw=found.high_raw)
             return [self._settle(param, None if found.empty else found, "", now)]
         return []
 
@@ -259,6 +270,7 @@ class DriveDescriber:
         for param in self._params.values():
             if pnus is None or param.pnu in pnus:
                 param.found.clear()
+                param.base = None
                 param.settled, param.since, param.due = False, None, 0.0
 
     def _settle(
@@ -278,6 +290,7 @@ class DriveDescriber:
         param.unanswered = retry
         if retry:  # not answered in time: the catalog stands; the drive is asked again later
             param.settled, param.found, param.due = False, {}, now + ASK_AGAIN
+            param.base = None
         elif self.identity and self.book is not None and found is not None and not from_book:
             # A refusal is not kept: it may be the drive's state, not its kind. Nor are the
             # limits: a drive's may follow its other settings (FC 4-14 follows 4-19), so a
@@ -288,6 +301,19 @@ class DriveDescriber:
         if found is not None or first:
             self.described[param.pnu] = found
         return Settled(param.pnu, found, why, first, self.identity, from_book, retry)
+
+
+def _shared(elements: tuple[int, ...]) -> tuple[int, ...]:
+    """The elements drives of one kind share: all but the limits."""
+    return tuple(e for e in elements if e not in LIMITS)
+
+
+def _type_element(pnu: int, kind: DriveDescription) -> pkw.DescriptionResponse | None:
+    """Element 1 as the book knows it, to read this drive's limits by (the type code is
+    the low byte in both forms)."""
+    if kind.type_code is None:
+        return None
+    return pkw.DescriptionResponse(0, pnu, DATA_TYPE, kind.type_code, b"", pkw.Width.WORD)
 
 
 def _said(outcome: Outcome) -> str:
