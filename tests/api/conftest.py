@@ -261,7 +261,8 @@ async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
     while loop.time() < end:
         lines = runtime.snapshot.lines
         up = lines and all(lines.values()) and len(lines) == len(runtime.runners)
-        described = not any(r.describing() for r in runtime.runners.values())
+        # The API's view (what a write is checked against), told after the planner's.
+        described = not any(d.pending for d in runtime.drives.values())
         if up and described and polled <= runtime.snapshot.readings.keys():
             return
         await asyncio.sleep(0.01)

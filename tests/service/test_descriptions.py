@@ -79,7 +79,9 @@ def info(runtime: Runtime, drive: str, parameter: str) -> dict[str, str]:
 
 
 async def described(runtime: Runtime) -> None:
-    await until(lambda: not any(r.describing() for r in runtime.runners.values()), timeout=20)
+    """Until every drive's descriptions have settled where the service shows them (the
+    runner tells its events in batches, after the planner)."""
+    await until(lambda: not any(d.pending for d in runtime.drives.values()), timeout=20)
 
 
 async def test_fc_drive_scaling_wins_and_no_value_goes_out_with_the_catalogs_first(

@@ -146,11 +146,6 @@ class DriveDescriber:
         param = self._params.get(pnu)
         return param is not None and not param.settled and pnu not in self.described
 
-    @property
-    def busy(self) -> bool:
-        """Whether a parameter is still being described for the first time."""
-        return any(self.waiting(pnu) for pnu in self._params)
-
     def due(self) -> float | None:
         """When the next element request may go out; None when nothing is left."""
         if self._identify_due is not None:

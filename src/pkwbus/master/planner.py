@@ -99,10 +99,6 @@ class Planner:
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
 
-    def describing(self) -> bool:
-        """Whether a drive's parameter is still being described for the first time."""
-        return any(d.describer is not None and d.describer.busy for d in self.drives)
-
     def take_events(self) -> list[Event]:
         events, self.events = self.events, []
         return events

@@ -137,10 +137,6 @@ class LineRunner:
         self.flush()
         self._wake.set()
 
-    def describing(self) -> bool:
-        """Whether a drive of the line is still describing a parameter for the first time."""
-        return self.planner.describing()
-
     def stop(self) -> None:
         """Take no new jobs; what is in flight finishes, then :meth:`run` returns."""
         self.stopping = True
