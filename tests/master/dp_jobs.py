@@ -8,22 +8,12 @@ import asyncio
 
 from pkwbus.link import PortError
 from pkwbus.master.dp_master import DpMaster, SlaveLocked
-from pkwbus.master.outcomes import Answered, LineFailed, Mismatch, Outcome, Rejected, TimedOut
+from pkwbus.master.outcomes import LineFailed, Outcome, TimedOut
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.transaction import PkwAnswer, PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dp_slave import Failed, FailureKind, SlaveEvent, SlaveState, StateChanged
-from pkwbus.protocol.ppo import JobDone, JobExpired, SlotResult
-
-
-def outcome_of(result: SlotResult) -> Outcome:
-    """What a slot's finished job comes to, as for FC and USS jobs."""
-    if isinstance(result, JobExpired):
-        return TimedOut(f"no matching answer within the deadline ({result.cycles} cycles)")
-    response, request = result.response, result.request
-    if isinstance(response, pkw.Rejection):
-        return Rejected(response.fault, response.text, response.short)
-    if result.mismatch and isinstance(response, pkw.ValueResponse):
-        return Mismatch(request.value, response.raw, response)
-    return Answered(response)
+from pkwbus.protocol.ppo import SlotAnswer
 
 
 async def run_dp_job(
@@ -39,18 +29,24 @@ async def run_dp_job(
     if slot is None:
         raise ValueError(f"slave {address} has no parameter channel")
     loop = asyncio.get_running_loop()
-    slot.submit(request, deadline)
-    result: list[SlotResult] = []
+    # The job judged by the one rule of every bus: the master's PKW transaction.
+    target = DriveTarget.create("profibus", address, dialect_name=slot.dialect.name)
+    tx = PkwTransaction(target, request, retries=0, deadline=deadline)
+    slot.submit(request)
+    result: list[Outcome] = []
     gone: list[str] = []
     hook = master.on_event
 
-    def watch(addr: int, event: SlaveEvent | SlotResult) -> None:
+    def watch(addr: int, event: SlaveEvent | SlotAnswer) -> None:
         if hook is not None:
             hook(addr, event)
         if addr != address:
             return
-        if isinstance(event, JobDone | JobExpired):
-            result.append(event)
+        if isinstance(event, SlotAnswer):
+            answer = PkwAnswer(event.response, b"", None, None, 0.0, cyclic=True,
+                               earlier=event.earlier)  # fmt: skip
+            if (outcome := tx.feed(answer, loop.time())) is not None:
+                result.append(outcome)
         elif isinstance(event, StateChanged) and event.new is SlaveState.LOCKED:
             gone.append("locked")
         elif (
@@ -70,12 +66,12 @@ async def run_dp_job(
                     raise SlaveLocked(address, diagnosis.master if diagnosis else None)
                 return TimedOut(gone[0])
             if loop.time() >= deadline:
-                expired = slot.expire(loop.time())
-                return outcome_of(expired) if expired else TimedOut("deadline passed")
+                return TimedOut(f"no matching answer within the deadline ({slot.cycles} cycles)")
             try:
                 await master.cycle()
             except PortError as exc:
                 return LineFailed(str(exc))
-        return outcome_of(result[0])
+        return result[0]
     finally:
+        slot.finish()
         master.on_event = hook

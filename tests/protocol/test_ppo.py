@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from pkwbus.protocol import dp_services, pkw, ppo, pzd
 from pkwbus.protocol.dialects import Command, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.ppo import JobDone, JobExpired, PkwSlot, ppo_type
+from pkwbus.protocol.ppo import PkwSlot, ppo_type
 from pkwbus.protocol.pzd import Profile
 
 PROFIDRIVE = ppo.dp_dialect("profidrive")
@@ -73,7 +73,7 @@ def test_no_parameter_channel_in_ppo_3_and_4() -> None:
     with pytest.raises(LocalProtocolError, match="no parameter channel"):
         ppo.encode_ppo_write(ppo_type(3), PCV, pkw.read(PCV, 1))
     with pytest.raises(LocalProtocolError, match="no parameter channel"):
-        PkwSlot(ppo_type(4), PCV).submit(pkw.read(PCV, 1), 1.0)
+        PkwSlot(ppo_type(4), PCV).submit(pkw.read(PCV, 1))
 
 
 def test_the_control_word_cannot_be_chosen() -> None:
@@ -159,127 +159,54 @@ def pkw_of(wire: bytes) -> pkw.PkwRequest:
     return pkw.decode_request(wire[:8], PCV, IndLayout.PROFIDRIVE)
 
 
-def test_slot_repeats_the_request_until_the_matching_answer() -> None:
+def test_slot_carries_the_request_after_the_slaves_ak_0_and_hands_on_each_answer() -> None:
     slot = PkwSlot(PPO1, PCV)
     assert slot.outputs() == bytes(12)
     request = pkw.read(PCV, 1613)
-    slot.submit(request, deadline=10.0)
-    # Waits for the slave's AK 0 before the new request goes out.
-    assert slot.feed(value(1613, 7), 0.1).done is None
+    slot.submit(request)
+    # Waits for the slave's AK 0 before the new request goes out: no answer to hand on.
+    assert slot.feed(value(1613, 7)).answer is None
     assert pkw_of(slot.outputs()).command is Command.NONE
-    slot.feed(IDLE, 0.2)
-    for t, answer in ((0.3, IDLE), (0.4, value(1614, 9)), (0.5, IDLE)):
+    assert slot.feed(IDLE).answer is None
+    for answer in (value(1614, 9), value(1613, 503)):
         assert pkw_of(slot.outputs()) == request
-        assert slot.feed(answer, t).done is None
-    assert pkw_of(slot.outputs()) == request
-    update = slot.feed(value(1613, 503), 0.6)
-    assert (
-        isinstance(update.done, JobDone) and update.done.cycles == 6
-    )  # 2 waiting for AK 0, 4 with the request
-    assert isinstance(update.done.response, pkw.ValueResponse) and update.done.response.raw == 503
+        update = slot.feed(answer)
+        assert update.answer is not None and update.answer.request == request
+        assert not update.answer.earlier  # AK 0 was seen: an answer to this request
+        assert update.answer.response == update.read.pkw if update.read else False
+    assert slot.cycles == 4 and slot.busy
+    slot.finish()  # the job judged it: AK 0 again, and the next job waits for AK 0
     assert not slot.busy and pkw_of(slot.outputs()).command is Command.NONE
 
 
-def test_slot_write_needs_the_echo() -> None:
+def test_an_answer_before_any_ak_0_may_be_an_earlier_ones() -> None:
     slot = PkwSlot(PPO1, PCV)
-    slot.feed(IDLE, 0.0)
-    request = pkw.write(PCV, 302, 1500, pkw.Width.WORD)
-    slot.submit(request, deadline=10.0)
-    assert slot.feed(IDLE, 0.1).done is None  # AK 0 while the slave works: not yet
-    done = slot.feed(value(302, 1500), 0.2).done
-    assert isinstance(done, JobDone) and not done.mismatch
-
-
-def test_a_write_acknowledged_with_another_value_ends_at_once() -> None:
-    """After the AK 0 handshake no stale answer can come: another value echoed is what the
-    slave took, and the job ends instead of writing it again every cycle."""
-    slot = PkwSlot(PPO1, PCV)
-    slot.feed(IDLE, 0.0)
-    slot.submit(pkw.write(PCV, 302, 1500, pkw.Width.WORD), deadline=10.0)
-    done = slot.feed(value(302, 1400), 0.1).done
-    assert isinstance(done, JobDone) and done.mismatch
-    assert not slot.busy and pkw_of(slot.outputs()).command is Command.NONE
-
-
-def test_slot_rejection_finishes_the_job() -> None:
-    slot = PkwSlot(PPO1, PCV)
-    slot.feed(IDLE, 0.0)
-    slot.submit(pkw.read(PCV, 9999 % 2048), deadline=10.0)
-    rejected = ppo_read(pkw.Rejection(7, 9999 % 2048, 0, 0, "Illegal PNU", "x"), PCV)
-    done = slot.feed(rejected, 0.1).done
-    assert isinstance(done, JobDone) and isinstance(done.response, pkw.Rejection)
-
-
-def test_slot_deadline() -> None:
-    slot = PkwSlot(PPO1, PCV)
-    slot.feed(IDLE, 0.0)
-    slot.submit(pkw.read(PCV, 1), deadline=1.0)
-    assert slot.feed(IDLE, 0.5).done is None
-    assert slot.expire(0.9) is None
-    done = slot.feed(IDLE, 1.0).done
-    assert isinstance(done, JobExpired) and done.cycles == 2
-    slot.submit(pkw.read(PCV, 1), deadline=2.0)
-    assert isinstance(slot.expire(2.0), JobExpired)  # also without an exchange
+    slot.submit(pkw.write(PCV, 302, 1500, pkw.Width.WORD))
+    for _ in range(ppo.IDLE_WAIT_CYCLES):
+        assert slot.feed(value(302, 1400)).answer is None
+    update = slot.feed(value(302, 1400))
+    assert update.answer is not None and update.answer.earlier
 
 
 def test_slot_refuses_a_second_job_and_ak_0() -> None:
     slot = PkwSlot(PPO1, PCV)
-    slot.submit(pkw.read(PCV, 1), 1.0)
+    slot.submit(pkw.read(PCV, 1))
     with pytest.raises(LocalProtocolError, match="already under way"):
-        slot.submit(pkw.read(PCV, 2), 1.0)
+        slot.submit(pkw.read(PCV, 2))
     with pytest.raises(LocalProtocolError, match="AK 0"):
-        PkwSlot(PPO1, PCV).submit(pkw.none_request(PCV), 1.0)
+        PkwSlot(PPO1, PCV).submit(pkw.none_request(PCV))
 
 
 def test_slot_gives_up_waiting_for_ak_0() -> None:
     slot = PkwSlot(PPO1, PCV)
-    slot.submit(pkw.read(PCV, 5), 100.0)
-    for n in range(ppo.IDLE_WAIT_CYCLES):
+    slot.submit(pkw.read(PCV, 5))
+    for _ in range(ppo.IDLE_WAIT_CYCLES):
         assert pkw_of(slot.outputs()).command is Command.NONE
-        slot.feed(value(4, 1), float(n))
+        slot.feed(value(4, 1))
     assert pkw_of(slot.outputs()).pnu == 5
 
 
 def test_slot_undecodable_read_is_reported_not_raised() -> None:
     slot = PkwSlot(PPO1, PCV)
-    update = slot.feed(bytes(3), 0.0)
+    update = slot.feed(bytes(3))
     assert update.read is None and "3 bytes" in update.error
-
-
-answers = st.one_of(
-    st.just(IDLE),
-    st.builds(value, st.integers(0, 3), st.integers(0, 3)),
-    st.binary(min_size=12, max_size=12),
-)
-
-
-@settings(deadline=None)
-@given(st.integers(0, 3), st.lists(answers, max_size=30))
-def test_slot_never_finishes_on_a_non_matching_answer(pnu: int, reads: list[bytes]) -> None:
-    slot = PkwSlot(PPO1, PCV)
-    request = pkw.read(PCV, pnu)
-    slot.submit(request, deadline=1000.0)
-    for n, data in enumerate(reads):
-        wire = slot.outputs()
-        assert wire[8:] == bytes(4)  # never a control word
-        sent = pkw_of(wire)
-        assert sent.command in (Command.NONE, Command.READ)
-        update = slot.feed(data, float(n))
-        if isinstance(update.done, JobDone):
-            assert sent == request
-            assert pkw.matches(request, update.done.response, PCV)
-            break
-        assert update.done is None
-
-
-def test_without_the_ak0_handshake_another_value_is_not_yet_a_mismatch() -> None:
-    """A slave that never showed AK 0 before the job went out may still be telling an
-    earlier answer for the same parameter: not a mismatch, the request goes on."""
-    slot = PkwSlot(PPO1, PCV)
-    slot.submit(pkw.write(PCV, 302, 1500, pkw.Width.WORD), deadline=10.0)
-    for n in range(ppo.IDLE_WAIT_CYCLES):  # the slave keeps answering its poll of 302
-        assert slot.feed(value(302, 1400), n * 0.01).done is None
-    assert pkw_of(slot.outputs()).command is not Command.NONE  # the change goes out now
-    assert slot.feed(value(302, 1400), 0.2).done is None  # still an earlier answer, maybe
-    done = slot.feed(value(302, 1500), 0.3).done
-    assert isinstance(done, JobDone) and not done.mismatch

@@ -604,9 +604,10 @@ async def test_every_request_a_slave_received_is_one_telegram_of_the_line(tmp_pa
 async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
     tmp_path: Path,
 ) -> None:
-    """The PKW slot's decoded answer goes to the planner as it is, with the PZD of the
-    PPO-read it came in and the time that exchange took: no made-up telegram to split and
-    decode again."""
+    """Every answer of the PKW slot goes to the planner as it is, decoded once, with the
+    time its exchange took, for the job's transaction to judge (the one rule of every bus):
+    no made-up telegram to split and decode again. The PPO-read's status word goes out with
+    every cycle's Inputs, once."""
     async with dp_service(tmp_path) as svc:
         (runner,) = svc.runtime.runners.values()
         assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
@@ -623,5 +624,7 @@ async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
     answers = [r for r in seen if isinstance(r, PkwAnswer)]
     assert answers and not [r for r in seen if isinstance(r, Reply)]
     for answer in answers:
-        assert answer.duration > 0 and answer.status_word is not None
+        assert answer.duration > 0 and answer.cyclic
+        assert answer.status_word is None  # told by the cycle's Inputs, not twice
         assert isinstance(answer.response, pkw.PkwResponse)
+    assert svc.sample("pkwbus_drive_status_word", drive="mixer") is not None

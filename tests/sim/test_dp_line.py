@@ -61,9 +61,13 @@ class Wire:
         for event in self.master.feed(reply, now):
             self.events.append(event)
             if isinstance(event, Inputs) and self.master.state is SlaveState.DATA_EXCHANGE:
-                update = self.slot.feed(event.data, now)
-                if update.done is not None:
-                    self.events.append(update.done)
+                update = self.slot.feed(event.data)
+                answer = update.answer  # judged by the one rule of every bus
+                if answer is not None and pkw.judge(
+                    answer.request, answer.response, self.sim.dialect
+                ) is pkw.Verdict.ANSWER:  # fmt: skip
+                    self.events.append(answer)
+                    self.slot.finish()
 
     def data_exchange_requests(self) -> list[bytes]:
         out = []
@@ -85,11 +89,11 @@ def test_each_dialect_starts_up_and_answers_a_read(dialect: str) -> None:
         now += 0.01
     assert wire.master.state is SlaveState.DATA_EXCHANGE
     pnu = READS[dialect]
-    wire.slot.submit(pkw.read(sim.dialect, pnu), deadline=now + 5)
+    wire.slot.submit(pkw.read(sim.dialect, pnu))
     for _ in range(30):
         wire.cycle(now)
         now += 0.01
-    done = [e for e in wire.events if isinstance(e, ppo.JobDone)]
+    done = [e for e in wire.events if isinstance(e, ppo.SlotAnswer)]
     assert len(done) == 1
     assert isinstance(done[0].response, pkw.ValueResponse)
     assert done[0].response.raw == sim.drives[8].value(pnu)
@@ -105,11 +109,11 @@ def test_a_write_through_the_ppo_changes_the_drive() -> None:
     for _ in range(4):
         wire.cycle(now)
         now += 0.01
-    wire.slot.submit(pkw.write(sim.dialect, 341, 1234, pkw.Width.DWORD), deadline=now + 5)
+    wire.slot.submit(pkw.write(sim.dialect, 341, 1234, pkw.Width.DWORD))
     for _ in range(30):
         wire.cycle(now)
         now += 0.01
-    assert [e for e in wire.events if isinstance(e, ppo.JobDone)]
+    assert [e for e in wire.events if isinstance(e, ppo.SlotAnswer)]
     assert sim.drives[9].value(341) == 1234
 
 

@@ -58,18 +58,19 @@ def test_a_parameter_read_through_the_ppo() -> None:
     for _ in range(4):
         exchange(m, slave, now)
     request = pkw.read(DIALECT, 304)
-    slot.submit(request, deadline=5.0)
+    slot.submit(request)
     done = None
     for _ in range(20):
         now += 0.01
         events = exchange(m, slave, now, slot.outputs())
         for event in events:
             if isinstance(event, Inputs):
-                update = slot.feed(event.data, now)
-                done = done or update.done
+                answer = slot.feed(event.data).answer
+                if answer and pkw.judge(request, answer.response, DIALECT) is pkw.Verdict.ANSWER:
+                    done = done or answer
         if done:
             break
-    assert isinstance(done, ppo.JobDone)
+    assert isinstance(done, ppo.SlotAnswer)
     assert isinstance(done.response, pkw.ValueResponse)
     assert done.response.raw == drive.value(304)
     assert drive.control_taken == 0

@@ -5,9 +5,11 @@ Every cycle sends one Data_Exchange (or start-up request) to each slave
 (:class:`~pkwbus.master.dp_master.DpMaster`). A slave whose PKW slot is idle
 gets the next job the planner gives it alone (:meth:`Planner.next_for`:
 writes, on-demand reads, due polls), so the jobs of different slaves run in
-parallel and a lagging slave delays only itself. The slot's decoded answer
-goes to the planner as it is (:class:`~pkwbus.master.transaction.PkwAnswer`);
-a job whose deadline passes ends as timed out.
+parallel and a lagging slave delays only itself. Every answer the slot gets
+while it carries the job goes to the planner decoded once, as it is
+(:class:`~pkwbus.master.transaction.PkwAnswer`, ``cyclic``): the job's
+transaction judges it, as on every bus; a job whose deadline passes ends as
+timed out. A job that ended leaves the slot to AK 0.
 
 A slave's health is its state, told to the planner (a slave is up while it is
 in data exchange), not counted from missing PKW answers. The PZD of every
@@ -48,7 +50,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveState,
     StateChanged,
 )
-from pkwbus.protocol.ppo import JobDone, JobExpired, PkwSlot, PpoType, SlotResult, pzd_words
+from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, pzd_words
 
 __all__ = ["CycleWire", "DpDriveSpec", "DpEvents", "NoDpEvents"]
 
@@ -121,6 +123,7 @@ class CycleWire:
         )  # fmt: skip
         self._runner: LineRunner | None = None
         self._names = {d.setup.address: d.name for d in drives}
+        self._specs_by_name = {d.name: d.setup.address for d in drives}
         self._specs = {d.setup.address: d for d in drives}
         self._sends: dict[str, Send] = {}
         for d in drives:
@@ -185,12 +188,24 @@ class CycleWire:
         self.link.abort(str(exc))
 
     def _feed(self, run: SlaveRun, now: float) -> None:
-        """Fill an idle slot with the planner's next job for that slave alone."""
+        """Before the slave's turn in a cycle: end its job when the planner has ended it or
+        its deadline has passed; fill an idle slot with the planner's next job for that
+        slave alone."""
         name = self._names[run.address]
         slot, slave, runner = run.slot, run.slave, self.runner
         if slot is None:
             return
         planner = runner.planner
+        if slot.busy:
+            send, tx = self._sends.get(name), planner.active(name)
+            if send is None or tx is None or tx.request is not slot.request:
+                self._sends.pop(name, None)  # ended meanwhile (the line stopped, say)
+                slot.finish()
+            elif now >= tx.deadline:
+                detail = f"no matching answer within the deadline ({slot.cycles} cycles)"
+                self._done(name, send, Failure(ErrorKind.TIMEOUT, detail), now)
+            if slot.busy:
+                return
         if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
             planner.expire_queued(name, now)  # nothing can go out: they end at deadline
             runner.batch()
@@ -200,10 +215,10 @@ class CycleWire:
         tx = planner.active(name) if send is not None else None
         if send is None or tx is None:  # (next_for gave a Send of its transaction)
             return
-        slot.submit(tx.request, tx.deadline)
+        slot.submit(tx.request)
         self._sends[name] = send
 
-    def _on_event(self, address: int, event: SlaveEvent | SlotResult) -> None:
+    def _on_event(self, address: int, event: SlaveEvent | SlotAnswer) -> None:
         name = self._names[address]
         runner, master = self.runner, self.master
         now = asyncio.get_running_loop().time()
@@ -227,24 +242,32 @@ class CycleWire:
         elif isinstance(event, DiagnosisRead):
             if event.diagnosis.flags:
                 self.dp_events.diagnosis(name, event.diagnosis.flags)
-        elif isinstance(event, JobDone | JobExpired):
-            self._job(name, event, now)
+        elif isinstance(event, SlotAnswer):
+            self._answer(name, event, now)
         runner.batch()
 
-    def _job(self, name: str, event: SlotResult, now: float) -> None:
-        send = self._sends.pop(name, None)
+    def _answer(self, name: str, event: SlotAnswer, now: float) -> None:
+        """The slot's answer, decoded once, to the job it carries: the job judges it (its
+        status word went out with the cycle's Inputs)."""
+        send = self._sends.get(name)
         if send is None:
             return
-        if isinstance(event, JobExpired):
-            detail = f"no matching answer within the deadline ({event.cycles} cycles)"
-            self.runner.planner.exchanged(send, Failure(ErrorKind.TIMEOUT, detail), now)
-            return
-        pzd = event.read.pzd if event.read is not None else ()  # the answer as decoded
         answer = PkwAnswer(
-            event.response, b"", pzd[0] if pzd else None, pzd[1] if len(pzd) > 1 else None,
-            self.master.answer_time,
+            event.response, b"", None, None, self.master.answer_time, cyclic=True,
+            earlier=event.earlier,
         )  # fmt: skip
-        self.runner.planner.exchanged(send, answer, now)
+        self._done(name, send, answer, now)
+
+    def _done(self, name: str, send: Send, result: PkwAnswer | Failure, now: float) -> None:
+        """Give ``result`` to the job in the slave's slot; an ended job leaves the slot."""
+        planner = self.runner.planner
+        tx = planner.active(name)
+        planner.exchanged(send, result, now)
+        if tx is None or tx.outcome is not None or planner.active(name) is not tx:
+            self._sends.pop(name, None)
+            run = self.master.runs[self._specs_by_name[name]]
+            if run.slot is not None:
+                run.slot.finish()
 
     def _on_answered(self, address: int, answer: float, took: float) -> None:
         """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held

@@ -3,9 +3,11 @@
 Each slave has its start-up state machine (:class:`~pkwbus.protocol.dp_slave.DpSlave`)
 and, when its PPO has a parameter channel, a PKW slot
 (:class:`~pkwbus.protocol.ppo.PkwSlot`) whose request goes in every PPO-write
-until the matching answer comes. Who fills the slots is the caller's: the
-command line submits one job; a service submits, per slave and per cycle,
-what its planner gives (``Planner.next_for``) through the ``feed`` hook.
+until its job is over; every answer while it does goes to ``on_event`` as a
+:class:`~pkwbus.protocol.ppo.SlotAnswer`, for the job to judge. Who fills the
+slots and ends their jobs is the caller's: the line runner's cycle wire, per
+slave and per cycle, with what its planner gives (``Planner.next_for``)
+through the ``feed`` hook.
 Stopping sends Global_Control Clear to every slave, then closes the port.
 """
 
@@ -27,7 +29,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveSetup,
     SlaveState,
 )
-from pkwbus.protocol.ppo import PkwSlot, SlotResult
+from pkwbus.protocol.ppo import PkwSlot, SlotAnswer
 
 __all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
 
@@ -58,11 +60,12 @@ class SlaveRun:
         return self.slave.setup.address
 
 
-EventHook = Callable[[int, "SlaveEvent | SlotResult"], None]
+EventHook = Callable[[int, "SlaveEvent | SlotAnswer"], None]
 # A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
 # address, how long the answer took and how long the request held the line.
 AnsweredHook = Callable[[int, float, float], None]
-Feed = Callable[[SlaveRun, float], None]  # fill an idle slot (a service's planner)
+# Each cycle, before its slave's turn: fill an idle slot, end a job past its deadline.
+Feed = Callable[[SlaveRun, float], None]
 
 
 class DpMaster:
@@ -112,11 +115,8 @@ class DpMaster:
         for run in self.runs.values():
             now = loop.time()
             slot = run.slot
-            if slot is not None:
-                if (expired := slot.expire(now)) is not None:
-                    self._emit(run, expired)
-                if self.feed is not None and not slot.busy:
-                    self.feed(run, now)
+            if slot is not None and self.feed is not None:
+                self.feed(run, now)
             slave = run.slave
             exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
             outputs = slot.outputs() if exchanging and slot is not None else None
@@ -136,9 +136,9 @@ class DpMaster:
                 self._emit(run, event)
                 told = told or isinstance(event, Inputs | Failed)
                 if isinstance(event, Inputs) and slot is not None:
-                    update = slot.feed(event.data, now)
-                    if update.done is not None:
-                        self._emit(run, update.done)
+                    update = slot.feed(event.data)
+                    if update.answer is not None:
+                        self._emit(run, update.answer)
             if not told and self.on_answered is not None:
                 self.on_answered(run.address, self.answer_time, self.exchange_time)
         self.cycles += 1
@@ -146,6 +146,6 @@ class DpMaster:
             await asyncio.sleep(IDLE_STEP)
         return sent
 
-    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotResult) -> None:
+    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotAnswer) -> None:
         if self.on_event is not None:
             self.on_event(run.address, event)

@@ -4,7 +4,9 @@ The rule is the SINAMICS G120 CU240B-2/CU240E-2 Operating Instructions'
 (section 6.3, "Communication via PROFIBUS").
 
 The same request bytes go out again until the matching answer arrives or
-the deadline passes. A non-matching answer (AK 0, a stale answer, another
+the deadline passes; on a cyclic channel (a PROFIBUS PPO) the request stays in
+every PPO-write, and every answer comes here to be judged (the one rule of
+every bus). A non-matching answer (AK 0, a stale answer, another
 PNU) is "not yet": counted as unexpected, never a failure. Timeouts and bad
 telegrams are retried up to ``retries`` times. A change acknowledged with
 another value than the one sent ends at once as :class:`Mismatch` (a repeat
@@ -71,6 +73,11 @@ class PkwAnswer:
     status_word: int | None
     main_actual: int | None
     duration: float
+    # A cyclic channel (a PPO) answers every cycle: "not yet" is its way of working, not
+    # an unexpected answer nor a repeat of the request.
+    cyclic: bool = False
+    # No AK 0 was seen since the request went in: it may still answer an earlier one.
+    earlier: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,12 +143,12 @@ class PkwTransaction:
         else:  # decoded where it came in
             tally.busy += result.duration
             tally.status_word, tally.main_actual = result.status_word, result.main_actual
-            outcome = self._on(result.response, result.pkw)
+            outcome = self._on(result.response, result.pkw, result)
         if outcome is None and now >= self.deadline:
             outcome = TimedOut("deadline passed" + self._last_error())
         if outcome is not None:
             self.outcome = outcome
-        else:
+        elif not (isinstance(result, PkwAnswer) and result.cyclic):
             tally.retries += 1
         return outcome
 
@@ -172,11 +179,15 @@ class PkwTransaction:
             return None
         return self._on(response, block.pkw)
 
-    def _on(self, response: pkw.PkwResponse, answer: bytes) -> Outcome | None:
+    def _on(
+        self, response: pkw.PkwResponse, answer: bytes, came: PkwAnswer | None = None
+    ) -> Outcome | None:
         self.answer_pkw, self.response = answer, response
         verdict = pkw.judge(self.request, response, self.target.dialect)
         if answer == self.stale and isinstance(response, pkw.Rejection):
             verdict = pkw.Verdict.NOT_YET  # the read's rejection repeated, not the change's
+        if came is not None and came.earlier and verdict is pkw.Verdict.MISMATCH:
+            verdict = pkw.Verdict.NOT_YET  # no AK 0 seen first: an earlier answer, maybe
         if verdict is pkw.Verdict.ANSWER:
             self.waiting = False
             if isinstance(response, pkw.Rejection):
@@ -186,7 +197,8 @@ class PkwTransaction:
         if mismatch and isinstance(response, pkw.ValueResponse):
             self.waiting = False
             return Mismatch(self.request.value, response.raw, response)
-        self.tally.errors[ErrorKind.UNEXPECTED] += 1
+        if came is None or not came.cyclic:
+            self.tally.errors[ErrorKind.UNEXPECTED] += 1
         self.waiting = True
         return None
 

@@ -34,12 +34,10 @@ __all__ = [
     "LAYOUT",
     "PKW_WORDS",
     "PPO_TYPES",
-    "JobDone",
-    "JobExpired",
     "PkwSlot",
     "PpoRead",
     "PpoType",
-    "SlotResult",
+    "SlotAnswer",
     "SlotUpdate",
     "decode_ppo_read",
     "dp_dialect",
@@ -190,49 +188,38 @@ def pzd_words(ppo: PpoType, data: bytes) -> tuple[int, ...]:
 
 
 @dataclass(frozen=True, slots=True)
-class JobDone:
-    """The matching answer arrived (a value, a count, a description or a rejection), or
-    a change was acknowledged with another value (``mismatch``)."""
+class SlotAnswer:
+    """The PKW answer of a PPO-read while the slot carried a request: whether it is the
+    request's answer, "not yet" or a mismatch is the job's to judge (one rule for every
+    bus: :func:`pkw.judge`, in the master's transaction). ``earlier``: the slave showed
+    no AK 0 since the request went in, so this may still be its answer to an earlier,
+    identical request."""
 
     request: pkw.PkwRequest
     response: pkw.PkwResponse
-    cycles: int
-    mismatch: bool = False
-    read: PpoRead | None = None  # the PPO-read it came in (its PZD beside the answer)
-
-
-@dataclass(frozen=True, slots=True)
-class JobExpired:
-    """The deadline passed before a matching answer."""
-
-    request: pkw.PkwRequest
-    cycles: int
-
-
-SlotResult = JobDone | JobExpired
+    earlier: bool
+    read: PpoRead
 
 
 @dataclass(frozen=True, slots=True)
 class SlotUpdate:
-    """What one PPO-read brought: the decoded read (None when undecodable) and a finished job."""
+    """What one PPO-read brought: the decoded read (None when undecodable), the answer to
+    the request the slot carries (None: none went out, or it was AK 0 waiting)."""
 
     read: PpoRead | None
-    done: SlotResult | None
+    answer: SlotAnswer | None
     error: str = ""
 
 
 class PkwSlot:
-    """The parameter channel of one slave over DP, one job at a time.
+    """The parameter channel of one slave over DP: the request of one job, in every
+    PPO-write until the job is finished (:meth:`finish`); with no job, AK 0.
 
-    The same request goes in every PPO-write until the matching answer
-    (identifier, PNU, IND and, for a change, the PWE echo; the rule of the
-    Siemens CU240 operating instructions, "rules for editing requests and
-    responses") arrives or the deadline passes. A change acknowledged with
-    another value ends the job too (:func:`pkw.judge`): repeated, it would
-    write that value again. With no job, AK 0 goes out.
-    Before a new job the slot waits for the slave to answer AK 0 (at most
-    :data:`IDLE_WAIT_CYCLES` cycles), so the answer to an earlier identical
-    request is never taken for the new one's.
+    Before a new request the slot waits for the slave to answer AK 0 (at most
+    :data:`IDLE_WAIT_CYCLES` cycles), so that the answer to an earlier identical
+    request is not taken for the new one's (Siemens CU240 operating instructions,
+    "rules for editing requests and responses"). Whether an answer ends the job
+    is not the slot's to say.
     """
 
     def __init__(self, ppo: PpoType, dia: Dialect, profile: Profile | None = None) -> None:
@@ -242,8 +229,7 @@ class PkwSlot:
         self.dialect = dia
         self.profile = profile or DEFAULT_PROFILES[dia.name]
         self.request: pkw.PkwRequest | None = None
-        self.deadline = 0.0
-        self.cycles = 0
+        self.cycles = 0  # PPO-reads since the request was submitted
         self._idle_seen = False
         self._idle_cycles = 0
 
@@ -251,7 +237,7 @@ class PkwSlot:
     def busy(self) -> bool:
         return self.request is not None
 
-    def submit(self, request: pkw.PkwRequest, deadline: float) -> None:
+    def submit(self, request: pkw.PkwRequest) -> None:
         if not self.ppo.has_pkw:
             raise LocalProtocolError(f"PPO {self.ppo.number} has no parameter channel")
         if self.request is not None:
@@ -261,8 +247,14 @@ class PkwSlot:
         if request.text:
             raise LocalProtocolError("a text write does not fit the 4 PKW words of a PPO")
         self.request = request
-        self.deadline = deadline
         self.cycles = 0
+
+    def finish(self) -> None:
+        """The job is over (answered, refused, mismatched or past its deadline): AK 0
+        goes out again, and the next job waits for the slave's AK 0."""
+        self.request = None
+        self._idle_seen = False
+        self._idle_cycles = 0
 
     def _sending(self) -> pkw.PkwRequest | None:
         if self.request is not None and (self._idle_seen or self._idle_cycles >= IDLE_WAIT_CYCLES):
@@ -273,42 +265,22 @@ class PkwSlot:
         """The PPO-write for the next Data_Exchange."""
         return encode_ppo_write(self.ppo, self.dialect, self._sending())
 
-    def expire(self, now: float) -> JobExpired | None:
-        """End the job when its deadline has passed (call it also while no exchange happens)."""
-        if self.request is None or now < self.deadline:
-            return None
-        done = JobExpired(self.request, self.cycles)
-        self._finish()
-        return done
-
-    def feed(self, inputs: bytes, now: float) -> SlotUpdate:
-        """Account for the PPO-read answering the last :meth:`outputs`."""
+    def feed(self, inputs: bytes) -> SlotUpdate:
+        """Take the PPO-read answering the last :meth:`outputs`."""
         sent = self._sending()
         if self.request is not None:
             self.cycles += 1
         try:
             read = decode_ppo_read(self.ppo, self.dialect, inputs, self.profile)
         except RemoteProtocolError as exc:
-            return SlotUpdate(None, self.expire(now), str(exc))
+            return SlotUpdate(None, None, str(exc))
         response = read.pkw
         if sent is None:
             if isinstance(response, pkw.NoResponse):
                 self._idle_seen = True
             else:
                 self._idle_cycles += 1
-            return SlotUpdate(read, self.expire(now))
-        verdict = pkw.Verdict.NOT_YET
-        if response is not None:
-            verdict = pkw.judge(sent, response, self.dialect)
-        if verdict is pkw.Verdict.MISMATCH and not self._idle_seen:
-            verdict = pkw.Verdict.NOT_YET  # no AK 0 seen first: it may be an earlier answer
-        if response is not None and verdict is not pkw.Verdict.NOT_YET:  # answer, or mismatch
-            done = JobDone(sent, response, self.cycles, verdict is pkw.Verdict.MISMATCH, read)
-            self._finish()
-            return SlotUpdate(read, done)
-        return SlotUpdate(read, self.expire(now))
-
-    def _finish(self) -> None:
-        self.request = None
-        self._idle_seen = False
-        self._idle_cycles = 0
+            return SlotUpdate(read, None)
+        if response is None:
+            return SlotUpdate(read, None)
+        return SlotUpdate(read, SlotAnswer(sent, response, not self._idle_seen, read))
