@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
+from pkwbus.protocol.dialects import Command
 from tests.api.conftest import POLLED_WRITABLES, fc_drives, service
 
 
@@ -102,9 +103,27 @@ async def test_a_parameter_not_described_yet_is_503_and_nothing_is_sent(tmp_path
         read = await svc.client.get("/api/v1/drives/fan1/parameters/3-41")
         entry.pending.discard(341)
         after = await svc.put("fan1", "3-41", {"value": 10})
+        assert svc.audit is not None
+        outcomes = [row.outcome for row in svc.audit.latest(2)]
     for r in (written, read):
         assert r.status_code == 503, r.text
         assert r.json()["error"]["kind"] == "not_described"
         assert "3-41" in r.json()["error"]["message"]
     assert after.status_code == 200, after.text
     assert len(svc.recorder.writes(1, 341)) == 1  # only the one after it was described
+    assert outcomes == ["ok", "not_sent"]
+
+
+async def test_a_change_whose_read_the_drive_refuses_is_not_sent(tmp_path: Path) -> None:
+    """3-42 is no array: the drive refuses the read of 3-42[135] before the change, and the
+    change never goes out (it went out some 2,000 times before, its refusal taken for the
+    read's repeated, until its deadline)."""
+    async with service(tmp_path) as svc:
+        r = await svc.put("fan2", "3-42", {"value": 10, "index": 135})
+        assert r.status_code == 409, r.text
+        assert r.json()["error"]["kind"] == "rejected"
+        assert svc.recorder.writes(2, 342) == []
+        (read,) = svc.recorder.for_pnu(2, 342)
+        assert read.command is Command.READ and read.subindex == 135
+        assert svc.audit is not None
+        assert svc.audit.latest(1)[0].outcome == "rejected"

@@ -28,7 +28,7 @@ DRIVES = [None, "fan1", "fan2", "pump1"]
 PARAMETERS = [None, "3-41", "3-42", "1-20", "16-13", "15-30", "15-30[3]", "p1120", "r0021"]
 # Values every writable parameter here holds exactly (writes refuse what they would
 # round), so that some generated writes can succeed; None keeps the generated value.
-VALUES = [None, 5, 10, 20.5]
+VALUES = [None, 5, 10, 20.5, 500]
 
 
 AUTH_TOKEN = AUTH["Authorization"].removeprefix("Bearer ")
@@ -79,7 +79,7 @@ def make_check(
     name = f"{op.method.upper()} {op.path}"
 
     @hypothesis.settings(
-        max_examples=120 if op.method.upper() == "PUT" else 25,
+        max_examples=300 if op.method.upper() == "PUT" else 25,
         deadline=None,
         database=None,
         derandomize=True,

@@ -30,8 +30,9 @@ from .record import rounded
 __all__ = ["Prober", "Problems", "Scraper", "Write", "Writer"]
 
 # A write's answer, and the outcomes its audit row may have (not_sent: the line refused
-# it before it went out, its port lost).
-EXPECTED_STATUS = {200: {"ok"}, 503: {"cancelled"}, 504: {"timeout", "not_sent"}}
+# it before it went out, its port lost; or, 503, its drive was describing the parameter,
+# back after it was away).
+EXPECTED_STATUS = {200: {"ok"}, 503: {"cancelled", "not_sent"}, 504: {"timeout", "not_sent"}}
 AUDIT_LIMIT = 1000  # the API's most rows per GET /api/v1/audit
 MAX_PROBLEMS = 20  # of each kind, kept in full
 Labels = tuple[tuple[str, str], ...]

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from pkwbus.master.drive_plan import Active, DrivePlan
 from pkwbus.master.jobs import Job
-from pkwbus.master.outcomes import Cancelled, LineFailed, NotSent, Outcome, TimedOut
+from pkwbus.master.outcomes import Cancelled, LineFailed, NotSent, Outcome, Rejected, TimedOut
 from pkwbus.master.plan import Finished, Send
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
@@ -105,6 +105,11 @@ def after_read(
     one), or the job finished unsent (never as if the change had gone out: no tally)."""
     if isinstance(outcome, Cancelled | TimedOut | LineFailed):
         return Finished(d.name, job, outcome)  # no answer to go by
+    if isinstance(outcome, Rejected):
+        # The drive refuses the parameter (no such PNU, index or access): its change is not
+        # sent, the refusal is the job's answer. (Sent anyway, its own refusal would read
+        # as the read's repeated, and the change would go out again until its deadline.)
+        return Finished(d.name, job, outcome)
     gate, why = _gate(d, job.request)
     if gate is Gate.LEARN:
         why = (

@@ -97,6 +97,8 @@ class Writes:
             audit.raw_value = request.value if not request.text else None
         except ApiError as exc:
             audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
+            if exc.kind == "not_described":  # a valid write, refused for now: not sent
+                audit.outcome = "not_sent"
             audit.detail = str(exc)
             exc.audit_incomplete = not await self.recorder.note(audit)
             raise
