@@ -81,3 +81,16 @@ def test_a_drive_silent_on_its_descriptions_is_one_warning_not_one_per_parameter
     rec.apply([Described("fan", targets[0], described, ())])  # it answers again
     rec.apply([Described("fan", targets[1], None, (), why, first=False, unanswered=True)])
     assert len(lines(caplog, logging.WARNING)) == 2  # told again after it had answered
+
+
+def test_a_writable_parameter_the_drive_calls_read_only_is_told_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO)
+    rec = record([0.0])
+    writable = DescribeTarget(341, "3-41", (1, 2, 4, 6, 7, 8), writable=True)
+    polled = DescribeTarget(1614, "16-14", (1, 2, 4, 6))
+    read_only = DriveDescription(type_code=7, conversion=-2, read_only=True)
+    rec.apply([Described("fan", writable, read_only, ()), Described("fan", polled, read_only, ())])
+    told = lines(caplog, logging.WARNING)
+    assert len(told) == 1 and "3-41" in told[0] and "read-only" in told[0]

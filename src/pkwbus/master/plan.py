@@ -59,6 +59,7 @@ class DescribeTarget:
     parameter: str  # the drive's name for it: the metric label
     elements: tuple[int, ...]
     catalog: ParameterDescription | None = None  # its catalog entry, to cross-check
+    writable: bool = False  # the configuration lists it as writable
 
 
 @dataclass(frozen=True)

@@ -174,6 +174,12 @@ class LineRecord:
                          target.parameter, event.why, extra=ctx)  # fmt: skip
         else:
             self._silent.discard(drive)
+        if found is not None and found.read_only and target.writable and event.first:
+            log.warning(
+                "drive %s describes %s as read-only, but the configuration lists it as"
+                " writable: the drive will refuse its writes", drive, target.parameter,
+                extra=ctx,
+            )  # fmt: skip
         if found is not None and target.catalog is not None:
             contradicts = disagreements(found, target.catalog)
             for d in contradicts:

@@ -255,7 +255,7 @@ def describe_targets(
     targets = []
     for pnu, (name, limits) in wanted.items():
         elements = tuple(e for e in elements_to_read(limits=limits) if not (short and e == NAME))
-        targets.append(DescribeTarget(pnu, name, elements, table.catalog.get(pnu)))
+        targets.append(DescribeTarget(pnu, name, elements, table.catalog.get(pnu), limits))
     return tuple(targets)
 
 
