@@ -81,7 +81,6 @@ class _Parameter:
     pnu: int
     elements: tuple[int, ...]
     found: dict[int, pkw.DescriptionResponse | None] = field(default_factory=dict)
-    since: float | None = None  # its first request
     due: float = 0.0  # when it may be asked (again)
     settled: bool = False
     unanswered: bool = False  # settled for want of answers: the catalog stands for now
@@ -185,8 +184,6 @@ class DriveDescriber:
                     continue  # another drive of its kind is asking: its answer will do
             element = param.next_element()
             assert element is not None  # a parameter with all its elements has settled
-            if param.since is None:
-                param.since = now
             request = pkw.read_description(self.dialect, param.pnu, element)
             return DescribeStep(param.pnu, element, request)
         if any(not p.settled and p.due <= now for p in self._params.values()):
@@ -266,7 +263,7 @@ class DriveDescriber:
             if pnus is None or param.pnu in pnus:
                 param.found.clear()
                 param.base = None
-                param.settled, param.since, param.due = False, None, 0.0
+                param.settled, param.due = False, 0.0
 
     def _settle(
         self,
@@ -279,7 +276,7 @@ class DriveDescriber:
         from_book: bool = False,
     ) -> Settled:
         first = param.pnu not in self.described
-        param.settled, param.since = True, None
+        param.settled = True
         if self.book is not None:
             self.book.release(self, param.pnu)
         param.unanswered = retry
