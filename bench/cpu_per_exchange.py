@@ -38,7 +38,7 @@ from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.plan import DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, Reply
+from pkwbus.master.transaction import Answered, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
@@ -58,7 +58,7 @@ async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
             await line.exchange(target, telegram)
         with measure_cpu(ops=n) as t:
             for _ in range(n):
-                if not isinstance(await line.exchange(target, telegram), Reply):
+                if not isinstance(await line.exchange(target, telegram), ResponseTelegram):
                     bad += 1
     finally:
         await line.close()

@@ -59,7 +59,7 @@ from cpu_per_exchange import raw_loop
 
 from pkwbus import link
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Reply
+from pkwbus.master.transaction import ResponseTelegram
 from pkwbus.protocol import pkw
 
 BAUDRATE = 115200
@@ -160,7 +160,7 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
         def done(result: object) -> None:
             nonlocal count, bad
             count += 1
-            bad += not isinstance(result, Reply)
+            bad += not isinstance(result, ResponseTelegram)
             if count >= total:
                 finished.set_result(bad)
             else:

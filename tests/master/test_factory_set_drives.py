@@ -15,7 +15,7 @@ from pkwbus.master.outcomes import Answered, Mismatch, NotSent, Rejected
 from pkwbus.master.plan import PkwLengthTold
 from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwTransaction, Reply
+from pkwbus.master.transaction import PkwTransaction, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.params import ValueType
@@ -233,12 +233,12 @@ def test_a_repeated_rejection_of_the_read_is_not_the_changes() -> None:
     )
     change = PkwTransaction(target, pkw.write(d, 2010, 9, pkw.Width.WORD), retries=2,
                             deadline=10.0, stale=refusal)  # fmt: skip
-    repeated = Reply(1, refusal + bytes(4), 0.001)
+    repeated = ResponseTelegram(1, refusal + bytes(4), 0.001)
     assert change.feed(repeated, 0.0) is None and change.waiting
     other = pkw.encode_response(
         pkw.Rejection(7, 2010, 0, 2, "", ""), d, target.ind_layout, VARIABLE
     )
-    outcome = change.feed(Reply(1, other + bytes(4), 0.001), 0.1)
+    outcome = change.feed(ResponseTelegram(1, other + bytes(4), 0.001), 0.1)
     assert isinstance(outcome, Rejected) and outcome.fault == 2
 
 

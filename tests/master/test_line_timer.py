@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, Failure, Reply
+from pkwbus.master.transaction import ErrorKind, Failure, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimFaults
 from tests.master.conftest import make_sim, open_line, serve
@@ -20,7 +20,9 @@ async def test_a_shorter_timeout_after_a_longer_one_fires_on_time() -> None:
     alive, dead = DriveTarget.create("fc", 1), DriveTarget.create("fc", 2)
     async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
         loop = asyncio.get_running_loop()
-        assert isinstance(await line.exchange(alive, _telegram(alive), timeout=2.0), Reply)
+        assert isinstance(
+            await line.exchange(alive, _telegram(alive), timeout=2.0), ResponseTelegram
+        )
         t0 = loop.time()
         result = await line.exchange(dead, _telegram(dead), timeout=0.05)
         waited = loop.time() - t0
@@ -34,7 +36,9 @@ async def test_a_longer_timeout_after_a_shorter_one_is_not_cut_short() -> None:
     async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
         loop = asyncio.get_running_loop()
         # a shorter timer armed first (long enough to be answered within on a loaded machine)
-        assert isinstance(await line.exchange(alive, _telegram(alive), timeout=0.3), Reply)
+        assert isinstance(
+            await line.exchange(alive, _telegram(alive), timeout=0.3), ResponseTelegram
+        )
         t0 = loop.time()
         result = await line.exchange(dead, _telegram(dead), timeout=1.0)
         waited = loop.time() - t0

@@ -38,7 +38,7 @@ from pkwbus.master.transaction import (
     ExchangeResult,
     Failure,
     LineFailed,
-    Reply,
+    ResponseTelegram,
     TimedOut,
 )
 from pkwbus.protocol import pkw
@@ -84,7 +84,7 @@ class FakeLine:
             return Failure(ErrorKind.TIMEOUT, "no answer")
         self.now += EXCHANGE
         reply = next(e for e in self.sim.deframer().feed(answer.data) if isinstance(e, Telegram))
-        return Reply(reply.adr, reply.data, EXCHANGE)
+        return ResponseTelegram(reply.adr, reply.data, EXCHANGE)
 
     def step(self, until: float) -> Send | None:
         action = self.planner.next_action(self.now)
@@ -182,14 +182,14 @@ def test_a_reply_that_is_no_block_tells_no_status_word() -> None:
     # The drive answers another parameter: "not yet", with its status word.
     other = send.target.telegram(pkw.read(send.target.dialect, 1530))
     not_ours = line.answer(dataclasses.replace(send, telegram=other))
-    assert isinstance(not_ours, Reply)
+    assert isinstance(not_ours, ResponseTelegram)
     line.planner.exchanged(send, not_ours, line.now)
     told = [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
     assert [e.word for e in told] == [line.sim.drives[1].status_word]
     # The repeat's answer is no block of this drive's shape: an unexpected answer.
     again = line.planner.next_action(line.now)
     assert again == send
-    line.planner.exchanged(send, Reply(1, b"\x01\x02\x03", EXCHANGE), line.now)
+    line.planner.exchanged(send, ResponseTelegram(1, b"\x01\x02\x03", EXCHANGE), line.now)
     assert not [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
 
 

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from pkwbus.catalog import CatalogError
 from pkwbus.catalog.loader import _parse_catalog
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, Reply
+from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, ResponseTelegram
 from pkwbus.protocol import params, pkw
 from pkwbus.protocol.dialects import DIALECTS, USS, Command, Dialect, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, ProtocolError, RemoteProtocolError
@@ -206,10 +206,10 @@ def transactions(draw: st.DrawFn) -> PkwTransaction:
         raise
 
 
-def replies(job: PkwTransaction) -> st.SearchStrategy[Reply | Failure]:
+def replies(job: PkwTransaction) -> st.SearchStrategy[ResponseTelegram | Failure]:
     target = job.target
 
-    def answer(ak: int, own_pnu: bool, raw: int) -> Reply:
+    def answer(ak: int, own_pnu: bool, raw: int) -> ResponseTelegram:
         resp = pkw.ValueResponse(
             ak, job.request.pnu if own_pnu else 7, job.request.subindex, raw, pkw.Width.WORD
         )
@@ -217,10 +217,10 @@ def replies(job: PkwTransaction) -> st.SearchStrategy[Reply | Failure]:
             body = pkw.encode_response(resp, target.dialect, target.ind_layout, 4)
         except LocalProtocolError:
             body = b""
-        return Reply(target.adr, body + bytes(2 * target.shape.pzd_words), 0.01)
+        return ResponseTelegram(target.adr, body + bytes(2 * target.shape.pzd_words), 0.01)
 
     return st.one_of(
-        st.binary(max_size=30).map(lambda b: Reply(target.adr, b, 0.01)),
+        st.binary(max_size=30).map(lambda b: ResponseTelegram(target.adr, b, 0.01)),
         st.builds(answer, st.integers(0, 15), st.booleans(), st.integers(0, 0xFFFF)),
         st.builds(Failure, st.sampled_from(list(ErrorKind)), st.just("test")),
     )

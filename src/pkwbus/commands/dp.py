@@ -23,13 +23,13 @@ from pathlib import Path
 from pkwbus import durations, limits
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
 from pkwbus.link import LinkState, PortError, PortSettings
-from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec, NoDpEvents
+from pkwbus.master.cycle_wire import CycleWire, NoDpEvents, SlaveSpec
 from pkwbus.master.dp_line import DpLine
 from pkwbus.master.dp_master import SlaveLocked, SlaveRun
 from pkwbus.master.outcomes import Outcome, TimedOut
 from pkwbus.master.plan import DriveSpec
 from pkwbus.master.record import NoEvents
-from pkwbus.master.single_job import DriveSession, SessionEnded
+from pkwbus.master.single_job import JobSession, SessionEnded
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import dp_services as dps
@@ -212,10 +212,8 @@ async def session(
     target = DriveTarget(Protocol.PROFIBUS, address, ctx.dialect, ppo.LAYOUT, shape)
     spec = DriveSpec("drive", target)
     watch = _Watch(address)
-    wire = CycleWire(
-        dp_line(args), [DpDriveSpec(spec, ctx.setup(address), ctx.ppo)], dp_events=watch
-    )
-    drive = watch.session = DriveSession(wire, spec, retries=ctx.retries, events=watch)
+    wire = CycleWire(dp_line(args), [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], dp_events=watch)
+    drive = watch.session = JobSession(wire, spec, retries=ctx.retries, events=watch)
     watch.wire = wire
     wire.link.reconnect.add_listener(watch.port)
     loop = asyncio.get_running_loop()
@@ -243,7 +241,7 @@ class _Watch(NoEvents, NoDpEvents):
 
     def __init__(self, address: int) -> None:
         self.address = address
-        self.session: DriveSession | None = None
+        self.session: JobSession | None = None
         self.wire: CycleWire | None = None
 
     def _run(self) -> SlaveRun | None:

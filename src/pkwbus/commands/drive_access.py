@@ -3,7 +3,7 @@
 :func:`drive_access` gives the drive's dialect, its catalog, how a request is
 checked before anything is sent, and how requests run on it one after the
 other, in one opening of the port, by the one line runner
-(:class:`pkwbus.master.single_job.DriveSession`): on FC and USS over the
+(:class:`pkwbus.master.single_job.JobSession`): on FC and USS over the
 line's exchange wire, over PROFIBUS DP over the cycle wire, through the
 slave's start-up and its PKW slot (:func:`pkwbus.commands.dp.session`). The
 commands themselves are the same for every bus.
@@ -35,7 +35,7 @@ from pkwbus.link import PortError
 from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.outcomes import Outcome
 from pkwbus.master.plan import DriveSpec
-from pkwbus.master.single_job import DriveSession
+from pkwbus.master.single_job import JobSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw, ppo
 from pkwbus.protocol.dialects import Dialect
@@ -87,7 +87,7 @@ async def _jobs(
     args: argparse.Namespace, target: DriveTarget, requests: Sequence[pkw.PkwRequest]
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
-    drive = DriveSession(
+    drive = JobSession(
         ExchangeWire(build_line(args)), DriveSpec("drive", target), retries=args.retries
     )
     try:

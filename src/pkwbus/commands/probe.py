@@ -25,7 +25,7 @@ from pkwbus.link import PortError
 from pkwbus.master.line import Line
 from pkwbus.master.pkw_probe import NO_ANSWER, ask_description, ask_pkw_length
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Failure, Reply
+from pkwbus.master.transaction import Failure, ResponseTelegram
 from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.pkw_length import AUTO, shown
 from pkwbus.protocol.telegram import Protocol
@@ -79,11 +79,11 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
             result = None
             for _ in range(line.retries + 1):
                 result = await bus.exchange(target, target.probe())
-                if isinstance(result, Reply) or (
+                if isinstance(result, ResponseTelegram) or (
                     isinstance(result, Failure) and result.kind.value == "port"
                 ):
                     break
-            if isinstance(result, Reply):
+            if isinstance(result, ResponseTelegram):
                 told = await _pkw_length(bus, line, target)
                 out.append(f"  {drive.name} (address {drive.address}): answers{told}")
                 out += await _descriptions(bus, line, drive, target)

@@ -39,7 +39,7 @@ from pkwbus.master.line import Line
 from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.single_job import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ErrorKind, Failure, Reply
+from pkwbus.master.transaction import Answered, ErrorKind, Failure, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
@@ -162,7 +162,7 @@ async def _probe(
         result = await line.exchange(target, target.probe())
         if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
             raise CommandError(result.detail, Exit.NO_ANSWER)
-        if isinstance(result, Reply):
+        if isinstance(result, ResponseTelegram):
             entry = _status(target, result)
             entry["type"] = await _drive_type(line, target)
             if target.protocol is Protocol.USS:
@@ -171,7 +171,7 @@ async def _probe(
     return None
 
 
-def _status(target: DriveTarget, reply: Reply) -> dict[str, Any]:
+def _status(target: DriveTarget, reply: ResponseTelegram) -> dict[str, Any]:
     entry: dict[str, Any] = {"address": target.address, "status_word": None, "status": {}}
     try:
         block = split_block(reply.data, target.response_shape(len(reply.data)))

@@ -36,7 +36,7 @@ from pkwbus.master.health import HealthPolicy
 from pkwbus.master.plan import DriveSpec, Send, StatusWord
 from pkwbus.master.planner import Planner
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.transaction import ErrorKind, Failure, PkwAnswer, Reply
+from pkwbus.master.transaction import ErrorKind, Failure, PkwAnswer, ResponseTelegram
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
@@ -52,7 +52,7 @@ from pkwbus.protocol.dp_slave import (
 )
 from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, pzd_words
 
-__all__ = ["CycleWire", "DpDriveSpec", "DpEvents", "NoDpEvents"]
+__all__ = ["CycleWire", "DpEvents", "NoDpEvents", "SlaveSpec"]
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +87,7 @@ class NoDpEvents:
 
 
 @dataclass(frozen=True)
-class DpDriveSpec:
+class SlaveSpec:
     """One slave: the planner's view of it (name, PKW target, polls) and its DP setup."""
 
     spec: DriveSpec
@@ -108,7 +108,7 @@ class CycleWire:
     def __init__(
         self,
         line: DpLine,
-        drives: Sequence[DpDriveSpec],
+        drives: Sequence[SlaveSpec],
         *,
         dp_events: DpEvents | None = None,
         listen: float | None = None,
@@ -226,7 +226,9 @@ class CycleWire:
         # request included); the answer took the time from the request written to it.
         if isinstance(event, Inputs):
             runner.exchanged(
-                name, Reply(address, event.data, master.answer_time), master.exchange_time
+                name,
+                ResponseTelegram(address, event.data, master.answer_time),
+                master.exchange_time,
             )
             self._status(name, address, event.data)
         elif isinstance(event, Failed):
@@ -272,7 +274,7 @@ class CycleWire:
     def _on_answered(self, address: int, answer: float, took: float) -> None:
         """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held
         the line, like a Data_Exchange."""
-        self.runner.exchanged(self._names[address], Reply(address, b"", answer), took)
+        self.runner.exchanged(self._names[address], ResponseTelegram(address, b"", answer), took)
 
     def _state(self, name: str, event: StateChanged, now: float) -> None:
         self.dp_events.slave_state(name, event.new)

@@ -31,7 +31,7 @@ from pkwbus.master.transaction import (
     ErrorKind,
     ExchangeResult,
     Failure,
-    Reply,
+    ResponseTelegram,
 )
 from pkwbus.protocol.telegram import (
     BadChecksum,
@@ -244,7 +244,7 @@ class Line:
         if self._send_timer is not None:
             self._send_timer.cancel()
             self._send_timer = None
-        if not isinstance(result, Reply) or self._deframer.buffered:
+        if not isinstance(result, ResponseTelegram) or self._deframer.buffered:
             self._stray = True  # what follows a bad answer must not start the next one
         done, self._done = self._done, None
         self._state = _State.IDLE
@@ -343,7 +343,7 @@ class Line:
                 loop = self._loop
                 assert loop is not None
                 duration = loop.time() - self._started
-                self._finish(Reply(event.adr, event.data, duration))
+                self._finish(ResponseTelegram(event.adr, event.data, duration))
                 return
             if isinstance(event, BadChecksum):
                 self._finish(Failure(ErrorKind.CHECKSUM, event.raw.hex(" ")))

@@ -55,7 +55,7 @@ from pkwbus.master.transaction import (
     LineFailed,
     Outcome,
     PkwTransaction,
-    Reply,
+    ResponseTelegram,
     TimedOut,
 )
 from pkwbus.master.write_gate import after_read, gate_write
@@ -222,7 +222,7 @@ class Planner:
             self._lagging.clear()
         self._health(d, result, now)
         if send.probe:
-            if isinstance(result, Reply):
+            if isinstance(result, ResponseTelegram):
                 if (status := d.status_of(result.data)) is not None:
                     self.events.append(status)
                 self._tell(d.probed(send, result.data))

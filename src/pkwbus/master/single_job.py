@@ -27,7 +27,7 @@ from pkwbus.master.runner import LineRunner, Wire
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 
-__all__ = ["DriveSession", "SessionEnded", "perform", "run_job"]
+__all__ = ["JobSession", "SessionEnded", "perform", "run_job"]
 
 
 class SessionEnded(Exception):
@@ -38,7 +38,7 @@ class SessionEnded(Exception):
         self.kind = kind
 
 
-class DriveSession:
+class JobSession:
     """One drive's line, driven by the one runner, for jobs one after the other."""
 
     def __init__(

@@ -37,7 +37,7 @@ __all__ = [
     "PkwAnswer",
     "PkwTransaction",
     "Rejected",
-    "Reply",
+    "ResponseTelegram",
     "Tally",
     "TimedOut",
 ]
@@ -55,7 +55,7 @@ class ErrorKind(enum.StrEnum):
 
 
 @dataclass(frozen=True, slots=True)
-class Reply:
+class ResponseTelegram:
     """A valid telegram from the addressed drive."""
 
     adr: int
@@ -86,7 +86,7 @@ class Failure:
     detail: str = ""
 
 
-ExchangeResult = Reply | PkwAnswer | Failure
+ExchangeResult = ResponseTelegram | PkwAnswer | Failure
 
 
 @dataclass
@@ -135,7 +135,7 @@ class PkwTransaction:
         tally = self.tally
         tally.telegrams += 1
         self.answer_pkw = self.response = None
-        if isinstance(result, Reply):
+        if isinstance(result, ResponseTelegram):
             tally.busy += result.duration
             outcome = self._on_reply(result)
         elif isinstance(result, Failure):
@@ -158,7 +158,7 @@ class PkwTransaction:
         kinds = ", ".join(f"{n} {k.value}" for k, n in self.tally.errors.most_common())
         return f" ({kinds})"
 
-    def _on_reply(self, reply: Reply) -> Outcome | None:
+    def _on_reply(self, reply: ResponseTelegram) -> Outcome | None:
         """A telegram's data split by the drive's shape, its PKW part decoded once."""
         target = self.target
         tally = self.tally

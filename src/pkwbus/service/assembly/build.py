@@ -16,7 +16,7 @@ import prometheus_client
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
-from pkwbus.master.cycle_wire import CycleWire, DpDriveSpec
+from pkwbus.master.cycle_wire import CycleWire, SlaveSpec
 from pkwbus.master.dp_line import DpLine
 from pkwbus.master.drive_identity import DescriptionBook
 from pkwbus.master.exchange_wire import ExchangeWire
@@ -159,7 +159,7 @@ def _dp_runner(
             found.ident, dp_services.watchdog_factors(watchdog), user_prm=found.user_prm
         )
         setup = SlaveSetup(drive.address, line.master_address, parameters, found.cfg, line.retries)
-        slaves.append(DpDriveSpec(spec, setup, found.ppo))
+        slaves.append(SlaveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
     deadline = max(2.0, 20 * sum(dp_timing.default_slot_time(line.baudrate) for _ in specs))
     dp_events = metrics.for_dp_line(line.name, [d.name for d in line.drives])
