@@ -1,8 +1,9 @@
 """Ask a drive once, on a line opened for it alone: what its PKW length is (USS: a word
 read, and the length of its answer), and how it describes a parameter (AK 4).
 
-For ``pkwbus scan`` and ``pkwbus check-config --probe``. The read goes out
-with the target's PKW length (4 words while a length is learned: both a
+For ``pkwbus scan`` and ``pkwbus check-config --probe``: each job by the
+planner, as on the service's lines (:func:`pkwbus.master.single_job.perform`).
+The read goes out with the target's PKW length (4 words while a length is learned: both a
 fixed-4 and a variable drive answer that), and the answer's length tells
 (:func:`pkwbus.protocol.pkw_length.told`). The parameter read is r0002, a
 word on the Siemens drives (MICROMASTER 440 Parameter List: r0002 "Drive
@@ -16,9 +17,9 @@ import asyncio
 from typing import Final, Literal
 
 from pkwbus.master.line import Line
-from pkwbus.master.outcomes import Answered, Outcome, Rejected
+from pkwbus.master.outcomes import Answered, Rejected
+from pkwbus.master.single_job import perform, run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import (
     DATA_TYPE,
@@ -29,23 +30,10 @@ from pkwbus.protocol.descriptions import (
 )
 from pkwbus.protocol.pkw_length import PkwWords, told
 
-__all__ = ["LENGTH_PNU", "NO_ANSWER", "ask", "ask_description", "ask_pkw_length"]
+__all__ = ["LENGTH_PNU", "NO_ANSWER", "ask_description", "ask_pkw_length"]
 
 LENGTH_PNU: Final = 2
 NO_ANSWER: Final = "no answer"
-
-
-async def ask(
-    line: Line, target: DriveTarget, request: pkw.PkwRequest, *, retries: int, deadline: float
-) -> tuple[Outcome, PkwTransaction]:
-    """One PKW job, repeated until its matching answer, its retries or its deadline."""
-    tx = PkwTransaction(target, request, retries=retries, deadline=deadline)
-    loop = asyncio.get_running_loop()
-    while True:
-        result = await line.exchange(target, tx.telegram)
-        outcome = tx.feed(result, loop.time())
-        if outcome is not None:
-            return outcome, tx
 
 
 async def ask_pkw_length(
@@ -56,11 +44,11 @@ async def ask_pkw_length(
     if not target.has_pkw:
         return NO_ANSWER
     request = pkw.read(target.dialect, LENGTH_PNU)
-    _, tx = await ask(line, target, request, retries=retries, deadline=deadline)
-    answer, response = tx.answer_pkw, tx.response
-    if answer is not None and response is not None:
-        return told(target.pkw_words_of(tx.telegram), len(answer) // 2, response)
-    return NO_ANSWER
+    tally = (await perform(line, target, request, retries=retries, deadline=deadline)).tally
+    if tally is None or tally.response is None or tally.answer_words is None:
+        return NO_ANSWER
+    sent = target.pkw_words_of(target.telegram(request))
+    return told(sent, tally.answer_words, tally.response)
 
 
 async def ask_description(
@@ -76,7 +64,7 @@ async def ask_description(
     for element in elements_to_read(limits=True):
         request = pkw.read_description(target.dialect, pnu, element)
         deadline = loop.time() + timeout
-        outcome, _ = await ask(line, target, request, retries=retries, deadline=deadline)
+        outcome = await run_job(line, target, request, retries=retries, deadline=deadline)
         response = outcome.response if isinstance(outcome, Answered) else None
         if isinstance(response, pkw.DescriptionResponse):
             found[element] = response

@@ -91,7 +91,7 @@ ExchangeResult = ResponseTelegram | PkwAnswer | Failure
 
 @dataclass
 class Tally:
-    """What a job's exchanges cost, for the metrics."""
+    """What a job's exchanges cost, for the metrics, and what its latest answer was."""
 
     telegrams: int = 0
     retries: int = 0
@@ -101,6 +101,10 @@ class Tally:
     status_word: int | None = None
     main_actual: int | None = None
     busy: float = 0.0
+    # The latest exchange's PKW answer as decoded, and its length in words (None when
+    # that exchange brought none): what it tells of the drive's PKW length.
+    response: pkw.PkwResponse | None = None
+    answer_words: int | None = None
 
 
 class PkwTransaction:
@@ -134,7 +138,7 @@ class PkwTransaction:
         """Account for one exchange; the outcome once the job is finished."""
         tally = self.tally
         tally.telegrams += 1
-        self.answer_pkw = self.response = None
+        self.answer_pkw = self.response = tally.response = tally.answer_words = None
         if isinstance(result, ResponseTelegram):
             tally.busy += result.duration
             outcome = self._on_reply(result)
@@ -183,6 +187,7 @@ class PkwTransaction:
         self, response: pkw.PkwResponse, answer: bytes, came: PkwAnswer | None = None
     ) -> Outcome | None:
         self.answer_pkw, self.response = answer, response
+        self.tally.response, self.tally.answer_words = response, len(answer) // 2
         verdict = pkw.judge(self.request, response, self.target.dialect)
         if answer == self.stale and isinstance(response, pkw.Rejection):
             verdict = pkw.Verdict.NOT_YET  # the read's rejection repeated, not the change's
