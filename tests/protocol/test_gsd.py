@@ -181,3 +181,16 @@ def test_user_prm_data_round_trip(data: bytes, newline: str, continued: bool) ->
         + ([f"User_Prm_Data = {body}"] if data else [])
     )
     assert gsd.parse(text + newline).user_prm == data
+
+
+def test_a_dpv1_slave_and_its_class_1_services() -> None:
+    assert gsd.parse(DRIVE).dpv1 is None  # no DPV1_Slave: a DP-V0 slave
+    text = DRIVE + "DPV1_Slave = 1\nC1_Read_Write_supp = 1\nC1_Max_Data_Len = 200\n"
+    text += "C1_Response_Timeout = 100\n"
+    setup = gsd.parse(text).dpv1
+    assert setup is not None
+    assert (setup.max_data, setup.response_timeout, setup.read_write) == (200, 1.0, True)
+    bare = gsd.parse(DRIVE + "DPV1_Slave = 1\n").dpv1
+    assert bare is not None and (bare.max_data, bare.read_write) == (240, False)
+    with pytest.raises(gsd.GsdError, match="C1_Max_Data_Len 241"):
+        gsd.parse(DRIVE + "DPV1_Slave = 1\nC1_Max_Data_Len = 241\n")

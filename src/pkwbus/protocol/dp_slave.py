@@ -1,4 +1,4 @@
-"""The master's view of one DP-V0 slave, as a state machine without I/O.
+"""The master's view of one DP slave, as a state machine without I/O.
 
 Feed it the time and what came back; it says which request to send next.
 Start-up (EN 50170 vol. 2 part 3, "master-slave start-up"; Felser PROFIBUS
@@ -10,12 +10,18 @@ another master is never parametrised: it stays ``locked`` and only its
 diagnosis is read again now and then. A request that gets no valid answer is
 repeated with the same FCB up to ``retries`` times; then the slave is offline
 and is probed again every ``probe_interval`` seconds.
+
+A DP-V1 slave (``SlaveSetup.dpv1``) is parametrised with DP-V1 on, and in data
+exchange carries one record transfer at a time over MSAC_C1
+(:class:`~pkwbus.protocol.dpv1_transfer.C1Transfer`): :meth:`DpSlave.poll_acyclic`
+gives its next request, sent between two Data_Exchanges, and its end comes
+back as a :class:`TransferEnded` event.
 """
 
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pkwbus.protocol import fdl
 from pkwbus.protocol.dp_services import (
@@ -26,6 +32,14 @@ from pkwbus.protocol.dp_services import (
     decode_diagnosis,
     io_lengths,
     request,
+)
+from pkwbus.protocol.dpv1 import C1_SAP, C1Answer, Dpv1Setup, decode_c1, request_frame, with_dpv1
+from pkwbus.protocol.dpv1_transfer import (
+    NO_DATA,
+    C1Transfer,
+    NoData,
+    RecordFailed,
+    TransferEnd,
 )
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.fdl import DataFrame, Status
@@ -45,6 +59,7 @@ __all__ = [
     "SlaveSetup",
     "SlaveState",
     "StateChanged",
+    "TransferEnded",
 ]
 
 
@@ -140,7 +155,14 @@ class Failed:
     detail: str
 
 
-SlaveEvent = StateChanged | Restarted | Inputs | DiagnosisRead | Failed
+@dataclass(frozen=True, slots=True)
+class TransferEnded:
+    """A record transfer (DP-V1) is over: its answer read back, or why not."""
+
+    end: TransferEnd
+
+
+SlaveEvent = StateChanged | Restarted | Inputs | DiagnosisRead | Failed | TransferEnded
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,6 +176,7 @@ class SlaveSetup:
     retries: int = 1
     probe_interval: float = 1.0  # seconds before the first probe of an offline or locked slave
     probe_cap: float = 30.0  # the probes' interval doubles up to this while it stays so
+    dpv1: Dpv1Setup | None = None  # a DP-V1 slave: parametrised so, records over MSAC_C1
 
     def __post_init__(self) -> None:
         if not 0 <= self.address <= 125:
@@ -165,7 +188,14 @@ class SlaveSetup:
         if self.probe_interval < 0 or self.probe_cap < self.probe_interval:
             raise LocalProtocolError("probe interval below 0, or above its cap")
         check_cfg(self.cfg)
-        self.parameters.encode()
+        self.prm_data()
+
+    def prm_data(self) -> bytes:
+        """The Set_Prm data: with DP-V1 switched on in its first user bytes for a DP-V1 slave."""
+        prm = self.parameters
+        if self.dpv1 is not None:
+            prm = replace(prm, user_prm=with_dpv1(prm.user_prm))
+        return prm.encode()
 
     @property
     def inputs(self) -> int:
@@ -192,6 +222,8 @@ class DpSlave:
         self._last_answer: float | None = None
         self._events: list[SlaveEvent] = []
         self._probe_wait = setup.probe_interval  # doubles while offline or locked
+        self.transfer: C1Transfer | None = None  # the record transfer in progress (DP-V1)
+        self._acyclic = False  # the request out is the transfer's
 
     # ----------------------------------------------------------- sending
 
@@ -215,6 +247,31 @@ class DpSlave:
         self._pending = frame
         return frame
 
+    def start_transfer(self, slot: int, index: int, data: bytes, now: float) -> None:
+        """Write ``data`` to record ``index`` of ``slot`` and read its answer back, between
+        the Data_Exchanges; LocalProtocolError when the slave cannot take it now."""
+        dpv1 = self.setup.dpv1
+        if dpv1 is None or not dpv1.read_write:
+            raise LocalProtocolError(f"slave {self.setup.address} is no DP-V1 slave with records")
+        if self.state is not SlaveState.DATA_EXCHANGE:
+            raise LocalProtocolError(f"slave {self.setup.address} is not in data exchange")
+        if self.transfer is not None:
+            raise LocalProtocolError(f"slave {self.setup.address} has a transfer in progress")
+        self.transfer = C1Transfer(slot, index, data, dpv1, now)
+
+    def poll_acyclic(self) -> DataFrame | None:
+        """The transfer's next request, to send after this cycle's Data_Exchange; None when
+        there is none (or the slave is out of data exchange, or a request is out)."""
+        transfer = self.transfer
+        if transfer is None or self._pending is not None or self._step is not _Step.EXCHANGE:
+            return None
+        setup = self.setup
+        pdu = transfer.next_pdu()
+        frame = request_frame(setup.address, setup.master, pdu, fcb=self._fcb, fcv=self._fcv)
+        self._pending = frame
+        self._acyclic = True
+        return frame
+
     def take_events(self) -> list[SlaveEvent]:
         """Events produced by :meth:`poll` (a watchdog restart) since the last call."""
         events, self._events = self._events, []
@@ -235,7 +292,7 @@ class DpSlave:
         if self._step in (_Step.DIAG, _Step.DIAG_READY, _Step.DIAG_EXCHANGE):
             service = Service.SLAVE_DIAG
         elif self._step is _Step.PRM:
-            service, data = Service.SET_PRM, setup.parameters.encode()
+            service, data = Service.SET_PRM, setup.prm_data()
         elif self._step is _Step.CFG:
             service, data = Service.CHK_CFG, setup.cfg
         else:
@@ -254,7 +311,9 @@ class DpSlave:
         the last call (a watchdog restart found by :meth:`poll` included)."""
         if self._pending is None:
             raise LocalProtocolError("an answer fed with no request out")
-        if isinstance(answer, NoAnswer):
+        if self._acyclic and not isinstance(answer, NoAnswer | Garbled):
+            self._on_c1(answer, now)
+        elif isinstance(answer, NoAnswer):
             self._fail(FailureKind.TIMEOUT, "no answer", now)
         elif isinstance(answer, Garbled):
             self._fail(FailureKind.GARBLED, answer.detail, now)
@@ -309,6 +368,46 @@ class DpSlave:
         self._events.append(DiagnosisRead(diagnosis))
         self._on_diagnosis(diagnosis, now)
 
+    def _on_c1(self, frame: fdl.Frame, now: float) -> None:
+        """The answer to a transfer's request: its next step, or its end."""
+        transfer = self.transfer
+        assert transfer is not None  # the request out is its
+        setup = self.setup
+        if isinstance(frame, fdl.ShortAck):
+            said: C1Answer | NoData | RecordFailed = NO_DATA
+        elif (
+            isinstance(frame, DataFrame)
+            and frame.sa == setup.address
+            and frame.da == setup.master
+            and not frame.control.is_request
+        ):
+            status = frame.control.status
+            if status is Status.RS:
+                said = RecordFailed(
+                    "the slave has no MSAC_C1 service access point (51) active:"
+                    " it does not run DP-V1"
+                )
+            elif status in (Status.NR, Status.OK) and not frame.data:
+                said = NO_DATA
+            elif frame.dsap != C1_SAP or status not in (Status.DL, Status.DH, Status.OK):
+                said = RecordFailed(f"{frame} answers an MSAC_C1 request")
+            else:
+                try:
+                    said = decode_c1(frame.data, transfer.function, transfer.slot, transfer.index)
+                except RemoteProtocolError as exc:
+                    said = RecordFailed(str(exc))
+        else:
+            self._fail(FailureKind.UNEXPECTED, f"{frame} is not this slave's answer", now)
+            return
+        self._answered(now)
+        end = said if isinstance(said, RecordFailed) else transfer.feed(said, now)
+        if end is not None:
+            self._end_transfer(end)
+
+    def _end_transfer(self, end: TransferEnd) -> None:
+        self.transfer = None
+        self._events.append(TransferEnded(end))
+
     def _on_exchange(self, status: Status, data: bytes, now: float) -> None:
         expected = self.setup.inputs
         if len(data) != expected:
@@ -345,6 +444,7 @@ class DpSlave:
     def _answered(self, now: float) -> None:
         """A request completed: FCB toggles, FCV on from now."""
         self._pending = None
+        self._acyclic = False
         self._tries = 0
         self._fcb = not self._fcb
         self._fcv = True
@@ -378,6 +478,9 @@ class DpSlave:
         return wait
 
     def _fresh(self, due: float) -> None:
+        if self.transfer is not None:
+            self._end_transfer(RecordFailed("the slave left data exchange"))
+        self._acyclic = False
         self._step = _Step.DIAG
         self._pending = None
         self._tries = 0

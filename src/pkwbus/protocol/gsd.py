@@ -1,9 +1,10 @@
 """Reading a slave's GSD file (the text "device data base" every PROFIBUS vendor publishes).
 
-What a DP-V0 master needs from it: the ident number, the user parameter
+What a DP master needs from it: the ident number, the user parameter
 bytes with their defaults (``User_Prm_Data``, or ``Ext_User_Prm_Data_Const``
 and ``Ext_User_Prm_Data_Ref`` with the ``ExtUserPrmData`` definitions), the
 modules with their configuration identifiers, and ``MaxTsdr`` per baud rate
+and, of a DP-V1 slave, its class 1 services (:func:`_dpv1`)
 (PROFIBUS GSD specification: keywords are case-insensitive, ``;`` starts a
 comment, ``\\`` at the end of a line continues it). Pure: text in, objects out.
 
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Final
 
+from pkwbus.protocol.dpv1 import DEFAULT_MAX_DATA, DEFAULT_RESPONSE_TIMEOUT, Dpv1Setup
 from pkwbus.protocol.errors import LocalProtocolError
 
 __all__ = ["BAUD_SUFFIXES", "HEADER", "ExtUserPrm", "Gsd", "GsdError", "GsdModule", "parse"]
@@ -90,6 +92,7 @@ class Gsd:
     max_tsdr: Mapping[int, int] = field(default_factory=dict)  # baud rate -> bit times
     vendor: str = ""
     model: str = ""
+    dpv1: Dpv1Setup | None = None  # None: a DP-V0 slave (no ``DPV1_Slave = 1``)
 
     def module(self, name: str) -> GsdModule:
         """The module of that name (case-insensitive, blanks ignored at the ends)."""
@@ -361,4 +364,28 @@ def _build(
         MappingProxyType(max_tsdr),
         text_of("vendor_name"),
         text_of("model_name"),
+        _dpv1(values),
     )
+
+
+def _dpv1(values: Mapping[str, tuple[int, str]]) -> Dpv1Setup | None:
+    """The class 1 services of a ``DPV1_Slave = 1`` (GSD specification for DP-V1:
+    ``C1_Max_Data_Len`` in bytes, ``C1_Response_Timeout`` in units of 10 ms)."""
+
+    def number(key: str, default: int) -> int:
+        if key not in values:
+            return default
+        line, text = values[key]
+        return _number(text, line)
+
+    if not number("dpv1_slave", 0):
+        return None
+    max_data = number("c1_max_data_len", DEFAULT_MAX_DATA)
+    if not 0 <= max_data <= DEFAULT_MAX_DATA:
+        raise GsdError(values["c1_max_data_len"][0], f"C1_Max_Data_Len {max_data} is outside 0-240")
+    ticks = number("c1_response_timeout", round(DEFAULT_RESPONSE_TIMEOUT / 0.01))
+    if not 1 <= ticks <= 0xFFFF:
+        raise GsdError(
+            values["c1_response_timeout"][0], f"C1_Response_Timeout {ticks} is outside 1-65535"
+        )
+    return Dpv1Setup(max_data, ticks * 0.01, bool(number("c1_read_write_supp", 0)))

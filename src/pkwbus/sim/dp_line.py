@@ -30,6 +30,7 @@ from pkwbus.protocol import fdl, ppo
 from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.fdl import BROADCAST, DataFrame, Status
+from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import BlockShape, Protocol
 from pkwbus.sim import ends
 from pkwbus.sim.config import SimFaults, SimTiming
@@ -38,6 +39,7 @@ from pkwbus.sim.drive import SimDrive
 from pkwbus.sim.ends import PtyEnd, TcpEnd
 from pkwbus.sim.faults import Answer
 from pkwbus.sim.model import ModelConfig
+from pkwbus.sim.records import RecordServer
 from pkwbus.sim.simulator import check_refusing
 from pkwbus.sim.stats import SimStats
 from pkwbus.sim.table import TABLES, ParamSpec
@@ -119,8 +121,13 @@ class DpSimulator:
         each: Mapping[int, SlaveKind] | None = None,
         model: ModelConfig | None = None,
         refuse_descriptions: Collection[int] = (),
+        dpv1: bool = False,
+        not_ready: int = 0,
     ) -> None:
-        """``each``: slaves of another dialect, ident or catalog than the line's, by address;
+        """``dpv1``: the slaves whose dialect has parameter access (data record 47) run
+        DP-V1 when parametrised so, answering ``not_ready`` reads of each response with
+        "state conflict" first; ``each``: slaves of another dialect, ident or catalog
+        than the line's, by address;
         ``refuse_descriptions``: slaves whose drives answer every description request (AK 4)
         with the dialect's "description not available" fault (ValueError for an address
         that is not a slave here)."""
@@ -141,6 +148,7 @@ class DpSimulator:
         shape = BlockShape(self.ppo.pkw_words, self.ppo.pzd_words)
         self.drives: dict[int, SimDrive] = {}
         self.slaves: dict[int, SimDpSlave] = {}
+        self.records: dict[int, RecordServer | None] = {}
         self._last: dict[int, bytes] = {}
         line_kind = SlaveKind(dialect, self.ident, catalog)
         refusing = frozenset(refuse_descriptions)
@@ -163,7 +171,14 @@ class DpSimulator:
             drive.model.now = clock()
             self.drives[address] = drive
             ident_number = DEFAULT_IDENTS[name] if kind.ident is None else kind.ident
-            self.slaves[address] = SimDpSlave(address, ident_number, self.ppo.cfg, drive.respond)
+            axis = AXES.get(name)
+            records = RecordServer(drive.params, drive.dialect, axis) if axis is not None else None
+            self.records[address] = records
+            self.slaves[address] = SimDpSlave(
+                address, ident_number, self.ppo.cfg, drive.respond,
+                records=records.answer if records is not None and dpv1 else None,
+                not_ready=not_ready,
+            )  # fmt: skip
 
     # ------------------------------------------------------------ faults
 

@@ -6,6 +6,12 @@ DATA_EXCH; with the watchdog on, a master silent for the watchdog time sends
 it back to WAIT_PRM. A repeated request (FCV set, same FCB) gets the previous
 answer again. Data_Exchange outputs go to the drive as a PKW + PZD block, and
 the drive's answer block is the PPO-read.
+
+A slave with ``records`` is a DP-V1 slave: parametrised with DP-V1 on, in data
+exchange it takes MSAC_C1 writes of data record 47 (slot ``record_slot``) and
+answers the read that follows with the drive's response, after answering
+``not_ready`` reads with "state conflict" (``DE 80 B5 00``); a read with no
+request written is a state conflict too, another record an invalid index.
 """
 
 from __future__ import annotations
@@ -21,12 +27,25 @@ from pkwbus.protocol.dp_services import (
     encode_diagnosis,
     io_lengths,
 )
+from pkwbus.protocol.dpv1 import (
+    C1_SAP,
+    NOT_READY,
+    C1Function,
+    Dpv1Status,
+    decode_c1_request,
+    encode_c1_error,
+)
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.fdl import BROADCAST, DataFrame, ShortAck, Status
+from pkwbus.protocol.profidrive import RECORD
 
 __all__ = ["Respond", "SimDpSlave", "SlaveMode"]
 
 Respond = Callable[[bytes, float], bytes]  # outputs (PPO-write), now -> inputs (PPO-read)
+Records = Callable[[bytes], bytes]  # a data record 47 request -> its response
+_INVALID_INDEX = 0xB0
+_INVALID_SLOT = 0xB2
+_WRITE_ERROR = 0xA1
 
 
 class SlaveMode(enum.StrEnum):
@@ -38,8 +57,25 @@ class SlaveMode(enum.StrEnum):
 class SimDpSlave:
     """One slave on a simulated DP line."""
 
-    def __init__(self, address: int, ident: int, cfg: bytes, respond: Respond) -> None:
+    def __init__(
+        self,
+        address: int,
+        ident: int,
+        cfg: bytes,
+        respond: Respond,
+        *,
+        records: Records | None = None,
+        record_slot: int = 0,
+        not_ready: int = 0,
+    ) -> None:
         self.address = address
+        self.records = records
+        self.record_slot = record_slot
+        self.not_ready = not_ready  # reads answered "state conflict" before each response
+        self.dpv1 = False  # parametrised with DP-V1 on
+        self.record_writes = 0
+        self._response: bytes | None = None  # the record's response, waiting to be read
+        self._waits = 0
         self.ident = ident
         self.cfg = cfg
         self.respond = respond
@@ -84,6 +120,8 @@ class SimDpSlave:
         self.mode = SlaveMode.WAIT_PRM
         self.owner = None
         self.watchdog = None
+        self.dpv1 = False
+        self._response = None
 
     def handle(self, frame: fdl.Frame, now: float) -> fdl.Frame | None:
         """The answer to ``frame``; None when the slave stays silent (not for it, broadcast)."""
@@ -126,6 +164,10 @@ class SimDpSlave:
                 self.cfg_fault = frame.data != self.cfg
                 self.mode = SlaveMode.WAIT_PRM if self.cfg_fault else SlaveMode.DATA_EXCH
             return ShortAck()
+        if service == C1_SAP and self.dpv1 and self.mode is SlaveMode.DATA_EXCH:
+            if frame.sa != self.owner:
+                return self._reply(frame, Status.RS)
+            return self._reply(frame, Status.DL, self._c1(frame.data))
         if service is not None:
             return self._reply(frame, Status.RS)
         if self.mode is not SlaveMode.DATA_EXCH or frame.sa != self.owner:
@@ -151,6 +193,39 @@ class SimDpSlave:
         self.cfg_fault = False
         self.owner = frame.sa if prm.lock else None
         self.watchdog = prm.watchdog_seconds
+        self.dpv1 = self.records is not None and Dpv1Status.decode(prm.user_prm) is not None
+        self._response = None
+
+    def _c1(self, data: bytes) -> bytes:
+        """An MSAC_C1 request's answer: a record 47 request written, its response read."""
+        try:
+            request = decode_c1_request(data)
+        except RemoteProtocolError:
+            function = (
+                C1Function.WRITE if data[:1] == bytes((C1Function.WRITE,)) else C1Function.READ
+            )
+            return encode_c1_error(function, _WRITE_ERROR)
+        function = request.function
+        if request.slot != self.record_slot:
+            return encode_c1_error(function, _INVALID_SLOT)
+        if request.index != RECORD:
+            return encode_c1_error(function, _INVALID_INDEX)
+        head = bytes((function, request.slot, request.index))
+        if function is C1Function.WRITE:
+            assert self.records is not None  # a DP-V1 slave has them
+            try:
+                self._response = self.records(request.data)
+            except RemoteProtocolError:
+                self._response = None
+                return encode_c1_error(function, _WRITE_ERROR)
+            self.record_writes += 1
+            self._waits = self.not_ready
+            return head + bytes((len(request.data),))
+        if self._response is None or self._waits > 0:
+            self._waits -= 1
+            return encode_c1_error(function, NOT_READY)
+        response, self._response = self._response, None
+        return head + bytes((len(response),)) + response
 
     def diagnosis(self) -> Diagnosis:
         flags = set()

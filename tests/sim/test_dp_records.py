@@ -1,0 +1,193 @@
+"""Data record 47 over DP-V1: the master's slave state machine against the simulated
+DP-V1 slave, frame by frame through the wire format."""
+
+from __future__ import annotations
+
+import pytest
+
+from pkwbus.protocol import dp_services as dps
+from pkwbus.protocol import fdl
+from pkwbus.protocol.dp_slave import (
+    DpSlave,
+    NoAnswer,
+    SlaveSetup,
+    SlaveState,
+    TransferEnded,
+)
+from pkwbus.protocol.dpv1 import Dpv1Setup
+from pkwbus.protocol.dpv1_transfer import RecordFailed, RecordRead
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.profidrive import (
+    AXES,
+    RECORD,
+    Change,
+    Format,
+    ParameterAddress,
+    ParameterError,
+    ParameterRequest,
+    Values,
+    decode_response,
+)
+from pkwbus.sim.dp_line import DpSimulator
+
+MASTER, ADDRESS = 2, 5
+
+
+class Bus:
+    """One master-side slave and the simulated line, one frame at a time."""
+
+    def __init__(self, sim: DpSimulator, *, dpv1: bool = True, timeout: float = 1.0) -> None:
+        self.sim = sim
+        setup = Dpv1Setup(response_timeout=timeout) if dpv1 else None
+        prm = dps.Parameters(sim.ident, dps.watchdog_factors(1.0))
+        self.slave = DpSlave(SlaveSetup(ADDRESS, MASTER, prm, sim.ppo.cfg, dpv1=setup))
+        self.now = 0.0
+        self.acyclic: list[fdl.DataFrame] = []
+        self.events: list[object] = []
+
+    def send(self, frame: fdl.DataFrame | None) -> None:
+        assert frame is not None
+        answer = self.sim.handle(fdl.encode(frame))
+        reply = NoAnswer() if answer is None else fdl.decode(answer)
+        self.events += self.slave.feed(reply, self.now)
+
+    def cycle(self) -> None:
+        """A Data_Exchange (or start-up request), then the transfer's request if any."""
+        self.now += 0.01
+        self.send(self.slave.poll(self.now))
+        frame = self.slave.poll_acyclic()
+        if frame is not None:
+            self.acyclic.append(frame)
+            self.send(frame)
+
+    def start(self) -> None:
+        for _ in range(6):
+            self.cycle()
+        assert self.slave.state is SlaveState.DATA_EXCHANGE
+
+    def transfer(self, request: ParameterRequest, cycles: int = 30) -> RecordRead | RecordFailed:
+        self.slave.start_transfer(0, RECORD, request.encode(), self.now)
+        self.events.clear()
+        for _ in range(cycles):
+            self.cycle()
+            ended = [e for e in self.events if isinstance(e, TransferEnded)]
+            if ended:
+                return ended[-1].end
+        raise AssertionError("the transfer did not end")
+
+
+def sim(dialect: str = "profidrive", *, not_ready: int = 0) -> DpSimulator:
+    return DpSimulator([ADDRESS], dialect=dialect, ppo_number=3, dpv1=True, not_ready=not_ready)
+
+
+@pytest.mark.parametrize("dialect", ["profidrive", "danfoss-pcv"])
+def test_many_parameters_in_one_request(dialect: str) -> None:
+    line = sim(dialect, not_ready=2)
+    bus = Bus(line)
+    bus.start()
+    drive = line.drives[ADDRESS]
+    pnus = sorted(drive.params.specs)[:8]
+    request = ParameterRequest.read(1, AXES[dialect], [ParameterAddress(p) for p in pnus])
+    end = bus.transfer(request)
+    assert isinstance(end, RecordRead)
+    assert end.reads == 3  # two "state conflict" answers, then the response
+    response = decode_response(end.data, request)
+    for pnu, result in zip(pnus, response.results, strict=True):
+        spec = drive.params.specs[pnu]
+        if spec.vtype.value == "text":
+            assert isinstance(result, Values) and result.format is Format.OCTET_STRING
+        elif spec.live is None:
+            assert isinstance(result, Values)
+            raw = drive.params.raw[pnu, 0]
+            if result.format is Format.FLOAT:
+                import struct
+
+                assert struct.pack(">f", result.values[0]) == raw.to_bytes(4, "big")
+            else:
+                assert result.values[0] & 0xFFFFFFFF == raw
+    # every acyclic frame went to SAP 51 and the slave stayed in data exchange
+    assert all((f.dsap, f.ssap) == (51, 51) for f in bus.acyclic)
+    assert bus.slave.state is SlaveState.DATA_EXCHANGE
+
+
+def test_a_change_is_written_and_an_unknown_parameter_refused() -> None:
+    line = sim()
+    bus = Bus(line)
+    bus.start()
+    drive = line.drives[ADDRESS]
+    # The G120X operating instructions' example, p1121 = 12.15 s, beside a parameter
+    # the drive does not have.
+    request = ParameterRequest.change(
+        0x80, 1, [Change(ParameterAddress(1121), Values(Format.FLOAT, (12.15,))),
+                  Change(ParameterAddress(9999), Values(Format.U16, (1,)))],
+    )  # fmt: skip
+    assert request.encode().startswith(bytes.fromhex("80 02 01 02 10 01 04 61 00 00"))
+    end = bus.transfer(request)
+    assert isinstance(end, RecordRead)
+    response = decode_response(end.data, request)
+    assert response.failed
+    assert response.results[0] is None  # done
+    error = response.results[1]
+    assert isinstance(error, ParameterError) and error.number == 0
+    assert error.text == "Illegal parameter number"
+    assert drive.params.number(1121) == pytest.approx(12.15, abs=1e-5)
+
+
+def test_a_read_only_parameter_is_not_changed() -> None:
+    line = sim()
+    bus = Bus(line)
+    bus.start()
+    before = line.drives[ADDRESS].params.raw[964, 0]
+    request = ParameterRequest.change(
+        6, 1, [Change(ParameterAddress(964), Values(Format.U16, (before ^ 1,)))]
+    )
+    end = bus.transfer(request)
+    assert isinstance(end, RecordRead)
+    (error,) = decode_response(end.data, request).results
+    assert isinstance(error, ParameterError)
+    assert error.text == "Parameter value cannot be changed"
+    assert line.drives[ADDRESS].params.raw[964, 0] == before
+
+
+def test_a_slave_that_does_not_answer_in_time_ends_the_transfer() -> None:
+    bus = Bus(sim(not_ready=1000), timeout=0.1)
+    bus.start()
+    end = bus.transfer(ParameterRequest.read(3, 1, [ParameterAddress(2)]))
+    assert isinstance(end, RecordFailed) and end.timed_out
+    assert bus.slave.state is SlaveState.DATA_EXCHANGE  # the cycle goes on
+
+
+def test_a_dpv0_slave_refuses_the_service_access_point() -> None:
+    line = DpSimulator([ADDRESS], dialect="profidrive", ppo_number=3, dpv1=False)
+    bus = Bus(line)
+    bus.start()
+    end = bus.transfer(ParameterRequest.read(3, 1, [ParameterAddress(2)]))
+    assert isinstance(end, RecordFailed) and "does not run DP-V1" in end.why
+    assert bus.slave.state is SlaveState.DATA_EXCHANGE
+
+
+def test_a_restart_mid_request_ends_the_transfer_and_the_slave_comes_back() -> None:
+    line = sim(not_ready=3)
+    bus = Bus(line)
+    bus.start()
+    bus.slave.start_transfer(
+        0, RECORD, ParameterRequest.read(4, 1, [ParameterAddress(2)]).encode(), bus.now
+    )
+    bus.cycle()
+    line.restart(ADDRESS)
+    for _ in range(12):
+        bus.cycle()
+    ended = [e.end for e in bus.events if isinstance(e, TransferEnded)]
+    assert len(ended) == 1 and isinstance(ended[0], RecordFailed)
+    assert bus.slave.state is SlaveState.DATA_EXCHANGE
+    assert bus.transfer(ParameterRequest.read(5, 1, [ParameterAddress(2)])).__class__ is RecordRead
+
+
+def test_a_transfer_needs_a_dpv1_slave_in_data_exchange() -> None:
+    bus = Bus(sim(), dpv1=False)
+    bus.start()
+    with pytest.raises(LocalProtocolError, match="no DP-V1 slave"):
+        bus.slave.start_transfer(0, RECORD, b"\x01\x01\x01\x01", bus.now)
+    fresh = Bus(sim())
+    with pytest.raises(LocalProtocolError, match="not in data exchange"):
+        fresh.slave.start_transfer(0, RECORD, b"\x01\x01\x01\x01", 0.0)
