@@ -15,7 +15,7 @@ import pytest
 
 from pkwbus.cli import main
 from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl
+from pkwbus.protocol import fdl, pzd
 from pkwbus.protocol.dp_slave import DpSlave, NoAnswer, SlaveSetup
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
@@ -254,3 +254,42 @@ def test_gsd_file(capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path:
     args = dp(danfoss, "--address", "8", "--gsd", str(bad), "16-13", ident=False)
     code, _, err = run(capsys, "read", *args)
     assert code == 2 and "GSD line 3" in err
+
+
+def test_read_write_and_describe_through_data_record_47(
+    capsys: pytest.CaptureFixture[str], end: str
+) -> None:
+    # A PPO-3 slave has no PKW words: its parameters go through data record 47 (DP-V1).
+    served = serve(end, "profidrive", ppo_number=3, catalog="siemens-g120", dpv1=True,
+                   not_ready=2)  # fmt: skip
+    try:
+        code, out, err = run(capsys, "read", *dp(served, "--ppo", "3", "--address", "8", "p1120",
+                                                 "--json"))  # fmt: skip
+        assert code == 0, err
+        got = json.loads(out)
+        assert got["raw"] == served.sim.drives[8].value(1120)
+        code, out, err = run(
+            capsys, "write", *dp(served, "--ppo", "3", "--address", "8", "p1121", "12.15")
+        )
+        assert code == 0, err
+        assert abs(served.sim.drives[8].params.number(1121) - 12.15) < 1e-5
+        assert served.sim.drives[9].params.number(1121) != served.sim.drives[8].params.number(1121)
+        code, out, err = run(capsys, "describe", *dp(served, "--ppo", "3", "--address", "8",
+                                                     "p1121"))  # fmt: skip
+        assert code == 0, err
+        assert served.sim.slaves[8].record_writes >= 3
+        # An unknown parameter: the drive's error number, in words.
+        code, out, err = run(capsys, "read", *dp(served, "--ppo", "3", "--address", "8", "r9999"))
+        assert code != 0
+        assert "Illegal parameter number" in out + err
+        # A change to EEPROM does not travel in the SINAMICS data set 47: refused, unsent.
+        before = served.sim.slaves[8].record_writes
+        code, out, err = run(capsys, "write", *dp(served, "--ppo", "3", "--address", "8",
+                                                  "p1121", "3.0", "--store", "eeprom"))  # fmt: skip
+        assert code == 2 and "RAM only" in err
+        assert served.sim.slaves[8].record_writes == before
+    finally:
+        served.close()
+    # Every Data_Exchange of PPO 3 (no PKW words) began with a control word of 0.
+    ctws = [int.from_bytes(f.data[:2], "big") for f in served.wire.data_exchanges()]
+    assert ctws and all(w == pzd.MONITORING_CTW for w in ctws)

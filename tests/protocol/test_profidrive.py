@@ -18,10 +18,9 @@ from pkwbus.protocol.profidrive import (
     ParameterRequest,
     RequestId,
     Values,
-    decode_request,
     decode_response,
-    encode_response,
 )
+from pkwbus.protocol.profidrive_drive import decode_request, encode_response
 
 # SINAMICS G120X operating instructions, "Parameter channel", example: change
 # p1121 (ramp-down time) to 12.15 s. Reference 0x80, change, DO 1, one parameter,

@@ -141,3 +141,78 @@ def test_check_config_estimates_the_dp_cycle_and_warns_of_polls_it_cannot_carry(
     assert f"DP cycle {expected * 1000:.1f} ms" in report and "WARN" in report
     fast = parse_config(SIM_LINE.format(baud=93750, every="1s"), environ={})
     assert line_load(fast.lines[0]).warnings == []
+
+
+DS47_LINE = """
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 19200
+    drives:
+      - name: a
+        address: 8
+        ident: 0x80B5
+        ppo: 3
+        dpv1: true
+        poll: [{polls}]
+      - {{name: b, address: 9, ident: 0x80B5}}
+"""
+
+
+def test_check_config_estimates_parameters_per_second_through_data_record_47() -> None:
+    from pkwbus.protocol import dp_timing
+    from pkwbus.service.config.line_load import (
+        DP_JOB_CYCLES,
+        check_config_report,
+        line_load,
+        record_seconds,
+    )
+
+    polls = ", ".join(f'{{parameter: "r{n:04d}", every: 1s}}' for n in range(20, 40))
+    config = parse_config(DS47_LINE.format(polls=polls), environ={})
+    drive = config.lines[0].drives[0]
+    assert drive.access == "ds47"  # PPO 3 has no PKW words; the slave is DP-V1
+    load = line_load(config.lines[0])
+    # PPO 3: 4 data bytes + 9 of the frame; PPO 1: 12 + 9, each way.
+    cycle = dp_timing.exchange_time(13, 13, 19200) + dp_timing.exchange_time(21, 21, 19200)
+    assert load.cycle == pytest.approx(cycle)
+    # The MSAC_C1 frames: SD2 with both SAPs (11 bytes) around the data; a request of 20
+    # value reads is 4 + 6 * 20 bytes, its response as long at most.
+    write = dp_timing.exchange_time(11 + 4 + 124, 11 + 4, 19200)
+    read = dp_timing.exchange_time(11 + 4, 11 + 4 + 124, 19200)
+    assert record_seconds(drive, 20, 19200) == pytest.approx((write + read) / 2)
+    access, most = load.access["a"]
+    assert access == "ds47"
+    assert most == pytest.approx(20 / (DP_JOB_CYCLES * (cycle + (write + read) / 2)))
+    assert load.access["b"] == ("pkw", pytest.approx(1 / (DP_JOB_CYCLES * cycle)))
+    assert most > load.access["b"][1]  # many parameters a request, one PKW job
+    report = "\n".join(check_config_report(config))
+    assert f"drive a: parameters through data record 47 (DP-V1), at most {most:.1f}" in report
+
+
+@pytest.mark.parametrize(
+    ("drive", "message"),
+    [
+        ("{name: a, address: 8, ident: 0x80B5, ppo: 3, parameter_access: ds47,"
+         " poll: [{parameter: r0021, every: 1s}]}", "ds47 needs a DP-V1 slave"),
+        ("{name: a, address: 8, ident: 0x80B5, ppo: 3, dpv1: true, parameter_access: pkw,"
+         " poll: [{parameter: r0021, every: 1s}]}", "pkw: PPO 3 has no PKW words"),
+        ("{name: a, address: 8, ident: 0x0B6A, ppo: 3, dpv1: true, dialect: hitachi-sjpb,"
+         " poll: [{parameter: '1082', every: 1s}]}", "documents the PKW channel only"),
+        ("{name: a, address: 8, ident: 0x80B5, axis: 1, poll: [{parameter: r0021, every: 1s}]}",
+         "axis: applies to parameter_access: ds47 only"),
+    ],
+)  # fmt: skip
+def test_data_record_47_mistakes_are_placed(drive: str, message: str) -> None:
+    text = f"""
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 93750
+    drives:
+      - {drive}
+"""
+    with pytest.raises(ConfigError, match=message):
+        parse_config(text, environ={})

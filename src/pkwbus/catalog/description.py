@@ -101,7 +101,8 @@ class ParameterDescription:
         if isinstance(response, pkw.TextResponse):
             return None, decode_text(response.text)
         if isinstance(response, pkw.ValueResponse):
-            vtype = None if self.vtype is ValueType.TEXT else self.vtype
+            # The type the answer names itself comes first: a float is a float.
+            vtype = response.vtype or (None if self.vtype is ValueType.TEXT else self.vtype)
             return response.raw, decode_value(response.raw, response.width, vtype, self.scaling)
         raise RemoteProtocolError(f"answer {type(response).__name__} carries no value")
 

@@ -63,7 +63,7 @@ def run_read(args: argparse.Namespace) -> int:
     ref, fmt = resolve(args, access)
     text = fmt.is_text and access.texts
     (req,) = checked(access, [pkw.read_parameter(access.dialect, ref.pnu, ref.index, text=text)])
-    (outcome,) = link.run(access.run([req]))
+    (outcome,) = link.run(access.run([req], fmt.vtype))
     return show_read(args, ref, fmt, outcome)
 
 
@@ -81,7 +81,7 @@ def run_write(args: argparse.Namespace) -> int:
             req = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=store)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    (outcome,) = link.run(access.run(checked(access, [req])))
+    (outcome,) = link.run(access.run(checked(access, [req]), fmt.vtype))
     response = finish(outcome)
     try:
         raw, value = fmt.value_of(response)

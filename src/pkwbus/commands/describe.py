@@ -45,7 +45,7 @@ def run_describe(args: argparse.Namespace) -> int:
         )
     ref, _ = resolve(args, access, typed=False)
     requests = checked(access, [pkw.read_description(access.dialect, ref.pnu, e) for e in ELEMENTS])
-    outcomes = link.run(access.run(requests))
+    outcomes = link.run(access.run(requests, None))
     found: dict[int, pkw.DescriptionResponse | None] = {}
     for element, outcome in zip(ELEMENTS, outcomes, strict=True):
         if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):

@@ -1,9 +1,12 @@
-"""`pkwbus read`, `write` and `describe` with ``--protocol profibus``: pkwbus as DP-V0 master.
+"""`pkwbus read`, `write` and `describe` with ``--protocol profibus``: pkwbus as DP master.
 
 The slave goes through its start-up (Slave_Diag, Set_Prm, Chk_Cfg, Slave_Diag
 until ready), then the job goes through the PKW part of its PPO until the
-matching answer comes. Set_Prm carries the ident number, the user parameters
-and the module identifiers given, or read from the drive's GSD file. A slave
+matching answer comes; with ``--access ds47`` (the default on a PPO without
+PKW words) the slave is parametrised as a DP-V1 slave and the job goes as a
+PROFIdrive parameter request in data record 47. Set_Prm carries the ident
+number, the user parameters and the module identifiers given, or read from the
+drive's GSD file. A slave
 owned by another master is never parametrised (exit 3); a line another
 master runs is never used (exit 3). At the end Global_Control Clear goes to
 every slave and the port is closed.
@@ -30,15 +33,18 @@ from pkwbus.master.outcomes import Outcome, TimedOut
 from pkwbus.master.plan import DriveSpec
 from pkwbus.master.record import NoEvents
 from pkwbus.master.single_job import JobSession, SessionEnded
-from pkwbus.master.target import DriveTarget
+from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import dp_services as dps
 from pkwbus.protocol import dp_timing, gsd, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.dp_slave import SlaveSetup, SlaveState
+from pkwbus.protocol.dpv1 import Dpv1Setup
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.ppo import PkwSlot, PpoType
+from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import BlockShape, Protocol
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = [
     "DEFAULT_BAUDRATE",
@@ -73,6 +79,19 @@ def add_dp_options(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--cfg", default=None, help='configuration identifiers, e.g. "F3 F1"')
     g.add_argument("--user-prm", default=None, metavar="HEX", help="user parameter bytes")
     g.add_argument(
+        "--access",
+        choices=("pkw", "ds47"),
+        default=None,
+        help="parameters through the PPO's PKW words or PROFIdrive data record 47 over"
+        " DP-V1 (default: pkw where the PPO has PKW words, else ds47)",
+    )
+    g.add_argument(
+        "--axis",
+        type=int_option(0, 255),
+        default=None,
+        help="the drive object of data record 47 (default: SINAMICS 1, Danfoss 0)",
+    )
+    g.add_argument(
         "--slot-time",
         type=duration_option(SLOT_TIME),
         default=None,
@@ -90,10 +109,24 @@ class DpContext:
     cfg: bytes
     master: int
     retries: int
+    record: RecordAccess | None = None  # parameters through data record 47 (DP-V1)
+    dpv1: Dpv1Setup | None = None
 
     def setup(self, address: int) -> SlaveSetup:
         try:
-            return SlaveSetup(address, self.master, self.parameters, self.cfg, self.retries)
+            return SlaveSetup(
+                address, self.master, self.parameters, self.cfg, self.retries, dpv1=self.dpv1
+            )
+        except LocalProtocolError as exc:
+            raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+    def target(self, address: int) -> DriveTarget:
+        """The slave as the runner addresses it."""
+        shape = BlockShape(self.ppo.pkw_words, self.ppo.pzd_words)
+        try:
+            return DriveTarget(
+                Protocol.PROFIBUS, address, self.dialect, ppo.LAYOUT, shape, record=self.record
+            )
         except LocalProtocolError as exc:
             raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
@@ -109,8 +142,9 @@ def _hex_bytes(text: str, what: str) -> bytes:
         raise CommandError(f"{what}: {text[:40]!r} is not hex bytes", Exit.BAD_INPUT) from None
 
 
-def _from_gsd(path: str, number: int) -> tuple[int, bytes, bytes]:
-    """Ident, user parameters and the PPO's module identifiers from a GSD file."""
+def _from_gsd(path: str, number: int) -> tuple[int, bytes, bytes, Dpv1Setup | None]:
+    """Ident, user parameters, the PPO's module identifiers and (a DP-V1 slave) its class 1
+    services from a GSD file."""
     try:
         text = Path(path).read_text(encoding="latin-1")
     except OSError as exc:
@@ -130,7 +164,7 @@ def _from_gsd(path: str, number: int) -> tuple[int, bytes, bytes]:
             Exit.BAD_INPUT,
         )
     module = modules[0]
-    return found.ident, found.prm_for([module]), module.cfg
+    return found.ident, found.prm_for([module]), module.cfg, found.dpv1
 
 
 def build_context(args: argparse.Namespace) -> DpContext:
@@ -144,9 +178,9 @@ def build_context(args: argparse.Namespace) -> DpContext:
         kind = ppo.ppo_type(args.ppo)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    cfg, user_prm = kind.cfg, b""
+    cfg, user_prm, dpv1 = kind.cfg, b"", None
     if args.gsd is not None:
-        ident, user_prm, cfg = _from_gsd(args.gsd, args.ppo)
+        ident, user_prm, cfg, dpv1 = _from_gsd(args.gsd, args.ppo)
     elif args.ident is not None:
         try:
             ident = limits.check_int(int(args.ident, 0), 0, 0xFFFF)
@@ -180,7 +214,25 @@ def build_context(args: argparse.Namespace) -> DpContext:
             f" PPO {kind.number} has {kind.length}",
             Exit.BAD_INPUT,
         )
-    return DpContext(dia, kind, parameters, cfg, args.master_address, args.retries)
+    access = getattr(args, "access", None) or ("pkw" if kind.has_pkw else "ds47")
+    record = None
+    if access == "ds47":
+        axis = args.axis if args.axis is not None else AXES.get(dia.name)
+        if axis is None:
+            raise CommandError(
+                f"--access ds47: the {dia.name} dialect documents the PKW channel only"
+                " (give --axis to use data record 47 anyway)",
+                Exit.BAD_INPUT,
+            )
+        record, dpv1 = RecordAccess(axis), dpv1 or Dpv1Setup()
+    elif not kind.has_pkw:
+        raise CommandError(f"PPO {kind.number} has no PKW words: --access ds47", Exit.BAD_INPUT)
+    elif getattr(args, "axis", None) is not None:
+        raise CommandError("--axis applies to --access ds47 only", Exit.BAD_INPUT)
+    return DpContext(
+        dia, kind, parameters, cfg, args.master_address, args.retries, record,
+        dpv1 if record is not None else None,
+    )  # fmt: skip
 
 
 def dp_line(args: argparse.Namespace) -> DpLine:
@@ -202,15 +254,15 @@ def dp_line(args: argparse.Namespace) -> DpLine:
 
 
 async def session(
-    args: argparse.Namespace, ctx: DpContext, address: int, jobs: Sequence[pkw.PkwRequest]
+    args: argparse.Namespace,
+    ctx: DpContext,
+    address: int,
+    jobs: Sequence[pkw.PkwRequest],
+    vtype: ValueType | None = None,
 ) -> list[Outcome]:
     """Run ``jobs`` one after the other on slave ``address`` through the line runner (the
     master listens first, parametrises the slave, and clears it at the end)."""
-    if not ctx.ppo.has_pkw:
-        raise CommandError(f"PPO {ctx.ppo.number} has no parameter channel", Exit.BAD_INPUT)
-    shape = BlockShape(ctx.ppo.pkw_words, ctx.ppo.pzd_words)
-    target = DriveTarget(Protocol.PROFIBUS, address, ctx.dialect, ppo.LAYOUT, shape)
-    spec = DriveSpec("drive", target)
+    spec = DriveSpec("drive", ctx.target(address))
     watch = _Watch(address)
     wire = CycleWire(dp_line(args), [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], dp_events=watch)
     drive = watch.session = JobSession(wire, spec, retries=ctx.retries, events=watch)
@@ -222,7 +274,7 @@ async def session(
         await drive.open()
         for request in jobs:
             deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
-            outcomes.append((await drive.job(request, deadline)).outcome)
+            outcomes.append((await drive.job(request, deadline, vtype)).outcome)
     except PortError as exc:
         raise CommandError(str(exc), Exit.PORT) from None
     except SessionEnded as exc:

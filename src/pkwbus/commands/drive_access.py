@@ -42,10 +42,12 @@ from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.params import ParameterRef, parse_parameter, parse_type
 from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = ["DriveAccess", "checked", "drive_access", "resolve"]
 
-Run = Callable[[Sequence[pkw.PkwRequest]], Coroutine[Any, Any, list[Outcome]]]
+# The jobs, one after the other, and the value type they are known by (None: not known).
+Run = Callable[[Sequence[pkw.PkwRequest], ValueType | None], Coroutine[Any, Any, list[Outcome]]]
 
 
 @dataclass(frozen=True)
@@ -64,10 +66,14 @@ def drive_access(args: argparse.Namespace) -> DriveAccess:
         ctx = build_context(args)
 
         def check_ppo(request: pkw.PkwRequest) -> object:
+            if ctx.record is not None:  # a parameter request of data record 47
+                return ctx.target(args.address).telegram(request)
             return ppo.encode_ppo_write(ctx.ppo, ctx.dialect, request)
 
-        def run_dp(requests: Sequence[pkw.PkwRequest]) -> Coroutine[Any, Any, list[Outcome]]:
-            return session(args, ctx, args.address, requests)
+        def run_dp(
+            requests: Sequence[pkw.PkwRequest], vtype: ValueType | None
+        ) -> Coroutine[Any, Any, list[Outcome]]:
+            return session(args, ctx, args.address, requests, vtype)
 
         catalog = DP_CATALOGS.get(ctx.dialect.name) or "none"
         return DriveAccess(ctx.dialect, catalog, False, check_ppo, run_dp)
@@ -76,7 +82,9 @@ def drive_access(args: argparse.Namespace) -> DriveAccess:
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
-    def run_line(requests: Sequence[pkw.PkwRequest]) -> Coroutine[Any, Any, list[Outcome]]:
+    def run_line(
+        requests: Sequence[pkw.PkwRequest], vtype: ValueType | None
+    ) -> Coroutine[Any, Any, list[Outcome]]:
         return _jobs(args, target, requests)
 
     catalog = DEFAULT_CATALOG[Protocol(args.protocol)]

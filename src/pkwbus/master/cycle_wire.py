@@ -11,6 +11,12 @@ while it carries the job goes to the planner decoded once, as it is
 transaction judges it, as on every bus; a job whose deadline passes ends as
 timed out. A job that ended leaves the slot to AK 0.
 
+A DP-V1 slave whose parameters go through PROFIdrive data record 47
+(``DriveTarget.record``) has no PKW slot: the planner's request for it (its
+polls due together, or a job alone) goes out as a record transfer, carried by
+the cycle between Data_Exchanges, and its response (or why none came) goes to
+the planner as the exchange's result.
+
 A slave's health is its state, told to the planner (a slave is up while it is
 in data exchange), not counted from missing PKW answers. The PZD of every
 Data_Exchange answer gives the drive's status word, without any PKW traffic.
@@ -36,7 +42,14 @@ from pkwbus.master.health import HealthPolicy
 from pkwbus.master.plan import DriveSpec, Send, StatusWord
 from pkwbus.master.planner import Planner
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.transaction import ErrorKind, Failure, PkwAnswer, ResponseTelegram
+from pkwbus.master.target import RecordAccess
+from pkwbus.master.transaction import (
+    ErrorKind,
+    Failure,
+    PkwAnswer,
+    PkwTransaction,
+    ResponseTelegram,
+)
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
@@ -49,8 +62,12 @@ from pkwbus.protocol.dp_slave import (
     SlaveSetup,
     SlaveState,
     StateChanged,
+    TransferEnded,
 )
+from pkwbus.protocol.dpv1_transfer import RecordRead, TransferEnd
+from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, pzd_words
+from pkwbus.protocol.profidrive import RECORD
 
 __all__ = ["CycleWire", "DpEvents", "NoDpEvents", "SlaveSpec"]
 
@@ -98,8 +115,17 @@ class SlaveSpec:
     def name(self) -> str:
         return self.spec.name
 
+    @property
+    def record(self) -> RecordAccess | None:
+        """Where its parameters go through data record 47 (None: through PKW)."""
+        return self.spec.target.record
+
     def slot(self) -> PkwSlot | None:
-        return PkwSlot(self.ppo, self.spec.target.dialect) if self.ppo.has_pkw else None
+        """Its PKW slot: none on a PPO without PKW, or where parameters go through
+        data record 47 (the PKW words then stay at AK 0)."""
+        if not self.ppo.has_pkw or self.record is not None:
+            return None
+        return PkwSlot(self.ppo, self.spec.target.dialect)
 
 
 class CycleWire:
@@ -193,12 +219,15 @@ class CycleWire:
         slave alone."""
         name = self._names[run.address]
         slot, slave, runner = run.slot, run.slave, self.runner
+        if self._specs[run.address].record is not None:
+            self._feed_record(name, run, now)
+            return
         if slot is None:
             return
         planner = runner.planner
         if slot.busy:
             send, tx = self._sends.get(name), planner.active(name)
-            if send is None or tx is None or tx.request is not slot.request:
+            if send is None or not isinstance(tx, PkwTransaction) or tx.request is not slot.request:
                 self._sends.pop(name, None)  # ended meanwhile (the line stopped, say)
                 slot.finish()
             elif now >= tx.deadline:
@@ -213,10 +242,49 @@ class CycleWire:
         send = planner.next_for(name, now)
         runner.batch()
         tx = planner.active(name) if send is not None else None
-        if send is None or tx is None:  # (next_for gave a Send of its transaction)
+        if send is None or not isinstance(tx, PkwTransaction):  # (next_for gave its Send)
             return
         slot.submit(tx.request)
         self._sends[name] = send
+
+    def _feed_record(self, name: str, run: SlaveRun, now: float) -> None:
+        """A DP-V1 slave whose parameters go through data record 47: with no transfer in
+        progress, the planner's next request for it (polls due together, or a job alone)
+        starts one; its end comes back as a TransferEnded."""
+        slave, runner = run.slave, self.runner
+        if name in self._sends:
+            return  # its transfer is in progress: it ends on its own (response timeout)
+        planner = runner.planner
+        if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
+            planner.expire_queued(name, now)  # nothing can go out: they end at deadline
+            runner.batch()
+            return
+        send = planner.next_for(name, now)
+        runner.batch()
+        if send is None:
+            return
+        record = self._specs[run.address].record
+        assert record is not None
+        try:
+            slave.start_transfer(record.slot, RECORD, send.telegram, now)
+        except LocalProtocolError as exc:  # a record larger than the slave takes, say
+            planner.exchanged(send, Failure(ErrorKind.UNEXPECTED, str(exc)), now)
+            runner.batch()
+            return
+        self._sends[name] = send
+
+    def _transfer_ended(self, name: str, address: int, end: TransferEnd, now: float) -> None:
+        """A record transfer is over: its response, or why none came, to the planner."""
+        send = self._sends.pop(name, None)
+        if send is None:
+            return
+        result: ResponseTelegram | Failure
+        if isinstance(end, RecordRead):
+            result = ResponseTelegram(address, end.data, self.master.answer_time)
+        else:
+            kind = ErrorKind.TIMEOUT if end.timed_out else ErrorKind.UNEXPECTED
+            result = Failure(kind, end.why)
+        self.runner.planner.exchanged(send, result, now)
 
     def _on_event(self, address: int, event: SlaveEvent | SlotAnswer) -> None:
         name = self._names[address]
@@ -246,6 +314,8 @@ class CycleWire:
                 self.dp_events.diagnosis(name, event.diagnosis.flags)
         elif isinstance(event, SlotAnswer):
             self._answer(name, event, now)
+        elif isinstance(event, TransferEnded):
+            self._transfer_ended(name, address, event.end, now)
         runner.batch()
 
     def _answer(self, name: str, event: SlotAnswer, now: float) -> None:

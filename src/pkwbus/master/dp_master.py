@@ -1,4 +1,4 @@
-"""The DP-V0 master of one line: its slaves in turn, one Data_Exchange each per cycle.
+"""The DP master of one line: its slaves in turn, one Data_Exchange each per cycle.
 
 Each slave has its start-up state machine (:class:`~pkwbus.protocol.dp_slave.DpSlave`)
 and, when its PPO has a parameter channel, a PKW slot
@@ -7,7 +7,10 @@ until its job is over; every answer while it does goes to ``on_event`` as a
 :class:`~pkwbus.protocol.ppo.SlotAnswer`, for the job to judge. Who fills the
 slots and ends their jobs is the caller's: the line runner's cycle wire, per
 slave and per cycle, with what its planner gives (``Planner.next_for``)
-through the ``feed`` hook.
+through the ``feed`` hook. A DP-V1 slave's record transfer (PROFIdrive data
+record 47), started by the same hook, sends one MSAC_C1 request after the
+slave's Data_Exchange in each cycle, so every slave keeps its cycle; its end
+comes to ``on_event`` as a :class:`~pkwbus.protocol.dp_slave.TransferEnded`.
 Stopping sends Global_Control Clear to every slave, then closes the port.
 """
 
@@ -29,6 +32,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveSetup,
     SlaveState,
 )
+from pkwbus.protocol.fdl import DataFrame
 from pkwbus.protocol.ppo import PkwSlot, SlotAnswer
 
 __all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
@@ -115,7 +119,7 @@ class DpMaster:
         for run in self.runs.values():
             now = loop.time()
             slot = run.slot
-            if slot is not None and self.feed is not None:
+            if self.feed is not None:
                 self.feed(run, now)
             slave = run.slave
             exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
@@ -125,26 +129,36 @@ class DpMaster:
                 self._emit(run, event)
             if frame is None:
                 continue
-            started = loop.time()
-            answer = await self.line.exchange(frame)
+            await self._exchange(run, frame)
             sent += 1
-            now = loop.time()
-            self.exchange_time = now - started
-            self.answer_time = now - self.line.sent_at
-            told = False  # an Inputs or a Failed event tells the exchange to on_event
-            for event in slave.feed(answer, now):
-                self._emit(run, event)
-                told = told or isinstance(event, Inputs | Failed)
-                if isinstance(event, Inputs) and slot is not None:
-                    update = slot.feed(event.data)
-                    if update.answer is not None:
-                        self._emit(run, update.answer)
-            if not told and self.on_answered is not None:
-                self.on_answered(run.address, self.answer_time, self.exchange_time)
+            acyclic = slave.poll_acyclic()  # a record transfer's next request, if any
+            if acyclic is not None:
+                await self._exchange(run, acyclic)
+                sent += 1
         self.cycles += 1
         if not sent:
             await asyncio.sleep(IDLE_STEP)
         return sent
+
+    async def _exchange(self, run: SlaveRun, frame: DataFrame) -> None:
+        """One request to the slave and its answer fed back; its events told."""
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        answer = await self.line.exchange(frame)
+        now = loop.time()
+        self.exchange_time = now - started
+        self.answer_time = now - self.line.sent_at
+        slot = run.slot
+        told = False  # an Inputs or a Failed event tells the exchange to on_event
+        for event in run.slave.feed(answer, now):
+            self._emit(run, event)
+            told = told or isinstance(event, Inputs | Failed)
+            if isinstance(event, Inputs) and slot is not None:
+                update = slot.feed(event.data)
+                if update.answer is not None:
+                    self._emit(run, update.answer)
+        if not told and self.on_answered is not None:
+            self.on_answered(run.address, self.answer_time, self.exchange_time)
 
     def _emit(self, run: SlaveRun, event: SlaveEvent | SlotAnswer) -> None:
         if self.on_event is not None:

@@ -23,6 +23,7 @@ from pkwbus.master.plan import (
     Send,
     StatusWord,
 )
+from pkwbus.master.record_transaction import RecordItem, RecordTransaction, fits
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command, Dialect
@@ -30,7 +31,7 @@ from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw_length import PkwLength
 from pkwbus.protocol.telegram import Protocol, split_block
 
-__all__ = ["Active", "DrivePlan", "PollState"]
+__all__ = ["Active", "DrivePlan", "PollState", "Work"]
 
 
 class PollState:
@@ -46,14 +47,18 @@ class PollState:
         self.fresh = False
 
 
+Work = Job | PollState | DescribeStep | tuple[PollState, ...]  # a tuple: polls in one record
+
+
 @dataclass(eq=False, slots=True)
 class Active:
-    """A drive's transaction in flight: a queued job's, or a poll's."""
+    """A drive's transaction in flight: a queued job's, a poll's, or (data record 47) the
+    polls due together."""
 
-    tx: PkwTransaction
+    tx: PkwTransaction | RecordTransaction
     priority: Priority
     order: float
-    work: Job | PollState | DescribeStep
+    work: Work
     send: Send
     # The read of a change's parameter before the change (master.write_gate).
     read_first: bool = False
@@ -74,6 +79,7 @@ class DrivePlan:
         "probe",
         "probes",
         "reads",
+        "references",
         "seq",
         "served",
         "shown_up",
@@ -112,7 +118,7 @@ class DrivePlan:
         # Polls waiting for their parameter's description, by PNU.
         self.held: dict[int, list[PollState]] = {}
         for p in spec.polls:
-            send = Send(spec.name, spec.target, spec.target.telegram(p.request))
+            send = self.send_of(p.request)
             if self.describer is not None and self.describer.waiting(p.request.pnu):
                 self.held.setdefault(p.request.pnu, []).append(PollState(p, 0.0, send))
             else:
@@ -123,6 +129,30 @@ class DrivePlan:
         self.pkw = PkwLength(target.pkw_setting) if uss else None
         self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
         self.probes = 0
+        self.references = itertools.count()  # data record 47: each request's own reference
+
+    def transaction(
+        self, items: list[RecordItem], *, retries: int, deadline: float, stale: bytes | None = None
+    ) -> PkwTransaction | RecordTransaction:
+        """One PKW job, or (data record 47) one request of all ``items``; LocalProtocolError
+        for what the drive's channel cannot carry."""
+        record = self.target.record
+        if record is None:
+            (item,) = items
+            return PkwTransaction(
+                self.target, item.request, retries=retries, deadline=deadline, stale=stale
+            )
+        reference = next(self.references) % 255 + 1
+        return RecordTransaction(
+            self.target, items, reference=reference, axis=record.axis, retries=retries,
+            deadline=deadline,
+        )  # fmt: skip
+
+    def send_of(self, request: pkw.PkwRequest) -> Send:
+        """A poll's request telegram, built once; none where the drive's parameters go
+        through data record 47 (its polls go out together, in a request of their own)."""
+        target = self.target
+        return Send(self.name, target, b"" if target.record else target.telegram(request))
 
     def next_probe(self) -> Send:
         """The probe of a down drive. While a learned PKW length is not known, every other
@@ -183,7 +213,7 @@ class DrivePlan:
             target = self.target = self.target.with_pkw_words(length.words)
             self.probe = Send(self.name, target, target.probe(), True)
             for _, _, poll in self.polls:
-                poll.send = Send(self.name, target, target.telegram(poll.spec.request))
+                poll.send = self.send_of(poll.spec.request)
         return PkwLengthTold(self.name, replace(length))
 
     def first_due(self) -> float | None:
@@ -208,11 +238,15 @@ class DrivePlan:
             step = describer.next_request(now)
             events += self.settle(describer.take_ready(), now)
             if step is not None:
-                tx = PkwTransaction(self.target, step.request, retries=retries, deadline=deadline)
+                tx = self.transaction(
+                    [RecordItem(step.request)], retries=retries, deadline=deadline
+                )
                 send = Send(self.name, self.target, tx.telegram)
                 return Active(tx, Priority.POLL, now, step, send), events
         if not self.polls or self.polls[0][0] > now:
             return None, events
+        if self.target.record is not None:
+            return self._start_record(now, deadline, retries, events)
         _, _, poll = heapq.heappop(self.polls)
         spec = poll.spec
         if now - poll.due > spec.every and not poll.fresh:
@@ -225,6 +259,26 @@ class DrivePlan:
             telegram=poll.send.telegram,
         )  # fmt: skip
         return Active(tx, Priority.POLL, poll.due, poll, poll.send), events
+
+    def _start_record(
+        self, now: float, deadline: float, retries: int, events: list[Event]
+    ) -> tuple[Active | None, list[Event]]:
+        """The polls due now, as many as one data record 47 request takes, together; with
+        them those due within half the first one's interval, so that polls released at
+        different times come to share their requests (a poll is never read later than due,
+        only at times a little earlier)."""
+        due: list[PollState] = []
+        until = now + self.polls[0][2].spec.every / 2
+        while self.polls and self.polls[0][0] <= until and fits(len(due) + 1):
+            poll = heapq.heappop(self.polls)[2]
+            if now - poll.due > poll.spec.every and not poll.fresh:
+                events.append(Overrun(self.name))
+            poll.fresh = False
+            due.append(poll)
+        items = [RecordItem(p.spec.request, p.spec.fmt.vtype) for p in due]
+        tx = self.transaction(items, retries=retries, deadline=deadline)
+        send = Send(self.name, self.target, tx.telegram)
+        return Active(tx, Priority.POLL, due[0].due, tuple(due), send), events
 
     @property
     def describing(self) -> bool:
@@ -280,11 +334,12 @@ class DrivePlan:
             waiting = {id(p) for p in polls}
             polls += [e[2] for e in self.polls if e[2].spec.request.pnu == done.pnu]
             work = self.active.work if self.active is not None else None
-            if isinstance(work, PollState) and work.spec.request.pnu == done.pnu:
-                polls.append(work)
+            for active in work if isinstance(work, tuple) else (work,):
+                if isinstance(active, PollState) and active.spec.request.pnu == done.pnu:
+                    polls.append(active)
             for poll in polls:
                 poll.spec = _described(poll.spec, done, self.target.dialect)
-                poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
+                poll.send = self.send_of(poll.spec.request)
             for poll in polls:
                 if id(poll) in waiting:
                     poll.due, poll.fresh = now, True
@@ -308,7 +363,7 @@ class DrivePlan:
 
     def push_poll(self, poll: PollState) -> None:
         if poll.send.target is not self.target:  # built before the PKW length was learned
-            poll.send = Send(self.name, self.target, self.target.telegram(poll.spec.request))
+            poll.send = self.send_of(poll.spec.request)
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
 
     def back(self, now: float) -> list[Described]:

@@ -48,6 +48,7 @@ from pkwbus.master.plan import (
     Send,
     StatusWord,
 )
+from pkwbus.master.record_transaction import RecordTransaction
 from pkwbus.master.transaction import (
     ErrorKind,
     ExchangeResult,
@@ -189,7 +190,7 @@ class Planner:
                 return send
         return None
 
-    def active(self, drive: str) -> PkwTransaction | None:
+    def active(self, drive: str) -> PkwTransaction | RecordTransaction | None:
         """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
         active = self._by_name[drive].active
         return active.tx if active is not None else None
@@ -229,7 +230,7 @@ class Planner:
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
-            if not isinstance(result, Failure):
+            if not isinstance(result, Failure) and isinstance(tx, PkwTransaction):
                 self._tell(d.heard(tx))
             tally = tx.tally
             if not isinstance(result, Failure) and tally.status_word is not None:
@@ -356,6 +357,19 @@ class Planner:
             return
         if isinstance(work, DescribeStep):
             self.events.extend(d.described(work, outcome, now))
+        elif isinstance(work, tuple):  # polls in one record: each with its own outcome
+            tx = active.tx
+            own = isinstance(tx, RecordTransaction) and tx.outcome is outcome
+            each = (
+                tx.outcomes if isinstance(tx, RecordTransaction) and own else (outcome,) * len(work)
+            )
+            for i, (poll, result) in enumerate(zip(work, each, strict=True)):
+                tally = tx.tally if i == 0 else None  # the request's cost, counted once
+                self.events.append(Finished(d.name, poll.spec, result, tally))
+                # Due again from the request's first due: polls of one interval fall due
+                # together from now on, and go out in one request (none later than due).
+                poll.due = max(active.order + poll.spec.every, now)
+                d.push_poll(poll)
         elif isinstance(work, PollState):
             self.events.append(Finished(d.name, work.spec, outcome, active.tx.tally))
             work.due = max(work.due + work.spec.every, now)
@@ -377,7 +391,7 @@ class Planner:
             self._show(d, False, result.kind.value)
             self._tell(d.went_down())  # its PKW length and identity are asked again
             active = d.active
-            if active is not None and isinstance(active.work, PollState):
+            if active is not None and isinstance(active.work, PollState | tuple):
                 self._complete(d, active, TimedOut("drive is down"), now)
 
     def _show(self, d: DrivePlan, up: bool, reason: str) -> None:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 
+from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortError
 from pkwbus.master.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.line import Line
@@ -26,6 +27,7 @@ from pkwbus.master.record import LineEvents
 from pkwbus.master.runner import LineRunner, Wire
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = ["JobSession", "SessionEnded", "perform", "run_job"]
 
@@ -71,15 +73,19 @@ class JobSession:
         self._task = asyncio.create_task(self.runner.run(), name="line command line")
         await asyncio.sleep(0)  # the runner takes the line as up before any job comes
 
-    async def job(self, request: pkw.PkwRequest, deadline: float) -> JobResult:
-        """One job; :class:`SessionEnded` when the watcher ended the session first."""
+    async def job(
+        self, request: pkw.PkwRequest, deadline: float, vtype: ValueType | None = None
+    ) -> JobResult:
+        """One job (``vtype``: the value type it is known by); :class:`SessionEnded` when
+        the watcher ended the session first."""
         ended = self.ended
         assert ended is not None  # opened
         loop = asyncio.get_running_loop()
         write = request.is_write or bool(request.text)
         kind = JobKind.WRITE if write else JobKind.READ
         priority = Priority.WRITE if write else Priority.READ
-        job = Job(self.drive, request, kind, priority, deadline, future=loop.create_future())
+        fmt = ParameterDescription(vtype=vtype)
+        job = Job(self.drive, request, kind, priority, deadline, fmt, loop.create_future())
         self.runner.submit(job)
         assert job.future is not None
         await asyncio.wait([job.future, ended], return_when=asyncio.FIRST_COMPLETED)

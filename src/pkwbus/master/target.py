@@ -19,6 +19,7 @@ from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw_length import AUTO, UNKNOWN_SEND_WORDS, PkwSetting, PkwWords
 from pkwbus.protocol.ppo import DEFAULT_PROFILES
+from pkwbus.protocol.profidrive_pkw import RecordItem, record_request
 from pkwbus.protocol.pzd import MONITORING_CTW, Profile
 from pkwbus.protocol.telegram import (
     FC_PARAMETER,
@@ -31,10 +32,21 @@ from pkwbus.protocol.telegram import (
     frame,
     uss_adr,
 )
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = [
     "DriveTarget",
+    "RecordAccess",
 ]
+
+
+@dataclass(frozen=True, slots=True)
+class RecordAccess:
+    """A DP-V1 slave whose parameters go through PROFIdrive data record 47 (many in one
+    request) instead of its PPO's PKW words: its axis (drive object) and slot."""
+
+    axis: int
+    slot: int = 0
 
 
 @dataclass(frozen=True)
@@ -50,6 +62,8 @@ class DriveTarget:
     # USS: the PKW length is learned from the drive's answers (configured ``auto``);
     # ``shape`` is what requests go out with meanwhile (see protocol.pkw_length).
     learn: bool = False
+    # PROFIBUS DP-V1: parameters through data record 47 (None: through PKW).
+    record: RecordAccess | None = None
     adr: int = field(init=False)
     _idle_pzd: tuple[int, ...] = field(init=False, repr=False)
 
@@ -118,8 +132,17 @@ class DriveTarget:
     def has_pkw(self) -> bool:
         return self.shape.pkw_words != 0
 
-    def telegram(self, request: pkw.PkwRequest) -> bytes:
-        """The whole request telegram: PKW, control word with bit 10 = 0, reference 0."""
+    def telegram(self, request: pkw.PkwRequest, vtype: ValueType | None = None) -> bytes:
+        """The whole request telegram: PKW, control word with bit 10 = 0, reference 0. For
+        a drive reached through data record 47, the parameter request that carries
+        ``request`` alone (reference 1; each request sent has its own), its change in the
+        format of ``vtype``."""
+        if self.record is not None:
+            item = RecordItem(request, vtype)
+            dialect = self.dialect.name
+            return record_request(
+                [item], reference=1, axis=self.record.axis, dialect=dialect
+            ).encode()
         words = self.shape.pkw_words
         if request.text and (self.protocol is Protocol.FC or self.learn):
             words = None  # a text travels in a block as long as it is

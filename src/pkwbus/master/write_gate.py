@@ -17,7 +17,8 @@ The read first does two things:
   length, until the two agree.
 
 A PROFIBUS PKW slot waits for AK 0 before each job instead (no stale answer
-can be taken), so there the change goes out at once.
+can be taken), so there the change goes out at once; so does a change in data
+record 47, whose response answers its own request reference.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from pkwbus.master.drive_plan import Active, DrivePlan
 from pkwbus.master.jobs import Job
 from pkwbus.master.outcomes import Cancelled, LineFailed, NotSent, Outcome, Rejected, TimedOut
 from pkwbus.master.plan import Finished, Send
-from pkwbus.master.transaction import PkwTransaction
+from pkwbus.master.record_transaction import RecordItem
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError
@@ -75,8 +76,9 @@ def _active(
 ) -> Active | Finished:  # fmt: skip
     """``request`` of ``job`` in flight; a request the drive's PKW block cannot carry ends
     the job unsent (its length learned meanwhile, say)."""
+    item = RecordItem(request, job.fmt.vtype)
     try:
-        tx = PkwTransaction(d.target, request, retries=retries, deadline=job.deadline, stale=stale)
+        tx = d.transaction([item], retries=retries, deadline=job.deadline, stale=stale)
     except LocalProtocolError as exc:
         return Finished(d.name, job, NotSent(str(exc)))
     return Active(tx, job.priority, order, job, Send(d.name, d.target, tx.telegram), first)

@@ -48,6 +48,7 @@ from pkwbus.protocol.pkw_requests import (
 from pkwbus.protocol.pkw_responses import (
     NO_CHANGE_RIGHTS,
     ArrayCountResponse,
+    ChangeDone,
     DescriptionResponse,
     NoResponse,
     PkwResponse,
@@ -68,6 +69,7 @@ __all__ = [
     "NO_CHANGE_RIGHTS",
     "PAGE_SIZE",
     "ArrayCountResponse",
+    "ChangeDone",
     "DescriptionResponse",
     "NoResponse",
     "PkwRequest",

@@ -20,10 +20,12 @@ from pkwbus.protocol.dialects import Command, Dialect, IndLayout, Reply
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw_fields import Width, decode_pke_ind, decode_pwe, encode_pke_ind
 from pkwbus.protocol.pkw_requests import PkwRequest
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = [
     "NO_CHANGE_RIGHTS",
     "ArrayCountResponse",
+    "ChangeDone",
     "DescriptionResponse",
     "NoResponse",
     "PkwResponse",
@@ -74,8 +76,19 @@ class NoResponse(PkwResponse):
 
 @dataclass(frozen=True, slots=True)
 class ValueResponse(PkwResponse):
+    """A value: ``raw`` as an unsigned number of ``width``. ``vtype``: the type the answer
+    itself names (a PROFIdrive parameter response's format); None for a PKW answer, which
+    tells only the width."""
+
     raw: int
     width: Width
+    vtype: ValueType | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ChangeDone(PkwResponse):
+    """A change carried out, its value not echoed: a PROFIdrive parameter response to a
+    change request carries none (SINAMICS G120X operating instructions, table 6-16)."""
 
 
 @dataclass(frozen=True, slots=True)

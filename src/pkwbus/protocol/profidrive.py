@@ -50,10 +50,11 @@ __all__ = [
     "ParameterRequest",
     "ParameterResponse",
     "RequestId",
+    "Result",
+    "Value",
     "Values",
-    "decode_request",
     "decode_response",
-    "encode_response",
+    "decode_values",
     "response_length",
 ]
 
@@ -67,12 +68,14 @@ MAX_RECORD: Final = 240  # bytes of one request or response (PROFIdrive base mod
 MAX_PARAMETERS: Final = 39  # parameters in one request
 MAX_ELEMENTS: Final = 234
 _HEAD = 4
-_ADDRESS = 6
 
 
 class RequestId(enum.IntEnum):
     READ = 0x01  # "request parameter"
     CHANGE = 0x02  # "change parameter"
+    # Danfoss: "Change parameter non-volatile (data is stored in non-volatile memory)",
+    # VLT PROFIBUS DP MCA 101 programming manual, 5.2.11.
+    CHANGE_NON_VOLATILE = 0x42
 
 
 class Attribute(enum.IntEnum):
@@ -221,7 +224,7 @@ class ParameterRequest:
             raise LocalProtocolError(
                 f"{len(self.addresses)} parameters in one request (1-{MAX_PARAMETERS})"
             )
-        if self.request_id is RequestId.CHANGE:
+        if self.request_id is not RequestId.READ:
             if len(self.changes) != len(self.addresses):
                 raise LocalProtocolError("a change needs values for every parameter")
         elif self.changes:
@@ -270,14 +273,15 @@ def decode_response(data: bytes, request: ParameterRequest) -> ParameterResponse
         )
     pos = _HEAD
     results: list[Result] = []
+    change = request.request_id is not RequestId.READ
     for address in request.addresses:
-        if request.request_id is RequestId.CHANGE and not failed:
+        if change and not failed:
             results.append(None)
             continue
-        if request.request_id is RequestId.CHANGE and pos >= len(data):
+        if change and pos >= len(data):
             raise RemoteProtocolError("a failed change's response is cut short")
-        result, pos = _decode_values(data, pos, address)
-        if request.request_id is RequestId.CHANGE and isinstance(result, Values):
+        result, pos = decode_values(data, pos, address)
+        if change and isinstance(result, Values):
             if result.format is not Format.ZERO:
                 raise RemoteProtocolError(f"a change answered with {result.format.name} values")
             result = None
@@ -289,7 +293,7 @@ def decode_response(data: bytes, request: ParameterRequest) -> ParameterResponse
     return ParameterResponse(reference, RequestId(rid & 0x7F), failed, axis, tuple(results))
 
 
-def _decode_values(data: bytes, pos: int, address: ParameterAddress) -> tuple[Result, int]:
+def decode_values(data: bytes, pos: int, address: ParameterAddress) -> tuple[Result, int]:
     if pos + 2 > len(data):
         raise RemoteProtocolError(f"the response ends before parameter {address.pnu}'s values")
     try:
@@ -346,54 +350,3 @@ def _pack(fmt: Format, value: Value) -> bytes:
 
 def _pad(data: bytes) -> bytes:
     return data + b"\x00" if len(data) % 2 else data
-
-
-# ------------------------------------------------------------- the drive's side
-
-
-def decode_request(data: bytes) -> ParameterRequest:
-    """A request as a drive receives it (the simulator's side, and tests)."""
-    if len(data) < _HEAD:
-        raise RemoteProtocolError(f"a parameter request of {len(data)} bytes (at least 4)")
-    reference, rid, axis, count = data[:_HEAD]
-    try:
-        request_id = RequestId(rid)
-    except ValueError:
-        raise RemoteProtocolError(f"request ID {rid:#04x}") from None
-    if not 1 <= count <= MAX_PARAMETERS:
-        raise RemoteProtocolError(f"{count} parameters in one request")
-    pos = _HEAD
-    addresses: list[ParameterAddress] = []
-    for _ in range(count):
-        if pos + _ADDRESS > len(data):
-            raise RemoteProtocolError("a parameter request is cut short")
-        attribute, elements, pnu, subindex = struct.unpack_from(">BBHH", data, pos)
-        try:
-            addresses.append(ParameterAddress(pnu, subindex, elements, Attribute(attribute)))
-        except ValueError:
-            raise RemoteProtocolError(f"attribute {attribute:#04x}") from None
-        pos += _ADDRESS
-    changes: list[Values] = []
-    if request_id is RequestId.CHANGE:
-        for address in addresses:
-            result, pos = _decode_values(data, pos, address)
-            if not isinstance(result, Values):
-                raise RemoteProtocolError(f"a change of parameter {address.pnu} with an error")
-            changes.append(result)
-    if pos != len(data):
-        raise RemoteProtocolError(f"{len(data) - pos} bytes after the request's last parameter")
-    return ParameterRequest(reference, request_id, axis, tuple(addresses), tuple(changes))
-
-
-def encode_response(request: ParameterRequest, results: Sequence[Result]) -> bytes:
-    """The drive's response to ``request`` (the simulator's side, and tests)."""
-    failed = any(isinstance(r, ParameterError) for r in results)
-    rid = request.request_id | (0x80 if failed else 0)
-    head = bytes((request.reference, rid, request.axis, len(results)))
-    parts: list[bytes] = []
-    for result in results:
-        if isinstance(result, ParameterError | Values):
-            parts.append(result.encode())
-        elif failed:
-            parts.append(Values(Format.ZERO, ()).encode())
-    return head + b"".join(parts)

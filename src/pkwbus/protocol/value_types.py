@@ -14,7 +14,7 @@ from fractions import Fraction
 from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw import Width
+from pkwbus.protocol.pkw_fields import Width
 
 __all__ = [
     "CONVERSION_FACTORS",

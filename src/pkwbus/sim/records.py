@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import struct
 
-from pkwbus.protocol import pkw, profidrive
+from pkwbus.protocol import pkw, profidrive, profidrive_drive
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw import Width
@@ -26,18 +26,12 @@ from pkwbus.protocol.profidrive import (
     RequestId,
     Values,
 )
+from pkwbus.protocol.profidrive_pkw import FORMATS
 from pkwbus.protocol.value_types import ValueType
 from pkwbus.sim.params import ParameterStore
 
-__all__ = ["FORMATS", "RecordServer"]
+__all__ = ["RecordServer"]
 
-FORMATS = {
-    ValueType.U16: Format.U16,
-    ValueType.I16: Format.I16,
-    ValueType.U32: Format.U32,
-    ValueType.I32: Format.I32,
-    ValueType.F32: Format.FLOAT,
-}
 _ILLEGAL_ADDRESS = 0x16
 _NUMBER_OF_VALUES = 0x18
 _FORMAT = 0x17
@@ -56,7 +50,7 @@ class RecordServer:
     def answer(self, data: bytes) -> bytes:
         """The response to a request record; RemoteProtocolError for one that does not
         decode (the slave then refuses the write)."""
-        request = profidrive.decode_request(data)
+        request = profidrive_drive.decode_request(data)
         self.requests += 1
         results: list[profidrive.Result] = []
         for i, address in enumerate(request.addresses):
@@ -66,7 +60,7 @@ class RecordServer:
                 results.append(self._read(address))
             else:
                 results.append(self._change(address, request.changes[i]))
-        return profidrive.encode_response(request, results)
+        return profidrive_drive.encode_response(request, results)
 
     def _read(self, address: ParameterAddress) -> Values | ParameterError:
         if address.attribute is Attribute.TEXT:
@@ -120,7 +114,8 @@ class RecordServer:
             index = address.subindex + offset
             indexed = address.elements > 1 or address.subindex > 0
             try:
-                raw = _raw(value, spec.vtype)
+                substitute = values.format in (Format.WORD, Format.DOUBLE_WORD)
+                raw = value if substitute and isinstance(value, int) else _raw(value, spec.vtype)
                 width = spec.vtype.width or Width.DWORD
                 where = index if indexed else None
                 request = pkw.write(self.dialect, address.pnu, raw, width, index=where)

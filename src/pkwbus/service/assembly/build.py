@@ -24,12 +24,13 @@ from pkwbus.master.line import Line
 from pkwbus.master.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Snapshot
-from pkwbus.master.target import DriveTarget
+from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.protocol import dp_services, dp_timing, pkw
 from pkwbus.protocol.descriptions import NAME, DescriptionForm, elements_to_read, form_of
 from pkwbus.protocol.dp_slave import SlaveSetup
 from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.pkw_length import AUTO
+from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.described import DescriptionSink
@@ -158,7 +159,10 @@ def _dp_runner(
         parameters = dp_services.Parameters(
             found.ident, dp_services.watchdog_factors(watchdog), user_prm=found.user_prm
         )
-        setup = SlaveSetup(drive.address, line.master_address, parameters, found.cfg, line.retries)
+        setup = SlaveSetup(
+            drive.address, line.master_address, parameters, found.cfg, line.retries,
+            dpv1=found.dpv1,
+        )  # fmt: skip
         slaves.append(SlaveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
     deadline = max(2.0, 20 * sum(dp_timing.default_slot_time(line.baudrate) for _ in specs))
@@ -172,6 +176,10 @@ def _dp_runner(
 
 def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
     """Where and how a configured drive is reached."""
+    record = None
+    if line.protocol == Protocol.PROFIBUS and drive.access == "ds47":
+        axis = drive.axis if drive.axis is not None else AXES.get(drive.pkw_dialect.name, 0)
+        record = RecordAccess(axis)
     return DriveTarget(
         Protocol(line.protocol),
         drive.address,
@@ -180,6 +188,7 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
         drive.shape,
         line.address_format,
         learn=drive.pkw_words == AUTO and line.protocol == Protocol.USS,
+        record=record,
     )
 
 
@@ -248,8 +257,9 @@ def describe_targets(
     for ref in drive.writable:
         ref = table.canonical(ref)
         wanted[ref.pnu] = (wanted.get(ref.pnu, (ref.name, True))[0], True)
-    # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block.
-    short = target.protocol is Protocol.PROFIBUS or (
+    # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block
+    # (data record 47 carries it).
+    short = (target.protocol is Protocol.PROFIBUS and target.record is None) or (
         target.protocol is Protocol.USS and drive.pkw_words in (3, 4)
     )
     targets = []
@@ -327,6 +337,9 @@ async def _start_dp_sim(
         ),
         each=each,
         refuse_descriptions=sim.refuse_descriptions,
+        # DP-V1 slaves when parametrised so; each record's response ready at the second read.
+        dpv1=True,
+        not_ready=1,
     )
     return await _serve_on_pty(simulator, line.name)
 

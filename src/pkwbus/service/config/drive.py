@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Annotated, Self, TypeVar
+from typing import Annotated, Literal, Self, TypeVar
 
 from pydantic import (
     Field,
     PlainValidator,
+    StrictBool,
     StrictInt,
     ValidationInfo,
     field_validator,
@@ -71,6 +72,12 @@ class Drive(Model):
     gsd: str | None = Field(default=None, strict=True)
     cfg: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
     user_prm: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
+    # DP-V1: None follows the GSD file (DPV1_Slave); parameters through the PPO's PKW words
+    # or PROFIdrive data record 47 (None: PKW where the PPO has it, else data record 47 on a
+    # DP-V1 slave); the drive object (axis) of data record 47 (None: the dialect's).
+    dpv1: StrictBool | None = None
+    parameter_access: Literal["pkw", "ds47"] | None = None
+    axis: StrictInt | None = Field(default=None, ge=0, le=255)
     # Filled in by the Line from its own protocol before the drive is validated.
     protocol: Annotated[BusProtocol, PlainValidator(_line_protocol)] = Field(
         default=BusProtocol.FC, exclude=True
@@ -195,7 +202,19 @@ class Drive(Model):
     @property
     def dp(self) -> DpDrive:
         """The PROFIBUS DP fields, as given."""
-        return DpDrive(self.ppo, self.ident, self.gsd, None, self.cfg, self.user_prm)
+        return DpDrive(self.ppo, self.ident, self.gsd, None, self.cfg, self.user_prm, self.dpv1)
+
+    @property
+    def access(self) -> Literal["pkw", "ds47"] | None:
+        """How its parameters are reached on a DP line: as configured, else through the
+        PPO's PKW words where it has them, else data record 47 on a DP-V1 slave; None:
+        no way (a PPO without PKW on a DP-V0 slave)."""
+        if self.parameter_access is not None:
+            return self.parameter_access
+        if ppo_type(self.ppo).has_pkw:
+            return "pkw"
+        settings = self.dp.settings()[0]
+        return "ds47" if settings is not None and settings.dpv1 is not None else None
 
     def refs(self) -> Iterator[tuple[str, ParameterRef]]:
         """Every parameter the drive's config names, with its place."""

@@ -30,6 +30,7 @@ from pkwbus.protocol.params import (
     canonical,
 )
 from pkwbus.protocol.ppo import ppo_type
+from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import FcAddressFormat
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
@@ -283,7 +284,16 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
     if line.protocol is not BusProtocol.PROFIBUS:
         problems += [
             (key, "applies to protocol profibus only")
-            for key in ("ppo", "ident", "gsd", "cfg", "user_prm")
+            for key in (
+                "ppo",
+                "ident",
+                "gsd",
+                "cfg",
+                "user_prm",
+                "dpv1",
+                "parameter_access",
+                "axis",
+            )
             if key in drive.model_fields_set
         ]
     if line.protocol is BusProtocol.PROFIBUS:
@@ -312,15 +322,39 @@ def _dp_drive_problems(line: Line, drive: Drive) -> list[Place]:
         if key in drive.model_fields_set
     ]
     kind = ppo_type(drive.ppo)
-    if not kind.has_pkw and (drive.poll or drive.writable):
+    settings, dp_problems = drive.dp.settings()
+    dpv1 = settings is not None and settings.dpv1 is not None
+    access = drive.access
+    if access is None and (drive.poll or drive.writable):
         problems.append(
             (
                 "ppo",
                 f"PPO {kind.number} has no PKW words: the drive has no parameter channel"
-                " to poll or write (PPO 1, 2 and 5 have one)",
+                " to poll or write (PPO 1, 2 and 5 have one; a DP-V1 slave has data"
+                " record 47: dpv1: true)",
             )
         )
-    problems += drive.dp.settings()[1]
+    if access == "pkw" and not kind.has_pkw:
+        problems.append(("parameter_access", f"pkw: PPO {kind.number} has no PKW words"))
+    if access == "ds47":
+        if settings is not None and not dpv1:
+            problems.append(
+                (
+                    "parameter_access",
+                    "ds47 needs a DP-V1 slave: dpv1: true, or a GSD file with DPV1_Slave = 1",
+                )
+            )
+        if drive.axis is None and drive.pkw_dialect.name not in AXES:
+            problems.append(
+                (
+                    "parameter_access",
+                    f"ds47: the {drive.pkw_dialect.name} dialect documents the PKW channel"
+                    " only (give axis to use data record 47 anyway)",
+                )
+            )
+    elif "axis" in drive.model_fields_set:
+        problems.append(("axis", "applies to parameter_access: ds47 only"))
+    problems += dp_problems
     return problems
 
 

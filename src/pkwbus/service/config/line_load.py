@@ -20,7 +20,12 @@ request and answer frames with the idle and reaction times of the bus timing
 adds to each answer. A slave's PKW channel completes at most one job every
 :data:`DP_JOB_CYCLES` cycles (the request, then AK 0 before the next one),
 so its polls are refreshed at most ``1 / (DP_JOB_CYCLES * cycle)`` times a
-second between them; polls that ask for more are warned about.
+second between them; polls that ask for more are warned about. A DP-V1 slave
+reached through data record 47 takes its due polls in one request (up to 39),
+written in one cycle and read back in the next (at best: a slave not ready
+answers the read with "state conflict" and it is read again): each such
+cycle carries one MSAC_C1 exchange more, so its parameters/s are the
+request's parameters over two of those longer cycles.
 
 The estimate lives with the configuration: it is arithmetic over the
 configuration's models (lines, drives, polls, bus timing), done before anything
@@ -38,6 +43,7 @@ from typing import Final
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol import dp_timing, fdl, timing
 from pkwbus.protocol.ppo import ppo_type
+from pkwbus.protocol.profidrive import MAX_PARAMETERS
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.drive import Drive
@@ -60,6 +66,7 @@ __all__ = [
     "exchange_seconds",
     "line_load",
     "port_warnings",
+    "record_seconds",
     "telegram_bytes",
 ]
 
@@ -85,6 +92,8 @@ class LineLoad:
     exchange_seconds: dict[str, float] = field(default_factory=dict)  # per drive
     cycle: float | None = None  # PROFIBUS DP: seconds of one cycle through every slave, at best
     warnings: list[str] = field(default_factory=list)
+    # PROFIBUS DP: each slave's access (pkw or ds47) and parameters per second at most.
+    access: dict[str, tuple[str, float]] = field(default_factory=dict)
 
 
 def telegram_bytes(line: Line, drive: Drive) -> int:
@@ -111,13 +120,35 @@ def dp_frame_bytes(drive: Drive) -> int:
     return len(fdl.encode(frame))
 
 
+def record_seconds(drive: Drive, count: int, baudrate: int) -> float:
+    """One MSAC_C1 exchange of a record transfer of ``count`` value reads, on average: the
+    write of the request and the read of its response, each in a cycle of its own."""
+    request = 4 + 6 * count  # head, then an address per parameter
+    response = 4 + 6 * count  # head, then format, count and up to 4 bytes per value
+
+    def frame(data: int) -> int:
+        body = bytes(data)
+        fc = fdl.request_fc(fdl.Function.SRD_HIGH)
+        return len(fdl.encode(fdl.DataFrame(drive.address, 0, fc, 0x33, 0x33, body)))
+
+    write = dp_timing.exchange_time(frame(4 + request), frame(4), baudrate)
+    read = dp_timing.exchange_time(frame(4), frame(4 + response), baudrate)
+    return (write + read) / 2
+
+
 def dp_line_load(line: Line) -> LineLoad:
     """The DP cycle of a line and how often each slave's polls can really be refreshed."""
     times = {
         d.name: dp_timing.exchange_time(dp_frame_bytes(d), dp_frame_bytes(d), line.baudrate)
         for d in line.drives
     }
+    batch = {
+        d.name: min(max(len(d.poll), 1), MAX_PARAMETERS) for d in line.drives if d.access == "ds47"
+    }
     cycle = sum(times.values())
+    busy = cycle + sum(
+        record_seconds(d, batch[d.name], line.baudrate) for d in line.drives if d.name in batch
+    )
     per_slave = 1 / (DP_JOB_CYCLES * cycle)  # PKW jobs per second on each slave, at most
     rate = 0.0
     worst = 0.0
@@ -135,6 +166,18 @@ def dp_line_load(line: Line) -> LineLoad:
     for drive in line.drives:
         demand = sum(1 / entry.every for entry in drive.poll)
         rate += demand
+        if drive.name in batch:  # data record 47: its polls together, two longer cycles each
+            most = batch[drive.name] / (DP_JOB_CYCLES * busy)
+            load.access[drive.name] = ("ds47", most)
+            worst = max(worst, demand / most)
+            if demand > most:
+                load.warnings.append(
+                    f"line {line.name}: drive {drive.name}'s polls ask for {demand:.1f}"
+                    f" reads/s; data record 47 carries at most {most:.1f}/s at a DP cycle of"
+                    f" {busy * 1000:.1f} ms"
+                )
+            continue
+        load.access[drive.name] = ("pkw", per_slave)
         worst = max(worst, demand / per_slave)
         if demand > per_slave:
             load.warnings.append(
@@ -252,6 +295,13 @@ def check_config_report(
                 f" a USB adapter's latency adds to each answer), {load.exchanges_per_second:.2f}"
                 f" polls/s, at most {load.capacity:.1f} PKW jobs/s per slave"
             )
+            for drive, (access, most) in load.access.items():
+                if access == "ds47":
+                    report.append(
+                        f"  drive {drive}: parameters through data record 47 (DP-V1), at most"
+                        f" {most:.1f} parameters/s (its PKW channel, where it has one: at most"
+                        f" {load.capacity:.1f}/s)"
+                    )
             report.extend(f"WARN {w}" for w in load.warnings)
             report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
             continue

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from pkwbus.problems import short
 from pkwbus.protocol import dp_services, gsd, ppo
+from pkwbus.protocol.dpv1 import Dpv1Setup
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.ppo import PpoType
 from pkwbus.service.config.base import Place
@@ -27,6 +28,7 @@ class DpSettings:
     ident: int
     user_prm: bytes
     cfg: bytes
+    dpv1: Dpv1Setup | None = None  # a DP-V1 slave, parametrised so (None: DP-V0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -39,16 +41,20 @@ class DpDrive:
     gsd_given: str | None
     cfg: bytes | None
     user_prm: bytes | None
+    dpv1: bool | None = None  # as configured; None: as the GSD file says (else DP-V0)
 
     def settings(self) -> tuple[DpSettings | None, list[Place]]:
         """The slave's settings, or the problems (each with its place) that stop them."""
         kind = ppo.ppo_type(self.ppo)
         problems: list[Place] = []
         ident, user_prm, cfg = self.ident, b"", kind.cfg
+        dpv1 = Dpv1Setup() if self.dpv1 else None
         if self.gsd is not None:
             found, problems = _read_gsd(self.gsd, self.gsd_given or self.gsd, kind)
             if found is not None:
-                gsd_ident, user_prm, cfg = found
+                gsd_ident, user_prm, cfg, described = found
+                if described is not None and self.dpv1 is not False:
+                    dpv1 = described  # the GSD's C1_Max_Data_Len and C1_Response_Timeout
                 if ident is not None and ident != gsd_ident:
                     problems.append(
                         (
@@ -86,12 +92,12 @@ class DpDrive:
             dp_services.Parameters(ident, user_prm=user_prm).encode()
         except LocalProtocolError as exc:
             return None, [("user_prm", str(exc))]
-        return DpSettings(kind, ident, user_prm, cfg), []
+        return DpSettings(kind, ident, user_prm, cfg, dpv1), []
 
 
 def _read_gsd(
     path: str, shown: str, kind: PpoType
-) -> tuple[tuple[int, bytes, bytes] | None, list[Place]]:
+) -> tuple[tuple[int, bytes, bytes, Dpv1Setup | None] | None, list[Place]]:
     try:
         with Path(path).open("rb") as file:
             data = file.read(MAX_GSD_BYTES + 1)
@@ -113,7 +119,7 @@ def _read_gsd(
             ("gsd", f"{shown} has no module for PPO {kind.number} (modules: {known}); give cfg")
         ]
     module = modules[0]
-    return (found.ident, found.prm_for([module]), module.cfg), []
+    return (found.ident, found.prm_for([module]), module.cfg, found.dpv1), []
 
 
 def ident_number(value: object) -> int:

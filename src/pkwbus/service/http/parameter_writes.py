@@ -102,7 +102,7 @@ class Writes:
             audit.detail = str(exc)
             exc.audit_incomplete = not await self.recorder.note(audit)
             raise
-        telegram = entry.target.telegram(request).hex(" ")
+        telegram = entry.target.telegram(request, fmt.vtype).hex(" ")
         if order.dry_run:
             audit.outcome = "dry_run"
             stored = await self.recorder.note(audit)
@@ -223,7 +223,7 @@ class Writes:
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
             raw, width = fmt.encode(order.value, str(ref))
             request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
-            entry.target.telegram(request)
+            entry.target.telegram(request, fmt.vtype)
         except LocalProtocolError as exc:
             raise ApiError(422, "invalid_value", str(exc)) from None
         return request
