@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import connection_flood
 import cpu_per_exchange
 import dead_drive
+import ds47
 import floor
 import line_efficiency
 import pkw_lag
@@ -98,6 +99,13 @@ def plan(quick: bool) -> Plan:
             "always due) with 1, 16 and 126 FC drives on the line, one simulator process "
             "serving them all; rounds interleaved, each count once a round.",
             lambda: cpu_per_exchange.by_drives(1500 if q else 5000, 2 if q else 9, [1, 16, 126]),
+        ),
+        (
+            "10. PROFIBUS DP: data record 47 against PKW in a PPO",
+            "3 simulated SINAMICS slaves on a pty with wire timing, 20 parameters polled on "
+            "each, always due, through the whole service; parameters/s per slave, beside what "
+            "`check-config` estimates at most.",
+            lambda: ds47.run(2.0 if q else 5.0),
         ),
     ]
 

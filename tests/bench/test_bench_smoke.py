@@ -15,6 +15,7 @@ MODULES = [
     "connection_flood",
     "cpu_per_exchange",
     "dead_drive",
+    "ds47",
     "floor",
     "line_efficiency",
     "pkw_lag",

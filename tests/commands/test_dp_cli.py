@@ -231,8 +231,12 @@ EndModule
         (["--ident", "0x0402", "--parity", "N"], "8E1"),
         (["--ident", "0x0402", "--dialect", "fc"], "not used over PROFIBUS"),
         (["--ident", "0x0402", "--retries", "9"], "at most 8"),
+        (["--ident", "0x0402", "--ppo", "3", "--access", "pkw"], "PPO 3 has no PKW words"),
+        (["--ident", "0x0402", "--axis", "1"], "--axis applies to --access ds47 only"),
+        (["--ident", "0x0B6A", "--dialect", "hitachi-sjpb", "--access", "ds47"],
+         "documents the PKW channel only"),
     ],
-)
+)  # fmt: skip
 def test_bad_dp_options_exit_2(
     capsys: pytest.CaptureFixture[str], args: list[str], message: str
 ) -> None:
@@ -241,6 +245,13 @@ def test_bad_dp_options_exit_2(
         "--address", "8", *args, "16-13",
     )  # fmt: skip
     assert code == 2 and message in err
+
+
+def test_a_scan_parametrises_nothing_so_takes_no_access(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(
+        capsys, "scan", "--port", "/nonexistent/tty", "--protocol", "profibus", "--access", "ds47"
+    )
+    assert code == 2 and "the scan parametrises no slave" in err
 
 
 def test_gsd_file(capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path: Path) -> None:

@@ -183,6 +183,8 @@ async def test_a_write_goes_through_the_record_and_is_read_back(tmp_path: Path) 
             headers={"Authorization": f"Bearer {TOKEN}"},
         )
         assert r.status_code == 200, r.text
+        assert r.json()["access"] == "ds47"
+        assert r.json()["value"] is None  # a change in data record 47 is not echoed
         assert abs(svc.sim.drives[9].params.number(1121) - 12.15) < 1e-5
         assert svc.sim.drives[8].params.number(1121) != svc.sim.drives[9].params.number(1121)
         (row,) = [e for e in svc.audit.latest(10) if e.drive == "pump"]
@@ -193,6 +195,9 @@ async def test_a_write_goes_through_the_record_and_is_read_back(tmp_path: Path) 
             if r.request_id is not RequestId.READ
         ]
         assert len(changes) == 1 and changes[0].addresses[0].pnu == 1121
+        got = await svc.client.get("/api/v1/drives/pump/parameters/p1121")
+        assert got.status_code == 200 and got.json()["access"] == "ds47"
+        assert abs(got.json()["value"] - 12.15) < 1e-5
         # The next poll reads the new value back.
         await until(
             lambda: abs(

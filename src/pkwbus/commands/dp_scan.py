@@ -144,6 +144,13 @@ def run_scan(args: argparse.Namespace) -> int:
         raise CommandError("--baudrates is for FC and USS lines", Exit.BAD_INPUT)
     if args.retries > MAX_DP_RETRIES:
         raise CommandError(f"--retries: at most {MAX_DP_RETRIES} over PROFIBUS", Exit.BAD_INPUT)
+    for option in ("access", "axis"):
+        if getattr(args, option, None) is not None:
+            raise CommandError(
+                f"--{option}: the scan parametrises no slave (data record 47 needs one in data"
+                " exchange): use it with read, write or describe",
+                Exit.BAD_INPUT,
+            )
     addresses = parse_addresses(args.addresses, 0, 125) if args.addresses else list(range(126))
     addresses = [a for a in addresses if a != args.master_address]
     args.baudrate = args.baudrate or DEFAULT_BAUDRATE

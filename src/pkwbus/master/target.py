@@ -155,7 +155,7 @@ class DriveTarget:
         """The shortest telegram the drive answers: process data only (FC) or PKW AK 0."""
         if self.protocol is Protocol.FC:
             return frame(self.adr, encode_block(b"", (MONITORING_CTW, 0)))
-        if not self.has_pkw:
+        if not self.has_pkw or self.record is not None:
             return frame(self.adr, encode_block(b"", self._idle_pzd))
         return self.telegram(pkw.none_request(self.dialect))
 

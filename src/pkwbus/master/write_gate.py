@@ -94,6 +94,7 @@ def gate_write(
     if gate is Gate.REFUSE:
         return Finished(d.name, job, NotSent(why))
     changes = request.is_write or bool(request.text)
+    read_first = read_first and d.target.record is None  # a record answers its own request
     first = changes and (read_first or gate is Gate.LEARN)
     if first:
         request = _read_of(d, request)

@@ -7,11 +7,12 @@ attribute 0x10, a description element of attribute 0x20 (the element as the
 subindex). A change carries its value in the parameter's own format (word or
 double word where the type is not known: "Bytes, words and double words are
 also possible as a substitute", SINAMICS field description of the parameter
-request). SINAMICS data set 47 changes RAM only (G120X operating
+request). A change goes to RAM ("change parameter"; SINAMICS G120X operating
 instructions: "A save operation is needed in order to transfer the modified
-data to the non-volatile memory"), so a change to RAM and EEPROM is built only
-where the dialect has a non-volatile change (Danfoss, request ID 0x42,
-MCA 101 programming manual 5.2.11); elsewhere it is refused with that reason.
+data to the non-volatile memory"): a change to RAM and EEPROM is refused with
+that reason. (Danfoss's "change parameter non-volatile", request ID 0x42 of
+the MCA 101 programming manual 5.2.11, has no PKW request of its dialect to
+come from.)
 """
 
 from __future__ import annotations
@@ -45,7 +46,6 @@ _EEPROM = frozenset(
         Command.WRITE_ARRAY_DWORD_EEPROM,
     }
 )
-_NON_VOLATILE = frozenset({"danfoss-pcv"})  # dialects with "change parameter non-volatile"
 FORMATS = {
     ValueType.U16: Format.U16,
     ValueType.I16: Format.I16,
@@ -87,16 +87,13 @@ def record_request(
     addresses = [_address(item.request) for item in items]
     if not writes[0]:
         return ParameterRequest.read(reference, axis, addresses)
-    request = items[0].request
-    rid = RequestId.CHANGE
-    if request.command in _EEPROM:
-        if dialect not in _NON_VOLATILE:
-            raise LocalProtocolError(
-                "a change in data record 47 goes to RAM only on this drive: write to RAM,"
-                " then save as the drive's manual says"
-            )
-        rid = RequestId.CHANGE_NON_VOLATILE
-    return ParameterRequest(reference, rid, axis, (addresses[0],), (_values(items[0]),))
+    if items[0].request.command in _EEPROM:
+        raise LocalProtocolError(
+            "a change in data record 47 goes to RAM only: write to RAM, then save as the"
+            " drive's manual says"
+        )
+    change = RequestId.CHANGE
+    return ParameterRequest(reference, change, axis, (addresses[0],), (_values(items[0]),))
 
 
 def _address(request: pkw.PkwRequest) -> ParameterAddress:

@@ -67,6 +67,11 @@ class DriveEntry:
         for poll in self.polls:
             self.formats.setdefault((poll.parameter, poll.index), poll.fmt)
 
+    @property
+    def access(self) -> str:
+        """The channel its parameters go through: ``pkw``, or ``ds47`` (data record 47)."""
+        return "pkw" if self.target.record is None else "ds47"
+
     def may_write(self, ref: ParameterRef) -> bool:
         """Whether the drive's ``writable`` list allows writing ``ref``."""
         return self.parameters.describe(ref).writable

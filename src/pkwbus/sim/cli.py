@@ -84,6 +84,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     dp.add_argument(
         "--ident", help="the slaves' ident number, e.g. 0x0402 (default: the dialect's)"
     )
+    dp.add_argument("--dpv1", action="store_true", help="DP-V1 slaves (data record 47)")
+    dp.add_argument("--not-ready", type=int, default=0, metavar="N",
+                    help="DP-V1: reads of each record answered 'state conflict' first")  # fmt: skip
     timing = parser.add_argument_group("timing")
     timing.add_argument("--response-delay", default="3ms", help="e.g. 3ms (default), 0.01, 1s")
     timing.add_argument("--baudrate", type=int)
@@ -292,7 +295,7 @@ def _dp_simulator(
     return DpSimulator(
         parse_addresses(args.drives), dialect=args.dialect or "profidrive", ppo_number=args.ppo,
         ident=ident, timing=timing, faults=dp_faults, seed=args.seed, catalog=catalog,
-        model=model, refuse_descriptions=refusing,
+        model=model, refuse_descriptions=refusing, dpv1=args.dpv1, not_ready=args.not_ready,
     )  # fmt: skip
 
 

@@ -131,6 +131,8 @@ class DpSimulator:
         ``refuse_descriptions``: slaves whose drives answer every description request (AK 4)
         with the dialect's "description not available" fault (ValueError for an address
         that is not a slave here)."""
+        if not_ready < 0:
+            raise ValueError(f"not ready for {not_ready} reads: it cannot be negative")
         try:
             self.dialect = ppo.dp_dialect(dialect)
             self.ppo = ppo.ppo_type(ppo_number)

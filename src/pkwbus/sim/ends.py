@@ -1,15 +1,7 @@
 """The simulator's ends: a TCP server (raw telegram bytes) and a pseudo-terminal.
 
-Timing of one exchange, as the master sees it on an RS-485 line:
-
-    first request byte ── request on the wire ── response delay ── answer on the wire ──┤
-
-The ends take the arrival of the request's first byte as the start, add
-the request's wire time (``len * 11 / baud``, when wire timing is on), the
-response delay and the answer's wire time, and write the whole answer at
-that instant: the master gets its last byte when a real line would deliver
-it, never earlier. Requests are answered one at a time, in order (half
-duplex). A late answer (fault) is written later without holding the line.
+Each connection is answered by a :class:`~pkwbus.sim.session.Session`, with the
+timing of an RS-485 line.
 
 An end can lose its port for a while (:meth:`TcpEnd.interrupt`,
 :meth:`PtyEnd.interrupt`), at random with :func:`drop_at_random`: a gateway
@@ -29,117 +21,15 @@ import os
 import random
 import struct
 import tty
-from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
-from pkwbus.sim.config import SimTiming
-from pkwbus.sim.faults import Answer
-from pkwbus.sim.stats import SimStats
+from pkwbus.sim.session import Answerer, Session
 
 __all__ = [
     "Answerer", "Interruptible", "PathInUseError", "PtyEnd", "Session", "TcpEnd",
     "check_link_free", "drop_at_random", "serve_pty", "serve_tcp",
 ]  # fmt: skip
-
-Write = Callable[[bytes], None]
-
-
-class Answerer(Protocol):
-    """What an end needs of the line it serves (a :class:`pkwbus.sim.Simulator`)."""
-
-    @property
-    def stats(self) -> SimStats: ...
-
-    @property
-    def timing(self) -> SimTiming: ...
-
-    def deframer(self) -> RequestDeframer: ...
-
-    def is_request(self, event: object) -> bool:
-        """Whether a deframer event is a request to answer (else a framing error)."""
-        ...
-
-    def request_size(self, event: object) -> int:
-        """Bytes the request took on the wire."""
-        ...
-
-    def answer(self, request: Any, now: float | None = None) -> Answer | None: ...
-
-
-class RequestDeframer(Protocol):
-    """A streaming deframer: FC/USS telegrams, or PROFIBUS FDL frames."""
-
-    @property
-    def buffered(self) -> int: ...
-
-    def feed(self, data: bytes) -> Sequence[object]: ...
-
-
-class Session:
-    """One conversation on an end: deframes requests and answers them with timing."""
-
-    def __init__(self, sim: Answerer, write: Write) -> None:
-        self.sim = sim
-        self._write = write
-        self._deframer = sim.deframer()
-        self._queue: asyncio.Queue[tuple[object, float]] = asyncio.Queue()
-        self._loop = asyncio.get_running_loop()
-        self._started = 0.0
-        self._late: set[asyncio.TimerHandle] = set()  # late answers still to send
-        self._task = self._loop.create_task(self._answer_in_turn())
-
-    def feed(self, chunk: bytes) -> None:
-        now = self._loop.time()
-        if not self._deframer.buffered:
-            self._started = now
-        for event in self._deframer.feed(chunk):
-            if self.sim.is_request(event):
-                self._queue.put_nowait((event, self._started))
-                self._started = now
-            else:
-                self.sim.stats.count("bad_requests")
-
-    async def _answer_in_turn(self) -> None:
-        timing = self.sim.timing
-        while True:
-            request, started = await self._queue.get()
-            answer = self.sim.answer(request)
-            if answer is None:
-                continue
-            wire = timing.wire_seconds(self.sim.request_size(request)) + timing.wire_seconds(
-                len(answer.data)
-            )
-            delay = started + wire + timing.response_delay - self._loop.time()
-            if answer.late:
-                self._send_later(max(delay, 0.0) + answer.late, answer)
-                continue
-            if delay > 0:
-                await asyncio.sleep(delay)
-            self._send(answer)
-
-    def _send_later(self, delay: float, answer: Answer) -> None:
-        def send() -> None:
-            self._late.discard(handle)
-            self._send(answer)
-
-        handle = self._loop.call_later(delay, send)
-        self._late.add(handle)
-
-    def _send(self, answer: Answer) -> None:
-        try:
-            self._write(answer.data)
-        except OSError:
-            self.sim.stats.count("unsent")
-
-    async def close(self) -> None:
-        """Stop answering; late answers not yet sent never are (the end they were for
-        is gone, and its descriptor's number may be another's by then)."""
-        for handle in self._late:
-            handle.cancel()
-        self._late.clear()
-        self._task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await self._task
 
 
 class TcpEnd:

@@ -89,8 +89,14 @@ class ValueBody(BaseModel):
     pnu: int
     index: int
     raw: int | None
-    value: float | int | str | None
+    value: float | int | str | None = Field(
+        description="as the drive answered it; a change through data record 47 is not echoed:"
+        " null (verify: true reads it back)"
+    )
     unit: str
+    access: Literal["pkw", "ds47"] = Field(
+        default="pkw", description="the channel that served it: PKW, or data record 47 (DP-V1)"
+    )
 
 
 class WriteResult(ValueBody):

@@ -78,6 +78,7 @@ class Reads:
             "raw": result.raw,
             "value": result.value,
             "unit": fmt.unit,
+            "access": entry.access,
         }
 
     async def try_read(

@@ -106,7 +106,7 @@ class Writes:
         if order.dry_run:
             audit.outcome = "dry_run"
             stored = await self.recorder.note(audit)
-            body = self._write_body(ref, fmt, order, request, telegram, audit, None)
+            body = self._write_body(entry, ref, fmt, order, request, telegram, audit, None)
             return body if stored else {**body, "audit": INCOMPLETE}
         # Once its row is stored the write runs to its end and the row is completed even
         # when the HTTP client goes away: the request may reach the drive regardless.
@@ -198,7 +198,7 @@ class Writes:
         except ApiError as exc:
             exc.audit_incomplete = not stored
             raise
-        body = self._write_body(ref, fmt, order, request, telegram, audit, result)
+        body = self._write_body(entry, ref, fmt, order, request, telegram, audit, result)
         body.update(old_value=old, verified=verified)
         if not stored:
             body["audit"] = INCOMPLETE
@@ -230,6 +230,7 @@ class Writes:
 
     def _write_body(
         self,
+        entry: DriveEntry,
         ref: ParameterRef,
         fmt: ParameterDescription,
         order: WriteOrder,
@@ -249,4 +250,5 @@ class Writes:
             "dry_run": order.dry_run,
             "telegram": telegram,
             "audit_id": audit.id,
+            "access": entry.access,
         }
