@@ -27,7 +27,8 @@ ARGS = [
 ]  # fmt: skip
 DRIVES = [
     {"name": "fan1", "address": 1, "catalog": "danfoss-fc",
-     "poll": [("3-41", "100ms"), ("16-13", "200ms")], "writable": ["3-41"]},
+     "poll": [("3-41", "100ms"), ("16-13", "200ms"), ("16-90", "200ms")],
+     "writable": ["3-41"]},
     {"name": "fan2", "address": 2, "catalog": "danfoss-fc",
      "poll": [("3-41", "100ms")], "writable": []},
 ]  # fmt: skip
@@ -76,6 +77,12 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
 
             served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
             sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)
+
+            # A trip: its alarm in the vendor's words (16-90 bit 2, Danfoss MCA 121 manual).
+            served.trip(1, 14, 2)
+            alarm = fan1.locator('ul.alarms li[data-code="16-90 bit 2"]')
+            sync_api.expect(alarm).to_contain_text("Earth fault", timeout=20_000)
+            sync_api.expect(alarm).to_have_class("alarm")
 
             # The last write attempts show once the page is given a token.
             audit = page.locator("#audit")

@@ -68,6 +68,11 @@ class ServedInThread:
         drive = self.svc.sim.drives[address]
         self.loop.call_soon_threadsafe(drive.set_value, pnu, raw)
 
+    def trip(self, address: int, code: int, bit: int) -> None:
+        """Trip a simulated drive: alarm ``code`` in its log, ``bit`` in its alarm word."""
+        assert self.loop is not None
+        self.loop.call_soon_threadsafe(self.svc.sim.drives[address].model.trip, code, bit)
+
 
 @contextlib.contextmanager
 def served_in_thread(tmp_path: Path, token: str, **drives: Any) -> Iterator[ServedInThread]:

@@ -29,6 +29,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
+from pkwbus.service.metrics.alarms import ALARM_LABELS
 from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
 from pkwbus.service.metrics.instrumentation import ServiceMetrics
@@ -146,6 +147,8 @@ def declared_counters() -> Exported:
     declared[conflict._name] = set(conflict._labelnames)
     # A series for each field a drive contradicts its catalog on: none while all agree.
     declared[MISMATCH[0]] = set(MISMATCH_LABELS)
+    # A series for each active alarm or warning: none while the drives show none.
+    declared["pkwbus_drive_alarm"] = set(ALARM_LABELS)
     return declared
 
 

@@ -69,6 +69,7 @@ lines:
     baudrate: 19200
     slot_time: {slot_time}
     watchdog: 2s
+    alarms: off  # the tests count the PKW jobs of the polls they configure
     drives:
 {drives}
 """

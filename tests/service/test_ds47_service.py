@@ -62,6 +62,7 @@ lines:
     baudrate: 93750
     slot_time: 20ms
     watchdog: 2s
+    alarms: off  # the tests count the parameters of each request
     drives:
 {drives}
 """

@@ -16,6 +16,7 @@ from typing import Protocol
 
 from prometheus_client import CollectorRegistry
 
+from pkwbus.catalog.alarms import ActiveAlarm
 from pkwbus.catalog.description import (
     OTHER_INDEX,
     ParameterDescription,
@@ -25,13 +26,13 @@ from pkwbus.catalog.description import (
 from pkwbus.catalog.precedence import Layers, resolve
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.plan import PollSpec
-from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot import ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.params import ParameterRef
 
-__all__ = ["DriveEntry", "LineCounts", "LineTask", "Runtime"]
+__all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime"]
 
 log = logging.getLogger(__name__)
 
@@ -127,6 +128,14 @@ class LineTask(Protocol):
     async def run(self) -> None: ...
 
 
+class Alarms(Protocol):
+    """The drives' active alarms in words (service.metrics.alarms.AlarmBoard)."""
+
+    def active(self, drive: str) -> list[ActiveAlarm]: ...
+
+    def said(self, key: ReadingKey, value: object) -> str: ...
+
+
 class Runtime:
     def __init__(
         self,
@@ -136,12 +145,14 @@ class Runtime:
         registry: CollectorRegistry,
         *,
         job_timeout: float = 5.0,
+        alarms: Alarms | None = None,
     ) -> None:
         self.runners = {s.name: s for s in runners}
         self.drives = {d.name: d for d in drives}
         self.snapshot = snapshot
         self.registry = registry
         self.job_timeout = job_timeout
+        self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self._tasks: list[asyncio.Task[None]] = []
         self.cleanups: list[Callable[[], object]] = []
         # What the status page shows of each line besides the snapshot (service.metrics).

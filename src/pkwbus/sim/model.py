@@ -43,8 +43,11 @@ class ModelConfig:
     trip_reset_seconds: float = 30.0  # a local operator resets the trip; 0 = never
 
 
-# (code shown in the alarm log, bit in the alarm word): illustrative, not a vendor list.
-ALARMS = {Profile.FC: ((13, 3), (14, 4), (4, 14)), Profile.PROFIDRIVE: ((1, 0), (2, 1), (11, 2))}
+# (code shown in the alarm log, bit in the alarm word). FC: the bits of over current (6) and
+# earth fault (2) as the Danfoss MCA 121 manual's table of 16-90 places them (see
+# catalog/data/alarms/danfoss-fc.yaml), and one bit no table read here explains (14); the
+# log codes are illustrative. PROFIdrive: illustrative.
+ALARMS = {Profile.FC: ((13, 6), (14, 2), (4, 14)), Profile.PROFIDRIVE: ((1, 0), (2, 1), (11, 2))}
 WARNING_BITS = (1, 9, 13)
 
 
@@ -133,8 +136,13 @@ class DriveModel:
         self.alarm_log = [code, *self.alarm_log][: self.log_length]
 
     def reset(self) -> None:
+        """The trip is acknowledged. A SINAMICS drive moves the acknowledged faults out of
+        its current entries (r0947 holds the current fault case first); Danfoss's alarm log
+        (15-30) keeps them."""
         self.tripped = False
         self.alarm_word = 0
+        if self.profile is Profile.PROFIDRIVE:
+            self.alarm_log = [0] * self.log_length
 
     def apply_control(self, ctw: int, ref: int | None, limits: Limits) -> None:
         """Process data from the master; acted on only with CTW bit 10 set."""

@@ -23,7 +23,7 @@ from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.line import Line
 from pkwbus.master.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.protocol import dp_services, dp_timing, pkw
 from pkwbus.protocol.descriptions import NAME, DescriptionForm, elements_to_read, form_of
@@ -33,6 +33,7 @@ from pkwbus.protocol.pkw_length import AUTO
 from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
+from pkwbus.service.assembly.alarm_polls import ALARM_EVERY, alarm_parameters, alarm_polls
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.assembly.parameter_table import (
@@ -40,6 +41,7 @@ from pkwbus.service.assembly.parameter_table import (
     layers_of,
     parameter_table,
 )
+from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
@@ -84,6 +86,12 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
     }
     collector = SnapshotCollector(snapshot, drives, infos)
     registry.register(collector)
+    board = AlarmBoard(alarm_parameters(config, entries), registry)
+
+    def landed(key: ReadingKey, reading: Reading) -> None:  # each value, to each observer
+        collector.landed(key, reading)
+        board.landed(key, reading)
+
     descriptions = DescriptionSink({e.name: e for e in entries}, collector, kept)
     for line, specs in planned:
         port = line.port
@@ -93,9 +101,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
             cleanups.append(close)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss = line.protocol is Protocol.USS
-        events = metrics.for_line(
-            line.name, dialects, collector.landed, uss=uss, descriptions=descriptions
-        )
+        events = metrics.for_line(line.name, dialects, landed, uss=uss, descriptions=descriptions)
         counts[line.name] = events
         if line.protocol is Protocol.PROFIBUS:
             runners.append(_dp_runner(line, port, specs, snapshot, metrics, events))
@@ -106,7 +112,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
                 line.name, wire, specs, retries=line.retries, snapshot=snapshot, events=events
             )
         )
-    runtime = Runtime(runners, entries, snapshot, registry)
+    runtime = Runtime(runners, entries, snapshot, registry, alarms=board)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)
     return runtime
@@ -218,6 +224,15 @@ def _drive(
         )  # fmt: skip
         units[ref.name] = fmt.unit
         info = _info(line, drive, ref, fmt, found.catalog)
+        infos.append(info)
+        sources[ref.name] = info.source
+    polled = {p.request.pnu for p in polls}
+    for ref in alarm_polls(line, drive, polled):
+        ref = table.canonical(ref)
+        fmt = table.describe(ref)
+        polls.append(PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), ALARM_EVERY, fmt))
+        units[ref.name] = fmt.unit
+        info = _info(line, drive, ref, fmt, layers_of(drive, table, ref).catalog)
         infos.append(info)
         sources[ref.name] = info.source
     describe = describe_targets(target, drive, table) if form is not None else ()

@@ -31,7 +31,7 @@ from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
-from pkwbus.service.config.fields import Describe, Name, Notation, PkwWords
+from pkwbus.service.config.fields import Alarms, Describe, Name, Notation, PkwWords
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
 from pkwbus.service.config.profibus import DpDrive, hex_bytes, ident_number, resolve_gsd_path
 
@@ -63,6 +63,9 @@ class Drive(Model):
     catalog: str | None = Field(default=None, strict=True)
     # The drive's own description elements (AK 4) over the catalog; None: the line's setting.
     describe: Describe | None = None
+    # Poll the alarm words its catalog explains even where ``poll`` does not: auto or off
+    # (None: the line's setting).
+    alarms: Alarms | None = None
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)

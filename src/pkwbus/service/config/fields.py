@@ -26,6 +26,7 @@ from pkwbus.protocol.params import (
 from pkwbus.protocol.pkw_length import PkwSetting
 
 __all__ = [
+    "Alarms",
     "CharTimeout",
     "Delay",
     "Describe",
@@ -125,3 +126,6 @@ def _describe(value: object) -> str:
 
 # Whether the drive's own description elements (AK 4) are read: auto, or off.
 Describe = Annotated[str, PlainValidator(_describe)]
+# Whether the alarm words and fault numbers a drive's catalog explains are polled even
+# where the configuration does not poll them: auto, or off.
+Alarms = Annotated[str, PlainValidator(_describe)]

@@ -36,6 +36,7 @@ from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import (
+    Alarms,
     CharTimeout,
     Delay,
     Describe,
@@ -103,6 +104,7 @@ class Line(Model):
     watchdog: Watchdog | None = None
     # The drives' own description elements (AK 4) over their catalogs; a drive may say otherwise.
     describe: Describe = "auto"
+    alarms: Alarms = "auto"
     drives: list[Drive] = Field(min_length=1)
 
     @field_validator("port")

@@ -31,6 +31,7 @@ from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.recorder import AuditRecorder
 from pkwbus.service.http.models import (
     ERRORS,
+    AlarmView,
     DriveView,
     Health,
     LineView,
@@ -320,6 +321,17 @@ def line_views(
     return views
 
 
+def alarm_views(runtime: Runtime, name: str) -> list[AlarmView]:
+    """The drive's active alarms and warnings, in words."""
+    board = runtime.alarms
+    active = board.active(name) if board is not None else []
+    return [
+        AlarmView(code=a.alarm.code, text=a.alarm.text, kind=a.alarm.kind,
+                  parameter=a.alarm.parameter, since=a.since)
+        for a in active
+    ]  # fmt: skip
+
+
 def drive_view(runtime: Runtime, name: str) -> DriveView:
     entry = runtime.drives[name]
     snap = runtime.snapshot
@@ -332,6 +344,8 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         if drive != name:
             continue
         fmt = formats.get((parameter, index), ParameterDescription())
+        board = runtime.alarms
+        alarm_words = board.said((drive, parameter, index), reading.value) if board else ""
         values.append(
             ParameterReading(
                 parameter=parameter,
@@ -341,7 +355,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
                 unit=entry.unit_of(parameter),
                 timestamp=reading.timestamp,
                 name=fmt.name,
-                shown=readable(reading.value, fmt),
+                shown=alarm_words or readable(reading.value, fmt),
                 source=entry.sources.get(parameter, "none"),
             )
         )
@@ -357,4 +371,5 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         faults=counts.fault_counts.get(name, 0) if counts is not None else 0,
         telegram_errors=counts.error_counts.get(name, 0) if counts is not None else 0,
         values=values,
+        alarms=alarm_views(runtime, name),
     )

@@ -11,6 +11,7 @@ from pkwbus.protocol import pkw
 
 __all__ = [
     "ERRORS",
+    "AlarmView",
     "DriveView",
     "ErrorBody",
     "Health",
@@ -36,6 +37,17 @@ class ParameterReading(BaseModel):
     source: str = "catalog"
 
 
+class AlarmView(BaseModel):
+    """An active alarm or warning: the drive's code and the vendor's text for it (empty
+    where no named document explains it), since when it is shown."""
+
+    code: str
+    text: str
+    kind: str = Field(description="alarm or warning")
+    parameter: str  # the alarm word or fault number parameter that shows it
+    since: float  # wall clock, seconds
+
+
 class DriveView(BaseModel):
     name: str
     line: str
@@ -48,6 +60,7 @@ class DriveView(BaseModel):
     values: list[ParameterReading]
     faults: int = 0  # rejections since the service started
     telegram_errors: int = 0  # exchanges without a usable answer since the service started
+    alarms: list[AlarmView] = []  # active alarms first, then warnings, oldest first
 
 
 class LineView(BaseModel):

@@ -57,6 +57,11 @@ function drawDrive(drive, now) {
       el("td", { class: "num value", title: `${v.value}` }, value),
       el("td", { class: "num age" }, age(seconds)));
   });
+  const alarms = (drive.alarms || []).map((a) => {
+    const since = new Date(a.since * 1000).toLocaleString();
+    return el("li", { class: a.kind === "alarm" ? "alarm" : "warning", "data-code": a.code },
+      `${a.kind} ${a.code}`, a.text ? ` ${a.text}` : "", ` (${a.parameter}, since ${since})`);
+  });
   const word = drive.status_word === null ? "no status word"
     : `status word 0x${drive.status_word.toString(16).padStart(4, "0")}`;
   return el("div", { class: `drive ${drive.up ? "up" : "down"}`, "data-drive": drive.name },
@@ -67,6 +72,7 @@ function drawDrive(drive, now) {
       el("span", { class: drive.telegram_errors ? "alarm" : "" },
         `${drive.telegram_errors} telegram errors`), " since the service started"),
     el("div", { class: "bits" }, ...bits),
+    alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
 }

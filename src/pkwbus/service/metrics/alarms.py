@@ -1,0 +1,103 @@
+"""The drives' active alarms and warnings, in words, as their alarm parameters are polled.
+
+Each polled alarm word or fault number (a parameter the drive's catalog has
+an alarm table for: :mod:`pkwbus.catalog.alarms`) is decoded as its value
+lands. A drive's active alarms are those its latest readings show; each
+keeps the time it was first seen. An alarm that comes or goes is a log
+line, and ``pkwbus_drive_alarm{line,drive,code,text,kind}`` is 1 while it is
+active, with no series otherwise. A log (Danfoss 15-30) is decoded for the
+page but is not an active alarm. What the drive last said stands while it
+is away (its words are read again when it answers).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from prometheus_client import CollectorRegistry, Gauge
+
+from pkwbus.catalog.alarms import ActiveAlarm, Alarm, CodeTable, WordTable
+from pkwbus.master.snapshot import Reading, ReadingKey
+
+__all__ = ["ALARM_LABELS", "AlarmBoard", "Watched"]
+
+log = logging.getLogger(__name__)
+
+ALARM_LABELS = ("line", "drive", "code", "text", "kind")
+
+
+@dataclass(frozen=True, slots=True)
+class Watched:
+    """A polled parameter that tells alarms: its drive's line and its decoder."""
+
+    line: str
+    decoder: WordTable | CodeTable
+
+
+class AlarmBoard:
+    """Active alarms by drive; ``landed`` takes each polled reading (the line's values)."""
+
+    def __init__(self, watched: Mapping[ReadingKey, Watched], registry: CollectorRegistry) -> None:
+        self.watched = dict(watched)
+        self._by_source: dict[ReadingKey, dict[str, ActiveAlarm]] = {}
+        self.gauge = Gauge(
+            "pkwbus_drive_alarm",
+            "1 while the drive shows this alarm or warning (code and text from the vendor's"
+            " table; no series when none is active)",
+            list(ALARM_LABELS),
+            registry=registry,
+        )
+
+    def landed(self, key: ReadingKey, reading: Reading) -> None:
+        watched = self.watched.get(key)
+        if watched is None or not isinstance(reading.value, int | float):
+            return
+        decoder = watched.decoder
+        if decoder.kind == "status" or (isinstance(decoder, CodeTable) and not decoder.active):
+            return  # a status word or a log: never an active alarm
+        now = decoder.decode(int(reading.value))
+        old = self._by_source.get(key, {})
+        new: dict[str, ActiveAlarm] = {}
+        drive = key[0]
+        for alarm in now:
+            kept = old.get(alarm.code)
+            new[alarm.code] = kept if kept is not None else ActiveAlarm(alarm, reading.timestamp)
+            if kept is None:
+                self._came(watched.line, drive, alarm)
+        for code, gone in old.items():
+            if code not in new:
+                self._went(watched.line, drive, gone.alarm)
+        self._by_source[key] = new
+
+    def said(self, key: ReadingKey, value: object) -> str:
+        """A polled alarm parameter's value in words (empty for any other parameter): the
+        codes and texts of the bits set or of the number; "none" for 0."""
+        watched = self.watched.get(key)
+        if watched is None or not isinstance(value, int | float):
+            return ""
+        alarms = watched.decoder.decode(int(value))
+        return "; ".join(a.shown for a in alarms) if alarms else "none"
+
+    def active(self, drive: str) -> list[ActiveAlarm]:
+        """The drive's active alarms and warnings, alarms first, oldest first."""
+        found = [a for key, alarms in self._by_source.items() if key[0] == drive
+                 for a in alarms.values()]  # fmt: skip
+        return sorted(found, key=lambda a: (a.alarm.kind != "alarm", a.since, a.alarm.code))
+
+    def _labels(self, line: str, drive: str, alarm: Alarm) -> tuple[str, ...]:
+        return (line, drive, alarm.code, alarm.text, alarm.kind)
+
+    def _came(self, line: str, drive: str, alarm: Alarm) -> None:
+        self.gauge.labels(*self._labels(line, drive, alarm)).set(1)
+        ctx = {"line": line, "drive": drive}
+        log.warning("drive %s: %s %s (%s)", drive, alarm.kind, alarm.shown, alarm.parameter,
+                    extra=ctx)  # fmt: skip
+
+    def _went(self, line: str, drive: str, alarm: Alarm) -> None:
+        with contextlib.suppress(KeyError):  # set when it came: there to remove
+            self.gauge.remove(*self._labels(line, drive, alarm))
+        ctx = {"line": line, "drive": drive}
+        log.info("drive %s: %s %s is gone", drive, alarm.kind, alarm.shown, extra=ctx)
