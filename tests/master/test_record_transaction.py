@@ -8,7 +8,7 @@ import struct
 import pytest
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.outcomes import Answered, LineFailed, Rejected, TimedOut
+from pkwbus.master.outcomes import Answered, LineFailed, NotSent, Rejected, TimedOut
 from pkwbus.master.plan import DriveSpec, Finished, PollSpec, Send
 from pkwbus.master.planner import Planner
 from pkwbus.master.record_transaction import RecordItem, RecordTransaction
@@ -178,3 +178,69 @@ def test_a_write_goes_before_the_polls_and_alone() -> None:
     request = decode_request(send.telegram)
     assert request.request_id is RequestId.CHANGE and len(request.addresses) == 1
     assert request.changes == (Values(Format.U32, (5,)),)
+
+
+def test_a_text_poll_is_ended_unsent_and_the_others_go() -> None:
+    polls = (
+        PollSpec("r0021", 0, pkw.read(SIEMENS, 21), 1.0, ParameterDescription(vtype=ValueType.F32)),
+        PollSpec("r0020", 0, pkw.read_text(SIEMENS, 20), 1.0,
+                 ParameterDescription(vtype=ValueType.TEXT)),
+    )  # fmt: skip
+    planner = Planner([DriveSpec("pump", target(), polls)], poll_deadline=2.0, retries=1)
+    planner.line_up(0.0)
+    send = planner.next_for("pump", 0.0)
+    assert send is not None
+    assert [a.pnu for a in decode_request(send.telegram).addresses] == [21]
+    (refused,) = [e for e in planner.take_events() if isinstance(e, Finished)]
+    assert isinstance(refused.outcome, NotSent) and "text" in refused.outcome.reason
+
+
+def test_the_slaves_largest_record_bounds_a_request() -> None:
+    small = DriveTarget(Protocol.PROFIBUS, 8, SIEMENS, ppo.LAYOUT, BlockShape(0, 2),
+                        record=RecordAccess(1, max_data=64))  # fmt: skip
+    planner = Planner([DriveSpec("pump", small, polls(13))], poll_deadline=2.0, retries=1)
+    planner.line_up(0.0)
+    send = planner.next_for("pump", 0.0)
+    assert send is not None
+    request = decode_request(send.telegram)
+    assert len(request.addresses) == 10  # 4 + 6 x 10 = 64 bytes each way
+    assert len(send.telegram) <= 64
+
+
+def test_substitute_formats_name_no_type_the_catalogs_decides() -> None:
+    items = [RecordItem(pkw.read(SIEMENS, 1000), ValueType.I16),
+             RecordItem(pkw.read(SIEMENS, 1121), ValueType.F32)]  # fmt: skip
+    tx = RecordTransaction(target(), items, reference=1, axis=1, retries=1, deadline=10.0)
+    bits = struct.unpack(">I", struct.pack(">f", 12.15))[0]
+    tx.feed(answer(tx, [Values(Format.WORD, (0xFFFE,)), Values(Format.DOUBLE_WORD, (bits,))]), 0.1)
+    word, dword = tx.outcomes
+    assert isinstance(word, Answered) and isinstance(dword, Answered)
+    assert ParameterDescription(vtype=ValueType.I16).value_of(word.response)[1] == -2
+    got = ParameterDescription(vtype=ValueType.F32).value_of(dword.response)[1]
+    assert got == pytest.approx(12.15, abs=1e-5)
+
+
+def test_a_read_answered_without_a_value_is_tried_again_and_the_deadline_ends_it() -> None:
+    tx = RecordTransaction(target(), [RecordItem(pkw.read(SIEMENS, 21))], reference=1, axis=1,
+                           retries=5, deadline=1.0)  # fmt: skip
+    assert tx.feed(answer(tx, [Values(Format.ZERO, ())]), 0.1) is None  # no value: not yet
+    late = tx.feed(Failure(ErrorKind.TIMEOUT, "no answer"), 1.0)
+    assert isinstance(late, TimedOut)
+
+
+def test_a_job_in_flight_ends_at_its_deadline_while_nothing_can_go_out() -> None:
+    from pkwbus.master.jobs import Job, JobKind, Priority
+
+    planner = Planner([DriveSpec("pump", target())], poll_deadline=2.0, retries=3)
+    planner.line_up(0.0)
+    job = Job("pump", pkw.read(SIEMENS, 21), JobKind.READ, Priority.READ, 2.0)
+    planner.submit(job, 0.0)
+    send = planner.next_for("pump", 0.0)
+    assert send is not None
+    planner.exchanged(send, Failure(ErrorKind.TIMEOUT, "the slave left data exchange"), 0.5)
+    planner.take_events()
+    planner.expire_queued("pump", 1.0)  # before its deadline: still in flight
+    assert planner.active("pump") is not None
+    planner.expire_queued("pump", 2.0)
+    (done,) = [e for e in planner.take_events() if isinstance(e, Finished)]
+    assert done.work is job and isinstance(done.outcome, TimedOut)

@@ -216,3 +216,37 @@ lines:
 """
     with pytest.raises(ConfigError, match=message):
         parse_config(text, environ={})
+
+
+def test_data_record_47_on_a_slave_without_record_services_or_with_text_polls(
+    tmp_path: Path,
+) -> None:
+    gsd = tmp_path / "v1.gsd"
+    gsd.write_text(
+        "#Profibus_DP\nIdent_Number = 0x80B5\nDPV1_Slave = 1\nC1_Read_Write_supp = 0\n"
+        'Module = "PPO 3" 0xF1\nEndModule\n'
+    )
+    text = f"""
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 93750
+    drives:
+      - {{name: a, address: 8, gsd: {gsd}, ppo: 3, parameter_access: ds47,
+          poll: [{{parameter: r0021, every: 1s}}]}}
+"""
+    with pytest.raises(ConfigError, match="C1_Read_Write_supp = 0"):
+        parse_config(text, environ={})
+    texts = """
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 93750
+    drives:
+      - {name: a, address: 8, ident: 0x80B5, ppo: 3, dpv1: true,
+         poll: [{parameter: r0021, every: 1s}, {parameter: r0020, every: 1s, type: text}]}
+"""
+    with pytest.raises(ConfigError, match=r"poll\[1\]: r0020 is a text"):
+        parse_config(texts, environ={})

@@ -238,3 +238,27 @@ async def test_a_slave_restarted_mid_request_comes_back_and_the_others_keep_poll
             for r in RestartReason
         ]
         assert sum(restarts) >= 1
+
+
+async def test_a_write_to_a_slave_gone_silent_ends_at_its_deadline(tmp_path: Path) -> None:
+    async with service(tmp_path, not_ready=3) as svc:
+        loop = asyncio.get_running_loop()
+        change = svc.client.put(
+            "/api/v1/drives/pump/parameters/p1121", json={"value": 12.5},
+            headers={"Authorization": f"Bearer {TOKEN}"},
+        )  # fmt: skip
+        task = asyncio.ensure_future(change)
+        # The write's request is written, its response not yet read: the slave goes silent.
+        await until(lambda: any(
+            decode_request(r).request_id is RequestId.CHANGE for r in svc.record_writes(9)
+        ))  # fmt: skip
+        svc.sim.kill(9)
+        started = loop.time()
+        r = await asyncio.wait_for(task, 30)
+        assert loop.time() - started < 15  # the job's deadline, not forever
+        assert r.status_code == 504, r.text
+        (row,) = [e for e in svc.audit.latest(10) if e.drive == "pump"]
+        assert row.outcome == "timeout"
+        svc.sim.revive(9)
+        pump = svc.reads("pump")
+        await until(lambda: svc.reads("pump") >= pump + 6)  # back, polled again

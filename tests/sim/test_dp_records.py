@@ -191,3 +191,33 @@ def test_a_transfer_needs_a_dpv1_slave_in_data_exchange() -> None:
     fresh = Bus(sim())
     with pytest.raises(LocalProtocolError, match="not in data exchange"):
         fresh.slave.start_transfer(0, RECORD, b"\x01\x01\x01\x01", 0.0)
+
+
+def test_a_transfer_ends_at_its_timeout_while_the_slave_keeps_its_diagnosis() -> None:
+    # The slave answers its Data_Exchange "diagnosis waiting", then static diagnosis on
+    # every Slave_Diag: the transfer cannot go on, and ends once its time is up.
+    from pkwbus.protocol.dp_services import Diagnosis, encode_diagnosis
+    from pkwbus.protocol.fdl import DataFrame, Status, response_fc
+
+    line = sim()
+    bus = Bus(line, timeout=0.1)
+    bus.start()
+    slave = bus.slave
+    request = ParameterRequest.read(3, 1, [ParameterAddress(2)]).encode()
+    slave.start_transfer(0, RECORD, request, bus.now)
+    inputs = bytes(slave.setup.inputs)
+    diag = encode_diagnosis(Diagnosis(frozenset({"stat_diag"}), MASTER, line.ident))
+    events = []
+    for _ in range(100):  # a second of cycles
+        bus.now += 0.01
+        frame = slave.poll(bus.now)
+        assert frame is not None
+        if frame.dsap is None:
+            answer = DataFrame(MASTER, ADDRESS, response_fc(Status.DH), data=inputs)
+        else:
+            answer = DataFrame(MASTER, ADDRESS, response_fc(Status.DL), 62, 60, diag)
+        events += slave.feed(answer, bus.now)
+        assert slave.poll_acyclic() is None
+    ended = [e.end for e in events + slave.take_events() if isinstance(e, TransferEnded)]
+    assert len(ended) == 1 and isinstance(ended[0], RecordFailed) and ended[0].timed_out
+    assert slave.state is SlaveState.DATA_EXCHANGE

@@ -224,7 +224,14 @@ def build_context(args: argparse.Namespace) -> DpContext:
                 " (give --axis to use data record 47 anyway)",
                 Exit.BAD_INPUT,
             )
-        record, dpv1 = RecordAccess(axis), dpv1 or Dpv1Setup()
+        dpv1 = dpv1 or Dpv1Setup()
+        if not dpv1.read_write:
+            raise CommandError(
+                f"--access ds47: the GSD file says C1_Read_Write_supp = 0: the slave reads"
+                f" and writes no data records ({args.gsd})",
+                Exit.BAD_INPUT,
+            )
+        record = RecordAccess(axis, max_data=dpv1.max_data)
     elif not kind.has_pkw:
         raise CommandError(f"PPO {kind.number} has no PKW words: --access ds47", Exit.BAD_INPUT)
     elif getattr(args, "axis", None) is not None:

@@ -21,8 +21,10 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Final
 
+from pkwbus.catalog.precedence import resolve
 from pkwbus.master.drive_identity import DescriptionBook, identity_of
 from pkwbus.master.outcomes import Answered, Cancelled, LineFailed, Outcome, Rejected
+from pkwbus.master.plan import PollSpec
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import (
     DATA_TYPE,
@@ -31,7 +33,7 @@ from pkwbus.protocol.descriptions import (
     DriveDescription,
     read_elements,
 )
-from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol.dialects import Command, Dialect
 
 __all__ = [
     "ASK_AGAIN",
@@ -40,6 +42,7 @@ __all__ = [
     "DescribeStep",
     "DriveDescriber",
     "Settled",
+    "described_poll",
 ]
 
 ASK_AGAIN: Final = 600.0  # seconds until a drive that did not describe is asked again
@@ -312,3 +315,16 @@ def _said(outcome: Outcome) -> str:
     if isinstance(outcome, Rejected):
         return outcome.text or outcome.short or f"fault {outcome.fault}"
     return "no description element in its answer"
+
+
+def described_poll(spec: PollSpec, settled: Settled, dialect: Dialect) -> PollSpec:
+    """``spec`` decoded (and read: text or value) as its parameter is now described."""
+    if spec.layers is None:
+        return spec
+    fmt = resolve(spec.layers, settled.description).description
+    request = spec.request
+    if fmt.is_text != spec.fmt.is_text:
+        indexed = request.subindex or request.command is Command.READ_ARRAY
+        index = request.subindex if indexed else None
+        request = pkw.read_parameter(dialect, request.pnu, index, text=fmt.is_text)
+    return replace(spec, fmt=fmt, request=request)

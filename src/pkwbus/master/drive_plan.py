@@ -7,28 +7,28 @@ import itertools
 from collections import deque
 from dataclasses import dataclass, replace
 
-from pkwbus.catalog.precedence import resolve
-from pkwbus.master.describing import DescribeStep, DriveDescriber, Settled
+from pkwbus.master.describing import DescribeStep, DriveDescriber, Settled, described_poll
 from pkwbus.master.drive_identity import identity_requests
 from pkwbus.master.health import DriveHealth, HealthPolicy
 from pkwbus.master.jobs import Job, Priority
-from pkwbus.master.outcomes import Outcome
+from pkwbus.master.outcomes import NotSent, Outcome
 from pkwbus.master.plan import (
     Described,
     DriveSpec,
     Event,
+    Finished,
     Overrun,
     PkwLengthTold,
     PollSpec,
     Send,
     StatusWord,
 )
-from pkwbus.master.record_transaction import RecordItem, RecordTransaction, fits
+from pkwbus.master.record_transaction import RecordItem, RecordTransaction
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command, Dialect
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw_length import PkwLength
+from pkwbus.protocol.profidrive_pkw import carried, fits
 from pkwbus.protocol.telegram import Protocol, split_block
 
 __all__ = ["Active", "DrivePlan", "PollState", "Work"]
@@ -269,12 +269,22 @@ class DrivePlan:
         only at times a little earlier)."""
         due: list[PollState] = []
         until = now + self.polls[0][2].spec.every / 2
-        while self.polls and self.polls[0][0] <= until and fits(len(due) + 1):
+        record = self.target.record
+        assert record is not None
+        while self.polls and self.polls[0][0] <= until and fits(len(due) + 1, record.max_data):
             poll = heapq.heappop(self.polls)[2]
             if now - poll.due > poll.spec.every and not poll.fresh:
                 events.append(Overrun(self.name))
             poll.fresh = False
+            why = carried(poll.spec.request)
+            if why:  # a text, say: ended unsent, polled (and refused) again at its interval
+                events.append(Finished(self.name, poll.spec, NotSent(why)))
+                poll.due = now + poll.spec.every
+                self.push_poll(poll)
+                continue
             due.append(poll)
+        if not due:
+            return None, events
         items = [RecordItem(p.spec.request, p.spec.fmt.vtype) for p in due]
         tx = self.transaction(items, retries=retries, deadline=deadline)
         send = Send(self.name, self.target, tx.telegram)
@@ -338,7 +348,7 @@ class DrivePlan:
                 if isinstance(active, PollState) and active.spec.request.pnu == done.pnu:
                     polls.append(active)
             for poll in polls:
-                poll.spec = _described(poll.spec, done, self.target.dialect)
+                poll.spec = described_poll(poll.spec, done, self.target.dialect)
                 poll.send = self.send_of(poll.spec.request)
             for poll in polls:
                 if id(poll) in waiting:
@@ -385,16 +395,3 @@ class DrivePlan:
         for poll in polls:
             poll.due = now
             self.push_poll(poll)
-
-
-def _described(spec: PollSpec, settled: Settled, dialect: Dialect) -> PollSpec:
-    """``spec`` decoded (and read: text or value) as its parameter is now described."""
-    if spec.layers is None:
-        return spec
-    fmt = resolve(spec.layers, settled.description).description
-    request = spec.request
-    if fmt.is_text != spec.fmt.is_text:
-        indexed = request.subindex or request.command is Command.READ_ARRAY
-        index = request.subindex if indexed else None
-        request = pkw.read_parameter(dialect, request.pnu, index, text=fmt.is_text)
-    return replace(spec, fmt=fmt, request=request)

@@ -13,17 +13,16 @@ The policy, in order:
   poll in flight ends, and it is probed with one short telegram at capped
   exponential back-off until it answers; then all its polls are due at once
   (none counts as an overrun);
-- a poll that starts more than one interval after it was due is an overrun;
-- nothing is sent past its deadline; a job still queued at its deadline ends.
+- a poll that starts more than one interval after it was due is an overrun; nothing
+  is sent past its deadline; a job still queued at its deadline ends.
 
 Drives wait in two heaps (ready, by the key above; and by the time they
 become due), so one exchange costs O(log n) in the number of drives. A
 drive's heap entries carry its version: a change of the drive pushes a new
 entry and the old one is skipped when it surfaces.
 
-A line asks :meth:`Planner.next_action`; a line that exchanges with every
-drive in turn (a PROFIBUS DP cycle, one PKW slot per slave) asks
-:meth:`Planner.next_for` each slot, under the same priorities.
+A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
+:meth:`Planner.next_for` for each slave's turn, under the same priorities.
 """
 
 from __future__ import annotations
@@ -192,14 +191,18 @@ class Planner:
 
     def active(self, drive: str) -> PkwTransaction | RecordTransaction | None:
         """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
-        active = self._by_name[drive].active
-        return active.tx if active is not None else None
+        return a.tx if (a := self._by_name[drive].active) is not None else None
 
     def expire_queued(self, drive: str, now: float) -> None:
-        """End the queued jobs of ``drive`` past their deadline (its slot cannot take one)."""
+        """End the jobs of ``drive`` past their deadline while nothing can go out to it,
+        queued or in flight between its tries."""
         d = self._by_name[drive]
         self._expire(d, d.writes, now)
         self._expire(d, d.reads, now)
+        active = d.active
+        if active is not None and not d.busy and now >= active.tx.deadline:
+            self._complete(d, active, TimedOut("deadline passed"), now)
+            self._index(d, now)
 
     def told_health(self, drive: str, up: bool, reason: str, now: float) -> None:
         """The wire tells ``drive``'s health (a DP slave in data exchange, or out of it); back
@@ -358,16 +361,14 @@ class Planner:
         if isinstance(work, DescribeStep):
             self.events.extend(d.described(work, outcome, now))
         elif isinstance(work, tuple):  # polls in one record: each with its own outcome
-            tx = active.tx
-            own = isinstance(tx, RecordTransaction) and tx.outcome is outcome
-            each = (
-                tx.outcomes if isinstance(tx, RecordTransaction) and own else (outcome,) * len(work)
-            )
+            tx, each = active.tx, [outcome] * len(work)
+            if isinstance(tx, RecordTransaction) and tx.outcome is outcome:
+                each = list(tx.outcomes)
             for i, (poll, result) in enumerate(zip(work, each, strict=True)):
-                tally = tx.tally if i == 0 else None  # the request's cost, counted once
+                # The request's cost counted once; due again from the request's first due,
+                # so that polls of one interval go out together (none later than due).
+                tally = tx.tally if i == 0 else None
                 self.events.append(Finished(d.name, poll.spec, result, tally))
-                # Due again from the request's first due: polls of one interval fall due
-                # together from now on, and go out in one request (none later than due).
                 poll.due = max(active.order + poll.spec.every, now)
                 d.push_poll(poll)
         elif isinstance(work, PollState):

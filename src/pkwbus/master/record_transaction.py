@@ -34,10 +34,11 @@ from pkwbus.protocol.value_types import ValueType
 
 __all__ = ["RecordItem", "RecordTransaction", "fits"]
 
+# The value types the typed formats name. Byte, Word and Double word are substitutes that
+# name no type: there the configuration, the description or the catalog decides.
 _TYPES = {
-    Format.BOOLEAN: ValueType.U16, Format.U8: ValueType.U16, Format.BYTE: ValueType.U16,
-    Format.U16: ValueType.U16, Format.WORD: ValueType.U16, Format.I8: ValueType.I16,
-    Format.I16: ValueType.I16, Format.U32: ValueType.U32, Format.DOUBLE_WORD: ValueType.U32,
+    Format.BOOLEAN: ValueType.U16, Format.U8: ValueType.U16, Format.U16: ValueType.U16,
+    Format.I8: ValueType.I16, Format.I16: ValueType.I16, Format.U32: ValueType.U32,
     Format.I32: ValueType.I32, Format.FLOAT: ValueType.F32,
 }  # fmt: skip
 
@@ -80,21 +81,21 @@ class RecordTransaction:
             tally.errors[result.kind] += 1
             if result.kind is ErrorKind.PORT:
                 return self._end(LineFailed(result.detail))
-            return self._try_again(f"no answer ({result.kind.value}: {result.detail})")
+            return self._try_again(f"no answer ({result.kind.value}: {result.detail})", now)
         tally.busy += result.duration
         try:
             response = profidrive.decode_response(result.data, self.request)
         except RemoteProtocolError as exc:
             tally.errors[ErrorKind.UNEXPECTED] += 1
-            return self._try_again(str(exc))
+            return self._try_again(str(exc), now)
         outcomes = tuple(
             self._outcome(item, got) for item, got in zip(self.items, response.results, strict=True)
         )
         return self._end(outcomes[0], outcomes)
 
-    def _try_again(self, why: str) -> Outcome | None:
+    def _try_again(self, why: str, now: float) -> Outcome | None:
         self._failures += 1
-        if self._failures > self.retries:
+        if self._failures > self.retries or now >= self.deadline:
             return self._end(TimedOut(f"no parameter response after {self._failures} tries: {why}"))
         tally = self.tally
         tally.retries += 1

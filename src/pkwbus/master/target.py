@@ -47,6 +47,7 @@ class RecordAccess:
 
     axis: int
     slot: int = 0
+    max_data: int = 240  # C1_Max_Data_Len: the largest record the slave takes, in bytes
 
 
 @dataclass(frozen=True)

@@ -114,6 +114,15 @@ class DpSlave:
 
         ``outputs`` are the Data_Exchange outputs (the PPO-write); all zero when None.
         """
+        transfer = self.transfer
+        stalled = self._step is not _Step.EXCHANGE and not self._acyclic
+        if transfer is not None and stalled and now >= transfer.deadline:
+            # The transfer cannot go on (the slave keeps another step, its diagnosis, say)
+            # and its time is up: it ends, whatever the slave does meanwhile.
+            self._end_transfer(RecordFailed(
+                f"no answer to the record transfer within the slave's response timeout"
+                f" ({transfer.setup.response_timeout:g} s)", timed_out=True,
+            ))  # fmt: skip
         if self._pending is not None:
             return self._pending
         if now < self._due:

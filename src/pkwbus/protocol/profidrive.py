@@ -281,6 +281,8 @@ def decode_response(data: bytes, request: ParameterRequest) -> ParameterResponse
         if change and pos >= len(data):
             raise RemoteProtocolError("a failed change's response is cut short")
         result, pos = decode_values(data, pos, address)
+        if not change and isinstance(result, Values) and result.format is Format.ZERO:
+            raise RemoteProtocolError(f"a read of parameter {address.pnu} answered with no value")
         if change and isinstance(result, Values):
             if result.format is not Format.ZERO:
                 raise RemoteProtocolError(f"a change answered with {result.format.name} values")

@@ -35,7 +35,7 @@ from pkwbus.protocol.profidrive import (
 )
 from pkwbus.protocol.value_types import ValueType
 
-__all__ = ["FORMATS", "RecordItem", "fits", "record_request"]
+__all__ = ["FORMATS", "RecordItem", "carried", "fits", "record_request"]
 
 _READS = frozenset({Command.READ, Command.READ_ARRAY})
 _EEPROM = frozenset(
@@ -65,11 +65,21 @@ class RecordItem:
     vtype: ValueType | None = None
 
 
-def fits(count: int) -> bool:
-    """Whether ``count`` value reads fit one request and its response (240 bytes each)."""
+def fits(count: int, max_data: int = profidrive.MAX_RECORD) -> bool:
+    """Whether ``count`` value reads fit one request and its response: 240 bytes each, or
+    the slave's ``C1_Max_Data_Len`` where it takes less."""
     if count > profidrive.MAX_PARAMETERS:
         return False
-    return 4 + _VALUE_ANSWER * count <= profidrive.MAX_RECORD
+    return 4 + _VALUE_ANSWER * count <= min(max_data, profidrive.MAX_RECORD)
+
+
+def carried(request: pkw.PkwRequest) -> str:
+    """Why ``request`` does not travel in data record 47 here (empty: it does)."""
+    try:
+        _address(request)
+    except LocalProtocolError as exc:
+        return str(exc)
+    return "texts do not travel in data record 47 here" if request.text else ""
 
 
 def record_request(

@@ -185,7 +185,9 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
     record = None
     if line.protocol == Protocol.PROFIBUS and drive.access == "ds47":
         axis = drive.axis if drive.axis is not None else AXES.get(drive.pkw_dialect.name, 0)
-        record = RecordAccess(axis)
+        settings = drive.dp.settings()[0]
+        dpv1 = settings.dpv1 if settings is not None else None
+        record = RecordAccess(axis, max_data=dpv1.max_data if dpv1 is not None else 240)
     return DriveTarget(
         Protocol(line.protocol),
         drive.address,

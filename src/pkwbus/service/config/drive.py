@@ -217,7 +217,8 @@ class Drive(Model):
         if ppo_type(self.ppo).has_pkw:
             return "pkw"
         settings = self.dp.settings()[0]
-        return "ds47" if settings is not None and settings.dpv1 is not None else None
+        dpv1 = settings.dpv1 if settings is not None else None
+        return "ds47" if dpv1 is not None and dpv1.read_write else None
 
     def refs(self) -> Iterator[tuple[str, ParameterRef]]:
         """Every parameter the drive's config names, with its place."""

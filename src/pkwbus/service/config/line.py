@@ -29,8 +29,6 @@ from pkwbus.protocol.params import (
     ParameterRef,
     canonical,
 )
-from pkwbus.protocol.ppo import ppo_type
-from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import FcAddressFormat
 from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
@@ -48,6 +46,7 @@ from pkwbus.service.config.fields import (
     Watchdog,
     upper,
 )
+from pkwbus.service.config.profibus import dp_drive_problems
 from pkwbus.sim.url import SimPort, parse_sim_port
 
 __all__ = ["MAX_DP_RETRIES", "Line", "Rs485"]
@@ -299,7 +298,7 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
             if key in drive.model_fields_set
         ]
     if line.protocol is BusProtocol.PROFIBUS:
-        problems += _dp_drive_problems(line, drive)
+        problems += dp_drive_problems(line, drive)
     elif line.protocol is BusProtocol.FC:
         for key in ("pkw_words", "pzd_words"):
             if key in drive.model_fields_set:
@@ -309,54 +308,6 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
     elif drive.pkw_words == 0 and (drive.poll or drive.writable):
         problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
     problems += _pnu_problems(drive, drive.pkw_dialect)
-    return problems
-
-
-def _dp_drive_problems(line: Line, drive: Drive) -> list[Place]:
-    problems: list[Place] = []
-    if drive.address == line.master_address:
-        problems.append(
-            ("address", f"{drive.address} is the master's own station (master_address)")
-        )
-    problems += [
-        (key, "the PPO sets it over PROFIBUS: give ppo")
-        for key in ("pkw_words", "pzd_words", "ind_layout")
-        if key in drive.model_fields_set
-    ]
-    kind = ppo_type(drive.ppo)
-    settings, dp_problems = drive.dp.settings()
-    dpv1 = settings is not None and settings.dpv1 is not None
-    access = drive.access
-    if access is None and (drive.poll or drive.writable):
-        problems.append(
-            (
-                "ppo",
-                f"PPO {kind.number} has no PKW words: the drive has no parameter channel"
-                " to poll or write (PPO 1, 2 and 5 have one; a DP-V1 slave has data"
-                " record 47: dpv1: true)",
-            )
-        )
-    if access == "pkw" and not kind.has_pkw:
-        problems.append(("parameter_access", f"pkw: PPO {kind.number} has no PKW words"))
-    if access == "ds47":
-        if settings is not None and not dpv1:
-            problems.append(
-                (
-                    "parameter_access",
-                    "ds47 needs a DP-V1 slave: dpv1: true, or a GSD file with DPV1_Slave = 1",
-                )
-            )
-        if drive.axis is None and drive.pkw_dialect.name not in AXES:
-            problems.append(
-                (
-                    "parameter_access",
-                    f"ds47: the {drive.pkw_dialect.name} dialect documents the PKW channel"
-                    " only (give axis to use data record 47 anyway)",
-                )
-            )
-    elif "axis" in drive.model_fields_set:
-        problems.append(("axis", "applies to parameter_access: ds47 only"))
-    problems += dp_problems
     return problems
 
 
