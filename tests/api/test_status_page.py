@@ -67,6 +67,7 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             frequency = fan1.locator('[data-parameter="16-13"]')
             sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
             sync_api.expect(frequency.locator(".title")).to_have_text("Frequency")
+            sync_api.expect(frequency.locator(".trend svg.spark")).to_have_count(1)
             sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
             sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
             sync_api.expect(fan1.locator(".bits")).to_contain_text("running")
@@ -99,6 +100,34 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             sync_api.expect(audit.locator("tbody tr").first).to_contain_text("ok")
             assert page.input_value("#token") == ""  # not left in the form
 
+            # The write form: the parameter, its limits and value, a confirmation, the answer.
+            page.select_option("#write-target", "fan1/3-41")
+            sync_api.expect(page.locator("#write-now")).to_contain_text("now 7.5 s")
+            page.fill("#write-value", "12.5")
+            page.click("#write-button")
+            sync_api.expect(page.locator("#write-button")).to_have_text(
+                re.compile(r"^Confirm: 7\.5 \u2192 12\.5 s$")
+            )
+            assert served.svc.sim.drives[1].value(341) == 750  # nothing sent before the confirm
+            page.click("#write-button")
+            result = page.locator("#write-result")
+            sync_api.expect(result).to_contain_text("fan1/3-41: written 12.5 s", timeout=20_000)
+            assert served.svc.sim.drives[1].value(341) == 1250
+            sync_api.expect(audit.locator("tbody tr").first).to_contain_text("12.5", timeout=20_000)
+            # A value outside the limits: the API's refusal, in words, and nothing sent.
+            page.fill("#write-value", "99999")
+            page.click("#write-button")
+            page.click("#write-button")
+            sync_api.expect(result).to_contain_text("refused (422", timeout=20_000)
+            assert served.svc.sim.drives[1].value(341) == 1250
+            # A wrong token: refused.
+            page.fill("#token", "not-the-token")
+            page.click("#token-form button")
+            sync_api.expect(result).to_contain_text("token: the token was refused", timeout=20_000)
+            page.fill("#write-value", "10")
+            page.click("#write-button")
+            sync_api.expect(result).to_contain_text("type the write token below first")
+
             shot = tmp_path / "status-page.png"
             page.screenshot(path=str(shot), full_page=True)
             print(f"\nstatus page screenshot: {shot}")
@@ -121,5 +150,7 @@ async def test_status_page_and_assets_are_served_locally(tmp_path: Path) -> None
             assert asset.startswith("/"), asset  # nothing from another host
             assert (await svc.client.get(asset)).status_code == 200, asset
         script = (await svc.client.get("/assets/status/status.js")).text
+        # The SVG namespace is a name the browser never fetches; nothing else is a URL.
+        script = script.replace('"http://www.w3.org/2000/svg"', '"svg-namespace"')
         assert "http://" not in script and "https://" not in script
         assert "/api/v1/drives" in script

@@ -17,7 +17,7 @@ from pkwbus.catalog import load_catalog
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol.params import Scaling, ValueType
 from pkwbus.protocol.telegram import Protocol
-from pkwbus.service.http.api import drive_view
+from pkwbus.service.http.views import drive_view
 from pkwbus.service.metrics.devices import SnapshotCollector
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator

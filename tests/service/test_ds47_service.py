@@ -167,6 +167,12 @@ async def test_the_due_polls_of_a_slave_go_out_in_one_request(tmp_path: Path) ->
 
             await until(lambda: sizes().count(len(POLLED)) >= 3)
             assert max(sizes()) == len(POLLED)
+        # The live list: each slave in data exchange, its ident and owner from its diagnosis.
+        view = {d["name"]: d for d in (await svc.client.get("/api/v1/drives")).json()}
+        for name in NAMES.values():
+            dp = view[name]["dp"]
+            assert dp["state"] == "data_exchange" and dp["ident"] == 0x80B5
+            assert dp["owner"] == 2 and dp["diagnosed"] is not None
         # "Not ready" answers were read again: more record reads than writes.
         reads = [
             f for f in svc.wire.frames

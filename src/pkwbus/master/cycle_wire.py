@@ -50,6 +50,7 @@ from pkwbus.master.transaction import (
     PkwTransaction,
     ResponseTelegram,
 )
+from pkwbus.protocol.dp_services import Diagnosis
 from pkwbus.protocol.dp_slave import (
     DiagnosisRead,
     DpSlave,
@@ -89,7 +90,7 @@ class DpEvents(Protocol):
 
     def slave_state(self, drive: str, state: SlaveState) -> None: ...
     def restarted(self, drive: str, reason: RestartReason) -> None: ...
-    def diagnosis(self, drive: str, flags: frozenset[str]) -> None: ...
+    def diagnosis(self, drive: str, diagnosis: Diagnosis) -> None: ...
 
 
 class NoDpEvents:
@@ -99,7 +100,7 @@ class NoDpEvents:
     def restarted(self, drive: str, reason: RestartReason) -> None:
         pass
 
-    def diagnosis(self, drive: str, flags: frozenset[str]) -> None:
+    def diagnosis(self, drive: str, diagnosis: Diagnosis) -> None:
         pass
 
 
@@ -310,8 +311,7 @@ class CycleWire:
                 "drive %s: parametrised again (%s)", name, event.reason, extra={"drive": name}
             )
         elif isinstance(event, DiagnosisRead):
-            if event.diagnosis.flags:
-                self.dp_events.diagnosis(name, event.diagnosis.flags)
+            self.dp_events.diagnosis(name, event.diagnosis)
         elif isinstance(event, SlotAnswer):
             self._answer(name, event, now)
         elif isinstance(event, TransferEnded):

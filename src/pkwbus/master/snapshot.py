@@ -9,8 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import Value
+from pkwbus.protocol.dp_slave_model import SlaveState
 
-__all__ = ["DriveState", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
+__all__ = ["DriveState", "LiveSlave", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,3 +49,16 @@ class Snapshot:
 
     def copy(self) -> Snapshot:
         return Snapshot(dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest))
+
+
+@dataclass(frozen=True, slots=True)
+class LiveSlave:
+    """A DP slave as the live list shows it: its state, and its latest diagnosis (ident
+    number, owning master, flags; None until one was read)."""
+
+    line: str
+    state: SlaveState = SlaveState.OFFLINE
+    ident: int | None = None
+    owner: int | None = None
+    flags: frozenset[str] = frozenset()
+    diagnosed: float | None = None  # wall clock of the latest diagnosis

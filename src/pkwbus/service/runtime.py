@@ -26,13 +26,13 @@ from pkwbus.catalog.description import (
 from pkwbus.catalog.precedence import Layers, resolve
 from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.plan import PollSpec
-from pkwbus.master.snapshot import ReadingKey, Snapshot
+from pkwbus.master.snapshot import LiveSlave, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.params import ParameterRef
 
-__all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime"]
+__all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime", "Trends"]
 
 log = logging.getLogger(__name__)
 
@@ -136,6 +136,12 @@ class Alarms(Protocol):
     def said(self, key: ReadingKey, value: object) -> str: ...
 
 
+class Trends(Protocol):
+    """The last minutes of each polled value (service.metrics.trends.Trends)."""
+
+    def points(self, key: ReadingKey, now: float) -> list[float | None]: ...
+
+
 class Runtime:
     def __init__(
         self,
@@ -146,6 +152,8 @@ class Runtime:
         *,
         job_timeout: float = 5.0,
         alarms: Alarms | None = None,
+        trends: Trends | None = None,
+        live: Mapping[str, LiveSlave] | None = None,
     ) -> None:
         self.runners = {s.name: s for s in runners}
         self.drives = {d.name: d for d in drives}
@@ -153,6 +161,8 @@ class Runtime:
         self.registry = registry
         self.job_timeout = job_timeout
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
+        self.trends = trends  # the values' last minutes, for the page (None: none kept)
+        self.live = live if live is not None else {}  # the DP slaves' live list, by drive
         self._tasks: list[asyncio.Task[None]] = []
         self.cleanups: list[Callable[[], object]] = []
         # What the status page shows of each line besides the snapshot (service.metrics).

@@ -45,6 +45,7 @@ from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
+from pkwbus.service.metrics.trends import Trends
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.dp_line import DpSimulator, SlaveKind
@@ -87,10 +88,12 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
     collector = SnapshotCollector(snapshot, drives, infos)
     registry.register(collector)
     board = AlarmBoard(alarm_parameters(config, entries), registry)
+    trends = Trends()
 
     def landed(key: ReadingKey, reading: Reading) -> None:  # each value, to each observer
         collector.landed(key, reading)
         board.landed(key, reading)
+        trends.landed(key, reading)
 
     descriptions = DescriptionSink({e.name: e for e in entries}, collector, kept)
     for line, specs in planned:
@@ -112,7 +115,9 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
                 line.name, wire, specs, retries=line.retries, snapshot=snapshot, events=events
             )
         )
-    runtime = Runtime(runners, entries, snapshot, registry, alarms=board)
+    runtime = Runtime(
+        runners, entries, snapshot, registry, alarms=board, trends=trends, live=metrics.live
+    )
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)
     return runtime

@@ -25,17 +25,13 @@ from fastapi_offline import FastAPIOffline
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
-from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.recorder import AuditRecorder
 from pkwbus.service.http.models import (
     ERRORS,
-    AlarmView,
     DriveView,
     Health,
     LineView,
-    ParameterReading,
     Readiness,
     ValueBody,
     WriteBody,
@@ -48,7 +44,7 @@ from pkwbus.service.http.parameters import (
     ParameterService,
     WriteOrder,
 )
-from pkwbus.service.http.readable import readable
+from pkwbus.service.http.views import drive_view, line_views, trend_views
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
@@ -266,6 +262,13 @@ def create_app(
     async def drives() -> list[DriveView]:
         return [drive_view(runtime, name) for name in runtime.drives]
 
+    @app.get("/api/v1/trends", response_model=dict[str, dict[str, list[float | None]]])
+    async def trends() -> dict[str, dict[str, list[float | None]]]:
+        """Each drive's values over the last 15 minutes, a point a 15 s (the page's
+        sparklines; /metrics and the drives' views keep full precision)."""
+        now = time.time()
+        return {name: trend_views(runtime, name, now) for name in runtime.drives}
+
     looks: dict[str, tuple[float, float]] = {}  # line -> (monotonic time, busy seconds)
 
     @app.get("/api/v1/lines", response_model=list[LineView])
@@ -290,86 +293,3 @@ def _error_response(exc: ApiError) -> JSONResponse:
         if isinstance(value, str):
             error[key] = _cap(value)
     return JSONResponse(body, status_code=exc.status)
-
-
-def line_views(
-    runtime: Runtime, looks: dict[str, tuple[float, float]], now: float
-) -> list[LineView]:
-    """Each line's port, drives and how busy it was since ``looks`` last saw it."""
-    snap = runtime.snapshot
-    views = []
-    for name in runtime.runners:
-        mine = [d for d, e in runtime.drives.items() if e.line == name]
-        up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
-        counts = runtime.counts.get(name)
-        busy = counts.busy_total if counts is not None else 0.0
-        utilisation = None
-        seen = looks.get(name)
-        if seen is not None and now > seen[0]:
-            utilisation = min(1.0, max(0.0, (busy - seen[1]) / (now - seen[0])))
-        looks[name] = (now, busy)
-        views.append(
-            LineView(
-                name=name,
-                open=bool(snap.lines.get(name)),
-                drives=len(mine),
-                drives_up=up,
-                busy_seconds=busy,
-                utilisation=utilisation,
-            )
-        )
-    return views
-
-
-def alarm_views(runtime: Runtime, name: str) -> list[AlarmView]:
-    """The drive's active alarms and warnings, in words."""
-    board = runtime.alarms
-    active = board.active(name) if board is not None else []
-    return [
-        AlarmView(code=a.alarm.code, text=a.alarm.text, kind=a.alarm.kind,
-                  parameter=a.alarm.parameter, since=a.since)
-        for a in active
-    ]  # fmt: skip
-
-
-def drive_view(runtime: Runtime, name: str) -> DriveView:
-    entry = runtime.drives[name]
-    snap = runtime.snapshot
-    counts = runtime.counts.get(entry.line)
-    state = snap.drives.get(name)
-    word = state.status_word if state else None
-    formats = entry.formats
-    values = []
-    for (drive, parameter, index), reading in list(snap.readings.items()):
-        if drive != name:
-            continue
-        fmt = formats.get((parameter, index), ParameterDescription())
-        board = runtime.alarms
-        alarm_words = board.said((drive, parameter, index), reading.value) if board else ""
-        values.append(
-            ParameterReading(
-                parameter=parameter,
-                index=index,
-                value=reading.value,
-                raw=reading.raw,
-                unit=entry.unit_of(parameter),
-                timestamp=reading.timestamp,
-                name=fmt.name,
-                shown=alarm_words or readable(reading.value, fmt),
-                source=entry.sources.get(parameter, "none"),
-            )
-        )
-    return DriveView(
-        name=name,
-        line=entry.line,
-        protocol=entry.target.protocol.value,
-        address=entry.target.address,
-        dialect=entry.target.dialect.name,
-        up=state.up if state else True,
-        status_word=word,
-        status=status_bits(word, entry.target.profile) if word is not None else {},
-        faults=counts.fault_counts.get(name, 0) if counts is not None else 0,
-        telegram_errors=counts.error_counts.get(name, 0) if counts is not None else 0,
-        values=values,
-        alarms=alarm_views(runtime, name),
-    )

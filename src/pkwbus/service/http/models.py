@@ -18,7 +18,9 @@ __all__ = [
     "LineView",
     "ParameterReading",
     "Readiness",
+    "SlaveView",
     "ValueBody",
+    "WritableView",
     "WriteBody",
     "WriteResult",
 ]
@@ -48,6 +50,30 @@ class AlarmView(BaseModel):
     since: float  # wall clock, seconds
 
 
+class WritableView(BaseModel):
+    """A parameter the API may write on the drive: its limits (as described now) and the
+    latest value the drive confirmed (None: none yet), for a write form."""
+
+    parameter: str
+    index: int
+    name: str
+    unit: str
+    minimum: float | None
+    maximum: float | None
+    value: float | int | str | None
+    text: bool = False  # a text parameter: the new value is a string
+
+
+class SlaveView(BaseModel):
+    """A PROFIBUS DP slave in the live list: its state, and its latest diagnosis."""
+
+    state: str
+    ident: int | None  # from its diagnosis (None: none read yet)
+    owner: int | None  # the master that owns it, by its diagnosis (None: none)
+    diagnosis: list[str]  # the flags of its latest diagnosis, in words (VIPA IM 353 names)
+    diagnosed: float | None  # wall clock of that diagnosis
+
+
 class DriveView(BaseModel):
     name: str
     line: str
@@ -61,6 +87,8 @@ class DriveView(BaseModel):
     faults: int = 0  # rejections since the service started
     telegram_errors: int = 0  # exchanges without a usable answer since the service started
     alarms: list[AlarmView] = []  # active alarms first, then warnings, oldest first
+    writable: list[WritableView] = []  # what the write form offers
+    dp: SlaveView | None = None  # a PROFIBUS DP slave: its place in the live list
 
 
 class LineView(BaseModel):

@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import collections
 import platform
+import time
 import weakref
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import replace
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
@@ -25,10 +27,11 @@ from pkwbus.catalog.precedence import Disagreement
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.plan import Described
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.snapshot import LiveSlave, Reading, ReadingKey
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
 from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol.dp_services import Diagnosis
 from pkwbus.protocol.dp_slave import RestartReason, SlaveState
 from pkwbus.service.metrics.exposition import CounterFamily
 
@@ -67,6 +70,8 @@ class ServiceMetrics:
     """The service's own counters; one :class:`LineMetrics` per line feeds them."""
 
     def __init__(self, registry: CollectorRegistry) -> None:
+        # The live list of the DP slaves, by drive, as their lines report them.
+        self.live: dict[str, LiveSlave] = {}
         ld = ["line", "drive"]
         self.faults = CounterFamily(
             "pkwbus_pkw_faults",
@@ -194,13 +199,19 @@ class DpMetrics:
     def slave_state(self, drive: str, state: SlaveState) -> None:
         for s, gauge in self._states[drive].items():
             gauge.set(1 if s is state else 0)
+        self._m.live[drive] = replace(self._m.live.get(drive, LiveSlave(self._line)), state=state)
 
     def restarted(self, drive: str, reason: RestartReason) -> None:
         self._restarts[(drive, reason)].inc()
 
-    def diagnosis(self, drive: str, flags: frozenset[str]) -> None:
-        for flag in sorted(flags):
+    def diagnosis(self, drive: str, diagnosis: Diagnosis) -> None:
+        for flag in sorted(diagnosis.flags):
             self._m.dp_diagnostics.labels(self._line, drive, flag).inc()
+        old = self._m.live.get(drive, LiveSlave(self._line))
+        self._m.live[drive] = replace(
+            old, ident=diagnosis.ident, owner=diagnosis.master, flags=diagnosis.flags,
+            diagnosed=time.time(),
+        )  # fmt: skip
 
 
 class LineMetrics:

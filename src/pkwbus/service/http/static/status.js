@@ -30,6 +30,24 @@ function words(name) {
   return name.replace(/_/g, " ");
 }
 
+function drawLive(drives) {
+  const slaves = drives.filter((d) => d.dp);
+  const section = document.getElementById("live");
+  section.hidden = slaves.length === 0;
+  const rows = slaves.map((d) => {
+    const dp = d.dp;
+    const ident = dp.ident === null ? "-" : `0x${dp.ident.toString(16).padStart(4, "0")}`;
+    const owner = dp.owner === null ? "none" : `${dp.owner}`;
+    const diag = dp.diagnosed === null ? "none read yet"
+      : (dp.diagnosis.length ? dp.diagnosis.join(", ") : "no flag set");
+    return el("tr", { "data-slave": d.name, class: dp.state === "data_exchange" ? "" : "bad" },
+      el("td", {}, d.name), el("td", {}, d.line), el("td", { class: "num" }, d.address),
+      el("td", {}, words(dp.state)), el("td", {}, ident), el("td", {}, owner),
+      el("td", {}, diag));
+  });
+  section.querySelector("tbody").replaceChildren(...rows);
+}
+
 function drawLines(lines) {
   const body = document.querySelector("#lines tbody");
   const rows = lines.map((line) => {
@@ -44,6 +62,45 @@ function drawLines(lines) {
   body.replaceChildren(...rows);
 }
 
+// The values' last 15 minutes (/api/v1/trends), fetched every 15 s: drive -> name -> points.
+let trendData = {};
+let trendsAt = 0;
+const TREND_PERIOD_MS = 15000;
+const SVG = "http://www.w3.org/2000/svg";
+
+function sparkline(points) {
+  const svg = document.createElementNS(SVG, "svg");
+  svg.setAttribute("class", "spark");
+  svg.setAttribute("viewBox", "0 0 120 24");
+  svg.setAttribute("width", "120");
+  svg.setAttribute("height", "24");
+  const known = points.filter((v) => v !== null);
+  if (known.length < 2) return svg;
+  const low = Math.min(...known), high = Math.max(...known);
+  const span = high - low || 1;
+  let path = "", pen = "M";
+  points.forEach((v, i) => {
+    if (v === null) { pen = "M"; return; }
+    const x = (i / (points.length - 1)) * 118 + 1;
+    const y = 22 - ((v - low) / span) * 20;
+    path += `${pen}${x.toFixed(1)},${y.toFixed(1)} `;
+    pen = "L";
+  });
+  const line = document.createElementNS(SVG, "path");
+  line.setAttribute("d", path.trim());
+  svg.append(line);
+  const title = document.createElementNS(SVG, "title");
+  title.textContent = `last 15 min: ${low} to ${high}`;
+  svg.append(title);
+  return svg;
+}
+
+async function refreshTrends() {
+  if (Date.now() - trendsAt < TREND_PERIOD_MS) return;
+  trendsAt = Date.now();
+  trendData = await getJson("/api/v1/trends");
+}
+
 function drawDrive(drive, now) {
   const bits = Object.entries(drive.status || {}).filter(([, on]) => on)
     .map(([name]) => el("span", { class: ALARM_BITS.has(name) ? "alarm" : "" }, words(name)));
@@ -52,9 +109,11 @@ function drawDrive(drive, now) {
     const shown = v.shown || `${v.value}`;  // to its resolution; the API keeps full precision
     const value = v.unit ? `${shown} ${v.unit}` : shown;
     const name = v.index ? `${v.parameter}[${v.index}]` : v.parameter;
+    const points = (trendData[drive.name] || {})[name] || [];
     return el("tr", { class: seconds > STALE_SECONDS || !drive.up ? "stale" : "", "data-parameter": name },
       el("td", {}, name), el("td", { class: "title" }, v.name || ""),
       el("td", { class: "num value", title: `${v.value}` }, value),
+      el("td", { class: "trend" }, sparkline(points)),
       el("td", { class: "num age" }, age(seconds)));
   });
   const alarms = (drive.alarms || []).map((a) => {
@@ -74,7 +133,8 @@ function drawDrive(drive, now) {
     el("div", { class: "bits" }, ...bits),
     alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
-      el("th", {}, "value"), el("th", {}, "age"))), el("tbody", {}, ...rows)));
+      el("th", {}, "value"), el("th", {}, "15 min"), el("th", {}, "age"))),
+      el("tbody", {}, ...rows)));
 }
 
 // The token for the audit log: in this variable only (no storage), for this page's life.
@@ -111,7 +171,99 @@ document.getElementById("token-form").addEventListener("submit", (event) => {
   const input = document.getElementById("token");
   auditToken = input.value.trim();
   input.value = "";
+  refreshWrites().catch((error) => showResult(`token: ${error.message}`, true));
+});
+
+// The write form: the writable parameters of every drive, kept across refreshes.
+let writables = new Map();  // "drive/parameter[index]" -> {drive, w}
+let pending = null;  // the write waiting for its confirmation: {key, value}
+
+function writeKey(drive, w) {
+  return `${drive}/${w.parameter}` + (w.index ? `[${w.index}]` : "");
+}
+
+function describeWritable(w) {
+  const unit = w.unit ? ` ${w.unit}` : "";
+  const now = w.value === null ? "not read yet" : `now ${w.value}${unit}`;
+  const low = w.minimum === null ? "" : `${w.minimum}`;
+  const high = w.maximum === null ? "" : `${w.maximum}`;
+  const limits = low || high ? `, limits ${low || "-"} to ${high || "-"}${unit}` : "";
+  return `${w.name ? w.name + ": " : ""}${now}${limits}`;
+}
+
+function drawWritable(drives) {
+  const select = document.getElementById("write-target");
+  const chosen = select.value;
+  writables = new Map();
+  const options = [];
+  for (const d of drives) {
+    for (const w of d.writable || []) {
+      const key = writeKey(d.name, w);
+      writables.set(key, { drive: d.name, w });
+      options.push(el("option", { value: key }, key));
+    }
+  }
+  if (options.length === 0) options.push(el("option", { value: "" }, "(none writable)"));
+  select.replaceChildren(...options);
+  if (writables.has(chosen)) select.value = chosen;
+  const item = writables.get(select.value);
+  document.getElementById("write-now").textContent = item ? describeWritable(item.w) : "";
+}
+
+function showResult(text, bad) {
+  const out = document.getElementById("write-result");
+  out.textContent = text;
+  out.className = bad ? "bad" : "ok";
+  out.hidden = false;
+}
+
+async function submitWrite(event) {
+  event.preventDefault();
+  const button = document.getElementById("write-button");
+  const key = document.getElementById("write-target").value;
+  const raw = document.getElementById("write-value").value.trim();
+  const item = writables.get(key);
+  if (!item || raw === "") return showResult("choose a parameter and type its new value", true);
+  if (!auditToken) return showResult("type the write token below first", true);
+  const value = item.w.text ? raw : Number(raw);
+  if (!item.w.text && !Number.isFinite(value)) return showResult(`${raw} is not a number`, true);
+  if (!pending || pending.key !== key || pending.value !== value) {
+    pending = { key, value };
+    const old = item.w.value === null ? "?" : item.w.value;
+    button.textContent = `Confirm: ${old} \u2192 ${value}${item.w.unit ? " " + item.w.unit : ""}`;
+    return;
+  }
+  pending = null;
+  button.textContent = "Write";
+  const index = item.w.index ? `?index=${item.w.index}` : "";
+  const response = await fetch(
+    `/api/v1/drives/${encodeURIComponent(item.drive)}/parameters/` +
+      `${encodeURIComponent(item.w.parameter)}${index}`,
+    { method: "PUT", cache: "no-store",
+      headers: { Authorization: `Bearer ${auditToken}`, "Content-Type": "application/json" },
+      body: JSON.stringify({ value }) });
+  const body = await response.json().catch(() => ({}));
+  if (response.ok) {
+    const unit = body.unit ? ` ${body.unit}` : "";
+    const shown = body.value === null || body.value === undefined ? value : body.value;
+    showResult(`${key}: written ${shown}${unit} (the drive's answer; audit entry ${body.audit_id})`,
+      false);
+  } else {
+    const error = body.error || {};
+    showResult(`${key}: refused (${response.status} ${error.kind || ""}): ` +
+      `${error.message || response.statusText}`, true);
+  }
   refreshWrites().catch(() => {});
+}
+
+document.getElementById("write-form").addEventListener("submit", (event) => {
+  submitWrite(event).catch((error) => showResult(`no answer from pkwbus (${error.message})`, true));
+});
+document.getElementById("write-target").addEventListener("change", () => {
+  pending = null;
+  document.getElementById("write-button").textContent = "Write";
+  const item = writables.get(document.getElementById("write-target").value);
+  document.getElementById("write-now").textContent = item ? describeWritable(item.w) : "";
 });
 
 async function getJson(path) {
@@ -125,10 +277,13 @@ async function refresh() {
   try {
     const [lines, drives, ready] = await Promise.all(
       [getJson("/api/v1/lines"), getJson("/api/v1/drives"), getJson("/readyz")]);
+    await refreshTrends().catch(() => {});  // the sparklines wait for the next try
     const now = Date.now() / 1000;
     drawLines(lines);
     document.getElementById("drives").replaceChildren(
       el("h2", {}, "Drives"), ...drives.map((d) => drawDrive(d, now)));
+    drawWritable(drives);
+    drawLive(drives);
     problem.hidden = ready.writes !== false;
     problem.textContent = ready.reason || "";
     await refreshWrites();

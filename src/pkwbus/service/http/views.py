@@ -1,0 +1,161 @@
+"""What the JSON API and the status page show of the lines and the drives: their views,
+made from the runtime and its snapshot (the alarms in words, the writable parameters,
+the trends of the values)."""
+
+from __future__ import annotations
+
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.pzd import status_bits
+from pkwbus.service.http.models import (
+    AlarmView,
+    DriveView,
+    LineView,
+    ParameterReading,
+    SlaveView,
+    WritableView,
+)
+from pkwbus.service.http.readable import readable
+from pkwbus.service.runtime import Runtime
+
+__all__ = [
+    "alarm_views",
+    "drive_view",
+    "line_views",
+    "slave_view",
+    "trend_views",
+    "writable_views",
+]
+
+
+def line_views(
+    runtime: Runtime, looks: dict[str, tuple[float, float]], now: float
+) -> list[LineView]:
+    """Each line's port, drives and how busy it was since ``looks`` last saw it."""
+    snap = runtime.snapshot
+    views = []
+    for name in runtime.runners:
+        mine = [d for d, e in runtime.drives.items() if e.line == name]
+        up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
+        counts = runtime.counts.get(name)
+        busy = counts.busy_total if counts is not None else 0.0
+        utilisation = None
+        seen = looks.get(name)
+        if seen is not None and now > seen[0]:
+            utilisation = min(1.0, max(0.0, (busy - seen[1]) / (now - seen[0])))
+        looks[name] = (now, busy)
+        views.append(
+            LineView(
+                name=name,
+                open=bool(snap.lines.get(name)),
+                drives=len(mine),
+                drives_up=up,
+                busy_seconds=busy,
+                utilisation=utilisation,
+            )
+        )
+    return views
+
+
+def alarm_views(runtime: Runtime, name: str) -> list[AlarmView]:
+    """The drive's active alarms and warnings, in words."""
+    board = runtime.alarms
+    active = board.active(name) if board is not None else []
+    return [
+        AlarmView(code=a.alarm.code, text=a.alarm.text, kind=a.alarm.kind,
+                  parameter=a.alarm.parameter, since=a.since)
+        for a in active
+    ]  # fmt: skip
+
+
+def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
+    """The drive's writable parameters, their limits as described now and the latest value
+    the drive confirmed."""
+    entry = runtime.drives[name]
+    views = []
+    for (pnu, index), known in sorted(entry.parameters.configured.items(), key=str):
+        if not known.writable or (index is not None and index < 0):
+            continue
+        ref = entry.canonical(ParameterRef(pnu, index, ""))
+        fmt = entry.format_of(ref)
+        latest = runtime.snapshot.latest.get((name, pnu, index or 0))
+        views.append(
+            WritableView(
+                parameter=ref.name, index=index or 0, name=fmt.name, unit=fmt.unit,
+                minimum=fmt.minimum, maximum=fmt.maximum,
+                value=latest.value if latest is not None else None, text=fmt.is_text,
+            )
+        )  # fmt: skip
+    return views
+
+
+def slave_view(runtime: Runtime, name: str) -> SlaveView | None:
+    """The drive's place in its DP line's live list (None: no DP slave)."""
+    live = runtime.live.get(name)
+    if live is None:
+        return None
+    flags = sorted(flag.replace("_", " ") for flag in live.flags)
+    return SlaveView(
+        state=live.state.value, ident=live.ident, owner=live.owner, diagnosis=flags,
+        diagnosed=live.diagnosed,
+    )  # fmt: skip
+
+
+def drive_view(runtime: Runtime, name: str) -> DriveView:
+    entry = runtime.drives[name]
+    snap = runtime.snapshot
+    counts = runtime.counts.get(entry.line)
+    state = snap.drives.get(name)
+    word = state.status_word if state else None
+    formats = entry.formats
+    values = []
+    for (drive, parameter, index), reading in list(snap.readings.items()):
+        if drive != name:
+            continue
+        fmt = formats.get((parameter, index), ParameterDescription())
+        board = runtime.alarms
+        alarm_words = board.said((drive, parameter, index), reading.value) if board else ""
+        values.append(
+            ParameterReading(
+                parameter=parameter,
+                index=index,
+                value=reading.value,
+                raw=reading.raw,
+                unit=entry.unit_of(parameter),
+                timestamp=reading.timestamp,
+                name=fmt.name,
+                shown=alarm_words or readable(reading.value, fmt),
+                source=entry.sources.get(parameter, "none"),
+            )
+        )
+    return DriveView(
+        name=name,
+        line=entry.line,
+        protocol=entry.target.protocol.value,
+        address=entry.target.address,
+        dialect=entry.target.dialect.name,
+        up=state.up if state else True,
+        status_word=word,
+        status=status_bits(word, entry.target.profile) if word is not None else {},
+        faults=counts.fault_counts.get(name, 0) if counts is not None else 0,
+        telegram_errors=counts.error_counts.get(name, 0) if counts is not None else 0,
+        values=values,
+        alarms=alarm_views(runtime, name),
+        writable=writable_views(runtime, name),
+        dp=slave_view(runtime, name),
+    )
+
+
+def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float | None]]:
+    """The last 15 minutes of each polled numeric value of the drive, oldest first (one
+    point a 15 s, None where none landed), by its parameter as the API names it."""
+    trends = runtime.trends
+    if trends is None:
+        return {}
+    out: dict[str, list[float | None]] = {}
+    for drive, parameter, index in list(runtime.snapshot.readings):
+        if drive == name:
+            points = trends.points((drive, parameter, index), now)
+            if points:
+                out[f"{parameter}[{index}]" if index else parameter] = points
+    return out
