@@ -30,7 +30,7 @@ DRIVES = [
      "poll": [("3-41", "100ms"), ("16-13", "200ms"), ("16-90", "200ms")],
      "writable": ["3-41"]},
     {"name": "fan2", "address": 2, "catalog": "danfoss-fc",
-     "poll": [("3-41", "100ms")], "writable": []},
+     "poll": [("3-41", "100ms"), ("16-90", "200ms")], "writable": []},
 ]  # fmt: skip
 
 
@@ -79,11 +79,22 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
             sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)
 
-            # A trip: its alarm in the vendor's words (16-90 bit 2, Danfoss MCA 121 manual).
-            served.trip(1, 14, 2)
-            alarm = fan1.locator('ul.alarms li[data-code="16-90 bit 2"]')
+            # A trip: its alarm in the vendor's words (16-90 bit 2, Danfoss MCA 121 manual),
+            # and the drive in alarm comes first.
+            served.trip(2, 14, 2)
+            fan2 = page.locator('[data-drive="fan2"]')
+            alarm = fan2.locator('ul.alarms li[data-code="16-90 bit 2"]')
             sync_api.expect(alarm).to_contain_text("Earth fault", timeout=20_000)
             sync_api.expect(alarm).to_have_class("alarm")
+            first = page.locator("#drives .drive").first
+            sync_api.expect(first).to_have_attribute("data-drive", "fan2")
+            # A drive's section folds, and stays folded across refreshes.
+            fan2.locator("button.fold").click()
+            sync_api.expect(fan2.locator("table")).to_be_hidden()
+            page.wait_for_timeout(2500)
+            sync_api.expect(fan2.locator("table")).to_be_hidden()
+            fan2.locator("button.fold").click()
+            sync_api.expect(fan2.locator("table")).to_be_visible()
 
             # The last write attempts show once the page is given a token.
             audit = page.locator("#audit")

@@ -123,8 +123,15 @@ function drawDrive(drive, now) {
   });
   const word = drive.status_word === null ? "no status word"
     : `status word 0x${drive.status_word.toString(16).padStart(4, "0")}`;
-  return el("div", { class: `drive ${drive.up ? "up" : "down"}`, "data-drive": drive.name },
-    el("h3", {}, `${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
+  const fold = el("button", { class: "fold", type: "button", title: "fold or unfold" },
+    folded.has(drive.name) ? "+" : "\u2212");
+  fold.addEventListener("click", () => {
+    if (folded.has(drive.name)) folded.delete(drive.name); else folded.add(drive.name);
+    refreshNow();
+  });
+  const cls = `drive ${drive.up ? "up" : "down"}${folded.has(drive.name) ? " folded" : ""}`;
+  return el("div", { class: cls, "data-drive": drive.name },
+    el("h3", {}, fold, ` ${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
       ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
     el("div", { class: "counts" },
       el("span", { class: drive.faults ? "alarm" : "" }, `${drive.faults} faults`),
@@ -135,6 +142,16 @@ function drawDrive(drive, now) {
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "15 min"), el("th", {}, "age"))),
       el("tbody", {}, ...rows)));
+}
+
+// Drives folded by the reader (kept across refreshes); drives down or in alarm come first.
+const folded = new Set();
+
+function urgency(drive) {
+  if (!drive.up) return 0;
+  if ((drive.alarms || []).some((a) => a.kind === "alarm")) return 1;
+  if ((drive.alarms || []).length) return 2;
+  return 3;
 }
 
 // The token for the audit log: in this variable only (no storage), for this page's life.
@@ -272,16 +289,25 @@ async function getJson(path) {
   return response.json();
 }
 
+let lastDrives = [];
+
+function refreshNow() {  // the drives from the last data: down or in alarm first, as folded
+  const now = Date.now() / 1000;
+  const ordered = lastDrives.map((d, i) => [urgency(d), i, d])
+    .sort((a, b) => a[0] - b[0] || a[1] - b[1]);
+  document.getElementById("drives").replaceChildren(
+    el("h2", {}, "Drives"), ...ordered.map(([, , d]) => drawDrive(d, now)));
+}
+
 async function refresh() {
   const problem = document.getElementById("problem");
   try {
     const [lines, drives, ready] = await Promise.all(
       [getJson("/api/v1/lines"), getJson("/api/v1/drives"), getJson("/readyz")]);
     await refreshTrends().catch(() => {});  // the sparklines wait for the next try
-    const now = Date.now() / 1000;
     drawLines(lines);
-    document.getElementById("drives").replaceChildren(
-      el("h2", {}, "Drives"), ...drives.map((d) => drawDrive(d, now)));
+    lastDrives = drives;
+    refreshNow();
     drawWritable(drives);
     drawLive(drives);
     problem.hidden = ready.writes !== false;
