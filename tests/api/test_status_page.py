@@ -138,6 +138,7 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             page.fill("#write-value", "10")
             page.click("#write-button")
             sync_api.expect(result).to_contain_text("type the write token below first")
+            sync_api.expect(ramp).to_have_text("12.50 s", timeout=20_000)  # what the drive holds
 
             shot = tmp_path / "status-page.png"
             page.screenshot(path=str(shot), full_page=True)
