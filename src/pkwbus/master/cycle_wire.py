@@ -236,17 +236,24 @@ class CycleWire:
                 self._done(name, send, Failure(ErrorKind.TIMEOUT, detail), now)
             if slot.busy:
                 return
-        if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
-            planner.expire_queued(name, now)  # nothing can go out: they end at deadline
-            runner.batch()
-            return
-        send = planner.next_for(name, now)
-        runner.batch()
+        send = self._next(name, slave, now)
         tx = planner.active(name) if send is not None else None
         if send is None or not isinstance(tx, PkwTransaction):  # (next_for gave its Send)
             return
         slot.submit(tx.request)
         self._sends[name] = send
+
+    def _next(self, name: str, slave: DpSlave, now: float) -> Send | None:
+        """The planner's next request for the slave alone; None, and its jobs past their
+        deadline ended, while nothing can go out to it."""
+        planner, runner = self.runner.planner, self.runner
+        if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
+            planner.expire_queued(name, now)  # nothing can go out: they end at deadline
+            runner.batch()
+            return None
+        send = planner.next_for(name, now)
+        runner.batch()
+        return send
 
     def _feed_record(self, name: str, run: SlaveRun, now: float) -> None:
         """A DP-V1 slave whose parameters go through data record 47: with no transfer in
@@ -256,12 +263,7 @@ class CycleWire:
         if name in self._sends:
             return  # its transfer is in progress: it ends on its own (response timeout)
         planner = runner.planner
-        if slave.state is not SlaveState.DATA_EXCHANGE or slave.waiting:
-            planner.expire_queued(name, now)  # nothing can go out: they end at deadline
-            runner.batch()
-            return
-        send = planner.next_for(name, now)
-        runner.batch()
+        send = self._next(name, slave, now)
         if send is None:
             return
         record = self._specs[run.address].record
