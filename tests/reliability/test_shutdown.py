@@ -20,6 +20,8 @@ AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
 async def test_a_stop_signal_during_a_write(tmp_path: Path, sig: signal.Signals) -> None:
+    if signal.getsignal(sig) is signal.SIG_IGN:  # started under nohup: the service inherits it
+        pytest.skip(f"{sig.name} is ignored here, and pkwbus rightly keeps an ignored one so")
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.8), seed=1, catalog="danfoss-fc")
     end = await sim.serve_tcp("127.0.0.1", 0)
     service = Service(tmp_path, end.url, timeout="3s")

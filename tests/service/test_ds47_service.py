@@ -179,7 +179,7 @@ async def test_the_due_polls_of_a_slave_go_out_in_one_request(tmp_path: Path) ->
             if f.dsap == C1_SAP and decode_c1_request(f.data).function is C1Function.READ
         ]  # fmt: skip
         writes = sum(len(svc.record_writes(a)) for a in ADDRESSES)
-        assert len(reads) >= 2 * writes - len(ADDRESSES)  # a transfer may be under way
+        assert len(reads) > writes  # each response was read again at least once
 
 
 async def test_a_write_goes_through_the_record_and_is_read_back(tmp_path: Path) -> None:
