@@ -538,8 +538,8 @@ def check_demo(token: str) -> None:
 
     drives = demo_drives()
     wait_until(f"all {drives} demo drives up", live, 30)
-    # Every value is polled at least every 10 s (the alarm words polled by default are the
-    # slowest): within 11 s at least half of them are read again.
+    # Most values are polled every second or two (the alarm words polled by default every
+    # 30 s, the demo's fault number every 10 s): within 11 s at least half are read again.
     first = samples(metrics(port), "pkwbus_parameter_last_update_timestamp_seconds")
     time.sleep(11.0)
     second = samples(metrics(port), "pkwbus_parameter_last_update_timestamp_seconds")

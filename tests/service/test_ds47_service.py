@@ -249,6 +249,7 @@ async def test_a_slave_restarted_mid_request_comes_back_and_the_others_keep_poll
 async def test_a_write_to_a_slave_gone_silent_ends_at_its_deadline(tmp_path: Path) -> None:
     async with service(tmp_path, not_ready=3) as svc:
         loop = asyncio.get_running_loop()
+        svc.sim.slaves[9].not_ready = 10**6  # the change's response never comes: no race
         change = svc.client.put(
             "/api/v1/drives/pump/parameters/p1121", json={"value": 12.5},
             headers={"Authorization": f"Bearer {TOKEN}"},
@@ -265,6 +266,7 @@ async def test_a_write_to_a_slave_gone_silent_ends_at_its_deadline(tmp_path: Pat
         assert r.status_code == 504, r.text
         (row,) = [e for e in svc.audit.latest(10) if e.drive == "pump"]
         assert row.outcome == "timeout"
+        svc.sim.slaves[9].not_ready = 3
         svc.sim.revive(9)
         pump = svc.reads("pump")
         await until(lambda: svc.reads("pump") >= pump + 6)  # back, polled again

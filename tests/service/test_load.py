@@ -33,8 +33,30 @@ lines:
       - name: fan
         address: 1
         catalog: danfoss-fc
+        alarms: off  # the figures below are of the polls given
         poll: {polls}
 """
+    )
+
+
+def test_the_alarm_words_polled_by_default_count_in_the_estimate() -> None:
+    from pkwbus.service.config.alarm_polls import ALARM_EVERY
+
+    polls = '[{parameter: "16-13", every: 1s}, {parameter: "16-90", every: 500ms}]'
+    given = line_load(fc_line(polls).lines[0])
+    auto = (
+        fc_line(polls)
+        .lines[0]
+        .model_copy(
+            update={
+                "drives": [fc_line(polls).lines[0].drives[0].model_copy(update={"alarms": "auto"})]
+            }
+        )
+    )
+    counted = line_load(auto)
+    # 16-90 is polled already; 16-92 (the warning word) is added, every ALARM_EVERY seconds.
+    assert counted.exchanges_per_second == pytest.approx(
+        given.exchanges_per_second + 1 / ALARM_EVERY
     )
 
 

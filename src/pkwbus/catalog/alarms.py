@@ -70,6 +70,7 @@ class WordTable(_Strict):
     bits: dict[int, str]
     # How a bit's code is written: {parameter}, {bit}; e.g. "16-90.{bit}".
     code: str = "{parameter} bit {bit}"
+    polled: bool = True  # polled by default where the configuration does not poll it
 
     @model_validator(mode="after")
     def _bits(self) -> Self:
@@ -97,6 +98,7 @@ class CodeTable(_Strict):
     texts: dict[int, str]
     code: str = "{n}"  # e.g. "F{n:05d}" (SINAMICS r0947 7801 is F07801)
     active: bool = True  # the parameter holds what is active now (else: a log)
+    polled: bool = True  # polled by default (its first element) where none is configured
 
     @model_validator(mode="after")
     def _parameter(self) -> Self:

@@ -33,7 +33,7 @@ from pkwbus.protocol.pkw_length import AUTO
 from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.alarm_polls import ALARM_EVERY, alarm_parameters, alarm_polls
+from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.assembly.parameter_table import (
@@ -41,6 +41,7 @@ from pkwbus.service.assembly.parameter_table import (
     layers_of,
     parameter_table,
 )
+from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry

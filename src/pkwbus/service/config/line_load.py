@@ -45,6 +45,7 @@ from pkwbus.protocol import dp_timing, fdl, timing
 from pkwbus.protocol.ppo import ppo_type
 from pkwbus.protocol.profidrive import MAX_PARAMETERS
 from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
+from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.line import Line
@@ -65,6 +66,7 @@ __all__ = [
     "dp_line_load",
     "exchange_seconds",
     "line_load",
+    "poll_rates",
     "port_warnings",
     "record_seconds",
     "telegram_bytes",
@@ -120,6 +122,14 @@ def dp_frame_bytes(drive: Drive) -> int:
     return len(fdl.encode(frame))
 
 
+def poll_rates(line: Line, drive: Drive) -> list[float]:
+    """The reads per second each of the drive's polls asks for: the configured ones, and
+    the alarm words polled by default (``alarms: auto``)."""
+    rates = [1 / entry.every for entry in drive.poll]
+    implicit = alarm_polls(line, drive, {entry.ref.pnu for entry in drive.poll})
+    return rates + [1 / ALARM_EVERY] * len(implicit)
+
+
 def record_seconds(drive: Drive, count: int, baudrate: int) -> float:
     """One MSAC_C1 exchange of a record transfer of ``count`` value reads, on average: the
     write of the request and the read of its response, each in a cycle of its own."""
@@ -143,7 +153,9 @@ def dp_line_load(line: Line) -> LineLoad:
         for d in line.drives
     }
     batch = {
-        d.name: min(max(len(d.poll), 1), MAX_PARAMETERS) for d in line.drives if d.access == "ds47"
+        d.name: min(max(len(poll_rates(line, d)), 1), MAX_PARAMETERS)
+        for d in line.drives
+        if d.access == "ds47"
     }
     cycle = sum(times.values())
     busy = cycle + sum(
@@ -164,7 +176,7 @@ def dp_line_load(line: Line) -> LineLoad:
         cycle=cycle,
     )
     for drive in line.drives:
-        demand = sum(1 / entry.every for entry in drive.poll)
+        demand = sum(poll_rates(line, drive))
         rate += demand
         if drive.name in batch:  # data record 47: its polls together, two longer cycles each
             most = batch[drive.name] / (DP_JOB_CYCLES * busy)
@@ -183,8 +195,9 @@ def dp_line_load(line: Line) -> LineLoad:
             load.warnings.append(
                 f"line {line.name}: drive {drive.name}'s polls ask for {demand:.1f} reads/s;"
                 f" its PKW channel carries at most {per_slave:.1f}/s at a DP cycle of"
-                f" {cycle * 1000:.1f} ms: each of its {len(drive.poll)} polled parameters is"
-                f" refreshed about every {len(drive.poll) / per_slave:.2f} s at best"
+                f" {cycle * 1000:.1f} ms: each of its {len(poll_rates(line, drive))} polled"
+                f" parameters is refreshed about every"
+                f" {len(poll_rates(line, drive)) / per_slave:.2f} s at best"
             )
     return replace(load, exchanges_per_second=rate, utilisation=worst)
 
@@ -197,9 +210,9 @@ def line_load(line: Line) -> LineLoad:
     rate = 0.0
     busy = 0.0
     for drive in line.drives:
-        for entry in drive.poll:
-            rate += 1 / entry.every
-            busy += times[drive.name] / entry.every
+        for every in poll_rates(line, drive):
+            rate += every
+            busy += times[drive.name] * every
     mean = busy / rate if rate else sum(times.values()) / len(times)
     load = LineLoad(
         line=line.name,
