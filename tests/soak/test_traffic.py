@@ -92,3 +92,20 @@ async def test_a_write_answered_200_that_the_drive_does_not_hold_is_found() -> N
 async def test_an_unexpected_answer_to_a_write_is_found() -> None:
     problems = await write(Fake(status=500, outcome="error"), 1)
     assert problems.counts["status"] == 1
+
+
+async def test_a_write_cut_off_by_the_soaks_end_may_have_a_pending_row() -> None:
+    # The soak cancels its writer at the end: a write whose PUT never returned has no
+    # answer to hold its row against; the service completes the row later.
+    fake = Fake(outcome="pending")
+    writer, problems = fake.writer()
+    await writer.one()
+    writer.writes[-1].status = 0  # as if its PUT had been cancelled
+    await writer.check_audit()
+    assert problems.counts == {}
+    # Answered, the same pending row is a problem.
+    fake = Fake(outcome="pending")
+    writer, problems = fake.writer()
+    await writer.one()
+    await writer.check_audit()
+    assert problems.counts == {"outcome": 1}
