@@ -29,10 +29,10 @@ from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw_fields import Width
 from pkwbus.protocol.profidrive import Format, ParameterError
 from pkwbus.protocol.profidrive_errors import error_text
-from pkwbus.protocol.profidrive_pkw import RecordItem, fits, record_request
+from pkwbus.protocol.profidrive_pkw import RecordItem, record_request
 from pkwbus.protocol.value_types import ValueType
 
-__all__ = ["RecordItem", "RecordTransaction", "fits"]
+__all__ = ["RecordItem", "RecordTransaction"]
 
 # The value types the typed formats name. Byte, Word and Double word are substitutes that
 # name no type: there the configuration, the description or the catalog decides.

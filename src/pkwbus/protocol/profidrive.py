@@ -55,7 +55,6 @@ __all__ = [
     "Values",
     "decode_response",
     "decode_values",
-    "response_length",
 ]
 
 RECORD: Final = 47  # the data record (index) of parameter access, in slot 0
@@ -245,12 +244,6 @@ class ParameterResponse:
     failed: bool  # response ID 0x81/0x82: at least one parameter failed
     axis: int
     results: tuple[Result, ...]
-
-
-def response_length(request: ParameterRequest, sizes: Sequence[int]) -> int:
-    """The bytes of the response to a read ``request`` whose parameters' values take
-    ``sizes`` bytes each (a failed one takes up to 6): to keep it within :data:`MAX_RECORD`."""
-    return _HEAD + sum(2 + size + size % 2 for size in sizes)
 
 
 def decode_response(data: bytes, request: ParameterRequest) -> ParameterResponse:
