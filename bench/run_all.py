@@ -26,6 +26,7 @@ import floor
 import line_efficiency
 import pkw_lag
 import scale
+import status_page
 import write_latency
 from _common import machine
 
@@ -106,6 +107,14 @@ def plan(quick: bool) -> Plan:
             "each, always due, through the whole service; parameters/s per slave, beside what "
             "`check-config` estimates at most.",
             lambda: ds47.run(2.0 if q else 5.0),
+        ),
+        (
+            "11. The status page at 126 drives",
+            "126 simulated FC drives × 20 parameters on one line (115200 baud, wire timing), "
+            "every value with 15 minutes of trend; headless Chromium opens the page. First "
+            "view against the goal of 2 s; the page's redraws timed in the page; CPU as it "
+            "is and slowed four times.",
+            lambda: status_page.run(126, (1.0, 4.0)),
         ),
     ]
 

@@ -21,6 +21,7 @@ MODULES = [
     "pkw_lag",
     "run_all",
     "scale",
+    "status_page",
     "write_latency",
 ]
 
@@ -112,3 +113,18 @@ def test_connection_flood_smallest() -> None:
     assert r["alive"] and r["tracebacks"] == 0
     assert r["quiet_polls_per_s"] > 0 and r["flood_polls_per_s"] > 0
     assert sum(r["parallel_answers"].values()) == 20
+
+
+def test_status_page_at_126_drives() -> None:
+    """Chromium shows all 126 drives with their values and trends (the time it takes is
+    benchmark 11's figure, not a threshold here)."""
+    mod = load("status_page")
+    try:
+        (row,) = mod.measure(126, (1.0,), ("3-41", "16-13"))
+    except load("_measure").BenchSetupError as e:
+        pytest.skip(f"{e} (deploy/browser-setup installs chromium)")
+    # every drive, every value, every sparkline (SHOWN waited for all of them)
+    assert row["drives"] == 126 and row["values"] == 126 * 2
+    assert row["elements"] > 126 * 2 * 5  # a row of five cells per value
+    assert row["first_s"] > 0 and row["kept_ms"] > 0 and row["anew_ms"] > 0
+    assert row["drives_kb"] > 0 and row["trends_kb"] > 0

@@ -68,14 +68,24 @@ let trendsAt = 0;
 const TREND_PERIOD_MS = 15000;
 const SVG = "http://www.w3.org/2000/svg";
 
-function sparkline(points) {
+function sparkline() {  // one per value, made once; drawTrend draws its line
   const svg = document.createElementNS(SVG, "svg");
   svg.setAttribute("class", "spark");
   svg.setAttribute("viewBox", "0 0 120 24");
   svg.setAttribute("width", "120");
   svg.setAttribute("height", "24");
+  svg.append(document.createElementNS(SVG, "path"), document.createElementNS(SVG, "title"));
+  return svg;
+}
+
+function drawTrend(svg, points) {
+  const [line, title] = svg.children;
   const known = points.filter((v) => v !== null);
-  if (known.length < 2) return svg;
+  if (known.length < 2) {
+    line.removeAttribute("d");
+    title.textContent = "";
+    return;
+  }
   const low = Math.min(...known), high = Math.max(...known);
   const span = high - low || 1;
   let path = "", pen = "M";
@@ -86,13 +96,8 @@ function sparkline(points) {
     path += `${pen}${x.toFixed(1)},${y.toFixed(1)} `;
     pen = "L";
   });
-  const line = document.createElementNS(SVG, "path");
   line.setAttribute("d", path.trim());
-  svg.append(line);
-  const title = document.createElementNS(SVG, "title");
   title.textContent = `last 15 min: ${low} to ${high}`;
-  svg.append(title);
-  return svg;
 }
 
 async function refreshTrends() {
@@ -101,21 +106,48 @@ async function refreshTrends() {
   trendData = await getJson("/api/v1/trends");
 }
 
-function drawDrive(drive, now) {
+// A value's row: its cells are made once and filled at each refresh (fillRow).
+function valueRow(name) {
+  const spark = sparkline();
+  const cells = { title: el("td", { class: "title" }), value: el("td", { class: "num value" }),
+    age: el("td", { class: "num age" }) };
+  const row = el("tr", { "data-parameter": name }, el("td", {}, name), cells.title,
+    cells.value, el("td", { class: "trend" }, spark), cells.age);
+  return { row, spark, ...cells, drawnTrends: -1 };
+}
+
+function setText(node, text) {  // only a change touches the page
+  if (node.textContent !== text) node.textContent = text;
+}
+
+function fillRow(r, drive, v, now) {
+  const seconds = now - v.timestamp;
+  const shown = v.shown || `${v.value}`;  // to its resolution; the API keeps full precision
+  const cls = seconds > STALE_SECONDS || !drive.up ? "stale" : "";
+  if (r.row.className !== cls) r.row.className = cls;
+  setText(r.title, v.name || "");
+  setText(r.value, v.unit ? `${shown} ${v.unit}` : shown);
+  if (r.value.title !== `${v.value}`) r.value.title = `${v.value}`;
+  setText(r.age, age(seconds));
+  if (r.drawnTrends !== trendsAt) {  // the sparklines change with the trends, every 15 s
+    const name = r.row.dataset.parameter;
+    drawTrend(r.spark, (trendData[drive.name] || {})[name] || []);
+    r.drawnTrends = trendsAt;
+  }
+}
+
+// The drive's heading, status bits and alarms: what makes its section's shape. Its
+// values' numbers and ages are filled in place; a new shape draws the section anew.
+function shapeOf(drive) {
+  return JSON.stringify([drive.up, drive.line, drive.address, drive.protocol, drive.status_word,
+    drive.status, drive.faults, drive.telegram_errors, drive.alarms, folded.has(drive.name),
+    drive.values.map((v) => [v.parameter, v.index])]);
+}
+
+function drawDrive(drive) {
   const bits = Object.entries(drive.status || {}).filter(([, on]) => on)
     .map(([name]) => el("span", { class: ALARM_BITS.has(name) ? "alarm" : "" }, words(name)));
-  const rows = drive.values.map((v) => {
-    const seconds = now - v.timestamp;
-    const shown = v.shown || `${v.value}`;  // to its resolution; the API keeps full precision
-    const value = v.unit ? `${shown} ${v.unit}` : shown;
-    const name = v.index ? `${v.parameter}[${v.index}]` : v.parameter;
-    const points = (trendData[drive.name] || {})[name] || [];
-    return el("tr", { class: seconds > STALE_SECONDS || !drive.up ? "stale" : "", "data-parameter": name },
-      el("td", {}, name), el("td", { class: "title" }, v.name || ""),
-      el("td", { class: "num value", title: `${v.value}` }, value),
-      el("td", { class: "trend" }, sparkline(points)),
-      el("td", { class: "num age" }, age(seconds)));
-  });
+  const rows = drive.values.map((v) => valueRow(v.index ? `${v.parameter}[${v.index}]` : v.parameter));
   const alarms = (drive.alarms || []).map((a) => {
     const since = new Date(a.since * 1000).toLocaleString();
     return el("li", { class: a.kind === "alarm" ? "alarm" : "warning", "data-code": a.code },
@@ -130,7 +162,7 @@ function drawDrive(drive, now) {
     refreshNow();
   });
   const cls = `drive ${drive.up ? "up" : "down"}${folded.has(drive.name) ? " folded" : ""}`;
-  return el("div", { class: cls, "data-drive": drive.name },
+  const node = el("div", { class: cls, "data-drive": drive.name },
     el("h3", {}, fold, ` ${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
       ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
     el("div", { class: "counts" },
@@ -141,7 +173,8 @@ function drawDrive(drive, now) {
     alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "15 min"), el("th", {}, "age"))),
-      el("tbody", {}, ...rows)));
+      el("tbody", {}, ...rows.map((r) => r.row))));
+  return { node, rows };
 }
 
 // Drives folded by the reader (kept across refreshes); drives down or in alarm come first.
@@ -291,12 +324,28 @@ async function getJson(path) {
 
 let lastDrives = [];
 
+// Each drive's section, kept across refreshes: name -> {shape, node, rows}.
+let sections = new Map();
+const drivesHeading = el("h2", {}, "Drives");
+
 function refreshNow() {  // the drives from the last data: down or in alarm first, as folded
   const now = Date.now() / 1000;
-  const ordered = lastDrives.map((d, i) => [urgency(d), i, d])
-    .sort((a, b) => a[0] - b[0] || a[1] - b[1]);
-  document.getElementById("drives").replaceChildren(
-    el("h2", {}, "Drives"), ...ordered.map(([, , d]) => drawDrive(d, now)));
+  const kept = new Map();
+  const nodes = lastDrives.map((d, i) => [urgency(d), i, d])
+    .sort((a, b) => a[0] - b[0] || a[1] - b[1])
+    .map(([, , d]) => {
+      const shape = shapeOf(d);
+      let section = sections.get(d.name);
+      if (!section || section.shape !== shape) section = { shape, ...drawDrive(d) };
+      d.values.forEach((v, i) => fillRow(section.rows[i], d, v, now));
+      kept.set(d.name, section);
+      return section.node;
+    });
+  sections = kept;
+  const box = document.getElementById("drives");
+  const shown = box.children;
+  const same = shown.length === nodes.length + 1 && nodes.every((n, i) => shown[i + 1] === n);
+  if (!same) box.replaceChildren(drivesHeading, ...nodes);
 }
 
 async function refresh() {
