@@ -3,7 +3,11 @@ significant digits; the API's value keeps full precision."""
 
 from __future__ import annotations
 
+import asyncio
+from collections.abc import Callable
 from pathlib import Path
+from types import MappingProxyType
+from typing import Any
 
 import pytest
 
@@ -15,6 +19,11 @@ from tests.api.conftest import USS_DRIVES, service
 
 def scaled(index: int, vtype: ValueType = ValueType.U32) -> ParameterDescription:
     return ParameterDescription(vtype=vtype, scaling=Scaling.conversion(index))
+
+
+LANGUAGE = ParameterDescription(
+    name="Language", vtype=ValueType.U16, options=MappingProxyType({0: "English", 4: "Danish"})
+)
 
 
 @pytest.mark.parametrize(
@@ -31,6 +40,9 @@ def scaled(index: int, vtype: ValueType = ValueType.U32) -> ParameterDescription
         (7, ParameterDescription(), "7"),  # a raw number
         (1.0 / 60 * 7, scaled(67), "0.1167"),  # 1/60: no power of ten
         ("PUMP-7", ParameterDescription(vtype=ValueType.TEXT), "PUMP-7"),
+        (0, LANGUAGE, "English [0]"),  # an enumeration: its text with the number
+        (4, LANGUAGE, "Danish [4]"),
+        (2, LANGUAGE, "2"),  # an option no source words: its number alone
     ],
 )
 def test_a_value_to_its_resolution(
@@ -49,3 +61,41 @@ async def test_the_drives_view_carries_names_and_readable_values(tmp_path: Path)
     (frequency,) = [v for v in drives["fan1"]["values"] if v["parameter"] == "16-13"]
     assert frequency["name"] == "Frequency"
     assert frequency["shown"] == f"{frequency['value']:.1f}"  # conversion index -1
+
+
+async def test_an_enumeration_in_words_and_a_write_form_with_its_options(tmp_path: Path) -> None:
+    drives = [{"name": "fan1", "address": 1, "catalog": "danfoss-fc",
+               "poll": [("0-01", "50ms")], "writable": ["0-01"]}]  # fmt: skip
+    async with service(tmp_path, fc=drives) as svc:
+        (language,) = await _values(svc, "0-01")
+        assert (language["value"], language["option"], language["shown"]) == (
+            0, "English", "English [0]"
+        )  # fmt: skip
+        svc.sims["fc"].drives[1].set_value(1, 4)
+        language = await _until(svc, "0-01", lambda v: v["value"] == 4)
+        assert (language["option"], language["shown"]) == ("Danish", "Danish [4]")
+        svc.sims["fc"].drives[1].set_value(1, 2)  # no source words option 2
+        language = await _until(svc, "0-01", lambda v: v["value"] == 2)
+        assert (language["option"], language["shown"]) == ("", "2")
+        drive = await _fan1(svc)
+    (form,) = drive["writable"]
+    assert form["options"] == {"0": "English", "4": "Danish"}  # JSON keys are strings
+
+
+async def _fan1(svc: Any) -> dict[str, Any]:
+    (drive,) = [d for d in (await svc.client.get("/api/v1/drives")).json() if d["name"] == "fan1"]
+    return drive  # type: ignore[no-any-return]
+
+
+async def _values(svc: Any, parameter: str) -> list[dict[str, Any]]:
+    drive = await _fan1(svc)
+    return [v for v in drive["values"] if v["parameter"] == parameter]
+
+
+async def _until(svc: Any, parameter: str, done: Callable[[dict[str, Any]], bool]) -> Any:
+    for _ in range(2000):
+        found = [v for v in await _values(svc, parameter) if done(v)]
+        if found:
+            return found[0]
+        await asyncio.sleep(0.01)
+    raise AssertionError(f"{parameter} never changed: {await _values(svc, parameter)}")

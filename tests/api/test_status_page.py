@@ -27,8 +27,8 @@ ARGS = [
 ]  # fmt: skip
 DRIVES = [
     {"name": "fan1", "address": 1, "catalog": "danfoss-fc",
-     "poll": [("3-41", "100ms"), ("16-13", "200ms"), ("16-90", "200ms")],
-     "writable": ["3-41"]},
+     "poll": [("3-41", "100ms"), ("16-13", "200ms"), ("16-90", "200ms"), ("0-01", "1s")],
+     "writable": ["3-41", "0-01"]},
     {"name": "fan2", "address": 2, "catalog": "danfoss-fc",
      "poll": [("3-41", "100ms"), ("16-90", "200ms")], "writable": []},
 ]  # fmt: skip
@@ -68,6 +68,10 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
             sync_api.expect(frequency.locator(".title")).to_have_text("Frequency")
             sync_api.expect(frequency.locator(".trend svg.spark")).to_have_count(1)
+            # An enumeration: the option's text as the Danfoss design guide words it.
+            language = fan1.locator('[data-parameter="0-01"]')
+            sync_api.expect(language.locator(".value")).to_have_text("English [0]")
+            sync_api.expect(language.locator(".title")).to_have_text("Language")
             sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
             sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
             sync_api.expect(fan1.locator(".bits")).to_contain_text("running")
@@ -111,6 +115,11 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             sync_api.expect(audit.locator("tbody tr").first).to_contain_text("ok")
             assert page.input_value("#token") == ""  # not left in the form
 
+            # An enumeration's form lists its options with their texts.
+            page.select_option("#write-target", "fan1/0-01")
+            sync_api.expect(page.locator("#write-now")).to_contain_text(
+                "Language: now 0; options 0 English, 4 Danish"
+            )
             # The write form: the parameter, its limits and value, a confirmation, the answer.
             page.select_option("#write-target", "fan1/3-41")
             sync_api.expect(page.locator("#write-now")).to_contain_text("now 7.5 s")

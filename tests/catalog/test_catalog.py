@@ -369,3 +369,49 @@ def test_good_file_loads(tmp_path: Path) -> None:
     assert sorted(catalog.parameters) == [341, 1082, 1613]
     spec = catalog.get(1613)
     assert spec is not None and spec.scale == 0.1
+
+
+# --- enumerations ---------------------------------------------------------------
+
+
+def test_danfoss_language_options_as_the_design_guide_words_them() -> None:
+    # Danfoss VLT HVAC Drive Design Guide MG11BC02, 8.4.10 "Parameter Value (PWE)":
+    # "0-01 Language where [0] is English, and [4] is Danish".
+    fc = load_catalog("danfoss-fc")
+    language = fc.get(1)
+    assert language is not None and language.name == "Language"
+    assert language.options == {0: "English", 4: "Danish"}
+    assert "8.4.10" in fc.sources[language.options_source]
+    assert not language.writable
+
+
+def test_options_load_with_their_source(tmp_path: Path) -> None:
+    path = write_catalog(
+        tmp_path, '"0-01": {name: Language, type: u16, options: {0: English}, options_source: m}\n'
+    )
+    spec = load_catalog_file(path).get(1)
+    assert spec is not None and spec.options == {0: "English"}
+
+
+@pytest.mark.parametrize(
+    ("entry", "problem"),
+    [
+        ("type: u16, options: {0: English}", "options need an options_source"),
+        ("type: f32, options: {0: English}, options_source: m", "whole-number type"),
+        ("options: {0: English}, options_source: m", "whole-number type"),
+        ("type: u16, conversion: -1, options: {0: a}, options_source: m", "no conversion"),
+        ("type: u16, scale: 0.5, options: {0: a}, options_source: m", "no conversion"),
+        ('type: u16, options: {0: " "}, options_source: m', "option 0 has no text"),
+        ("type: u16, options: {x: a}, options_source: m", "options.x"),
+    ],
+)
+def test_options_are_checked(tmp_path: Path, entry: str, problem: str) -> None:
+    message = load_error(tmp_path, f'"0-01": {{name: Language, {entry}}}\n')
+    assert 'parameters."0-01"' in message and problem in message
+
+
+def test_options_source_must_be_in_the_sources_table(tmp_path: Path) -> None:
+    message = load_error(
+        tmp_path, '"0-01": {name: L, type: u16, options: {0: a}, options_source: nope}\n'
+    )
+    assert "parameters.\"0-01\".options_source: 'nope' is not in the sources table" in message

@@ -122,9 +122,9 @@ def test_demo_loads_with_its_defaults() -> None:
     ]  # fmt: skip
     _, fan = drive_named(config, "supply_fan") or pytest.fail("no supply_fan")
     assert [str(p.ref) for p in fan.poll] == [
-        "16-13", "16-14", "16-10", "16-30", "16-90", "16-92", "15-30[0]",
+        "16-13", "16-14", "16-10", "16-30", "16-90", "16-92", "15-30[0]", "0-01",
     ]  # fmt: skip
-    assert [p.every for p in fan.poll] == [1, 1, 2, 2, 5, 5, 30]
+    assert [p.every for p in fan.poll] == [1, 1, 2, 2, 5, 5, 30, 60]
     assert fan.may_write(ParameterRef(341, None, "341"))
     assert not fan.may_write(ParameterRef(1613, None, "16-13"))
     _, conveyor = drive_named(config, "conveyor") or pytest.fail("no conveyor")

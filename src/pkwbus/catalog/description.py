@@ -40,6 +40,11 @@ if TYPE_CHECKING:
 __all__ = ["OTHER_INDEX", "ParameterDescription", "ParameterKey", "ParameterTable", "Value"]
 
 Value = int | float | str
+_NO_OPTIONS: Final[Mapping[int, str]] = MappingProxyType({})
+
+
+def _no_options() -> Mapping[int, str]:
+    return _NO_OPTIONS
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +66,8 @@ class ParameterDescription:
     array: int | None = None  # number of elements, when the catalog says it is an array
     writable: bool = False
     prefix: str = ""  # Siemens r (read-only) or p (settable), when the catalog says
+    # An enumeration's options (number -> the catalog's sourced text); empty for none.
+    options: Mapping[int, str] = field(default_factory=_no_options, hash=False)
 
     @classmethod
     def from_spec(cls, spec: ParameterSpec | None) -> ParameterDescription:
@@ -84,6 +91,7 @@ class ParameterDescription:
             spec.array,
             spec.writable,
             spec.prefix,
+            MappingProxyType(dict(spec.options)) if spec.options else _NO_OPTIONS,
         )
 
     def with_type(self, vtype: ValueType | None) -> ParameterDescription:
@@ -95,6 +103,12 @@ class ParameterDescription:
     @property
     def is_text(self) -> bool:
         return self.vtype is ValueType.TEXT
+
+    def option(self, value: Value) -> str:
+        """The enumeration's text for ``value``; empty where the catalog words none."""
+        if isinstance(value, int) and not isinstance(value, bool):
+            return self.options.get(value, "")
+        return ""
 
     def value_of(self, response: pkw.PkwResponse) -> tuple[int | None, Value]:
         """(raw number, value) of an answer; the peer's error when it does not carry one."""

@@ -16,7 +16,7 @@ import os
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal, Self
+from typing import Any, Final, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -75,6 +75,10 @@ class ParameterSpec(BaseModel):
     verified: bool = True
     note: str = ""
     source: str = ""
+    # An enumeration's options as a named document words them (number -> text); a
+    # number not listed is shown as its number alone. ``options_source`` names it.
+    options: dict[int, str] = Field(default_factory=dict)
+    options_source: str = ""
     # Siemens r (read-only) or p (settable), from the key ("r0021"); empty otherwise.
     prefix: Literal["", "r", "p"] = ""
 
@@ -82,6 +86,7 @@ class ParameterSpec(BaseModel):
     def _check(self) -> Self:
         _check_scaling(self)
         _check_limits(self)
+        _check_options(self)
         if not self.verified and not self.note.strip():
             raise ValueError("verified: false needs a note saying what could not be sourced")
         return self
@@ -122,6 +127,23 @@ def _check_limits(spec: ParameterSpec) -> None:
         raise ValueError(f"min {spec.min} is greater than max {spec.max}")
 
 
+_WHOLE_NUMBERS: Final = frozenset({"u16", "i16", "u32", "i32"})
+
+
+def _check_options(spec: ParameterSpec) -> None:
+    if not spec.options:
+        return
+    if not spec.options_source:
+        raise ValueError("options need an options_source: the document that words them")
+    if spec.type not in _WHOLE_NUMBERS:
+        raise ValueError(f"options need a whole-number type (u16, i16, u32, i32), not {spec.type}")
+    if spec.conversion not in (None, 0) or spec.scale not in (None, 1):
+        raise ValueError("options number the raw value: no conversion or scale")
+    blank = [n for n, text in spec.options.items() if not text.strip()]
+    if blank:
+        raise ValueError(f"option {blank[0]} has no text")
+
+
 class Catalog(BaseModel):
     """A named set of parameter specs for one kind of drive, keyed by PNU."""
 
@@ -138,9 +160,12 @@ class Catalog(BaseModel):
         for pnu, spec in self.parameters.items():
             if pnu != spec.pnu:
                 raise ValueError(f"parameters.{pnu}: key and pnu {spec.pnu} differ")
-            problem = _source_problem(spec, self.sources)
+            problem = _source_problem(spec.source, self.sources)
             if problem:
                 raise ValueError(f"parameters.{pnu}.source: {problem}")
+            problem = _source_problem(spec.options_source, self.sources)
+            if problem:
+                raise ValueError(f"parameters.{pnu}.options_source: {problem}")
         return self
 
     def get(self, pnu: int) -> ParameterSpec | None:
@@ -148,10 +173,10 @@ class Catalog(BaseModel):
         return self.parameters.get(pnu)
 
 
-def _source_problem(spec: ParameterSpec, sources: Mapping[str, str]) -> str | None:
-    if spec.source and spec.source not in sources:
+def _source_problem(source: str, sources: Mapping[str, str]) -> str | None:
+    if source and source not in sources:
         known = ", ".join(sorted(sources)) or "none"
-        return f"{spec.source!r} is not in the sources table (known: {known})"
+        return f"{source!r} is not in the sources table (known: {known})"
     return None
 
 
@@ -238,9 +263,10 @@ def _parse_parameters(data: Mapping[str, Any], origin: str) -> dict[int, Paramet
             raise CatalogError(
                 f'{where}: PNU {spec.pnu} is already defined as "{first_key[spec.pnu]}"'
             )
-        problem = _source_problem(spec, sources)
-        if problem:
-            raise CatalogError(f"{where}.source: {problem}")
+        for field_name in ("source", "options_source"):
+            problem = _source_problem(getattr(spec, field_name), sources)
+            if problem:
+                raise CatalogError(f"{where}.{field_name}: {problem}")
         specs[spec.pnu] = spec
         first_key[spec.pnu] = _key_text(key)
     return specs

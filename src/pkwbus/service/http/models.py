@@ -35,6 +35,7 @@ class ParameterReading(BaseModel):
     timestamp: float
     name: str = ""  # as the configuration, the drive or the catalog names it; else empty
     shown: str = ""  # the value to its resolution, for people (the status page)
+    option: str = ""  # an enumeration's text for the value, from the catalog's source
     # Where its type and scaling came from: config, drive (its own description), catalog, none.
     source: str = "catalog"
 
@@ -62,6 +63,7 @@ class WritableView(BaseModel):
     maximum: float | None
     value: float | int | str | None
     text: bool = False  # a text parameter: the new value is a string
+    options: dict[int, str] = {}  # an enumeration's numbers and their texts (catalog)
 
 
 class SlaveView(BaseModel):

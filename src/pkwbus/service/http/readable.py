@@ -2,7 +2,8 @@
 
 A scaled integer shows the decimals its scaling gives (a conversion index of -2:
 two decimals, Danfoss FC protocol, conversion index); a float, or a scaling
-that is no power of ten, about four significant digits. The API's ``value``
+that is no power of ten, about four significant digits; an enumeration's
+number, its text from the catalog with it ("English [0]"). The API's ``value``
 and ``/metrics`` keep full precision: this is presentation only.
 """
 
@@ -39,6 +40,9 @@ def readable(value: Value, fmt: ParameterDescription) -> str:
     """``value`` as the status page shows it (without its unit)."""
     if isinstance(value, str):
         return value
+    if fmt.options and isinstance(value, int):
+        option = fmt.option(value)  # an enumeration: its text with the number
+        return f"{option} [{value}]" if option else f"{value}"
     if fmt.vtype is ValueType.F32 or (isinstance(value, float) and fmt.vtype is None):
         return _significant(float(value))
     decimals = _decimals_of(fmt.scaling.factor)

@@ -84,6 +84,7 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
                 parameter=ref.name, index=index or 0, name=fmt.name, unit=fmt.unit,
                 minimum=fmt.minimum, maximum=fmt.maximum,
                 value=latest.value if latest is not None else None, text=fmt.is_text,
+                options=dict(fmt.options),
             )
         )  # fmt: skip
     return views
@@ -125,6 +126,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
                 timestamp=reading.timestamp,
                 name=fmt.name,
                 shown=alarm_words or readable(reading.value, fmt),
+                option=fmt.option(reading.value),
                 source=entry.sources.get(parameter, "none"),
             )
         )

@@ -238,7 +238,9 @@ function describeWritable(w) {
   const low = w.minimum === null ? "" : `${w.minimum}`;
   const high = w.maximum === null ? "" : `${w.maximum}`;
   const limits = low || high ? `, limits ${low || "-"} to ${high || "-"}${unit}` : "";
-  return `${w.name ? w.name + ": " : ""}${now}${limits}`;
+  const options = Object.entries(w.options || {}).map(([n, text]) => `${n} ${text}`).join(", ");
+  const listed = options ? `; options ${options}` : "";
+  return `${w.name ? w.name + ": " : ""}${now}${limits}${listed}`;
 }
 
 function drawWritable(drives) {
