@@ -7,9 +7,12 @@ import logging
 
 import httpx
 import pytest
+from prometheus_client import CollectorRegistry, generate_latest
 
 from pkwbus.catalog.alarms import alarm_table
+from pkwbus.master.snapshot import Reading
 from pkwbus.service.http.api import create_app
+from pkwbus.service.metrics.alarms import AlarmBoard, Watched
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.model import ModelConfig
 from tests.master.conftest import until
@@ -40,6 +43,26 @@ def test_the_danfoss_alarm_word_against_its_table() -> None:
     ]  # fmt: skip
     assert word.decode(0) == ()
     assert table.decoder(1613) is None  # not an alarm parameter
+
+
+def test_the_danfoss_extended_status_word_is_told_bit_by_bit_and_never_an_alarm() -> None:
+    # 16-94 Ext. Status Word (Danfoss BACnet OI MG.14.C1.02, 7.1: one bit each); no
+    # reachable document words its bits: each set bit is its code alone.
+    table = alarm_table("danfoss-fc")
+    assert table is not None
+    word = table.decoder(1694)
+    assert word is not None and word.kind == "status" and not word.polled
+    alarms = word.decode(0x00000001 | 0x00000008)
+    assert [(a.code, a.text, a.kind) for a in alarms] == [
+        ("16-94 bit 0", "", "status"), ("16-94 bit 3", "", "status")
+    ]  # fmt: skip
+    # Polled, its value is told in bits on the page; no alarm comes of it.
+    registry = CollectorRegistry()
+    board = AlarmBoard({("press", "16-94", 0): Watched("line_fc", word)}, registry)
+    board.landed(("press", "16-94", 0), Reading(0x9, 0x9, 1000.0))
+    assert board.said(("press", "16-94", 0), 0x9) == "16-94 bit 0; 16-94 bit 3"
+    assert board.active("press") == []
+    assert "pkwbus_drive_alarm{" not in generate_latest(registry).decode()
 
 
 async def test_a_trip_is_shown_in_words_and_goes_with_the_reset(
