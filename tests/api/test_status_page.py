@@ -58,6 +58,9 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
                     route.abort()
 
             page.route("**/*", only_here)
+            # A quarter of an hour of trend behind two values (the sparklines' points).
+            served.history("fan1", "16-13", [30.0 + (k % 12) for k in range(59)])
+            served.history("fan2", "3-41", [5.0 + (k // 20) for k in range(59)])
             page.goto(served.url + "/")
             fan1 = page.locator('[data-drive="fan1"]')
             ramp = fan1.locator('[data-parameter="3-41"] .value')
@@ -68,6 +71,13 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
             sync_api.expect(frequency.locator(".title")).to_have_text("Frequency")
             sync_api.expect(frequency.locator(".trend svg.spark")).to_have_count(1)
+            # Its sparkline: a line through the points of the last 15 minutes.
+            spark = frequency.locator(".trend svg.spark")
+            sync_api.expect(spark.locator("title")).to_have_text(
+                re.compile(r"^last 15 min: 30 to \d+(\.\d+)?$")
+            )
+            drawn = spark.locator("path").get_attribute("d") or ""
+            assert drawn.startswith("M") and drawn.count("L") >= 50, drawn
             # An enumeration: the option's text as the Danfoss design guide words it.
             language = fan1.locator('[data-parameter="0-01"]')
             sync_api.expect(language.locator(".value")).to_have_text("English [0]")

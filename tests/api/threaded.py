@@ -8,12 +8,14 @@ import asyncio
 import contextlib
 import socket
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import uvicorn
 
+from pkwbus.master.snapshot import Reading
 from pkwbus.service.http.api import create_app
 from tests.api.conftest import service
 
@@ -67,6 +69,19 @@ class ServedInThread:
         assert self.loop is not None
         drive = self.svc.sim.drives[address]
         self.loop.call_soon_threadsafe(drive.set_value, pnu, raw)
+
+    def history(self, drive: str, parameter: str, values: list[float]) -> None:
+        """Give a value the trend it would have after a quarter of an hour: ``values``, one
+        a trend point (15 s) apart, the last one a point before now."""
+        assert self.loop is not None
+        trends = self.svc.runtime.trends
+
+        async def landed() -> None:
+            now = time.time()
+            for k, value in enumerate(reversed(values), 1):
+                trends.landed((drive, parameter, 0), Reading(value, None, now - k * trends.step))
+
+        asyncio.run_coroutine_threadsafe(landed(), self.loop).result(timeout=30)
 
     def trip(self, address: int, code: int, bit: int) -> None:
         """Trip a simulated drive: alarm ``code`` in its log, ``bit`` in its alarm word."""
