@@ -20,6 +20,10 @@ sparkline is drawn in full (the worst case). Then headless Chromium (Debian's
   page, median of five, and their size.
 - the page's element count and JavaScript heap after the redraws.
 
+Also the trends' memory at 8 lines x 126 drives x 20 parameters, every ring
+full: what ``tracemalloc`` counts for the rings and their index (the keys are
+the service's own and not counted).
+
 ``--throttle 4`` also runs the page with its CPU slowed four times
 (Chromium's CPU throttling), for an old plant PC.
 
@@ -36,6 +40,7 @@ import shutil
 import sys
 import tempfile
 import time
+import tracemalloc
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +52,7 @@ from scale import BAUD, DELAY, PARAMETERS
 
 from pkwbus import link
 from pkwbus.master.snapshot import Reading
-from pkwbus.service.metrics.trends import POINTS
+from pkwbus.service.metrics.trends import POINTS, Trends
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -195,6 +200,27 @@ def measure(
         logger.setLevel(level)
 
 
+def trend_memory(lines: int = 8, drives: int = 126, parameters: int = 20) -> dict[str, Any]:
+    """The bytes the trends hold with every value's ring full."""
+    keys = [(f"l{n}d{d}", f"p{p}", 0) for n in range(lines) for d in range(drives)
+            for p in range(parameters)]  # fmt: skip
+    now = time.time()
+    trends = Trends()
+    readings = [Reading(float(k), k, now - k * trends.step) for k in range(POINTS)]
+    tracemalloc.start()
+    try:
+        for key in keys:
+            for reading in readings:
+                trends.landed(key, reading)
+        held, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return {
+        "lines": lines, "drives": drives, "parameters": parameters, "values": len(keys),
+        "mib": held / 2**20, "bytes_per_value": held / len(keys),
+    }  # fmt: skip
+
+
 def run(drives: int = 126, throttles: tuple[float, ...] = (1.0, 4.0)) -> dict[str, Any]:
     rows = measure(drives, throttles)
     table = markdown_table(
@@ -217,7 +243,16 @@ def run(drives: int = 126, throttles: tuple[float, ...] = (1.0, 4.0)) -> dict[st
         },
         digits=2,
     )
-    return {"rows": rows, "table": table}
+    memory = trend_memory()
+    table += "\n\n" + markdown_table(
+        [memory],
+        {
+            "lines": "lines", "drives": "drives per line", "parameters": "parameters per drive",
+            "values": "values", "mib": "trends MiB", "bytes_per_value": "bytes per value",
+        },
+        digits=1,
+    )  # fmt: skip
+    return {"rows": rows, "table": table, "memory": memory}
 
 
 def main() -> int:

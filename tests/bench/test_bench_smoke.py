@@ -128,3 +128,10 @@ def test_status_page_at_126_drives() -> None:
     assert row["elements"] > 126 * 2 * 5  # a row of five cells per value
     assert row["first_s"] > 0 and row["kept_ms"] > 0 and row["anew_ms"] > 0
     assert row["drives_kb"] > 0 and row["trends_kb"] > 0
+
+
+def test_trend_memory_smallest() -> None:
+    small = load("status_page").trend_memory(1, 2, 3)
+    large = load("status_page").trend_memory(1, 4, 3)
+    assert (small["values"], large["values"]) == (6, 12)
+    assert large["mib"] > small["mib"] > 0  # rings grow with the values

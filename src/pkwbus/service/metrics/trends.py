@@ -3,7 +3,8 @@
 A bounded ring per value: :data:`POINTS` buckets of ``period / POINTS`` seconds
 (15 s), each holding the last value that landed in it, as a 32-bit float
 (``array('f')``: 4 bytes a point). At 8 lines x 126 drives x 20 parameters
-that is about 20,000 rings of 60 points, some 5 MB with their bookkeeping;
+that is 20,160 rings of 60 points: 8.3 MiB with their bookkeeping, about 430
+bytes a value (benchmark 11, ``bench/status_page.py``);
 ``/metrics`` and the API keep full precision, this is for the eye only. A
 bucket no value landed in stays empty (NaN), so a gap shows as a gap.
 """
