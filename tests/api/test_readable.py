@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -43,6 +44,9 @@ LANGUAGE = ParameterDescription(
         (0, LANGUAGE, "English [0]"),  # an enumeration: its text with the number
         (4, LANGUAGE, "Danish [4]"),
         (2, LANGUAGE, "2"),  # an option no source words: its number alone
+        # A drive that describes the value scaled reads it its own way: no option.
+        (4.0, replace(LANGUAGE, scaling=Scaling.conversion(-1)), "4.0"),
+        (40, replace(LANGUAGE, scaling=Scaling.conversion(1)), "40.00"),
     ],
 )
 def test_a_value_to_its_resolution(
@@ -61,6 +65,14 @@ async def test_the_drives_view_carries_names_and_readable_values(tmp_path: Path)
     (frequency,) = [v for v in drives["fan1"]["values"] if v["parameter"] == "16-13"]
     assert frequency["name"] == "Frequency"
     assert frequency["shown"] == f"{frequency['value']:.1f}"  # conversion index -1
+
+
+def test_options_apply_only_to_an_unscaled_whole_number() -> None:
+    assert LANGUAGE.enumerates and LANGUAGE.option(4) == "Danish"
+    scaled_language = replace(LANGUAGE, scaling=Scaling.conversion(-1))
+    assert not scaled_language.enumerates and scaled_language.option(4) == ""
+    as_float = replace(LANGUAGE, vtype=ValueType.F32)
+    assert not as_float.enumerates and as_float.option(4) == ""
 
 
 async def test_an_enumeration_in_words_and_a_write_form_with_its_options(tmp_path: Path) -> None:

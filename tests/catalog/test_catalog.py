@@ -403,6 +403,11 @@ def test_options_load_with_their_source(tmp_path: Path) -> None:
         ("type: u16, scale: 0.5, options: {0: a}, options_source: m", "no conversion"),
         ('type: u16, options: {0: " "}, options_source: m', "option 0 has no text"),
         ("type: u16, options: {x: a}, options_source: m", "options.x"),
+        ('type: u16, options: {"0": a}, options_source: m', "options.0"),  # a string
+        ("type: u16, options: {yes: a}, options_source: m", "whole number, not True"),
+        ("type: u16, options: {-1: a}, options_source: m", "option -1 is outside u16"),
+        ("type: i16, options: {40000: a}, options_source: m", "option 40000 is outside i16"),
+        ("type: u16, options_source: m", "options_source without options"),
     ],
 )
 def test_options_are_checked(tmp_path: Path, entry: str, problem: str) -> None:
@@ -415,3 +420,16 @@ def test_options_source_must_be_in_the_sources_table(tmp_path: Path) -> None:
         tmp_path, '"0-01": {name: L, type: u16, options: {0: a}, options_source: nope}\n'
     )
     assert "parameters.\"0-01\".options_source: 'nope' is not in the sources table" in message
+
+
+@pytest.mark.parametrize(
+    "changes", [{"type": "f32"}, {"type": "text"}, {"scale": 0.1}, {"conversion": 1}]
+)
+def test_an_override_that_reads_the_value_another_way_drops_the_options(
+    changes: dict[str, object],
+) -> None:
+    language = load_catalog("danfoss-fc").get(1)
+    assert language is not None and language.options
+    changed = language.overridden(changes)
+    assert (changed.options, changed.options_source) == ({}, "")
+    assert language.overridden({"name": "Sprache"}).options == language.options  # kept

@@ -4,6 +4,7 @@ values are; a unit never paired with another scaling than its own."""
 from __future__ import annotations
 
 from fractions import Fraction
+from types import MappingProxyType
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers, disagreements, resolve
@@ -70,3 +71,14 @@ def test_disagreements_name_field_and_both_values() -> None:
         "max": ("200", "100"),
     }
     assert disagreements(DriveDescription(type_code=4, conversion=-2, unit="A"), CATALOG) == []
+
+
+def test_the_catalogs_options_stand_only_while_the_drive_reads_the_number_unscaled() -> None:
+    language = ParameterDescription(
+        "Language", ValueType.U16, options=MappingProxyType({0: "English", 4: "Danish"})
+    )
+    layers = Layers(language, catalog=language)
+    plain = resolve(layers, DriveDescription(type_code=6, conversion=0)).description  # U16
+    assert plain.enumerates and plain.option(4) == "Danish"
+    scaled = resolve(layers, DriveDescription(type_code=6, conversion=-1)).description
+    assert not scaled.enumerates and scaled.option(4) == ""  # raw 40 is no "Danish"

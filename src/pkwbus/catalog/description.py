@@ -43,6 +43,9 @@ Value = int | float | str
 _NO_OPTIONS: Final[Mapping[int, str]] = MappingProxyType({})
 
 
+_WHOLE: Final = frozenset({ValueType.U16, ValueType.I16, ValueType.U32, ValueType.I32})
+
+
 def _no_options() -> Mapping[int, str]:
     return _NO_OPTIONS
 
@@ -104,9 +107,15 @@ class ParameterDescription:
     def is_text(self) -> bool:
         return self.vtype is ValueType.TEXT
 
+    @property
+    def enumerates(self) -> bool:
+        """Options that apply: they number the raw value, so the value must be a whole
+        number, unscaled (a drive that describes it scaled reads its own way)."""
+        return bool(self.options) and self.vtype in _WHOLE and self.scaling == UNSCALED
+
     def option(self, value: Value) -> str:
         """The enumeration's text for ``value``; empty where the catalog words none."""
-        if isinstance(value, int) and not isinstance(value, bool):
+        if self.enumerates and isinstance(value, int) and not isinstance(value, bool):
             return self.options.get(value, "")
         return ""
 

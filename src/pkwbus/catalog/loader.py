@@ -18,9 +18,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Final, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, model_validator
 
 from pkwbus.problems import plain
+from pkwbus.protocol import value_types
 from pkwbus.protocol.notation import MAX_PNU, ParameterRef, parse_parameter
 from pkwbus.protocol.value_types import CONVERSION_FACTORS, Scaling
 from pkwbus.yamlfile import YamlError, load_yaml
@@ -77,7 +78,7 @@ class ParameterSpec(BaseModel):
     source: str = ""
     # An enumeration's options as a named document words them (number -> text); a
     # number not listed is shown as its number alone. ``options_source`` names it.
-    options: dict[int, str] = Field(default_factory=dict)
+    options: dict[StrictInt, str] = Field(default_factory=dict)
     options_source: str = ""
     # Siemens r (read-only) or p (settable), from the key ("r0021"); empty otherwise.
     prefix: Literal["", "r", "p"] = ""
@@ -105,6 +106,10 @@ class ParameterSpec(BaseModel):
             fields["conversion"] = None
         if "conversion" in changes or changes.get("type") == "text":
             fields["scale"] = None
+        if {"type", "scale", "conversion"} & changes.keys():
+            # The catalog's options number the raw value of its type: another type or a
+            # scaling reads the value another way, so they no longer apply.
+            fields["options"], fields["options_source"] = {}, ""
         try:
             return ParameterSpec.model_validate({**fields, **changes})
         except ValidationError as exc:
@@ -132,6 +137,8 @@ _WHOLE_NUMBERS: Final = frozenset({"u16", "i16", "u32", "i32"})
 
 def _check_options(spec: ParameterSpec) -> None:
     if not spec.options:
+        if spec.options_source:
+            raise ValueError("options_source without options")
         return
     if not spec.options_source:
         raise ValueError("options need an options_source: the document that words them")
@@ -139,9 +146,12 @@ def _check_options(spec: ParameterSpec) -> None:
         raise ValueError(f"options need a whole-number type (u16, i16, u32, i32), not {spec.type}")
     if spec.conversion not in (None, 0) or spec.scale not in (None, 1):
         raise ValueError("options number the raw value: no conversion or scale")
-    blank = [n for n, text in spec.options.items() if not text.strip()]
-    if blank:
-        raise ValueError(f"option {blank[0]} has no text")
+    low, high = value_types.ValueType(spec.type).bounds
+    for number, text in spec.options.items():
+        if not low <= number <= high:
+            raise ValueError(f"option {number} is outside {spec.type} ({low} to {high})")
+        if not text.strip():
+            raise ValueError(f"option {number} has no text")
 
 
 class Catalog(BaseModel):

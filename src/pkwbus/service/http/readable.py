@@ -40,7 +40,7 @@ def readable(value: Value, fmt: ParameterDescription) -> str:
     """``value`` as the status page shows it (without its unit)."""
     if isinstance(value, str):
         return value
-    if fmt.options and isinstance(value, int):
+    if fmt.enumerates and isinstance(value, int):
         option = fmt.option(value)  # an enumeration: its text with the number
         return f"{option} [{value}]" if option else f"{value}"
     if fmt.vtype is ValueType.F32 or (isinstance(value, float) and fmt.vtype is None):

@@ -84,7 +84,7 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
                 parameter=ref.name, index=index or 0, name=fmt.name, unit=fmt.unit,
                 minimum=fmt.minimum, maximum=fmt.maximum,
                 value=latest.value if latest is not None else None, text=fmt.is_text,
-                options=dict(fmt.options),
+                options=dict(fmt.options) if fmt.enumerates else {},
             )
         )  # fmt: skip
     return views
