@@ -78,6 +78,14 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             )
             drawn = spark.locator("path").get_attribute("d") or ""
             assert drawn.startswith("M") and drawn.count("L") >= 50, drawn
+            # New trends redraw a kept row's sparkline in its place (asked for now rather
+            # than at the page's next 15 s).
+            ramp_spark = fan1.locator('[data-parameter="3-41"] .trend svg.spark')
+            served.history("fan1", "3-41", [2.0 + (k % 3) for k in range(59)])
+            page.evaluate("trendsFetched = 0")
+            sync_api.expect(ramp_spark.locator("title")).to_have_text(
+                re.compile(r"^last 15 min: 2 to \d+(\.\d+)?$"), timeout=20_000
+            )
             # An enumeration: the option's text as the Danfoss design guide words it.
             language = fan1.locator('[data-parameter="0-01"]')
             sync_api.expect(language.locator(".value")).to_have_text("English [0]")
@@ -128,7 +136,7 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             # An enumeration's form lists its options with their texts.
             page.select_option("#write-target", "fan1/0-01")
             sync_api.expect(page.locator("#write-now")).to_contain_text(
-                "Language: now 0; options 0 English, 4 Danish"
+                "Language: now English [0]; options 0 English, 4 Danish"
             )
             # The write form: the parameter, its limits and value, a confirmation, the answer.
             page.select_option("#write-target", "fan1/3-41")

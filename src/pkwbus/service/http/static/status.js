@@ -64,7 +64,8 @@ function drawLines(lines) {
 
 // The values' last 15 minutes (/api/v1/trends), fetched every 15 s: drive -> name -> points.
 let trendData = {};
-let trendsAt = 0;
+let trendsFetched = 0;  // when they were last asked for
+let trendsVersion = 0;  // counts the trends that arrived: a row draws its sparkline anew
 const TREND_PERIOD_MS = 15000;
 const SVG = "http://www.w3.org/2000/svg";
 
@@ -74,16 +75,17 @@ function sparkline() {  // one per value, made once; drawTrend draws its line
   svg.setAttribute("viewBox", "0 0 120 24");
   svg.setAttribute("width", "120");
   svg.setAttribute("height", "24");
-  svg.append(document.createElementNS(SVG, "path"), document.createElementNS(SVG, "title"));
-  return svg;
+  const line = document.createElementNS(SVG, "path");
+  const title = document.createElementNS(SVG, "title");
+  svg.append(line, title);
+  return { svg, line, title };
 }
 
-function drawTrend(svg, points) {
-  const [line, title] = svg.children;
+function drawTrend(spark, points) {
   const known = points.filter((v) => v !== null);
   if (known.length < 2) {
-    line.removeAttribute("d");
-    title.textContent = "";
+    spark.line.removeAttribute("d");
+    spark.title.textContent = "";
     return;
   }
   const low = Math.min(...known), high = Math.max(...known);
@@ -96,14 +98,15 @@ function drawTrend(svg, points) {
     path += `${pen}${x.toFixed(1)},${y.toFixed(1)} `;
     pen = "L";
   });
-  line.setAttribute("d", path.trim());
-  title.textContent = `last 15 min: ${low} to ${high}`;
+  spark.line.setAttribute("d", path.trim());
+  spark.title.textContent = `last 15 min: ${low} to ${high}`;
 }
 
 async function refreshTrends() {
-  if (Date.now() - trendsAt < TREND_PERIOD_MS) return;
-  trendsAt = Date.now();
+  if (Date.now() - trendsFetched < TREND_PERIOD_MS) return;
+  trendsFetched = Date.now();
   trendData = await getJson("/api/v1/trends");
+  trendsVersion += 1;
 }
 
 // A value's row: its cells are made once and filled at each refresh (fillRow).
@@ -112,7 +115,7 @@ function valueRow(name) {
   const cells = { title: el("td", { class: "title" }), value: el("td", { class: "num value" }),
     age: el("td", { class: "num age" }) };
   const row = el("tr", { "data-parameter": name }, el("td", {}, name), cells.title,
-    cells.value, el("td", { class: "trend" }, spark), cells.age);
+    cells.value, el("td", { class: "trend" }, spark.svg), cells.age);
   return { row, spark, ...cells, drawnTrends: -1 };
 }
 
@@ -129,19 +132,27 @@ function fillRow(r, drive, v, now) {
   setText(r.value, v.unit ? `${shown} ${v.unit}` : shown);
   if (r.value.title !== `${v.value}`) r.value.title = `${v.value}`;
   setText(r.age, age(seconds));
-  if (r.drawnTrends !== trendsAt) {  // the sparklines change with the trends, every 15 s
+  if (r.drawnTrends !== trendsVersion) {  // the sparklines change with the trends, every 15 s
     const name = r.row.dataset.parameter;
     drawTrend(r.spark, (trendData[drive.name] || {})[name] || []);
-    r.drawnTrends = trendsAt;
+    r.drawnTrends = trendsVersion;
   }
 }
 
 // The drive's heading, status bits and alarms: what makes its section's shape. Its
-// values' numbers and ages are filled in place; a new shape draws the section anew.
+// counts, values and ages are filled in place, and it folds in place; a new shape draws
+// the section anew.
 function shapeOf(drive) {
   return JSON.stringify([drive.up, drive.line, drive.address, drive.protocol, drive.status_word,
-    drive.status, drive.faults, drive.telegram_errors, drive.alarms, folded.has(drive.name),
-    drive.values.map((v) => [v.parameter, v.index])]);
+    drive.status, drive.alarms, drive.values.map((v) => [v.parameter, v.index])]);
+}
+
+function fillCounts(section, drive) {
+  const { faults, errors } = section;
+  setText(faults, `${drive.faults} faults`);
+  faults.className = drive.faults ? "alarm" : "";
+  setText(errors, `${drive.telegram_errors} telegram errors`);
+  errors.className = drive.telegram_errors ? "alarm" : "";
 }
 
 function drawDrive(drive) {
@@ -157,24 +168,24 @@ function drawDrive(drive) {
     : `status word 0x${drive.status_word.toString(16).padStart(4, "0")}`;
   const fold = el("button", { class: "fold", type: "button", title: "fold or unfold" },
     folded.has(drive.name) ? "+" : "\u2212");
-  fold.addEventListener("click", () => {
-    if (folded.has(drive.name)) folded.delete(drive.name); else folded.add(drive.name);
-    refreshNow();
-  });
   const cls = `drive ${drive.up ? "up" : "down"}${folded.has(drive.name) ? " folded" : ""}`;
+  const faults = el("span", {}), errors = el("span", {});
   const node = el("div", { class: cls, "data-drive": drive.name },
     el("h3", {}, fold, ` ${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
       ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
-    el("div", { class: "counts" },
-      el("span", { class: drive.faults ? "alarm" : "" }, `${drive.faults} faults`),
-      el("span", { class: drive.telegram_errors ? "alarm" : "" },
-        `${drive.telegram_errors} telegram errors`), " since the service started"),
+    el("div", { class: "counts" }, faults, errors, " since the service started"),
     el("div", { class: "bits" }, ...bits),
     alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "15 min"), el("th", {}, "age"))),
       el("tbody", {}, ...rows.map((r) => r.row))));
-  return { node, rows };
+  fold.addEventListener("click", () => {  // folds in place: the button keeps its focus
+    const now = !folded.has(drive.name);
+    if (now) folded.add(drive.name); else folded.delete(drive.name);
+    node.classList.toggle("folded", now);
+    fold.textContent = now ? "+" : "\u2212";
+  });
+  return { node, rows, faults, errors };
 }
 
 // Drives folded by the reader (kept across refreshes); drives down or in alarm come first.
@@ -234,7 +245,9 @@ function writeKey(drive, w) {
 
 function describeWritable(w) {
   const unit = w.unit ? ` ${w.unit}` : "";
-  const now = w.value === null ? "not read yet" : `now ${w.value}${unit}`;
+  const option = w.value === null ? undefined : (w.options || {})[w.value];
+  const shown = option ? `${option} [${w.value}]` : `${w.value}`;
+  const now = w.value === null ? "not read yet" : `now ${shown}${unit}`;
   const low = w.minimum === null ? "" : `${w.minimum}`;
   const high = w.maximum === null ? "" : `${w.maximum}`;
   const limits = low || high ? `, limits ${low || "-"} to ${high || "-"}${unit}` : "";
@@ -339,6 +352,7 @@ function refreshNow() {  // the drives from the last data: down or in alarm firs
       const shape = shapeOf(d);
       let section = sections.get(d.name);
       if (!section || section.shape !== shape) section = { shape, ...drawDrive(d) };
+      fillCounts(section, d);
       d.values.forEach((v, i) => fillRow(section.rows[i], d, v, now));
       kept.set(d.name, section);
       return section.node;
