@@ -5,6 +5,7 @@ on the line. Every PPO-write on the wire has control word bit 10 = 0."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import gc
 import logging
 from collections.abc import AsyncIterator
@@ -27,7 +28,11 @@ from pkwbus.protocol.dp_slave import (
     NoAnswer,
     SlaveSetup,
     SlaveState,
+    TransferEnded,
 )
+from pkwbus.protocol.dpv1 import C1_SAP, Dpv1Setup
+from pkwbus.protocol.dpv1_transfer import RecordRead
+from pkwbus.protocol.profidrive import RECORD, ParameterAddress, ParameterRequest
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.faults import Answer
@@ -266,3 +271,57 @@ async def test_a_port_lost_while_the_request_goes_out_leaves_no_unretrieved_erro
     gc.collect()
     await asyncio.sleep(0)
     assert "never retrieved" not in caplog.text
+
+
+async def test_an_unanswered_record_request_is_repeated_at_once_and_data_exchange_goes_on(
+    end: str,
+) -> None:
+    # The FDL repeats a request right after its slot time: a repeat of the MSAC_C1
+    # request must not take the place of the slave's next Data_Exchange.
+    sim = make_sim([8], "profidrive", ppo_number=3, dpv1=True)
+    answer = sim.answer
+    dropped: list[fdl.DataFrame] = []
+
+    def drop_the_first_record_request(frame: object, now: float | None = None) -> Any:
+        if isinstance(frame, fdl.DataFrame) and frame.dsap == C1_SAP and not dropped:
+            dropped.append(frame)
+            return None
+        return answer(frame, now)
+
+    sim.answer = drop_the_first_record_request  # type: ignore[method-assign]
+    wire = record_dp_wire(sim)  # sees every request, the dropped one too
+    ended: list[TransferEnded] = []
+
+    def on_event(address: int, event: object) -> None:
+        if isinstance(event, TransferEnded):
+            ended.append(event)
+
+    async with serve(sim, end) as port:
+        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        setup = dataclasses.replace(setup_for(sim, 8), dpv1=Dpv1Setup(response_timeout=2.0))
+        master = DpMaster(line, [(setup, None)], on_event=on_event)
+        await master.start(listen=0.02)
+        try:
+            slave = master.runs[8].slave
+            for _ in range(50):
+                if slave.state is SlaveState.DATA_EXCHANGE:
+                    break
+                await master.cycle()
+            assert slave.state is SlaveState.DATA_EXCHANGE
+            request = ParameterRequest.read(1, 1, [ParameterAddress(2)])
+            slave.start_transfer(0, RECORD, request.encode(), asyncio.get_running_loop().time())
+            wire.frames.clear()
+            cycles = 0
+            while not ended and cycles < 50:
+                await master.cycle()
+                cycles += 1
+        finally:
+            await master.stop()
+    assert len(dropped) == 1 and ended and isinstance(ended[0].end, RecordRead)
+    to_slave = [f for f in wire.frames if f.da == 8]
+    exchanges = [f for f in to_slave if f.dsap is None]
+    assert len(exchanges) == cycles  # a Data_Exchange every cycle, the repeat's too
+    first = to_slave.index(dropped[0])
+    repeat = to_slave[first + 1]  # right after the unanswered one, the same FCB
+    assert repeat.dsap == C1_SAP and repeat.data == dropped[0].data
+    assert repeat.control == dropped[0].control

@@ -56,9 +56,10 @@ class Bus:
         self.now += 0.01
         self.send(self.slave.poll(self.now))
         frame = self.slave.poll_acyclic()
-        if frame is not None:
+        while frame is not None:  # and its repeats at once, as the master sends them
             self.acyclic.append(frame)
             self.send(frame)
+            frame = self.slave.repeat_acyclic()
 
     def start(self) -> None:
         for _ in range(6):

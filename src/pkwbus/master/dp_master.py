@@ -132,9 +132,10 @@ class DpMaster:
             await self._exchange(run, frame)
             sent += 1
             acyclic = slave.poll_acyclic()  # a record transfer's next request, if any
-            if acyclic is not None:
+            while acyclic is not None:  # and its repeats, while unanswered
                 await self._exchange(run, acyclic)
                 sent += 1
+                acyclic = slave.repeat_acyclic()
         self.cycles += 1
         if not sent:
             await asyncio.sleep(IDLE_STEP)

@@ -158,6 +158,13 @@ class DpSlave:
         self._acyclic = True
         return frame
 
+    def repeat_acyclic(self) -> DataFrame | None:
+        """The transfer's request again, at once, while it is unanswered and retries are
+        left (None otherwise). The FDL repeats a request as soon as its slot time is
+        over, so the repeat holds up neither the next cycle's Data_Exchange nor the
+        slaves after this one."""
+        return self._pending if self._acyclic else None
+
     def take_events(self) -> list[SlaveEvent]:
         """Events produced by :meth:`poll` (a watchdog restart) since the last call."""
         events, self._events = self._events, []
