@@ -191,6 +191,19 @@ def test_check_config_estimates_parameters_per_second_through_data_record_47() -
     assert f"drive a: parameters through data record 47 (DP-V1), at most {most:.1f}" in report
 
 
+def one_slave_line(drive: str) -> str:
+    """A DP line at 93750 baud with ``drive`` (a flow mapping) as its one slave."""
+    return f"""
+lines:
+  - name: dp
+    port: /dev/ttyUSB1
+    protocol: profibus
+    baudrate: 93750
+    drives:
+      - {drive}
+"""
+
+
 @pytest.mark.parametrize(
     ("drive", "message"),
     [
@@ -205,17 +218,8 @@ def test_check_config_estimates_parameters_per_second_through_data_record_47() -
     ],
 )  # fmt: skip
 def test_data_record_47_mistakes_are_placed(drive: str, message: str) -> None:
-    text = f"""
-lines:
-  - name: dp
-    port: /dev/ttyUSB1
-    protocol: profibus
-    baudrate: 93750
-    drives:
-      - {drive}
-"""
     with pytest.raises(ConfigError, match=message):
-        parse_config(text, environ={})
+        parse_config(one_slave_line(drive), environ={})
 
 
 def test_data_record_47_on_a_slave_without_record_services_or_with_text_polls(
@@ -226,27 +230,15 @@ def test_data_record_47_on_a_slave_without_record_services_or_with_text_polls(
         "#Profibus_DP\nIdent_Number = 0x80B5\nDPV1_Slave = 1\nC1_Read_Write_supp = 0\n"
         'Module = "PPO 3" 0xF1\nEndModule\n'
     )
-    text = f"""
-lines:
-  - name: dp
-    port: /dev/ttyUSB1
-    protocol: profibus
-    baudrate: 93750
-    drives:
-      - {{name: a, address: 8, gsd: {gsd}, ppo: 3, parameter_access: ds47,
-          poll: [{{parameter: r0021, every: 1s}}]}}
-"""
+    text = one_slave_line(
+        f"{{name: a, address: 8, gsd: {gsd}, ppo: 3, parameter_access: ds47,"
+        " poll: [{parameter: r0021, every: 1s}]}"
+    )
     with pytest.raises(ConfigError, match="C1_Read_Write_supp = 0"):
         parse_config(text, environ={})
-    texts = """
-lines:
-  - name: dp
-    port: /dev/ttyUSB1
-    protocol: profibus
-    baudrate: 93750
-    drives:
-      - {name: a, address: 8, ident: 0x80B5, ppo: 3, dpv1: true,
-         poll: [{parameter: r0021, every: 1s}, {parameter: r0020, every: 1s, type: text}]}
-"""
+    texts = one_slave_line(
+        "{name: a, address: 8, ident: 0x80B5, ppo: 3, dpv1: true,"
+        " poll: [{parameter: r0021, every: 1s}, {parameter: r0020, every: 1s, type: text}]}"
+    )
     with pytest.raises(ConfigError, match=r"poll\[1\]: r0020 is a text"):
         parse_config(texts, environ={})

@@ -43,9 +43,6 @@ Value = int | float | str
 _NO_OPTIONS: Final[Mapping[int, str]] = MappingProxyType({})
 
 
-_WHOLE: Final = frozenset({ValueType.U16, ValueType.I16, ValueType.U32, ValueType.I32})
-
-
 def _no_options() -> Mapping[int, str]:
     return _NO_OPTIONS
 
@@ -111,7 +108,8 @@ class ParameterDescription:
     def enumerates(self) -> bool:
         """Options that apply: they number the raw value, so the value must be a whole
         number, unscaled (a drive that describes it scaled reads its own way)."""
-        return bool(self.options) and self.vtype in _WHOLE and self.scaling == UNSCALED
+        whole = self.vtype is not None and self.vtype.whole
+        return bool(self.options) and whole and self.scaling == UNSCALED
 
     def option(self, value: Value) -> str:
         """The enumeration's text for ``value``; empty where the catalog words none."""

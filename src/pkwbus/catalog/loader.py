@@ -16,7 +16,7 @@ import os
 from collections.abc import Mapping
 from importlib import resources
 from pathlib import Path
-from typing import Any, Final, Literal, Self
+from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, model_validator
 
@@ -132,9 +132,6 @@ def _check_limits(spec: ParameterSpec) -> None:
         raise ValueError(f"min {spec.min} is greater than max {spec.max}")
 
 
-_WHOLE_NUMBERS: Final = frozenset({"u16", "i16", "u32", "i32"})
-
-
 def _check_options(spec: ParameterSpec) -> None:
     if not spec.options:
         if spec.options_source:
@@ -142,11 +139,12 @@ def _check_options(spec: ParameterSpec) -> None:
         return
     if not spec.options_source:
         raise ValueError("options need an options_source: the document that words them")
-    if spec.type not in _WHOLE_NUMBERS:
+    vtype = value_types.ValueType(spec.type) if spec.type else None
+    if vtype is None or not vtype.whole:
         raise ValueError(f"options need a whole-number type (u16, i16, u32, i32), not {spec.type}")
     if spec.conversion not in (None, 0) or spec.scale not in (None, 1):
         raise ValueError("options number the raw value: no conversion or scale")
-    low, high = value_types.ValueType(spec.type).bounds
+    low, high = vtype.bounds
     for number, text in spec.options.items():
         if not low <= number <= high:
             raise ValueError(f"option {number} is outside {spec.type} ({low} to {high})")
@@ -170,12 +168,10 @@ class Catalog(BaseModel):
         for pnu, spec in self.parameters.items():
             if pnu != spec.pnu:
                 raise ValueError(f"parameters.{pnu}: key and pnu {spec.pnu} differ")
-            problem = _source_problem(spec.source, self.sources)
-            if problem:
-                raise ValueError(f"parameters.{pnu}.source: {problem}")
-            problem = _source_problem(spec.options_source, self.sources)
-            if problem:
-                raise ValueError(f"parameters.{pnu}.options_source: {problem}")
+            for field_name in ("source", "options_source"):
+                problem = _source_problem(getattr(spec, field_name), self.sources)
+                if problem:
+                    raise ValueError(f"parameters.{pnu}.{field_name}: {problem}")
         return self
 
     def get(self, pnu: int) -> ParameterSpec | None:

@@ -51,6 +51,11 @@ class ValueType(enum.StrEnum):
     def bounds(self) -> tuple[int, int]:
         return _BOUNDS[self]
 
+    @property
+    def whole(self) -> bool:
+        """A whole-number type (u16, i16, u32, i32): the ones with bounds."""
+        return self in _BOUNDS
+
 
 _BOUNDS = {
     ValueType.U16: (0, 0xFFFF),
