@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 from pkwbus import __version__
-from pkwbus.commands import access, describe, ports, scan, service
+from pkwbus.commands import access, describe, gsd, ports, scan, service
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.sim import cli as sim_cli
 
@@ -27,7 +27,8 @@ class Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="pkwbus",
-        description="RS-485 bus master for the PKW parameter channel (Danfoss FC, Siemens USS)",
+        description="Bus master for the PKW parameter channel of variable-frequency drives:"
+        " Danfoss FC protocol and Siemens USS on RS-485, and PROFIBUS DP (DP-V0, DP-V1)",
     )
     parser.add_argument("--version", action="version", version=f"pkwbus {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
@@ -38,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     describe.add_parsers(sub)
     service.add_parsers(sub)
     ports.add_parsers(sub)
+    gsd.add_parsers(sub)
     sim_cli.add_parser(sub).set_defaults(func=sim_cli.run)
     return parser
 

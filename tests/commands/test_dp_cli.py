@@ -267,6 +267,60 @@ def test_gsd_file(capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path:
     assert code == 2 and "GSD line 3" in err
 
 
+VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "gsd_files" / "mm4_like.gse"
+
+
+def test_a_vendor_shaped_gsd_file_as_it_ships(capsys: pytest.CaptureFixture[str], end: str) -> None:
+    """The MICROMASTER-4-like file (baud rate lines, DP-V1 keys, reference lines) with
+    --gsd: the slave is parametrised from it and answers."""
+    served = serve(end, "profidrive", catalog="siemens-g120")
+    try:
+        args = dp(served, "--address", "8", "--gsd", str(VENDOR_SHAPED), "r0021", ident=False)
+        code, out, err = run(capsys, "read", *args)
+        assert code == 0, err
+        assert "r0021" in out
+        prm = [f for f in served.wire.frames if f.dsap == dps.Service.SET_PRM]
+        sent = dps.decode_parameters(prm[0].data)
+        assert (sent.ident, sent.user_prm) == (0x80B5, bytes(3))  # the file's
+    finally:
+        served.close()
+
+
+def test_cfg_given_beside_a_gsd_file_without_that_module(
+    capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path: Path
+) -> None:
+    telegrams = tmp_path / "telegrams.gsd"
+    telegrams.write_text(GSD_TEXT.replace('"PPO 1" 0xF3,0xF1', '"Telegram 1" 0x00,0xE1,0xD1'))
+    args = dp(danfoss, "--address", "8", "--gsd", str(telegrams), "16-13", ident=False)
+    code, _, err = run(capsys, "read", *args)
+    assert code == 2 and "has no module for PPO 1 (modules: 'Telegram 1'); give --cfg" in err
+    code, out, err = run(capsys, "read", *args[:-1], "--cfg", "F3 F1", "16-13")
+    assert code == 0, err
+    assert "16-13" in out
+
+
+@pytest.mark.parametrize(
+    ("extra", "args", "message"),
+    [
+        ("9.6_supp = 1\nMaxTsdr_9.6 = 60\n", ["--baudrate", "19200"],
+         "the slave does not run at 19200 baud (the file names 9600): give --baudrate"),
+        ("19.2_supp = 1\nMaxTsdr_19.2 = 600\n", ["--slot-time", "20ms"],
+         "--slot-time: the slave may begin to answer 600 bit times (31.2 ms) after a request"),
+    ],
+)  # fmt: skip
+def test_the_line_rate_and_slot_time_against_the_gsd_file(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, extra: str, args: list[str],
+    message: str,
+) -> None:  # fmt: skip
+    path = tmp_path / "drive.gsd"
+    path.write_text(GSD_TEXT + extra)
+    code, _, err = run(
+        capsys, "read", "--port", "/nonexistent/tty", "--protocol", "profibus",
+        "--address", "8", "--gsd", str(path), *args, "16-13",
+    )  # fmt: skip
+    assert code == 2 and message in err, err
+
+
 def test_read_write_and_describe_through_data_record_47(
     capsys: pytest.CaptureFixture[str], end: str
 ) -> None:

@@ -23,7 +23,7 @@ def imported_modules(path: pathlib.Path) -> set[str]:
 
 def test_protocol_imports_no_io_or_clock() -> None:
     root = pathlib.Path(pkwbus.protocol.__file__).parent
-    files = sorted(root.glob("*.py"))
+    files = sorted(root.rglob("*.py"))
     assert len(files) >= 6
     for path in files:
         bad = imported_modules(path) & FORBIDDEN

@@ -32,6 +32,14 @@ EXPECTED = {
     "bad_ident": "lines[0].drives[0].ident: 65536 is not a 16-bit number",
     "pkw_words_on_dp": "lines[0].drives[0].pkw_words: the PPO sets it over PROFIBUS",
     "bad_watchdog": "lines[0].watchdog: '1h' is too long for a watchdog",
+    "gsd_rate_unsupported": (
+        "lines[0].drives[0].gsd: the slave does not run at 93750 baud, the line's rate (its GSD"
+        " file names 9600, 19200)"
+    ),
+    "gsd_slot_time_short": (
+        "lines[0].drives[0].gsd: its GSD file's MaxTsdr at 19200 baud, 600 bit times (31.2 ms),"
+        " is longer than the line's slot_time (20 ms)"
+    ),
 }
 
 GOOD = """
@@ -101,6 +109,58 @@ def test_a_good_dp_line(tmp_path: Path) -> None:
     pump_settings, _ = pump.dp.settings()
     assert pump_settings is not None and pump_settings.ppo.number == 3
     assert pump.pkw_dialect.name == "profidrive"
+
+
+VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "gsd_files" / "mm4_like.gse"
+
+
+def test_a_vendor_shaped_gsd_file_as_it_ships(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """The MICROMASTER-4-like file (baud rate lines, DP-V1 keys, module reference lines):
+    its PPO 1 module, its user parameters, its DP-V1 services; check-config exit 0."""
+    text = one_slave_line(f"{{name: a, address: 8, gsd: {VENDOR_SHAPED}, ppo: 1}}")
+    settings, problems = parse_config(text, environ={}).lines[0].drives[0].dp.settings()
+    assert problems == [] and settings is not None
+    assert (settings.ident, settings.cfg, settings.user_prm) == (0x80B5, b"\xf3\xf1", bytes(3))
+    assert settings.module is not None and settings.module.reference == 21
+    assert settings.dpv1 is not None and settings.dpv1.max_data == 240
+    ppo3 = one_slave_line(f"{{name: a, address: 8, gsd: {VENDOR_SHAPED}, ppo: 3}}")
+    found, _ = parse_config(ppo3, environ={}).lines[0].drives[0].dp.settings()
+    assert found is not None and found.cfg == b"\x00\xf1"  # an empty slot before the PZD
+    path = tmp_path / "pkwbus.yaml"
+    path.write_text(text.replace("93750", "19200"))
+    assert main(["check-config", str(path)]) == 0, capsys.readouterr().err
+
+
+def test_cfg_given_needs_no_module_of_the_gsd_file(tmp_path: Path) -> None:
+    """The configuration's cfg overrides the GSD file's: a file without a module for the
+    PPO is refused only where no cfg is given (docs/profibus.md)."""
+    gsd = tmp_path / "telegrams.gsd"
+    gsd.write_text(
+        "#Profibus_DP\nIdent_Number = 0x0402\nUser_Prm_Data = 0x01\n"
+        'Module = "Standard Telegram 1" 0x00,0xE1,0xD1\n1\nEndModule\n'
+    )
+    without = one_slave_line(f"{{name: a, address: 8, gsd: {gsd}}}")
+    with pytest.raises(ConfigError) as caught:
+        parse_config(without, environ={})
+    assert "has no module for PPO 1 (modules: 'Standard Telegram 1'); give cfg" in str(caught.value)
+    given = one_slave_line(f'{{name: a, address: 8, gsd: {gsd}, cfg: "F3 F1"}}')
+    settings, problems = parse_config(given, environ={}).lines[0].drives[0].dp.settings()
+    assert problems == [] and settings is not None
+    assert (settings.ident, settings.cfg, settings.user_prm) == (0x0402, b"\xf3\xf1", b"\x01")
+    assert settings.module is None
+
+
+def test_the_slot_time_waits_for_the_slowest_slaves_max_tsdr(tmp_path: Path) -> None:
+    from pkwbus.protocol import dp_timing
+
+    slow = BAD / "gsd" / "slow.gsd"
+    assert dp_timing.default_slot_time(19200, 60) == dp_timing.default_slot_time(19200)
+    longer = dp_timing.default_slot_time(19200, 600)
+    assert longer == pytest.approx(dp_timing.default_slot_time(19200) + 540 / 19200)
+    text = one_slave_line(f"{{name: a, address: 8, gsd: {slow}}}").replace("93750", "19200")
+    assert parse_config(text, environ={}).lines[0].drives[0].dp.settings()[0] is not None
 
 
 def test_parse_config_without_a_folder_reads_gsd_paths_as_given() -> None:

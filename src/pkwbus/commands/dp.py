@@ -21,10 +21,10 @@ import argparse
 import asyncio
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
-from pkwbus import durations, limits
+from pkwbus import dp_settings, durations, limits
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
+from pkwbus.dp_settings import DpGiven
 from pkwbus.link import LinkState, PortError, PortSettings
 from pkwbus.master.cycle_wire import CycleWire, NoDpEvents, SlaveSpec
 from pkwbus.master.dp_line import DpLine
@@ -36,11 +36,12 @@ from pkwbus.master.single_job import JobSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import dp_timing, gsd, pkw, ppo
+from pkwbus.protocol import dp_timing, pkw, ppo
 from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.dp_slave import SlaveSetup, SlaveState
 from pkwbus.protocol.dpv1 import Dpv1Setup
 from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.gsd import Gsd
 from pkwbus.protocol.ppo import PkwSlot, PpoType
 from pkwbus.protocol.profidrive import AXES
 from pkwbus.protocol.telegram import BlockShape, Protocol
@@ -111,6 +112,7 @@ class DpContext:
     retries: int
     record: RecordAccess | None = None  # parameters through data record 47 (DP-V1)
     dpv1: Dpv1Setup | None = None
+    slot_time: float | None = None  # None: the default at the line's rate
 
     def setup(self, address: int) -> SlaveSetup:
         try:
@@ -142,29 +144,9 @@ def _hex_bytes(text: str, what: str) -> bytes:
         raise CommandError(f"{what}: {text[:40]!r} is not hex bytes", Exit.BAD_INPUT) from None
 
 
-def _from_gsd(path: str, number: int) -> tuple[int, bytes, bytes, Dpv1Setup | None]:
-    """Ident, user parameters, the PPO's module identifiers and (a DP-V1 slave) its class 1
-    services from a GSD file."""
-    try:
-        text = Path(path).read_text(encoding="latin-1")
-    except OSError as exc:
-        raise CommandError(f"--gsd: cannot read {path}: {exc.strerror}", Exit.BAD_INPUT) from None
-    try:
-        found = gsd.parse(text)
-    except gsd.GsdError as exc:
-        raise CommandError(f"--gsd {path}: {exc}", Exit.BAD_INPUT) from None
-    wanted = ppo.ppo_type(number)
-    modules = [m for m in found.modules if m.cfg.lstrip(b"\x00") == wanted.cfg]
-    if not modules:
-        modules = [m for m in found.modules if f"ppo{number}" in m.name.casefold().replace(" ", "")]
-    if not modules:
-        known = ", ".join(repr(m.name) for m in found.modules) or "none"
-        raise CommandError(
-            f"--gsd {path}: no module for PPO {number} (modules: {known}); give --cfg",
-            Exit.BAD_INPUT,
-        )
-    module = modules[0]
-    return found.ident, found.prm_for([module]), module.cfg, found.dpv1
+def _option(key: str) -> str:
+    """A field of the DP settings as the command line names it."""
+    return "--" + key.replace("_", "-")
 
 
 def build_context(args: argparse.Namespace) -> DpContext:
@@ -178,10 +160,8 @@ def build_context(args: argparse.Namespace) -> DpContext:
         kind = ppo.ppo_type(args.ppo)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    cfg, user_prm, dpv1 = kind.cfg, b"", None
-    if args.gsd is not None:
-        ident, user_prm, cfg, dpv1 = _from_gsd(args.gsd, args.ppo)
-    elif args.ident is not None:
+    ident = None
+    if args.ident is not None:
         try:
             ident = limits.check_int(int(args.ident, 0), 0, 0xFFFF)
         except ValueError:
@@ -189,31 +169,23 @@ def build_context(args: argparse.Namespace) -> DpContext:
                 f"--ident: {args.ident[:40]!r} is not a 16-bit number such as 0x0402",
                 Exit.BAD_INPUT,
             ) from None
-    else:
-        raise CommandError(
-            "give the slave's ident number (--ident 0x0402) or its GSD file (--gsd FILE)",
-            Exit.BAD_INPUT,
-        )
-    if args.cfg is not None:
-        cfg = _hex_bytes(args.cfg, "--cfg")
-    if args.user_prm is not None:
-        user_prm = _hex_bytes(args.user_prm, "--user-prm")
-    slot = args.slot_time or dp_timing.default_slot_time(args.baudrate or DEFAULT_BAUDRATE)
+    cfg = _hex_bytes(args.cfg, "--cfg") if args.cfg is not None else None
+    user_prm = _hex_bytes(args.user_prm, "--user-prm") if args.user_prm is not None else None
+    given = DpGiven(args.ppo, ident, args.gsd, cfg, user_prm)
+    found, problems = dp_settings.resolve(given, _option)
+    if found is None:
+        key, text = problems[0]
+        where = f"{_option(key)}: " if key and key != "gsd" else ""
+        raise CommandError(f"{where}{text}", Exit.BAD_INPUT)
+    ident, user_prm, cfg, dpv1 = found.ident, found.user_prm, found.cfg, found.dpv1
+    slot = _slot_time(args, found.gsd)
     # The watchdog: several worst-case cycles, at least a second.
     watchdog = max(1.0, 10 * slot * (args.retries + 1))
     try:
         parameters = dps.Parameters(ident, dps.watchdog_factors(watchdog), user_prm=user_prm)
         parameters.encode()
-        dps.check_cfg(cfg)
-        inputs, outputs = dps.io_lengths(cfg)
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
-    if (inputs, outputs) != (kind.length, kind.length):
-        raise CommandError(
-            f"the configuration {cfg.hex(' ')} sets up {inputs}/{outputs} bytes in/out;"
-            f" PPO {kind.number} has {kind.length}",
-            Exit.BAD_INPUT,
-        )
     access = getattr(args, "access", None) or ("pkw" if kind.has_pkw else "ds47")
     record = None
     if access == "ds47":
@@ -238,11 +210,35 @@ def build_context(args: argparse.Namespace) -> DpContext:
         raise CommandError("--axis applies to --access ds47 only", Exit.BAD_INPUT)
     return DpContext(
         dia, kind, parameters, cfg, args.master_address, args.retries, record,
-        dpv1 if record is not None else None,
+        dpv1 if record is not None else None, slot,
     )  # fmt: skip
 
 
-def dp_line(args: argparse.Namespace) -> DpLine:
+def _slot_time(args: argparse.Namespace, found: Gsd | None) -> float:
+    """``--slot-time``, else the default at the rate, waiting for the slave's GSD MaxTsdr;
+    bad input where the GSD file says the slave does not run at the rate, or may answer
+    later than ``--slot-time``."""
+    rate = args.baudrate or DEFAULT_BAUDRATE
+    tsdr = found.max_tsdr.get(rate) if found is not None else None
+    if found is not None and found.supports(rate) is False:
+        raise CommandError(
+            f"--gsd {args.gsd}: the slave does not run at {rate} baud (the file names"
+            f" {found.rates_text()}): give --baudrate",
+            Exit.BAD_INPUT,
+        )
+    if args.slot_time is None:
+        return dp_timing.default_slot_time(rate, tsdr)
+    if tsdr is not None and args.slot_time < dp_timing.bits(tsdr, rate):
+        raise CommandError(
+            f"--slot-time: the slave may begin to answer {tsdr} bit times"
+            f" ({dp_timing.bits(tsdr, rate) * 1000:.3g} ms) after a request at {rate} baud"
+            f" (its GSD file's MaxTsdr): give a longer one",
+            Exit.BAD_INPUT,
+        )
+    return float(args.slot_time)
+
+
+def dp_line(args: argparse.Namespace, slot_time: float | None = None) -> DpLine:
     try:
         settings = PortSettings(
             limits.check_port_url(args.port),
@@ -253,7 +249,7 @@ def dp_line(args: argparse.Namespace) -> DpLine:
         return DpLine(
             settings,
             args.master_address,
-            slot_time=args.slot_time,
+            slot_time=slot_time if slot_time is not None else args.slot_time,
             trace=print_trace if args.trace else None,
         )
     except ValueError as exc:
@@ -271,7 +267,11 @@ async def session(
     master listens first, parametrises the slave, and clears it at the end)."""
     spec = DriveSpec("drive", ctx.target(address))
     watch = _Watch(address)
-    wire = CycleWire(dp_line(args), [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], dp_events=watch)
+    wire = CycleWire(
+        dp_line(args, ctx.slot_time),
+        [SlaveSpec(spec, ctx.setup(address), ctx.ppo)],
+        dp_events=watch,
+    )
     drive = watch.session = JobSession(wire, spec, retries=ctx.retries, events=watch)
     watch.wire = wire
     wire.link.reconnect.add_listener(watch.port)

@@ -60,15 +60,20 @@ def wire_time(nbytes: int, baudrate: int) -> float:
     return bits(nbytes * CHAR_BITS, baudrate)
 
 
-def default_slot_time(baudrate: int) -> float:
-    """A slot time safe over a USB-RS485 adapter, never below the standard 100 bit times."""
+def default_slot_time(baudrate: int, max_tsdr: int | None = None) -> float:
+    """A slot time safe over a USB-RS485 adapter, never below the standard 100 bit times.
+
+    It allows a slave the standard max TSDR of 60 bit times; ``max_tsdr``, the
+    longest any slave's GSD file gives at this rate (``MaxTsdr_<rate>``), adds
+    what it asks beyond that."""
     if baudrate <= 19200:
         usb = USB_SLOT_SLOW
     elif baudrate < 93750:
         usb = USB_SLOT_MIDDLE
     else:
         usb = USB_SLOT_FAST
-    return max(usb, bits(TSL_BITS, baudrate))
+    beyond = bits(max(0, (max_tsdr or 0) - MAX_TSDR_BITS), baudrate)
+    return max(usb, bits(TSL_BITS, baudrate)) + beyond
 
 
 def token_lost_time(slot_time: float, address: int) -> float:

@@ -160,14 +160,20 @@ def _dp_runner(
         low_latency=line.low_latency,
         rs485=Rs485Mode(**line.rs485.model_dump()) if line.rs485 is not None else None,
     )
-    dp = DpLine(settings, line.master_address, slot_time=line.slot_time)
-    # The watchdog: as configured, else several worst-case cycles and at least a second.
-    watchdog = line.watchdog or max(1.0, 10 * dp.slot_time * (line.retries + 1) * len(specs))
-    slaves = []
-    for drive, spec in zip(line.drives, specs, strict=True):
+    resolved = []
+    for drive in line.drives:
         found, _ = drive.dp.settings()
         if found is None:  # the configuration checked it; a GSD file changed since
             raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
+        resolved.append(found)
+    # The slot time: as configured, else one that waits for the slowest slave's GSD MaxTsdr.
+    tsdr = [s.gsd.max_tsdr.get(line.baudrate, 0) for s in resolved if s.gsd is not None]
+    slot = line.slot_time or dp_timing.default_slot_time(line.baudrate, max(tsdr, default=None))
+    dp = DpLine(settings, line.master_address, slot_time=slot)
+    # The watchdog: as configured, else several worst-case cycles and at least a second.
+    watchdog = line.watchdog or max(1.0, 10 * dp.slot_time * (line.retries + 1) * len(specs))
+    slaves = []
+    for drive, spec, found in zip(line.drives, specs, resolved, strict=True):
         parameters = dp_services.Parameters(
             found.ident, dp_services.watchdog_factors(watchdog), user_prm=found.user_prm
         )
@@ -177,7 +183,7 @@ def _dp_runner(
         )  # fmt: skip
         slaves.append(SlaveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
-    deadline = max(2.0, 20 * sum(dp_timing.default_slot_time(line.baudrate) for _ in specs))
+    deadline = max(2.0, 20 * dp.slot_time * len(specs))
     dp_events = metrics.for_dp_line(line.name, [d.name for d in line.drives])
     wire = CycleWire(dp, slaves, dp_events=dp_events)
     return LineRunner(

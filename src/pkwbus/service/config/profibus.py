@@ -9,11 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from pkwbus import dp_settings
+from pkwbus.dp_settings import DpGiven, DpSettings
 from pkwbus.problems import short
-from pkwbus.protocol import dp_services, gsd, ppo
-from pkwbus.protocol.dpv1 import Dpv1Setup
-from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.ppo import PpoType
+from pkwbus.protocol import dp_timing, ppo
+from pkwbus.protocol.gsd import Gsd
 from pkwbus.protocol.profidrive import AXES
 from pkwbus.service.config.base import Place
 
@@ -30,19 +30,6 @@ __all__ = [
     "resolve_gsd_path",
 ]
 
-MAX_GSD_BYTES = 1 << 20
-
-
-@dataclass(frozen=True, slots=True)
-class DpSettings:
-    """The Set_Prm and Chk_Cfg data of one slave."""
-
-    ppo: PpoType
-    ident: int
-    user_prm: bytes
-    cfg: bytes
-    dpv1: Dpv1Setup | None = None  # a DP-V1 slave, parametrised so (None: DP-V0)
-
 
 @dataclass(frozen=True, slots=True)
 class DpDrive:
@@ -57,82 +44,12 @@ class DpDrive:
     dpv1: bool | None = None  # as configured; None: as the GSD file says (else DP-V0)
 
     def settings(self) -> tuple[DpSettings | None, list[Place]]:
-        """The slave's settings, or the problems (each with its place) that stop them."""
-        kind = ppo.ppo_type(self.ppo)
-        problems: list[Place] = []
-        ident, user_prm, cfg = self.ident, b"", kind.cfg
-        dpv1 = Dpv1Setup() if self.dpv1 else None
-        if self.gsd is not None:
-            found, problems = _read_gsd(self.gsd, self.gsd_given or self.gsd, kind)
-            if found is not None:
-                gsd_ident, user_prm, cfg, described = found
-                if described is not None and self.dpv1 is not False:
-                    dpv1 = described  # the GSD's C1_Max_Data_Len and C1_Response_Timeout
-                if ident is not None and ident != gsd_ident:
-                    problems.append(
-                        (
-                            "ident",
-                            f"0x{ident:04X} contradicts the GSD file's Ident_Number"
-                            f" 0x{gsd_ident:04X}",
-                        )
-                    )
-                ident = gsd_ident
-        elif ident is None:
-            problems.append(
-                ("", "give the slave's ident number (ident: 0x0402) or its GSD file (gsd: PATH)")
-            )
-        if self.cfg is not None:
-            cfg = self.cfg
-        if self.user_prm is not None:
-            user_prm = self.user_prm
-        try:
-            dp_services.check_cfg(cfg)
-            lengths = dp_services.io_lengths(cfg)
-        except LocalProtocolError as exc:
-            problems.append(("cfg", str(exc)))
-        else:
-            if lengths != (kind.length, kind.length):
-                problems.append(
-                    (
-                        "cfg",
-                        f"{cfg.hex(' ').upper()} sets up {lengths[0]}/{lengths[1]} bytes in/out;"
-                        f" PPO {kind.number} has {kind.length}",
-                    )
-                )
-        if problems or ident is None:
-            return None, problems
-        try:
-            dp_services.Parameters(ident, user_prm=user_prm).encode()
-        except LocalProtocolError as exc:
-            return None, [("user_prm", str(exc))]
-        return DpSettings(kind, ident, user_prm, cfg, dpv1), []
-
-
-def _read_gsd(
-    path: str, shown: str, kind: PpoType
-) -> tuple[tuple[int, bytes, bytes, Dpv1Setup | None] | None, list[Place]]:
-    try:
-        with Path(path).open("rb") as file:
-            data = file.read(MAX_GSD_BYTES + 1)
-    except OSError as exc:
-        return None, [("gsd", f"cannot read {shown}: {exc.strerror or exc}")]
-    if len(data) > MAX_GSD_BYTES:
-        return None, [("gsd", f"{shown} is larger than 1 MiB: not a GSD file")]
-    try:
-        found = gsd.parse(data.decode("latin-1"))
-    except gsd.GsdError as exc:
-        return None, [("gsd", f"{shown}: {exc}")]
-    modules = [m for m in found.modules if m.cfg.lstrip(b"\x00") == kind.cfg]
-    if not modules:
-        wanted = f"ppo{kind.number}"
-        modules = [m for m in found.modules if wanted in m.name.casefold().replace(" ", "")]
-    if not modules:
-        known = ", ".join(repr(m.name) for m in found.modules) or "none"
-        return None, [
-            ("gsd", f"{shown} has no module for PPO {kind.number} (modules: {known}); give cfg")
-        ]
-    module = modules[0]
-    return (found.ident, found.prm_for([module]), module.cfg, found.dpv1), []
+        """The slave's settings, or the problems (each with its place) that stop them
+        (:func:`pkwbus.dp_settings.resolve`, as the command line's)."""
+        given = DpGiven(
+            self.ppo, self.ident, self.gsd, self.cfg, self.user_prm, self.dpv1, self.gsd_given
+        )
+        return dp_settings.resolve(given)
 
 
 def ident_number(value: object) -> int:
@@ -226,7 +143,35 @@ def dp_drive_problems(line: Line, drive: Drive) -> list[Place]:
     elif "axis" in drive.model_fields_set:
         problems.append(("axis", "applies to parameter_access: ds47 only"))
     problems += dp_problems
+    if settings is not None and settings.gsd is not None:
+        problems += _rate_problems(line, settings.gsd)
     return problems
+
+
+def _rate_problems(line: Line, found: Gsd) -> list[Place]:
+    """The line's baud rate against the slave's GSD file: a rate it supports, and a slot
+    time no shorter than its MaxTsdr at that rate (the latest it may begin to answer)."""
+    rate = line.baudrate
+    if found.supports(rate) is False:
+        return [
+            (
+                "gsd",
+                f"the slave does not run at {rate} baud, the line's rate (its GSD file names"
+                f" {found.rates_text()})",
+            )
+        ]
+    tsdr = found.max_tsdr.get(rate)
+    slot = line.slot_time
+    if slot is not None and tsdr is not None and slot < dp_timing.bits(tsdr, rate):
+        return [
+            (
+                "gsd",
+                f"its GSD file's MaxTsdr at {rate} baud, {tsdr} bit times"
+                f" ({_ms(dp_timing.bits(tsdr, rate))}), is longer than the line's slot_time"
+                f" ({_ms(slot)}): the master would give up on the slave before it may answer",
+            )
+        ]
+    return []
 
 
 def _text_polls(drive: Drive) -> list[Place]:
@@ -243,3 +188,7 @@ def _text_polls(drive: Drive) -> list[Place]:
                 (f"poll[{i}]", f"{entry.ref} is a text: texts do not travel in data record 47")
             )
     return problems
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1000:.3g} ms"
