@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkwbus.protocol import dp_services, pkw, ppo, pzd
-from pkwbus.protocol.dialects import Command, IndLayout
+from pkwbus.protocol.dialects import Command, Dialect, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.ppo import PkwSlot, ppo_type
 from pkwbus.protocol.pzd import Profile
@@ -155,8 +155,8 @@ def value(pnu: int, raw: int, sub: int = 0) -> bytes:
     return ppo_read(pkw.ValueResponse(1, pnu, sub, raw, pkw.Width.WORD), PCV)
 
 
-def pkw_of(wire: bytes) -> pkw.PkwRequest:
-    return pkw.decode_request(wire[:8], PCV, IndLayout.PROFIDRIVE)
+def pkw_of(wire: bytes, dialect: Dialect = PCV) -> pkw.PkwRequest:
+    return pkw.decode_request(wire[:8], dialect, IndLayout.PROFIDRIVE)
 
 
 def test_slot_carries_the_request_after_the_slaves_ak_0_and_hands_on_each_answer() -> None:
@@ -210,3 +210,21 @@ def test_slot_undecodable_read_is_reported_not_raised() -> None:
     slot = PkwSlot(PPO1, PCV)
     update = slot.feed(bytes(3))
     assert update.read is None and "3 bytes" in update.error
+
+
+@pytest.mark.parametrize("dialect", ["danfoss-pcv", "profidrive", "hitachi-sjpb"])
+def test_answers_that_are_no_pkw_answers_end_the_wait_for_ak_0(dialect: str) -> None:
+    """A slave whose PPO-reads are no PKW answer of the dialect (all bytes FF): a job still
+    goes out once the wait for AK 0 has run out, and each answer tells the request."""
+    d = ppo.dp_dialect(dialect)
+    slot = PkwSlot(PPO1, d)
+    request = pkw.read(d, 5)
+    slot.submit(request)
+    for _ in range(ppo.IDLE_WAIT_CYCLES):
+        assert pkw_of(slot.outputs(), d).command is Command.NONE
+        update = slot.feed(b"\xff" * PPO1.length)
+        assert update.garbled is not None and update.garbled.request is None
+        assert f"no PPO 1 answer of the {dialect} dialect" in update.error
+    assert pkw_of(slot.outputs(), d).pnu == 5
+    update = slot.feed(b"\xff" * PPO1.length)
+    assert update.garbled is not None and update.garbled.request is request

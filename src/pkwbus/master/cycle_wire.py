@@ -67,7 +67,7 @@ from pkwbus.protocol.dp_slave import (
 )
 from pkwbus.protocol.dpv1_transfer import RecordRead, TransferEnd
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, pzd_words
+from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
 from pkwbus.protocol.profidrive import RECORD
 
 __all__ = ["CycleWire", "DpEvents", "NoDpEvents", "SlaveSpec"]
@@ -153,6 +153,8 @@ class CycleWire:
         self._specs_by_name = {d.name: d.setup.address for d in drives}
         self._specs = {d.setup.address: d for d in drives}
         self._sends: dict[str, Send] = {}
+        self._garbled: dict[str, SlotGarbled] = {}  # this exchange's unreadable PKW answer
+        self._unreadable: set[str] = set()  # slaves whose PKW answers cannot be read
         for d in drives:
             self.dp_events.slave_state(d.name, SlaveState.OFFLINE)
 
@@ -289,19 +291,27 @@ class CycleWire:
             result = Failure(kind, end.why)
         self.runner.planner.exchanged(send, result, now)
 
-    def _on_event(self, address: int, event: SlaveEvent | SlotAnswer) -> None:
+    def _on_event(self, address: int, event: SlaveEvent | SlotAnswer | SlotGarbled) -> None:
         name = self._names[address]
         runner, master = self.runner, self.master
         now = asyncio.get_running_loop().time()
         # The line was busy for as long as the exchange held it (its idle time before the
         # request included); the answer took the time from the request written to it.
         if isinstance(event, Inputs):
-            runner.exchanged(
-                name,
-                ResponseTelegram(address, event.data, master.answer_time),
-                master.exchange_time,
+            garbled = self._garbled.pop(name, None)
+            result: ResponseTelegram | Failure = ResponseTelegram(
+                address, event.data, master.answer_time
             )
+            if garbled is not None and garbled.request is None:  # no job counts it
+                result = Failure(ErrorKind.UNEXPECTED, garbled.why)
+            runner.exchanged(name, result, master.exchange_time)
+            self._readable(name, garbled)
             self._status(name, address, event.data)
+        elif isinstance(event, SlotGarbled):
+            self._garbled[name] = event
+            send = self._sends.get(name)
+            if event.request is not None and send is not None:
+                self._done(name, send, Failure(ErrorKind.UNEXPECTED, event.why, True), now)
         elif isinstance(event, Failed):
             failure = Failure(_ERROR_KINDS[event.kind], event.detail)
             runner.exchanged(name, failure, master.exchange_time)
@@ -342,6 +352,20 @@ class CycleWire:
             run = self.master.runs[self._specs_by_name[name]]
             if run.slot is not None:
                 run.slot.finish()
+
+    def _readable(self, name: str, garbled: SlotGarbled | None) -> None:
+        """Tell once when a slave's PKW answers stop being readable, and when they are
+        readable again (the counts are the telegram errors of kind ``unexpected``)."""
+        ctx = {"line": self.runner.name, "drive": name}
+        if garbled is not None and name not in self._unreadable:
+            self._unreadable.add(name)
+            log.warning(
+                "drive %s: %s: is the drive set to this PPO and dialect? Its parameter"
+                " jobs end unanswered until it is", name, garbled.why, extra=ctx,
+            )  # fmt: skip
+        elif garbled is None and name in self._unreadable:
+            self._unreadable.discard(name)
+            log.info("drive %s: its PKW answers can be read again", name, extra=ctx)
 
     def _on_answered(self, address: int, answer: float, took: float) -> None:
         """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held

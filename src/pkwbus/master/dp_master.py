@@ -33,7 +33,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveState,
 )
 from pkwbus.protocol.fdl import DataFrame
-from pkwbus.protocol.ppo import PkwSlot, SlotAnswer
+from pkwbus.protocol.ppo import PkwSlot, SlotAnswer, SlotGarbled
 
 __all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
 
@@ -64,7 +64,7 @@ class SlaveRun:
         return self.slave.setup.address
 
 
-EventHook = Callable[[int, "SlaveEvent | SlotAnswer"], None]
+EventHook = Callable[[int, "SlaveEvent | SlotAnswer | SlotGarbled"], None]
 # A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
 # address, how long the answer took and how long the request held the line.
 AnsweredHook = Callable[[int, float, float], None]
@@ -152,15 +152,18 @@ class DpMaster:
         slot = run.slot
         told = False  # an Inputs or a Failed event tells the exchange to on_event
         for event in run.slave.feed(answer, now):
-            self._emit(run, event)
-            told = told or isinstance(event, Inputs | Failed)
+            update = None
             if isinstance(event, Inputs) and slot is not None:
                 update = slot.feed(event.data)
-                if update.answer is not None:
-                    self._emit(run, update.answer)
+                if update.garbled is not None:  # told before the exchange it came with
+                    self._emit(run, update.garbled)
+            self._emit(run, event)
+            told = told or isinstance(event, Inputs | Failed)
+            if update is not None and update.answer is not None:
+                self._emit(run, update.answer)
         if not told and self.on_answered is not None:
             self.on_answered(run.address, self.answer_time, self.exchange_time)
 
-    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotAnswer) -> None:
+    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotAnswer | SlotGarbled) -> None:
         if self.on_event is not None:
             self.on_event(run.address, event)

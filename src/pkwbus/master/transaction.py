@@ -84,6 +84,10 @@ class PkwAnswer:
 class Failure:
     kind: ErrorKind
     detail: str = ""
+    # An answer from the right drive that cannot be read (a PPO-read whose PKW words are
+    # no answer of the dialect): a try of the job's retries, as a telegram that does not
+    # decode is on FC and USS, not "not yet" forever.
+    unreadable: bool = False
 
 
 ExchangeResult = ResponseTelegram | PkwAnswer | Failure
@@ -212,9 +216,13 @@ class PkwTransaction:
         self.waiting = False
         if failure.kind is ErrorKind.PORT:
             return LineFailed(failure.detail)
-        if failure.kind is ErrorKind.UNEXPECTED:
+        if failure.kind is ErrorKind.UNEXPECTED and not failure.unreadable:
             return None  # a garbled answer from the right drive: not yet
         self._failures += 1
+        if failure.unreadable and self._failures > self.retries:
+            self.waiting = True
+            return TimedOut(f"no answer that can be read after {self._failures} tries: "
+                            f"{failure.detail}")  # fmt: skip
         if self._failures > self.retries:
             return TimedOut(f"no valid answer after {self._failures} tries" + self._last_error())
         return None

@@ -38,6 +38,7 @@ __all__ = [
     "PpoRead",
     "PpoType",
     "SlotAnswer",
+    "SlotGarbled",
     "SlotUpdate",
     "decode_ppo_read",
     "dp_dialect",
@@ -202,13 +203,28 @@ class SlotAnswer:
 
 
 @dataclass(frozen=True, slots=True)
+class SlotGarbled:
+    """A PPO-read whose PKW words are no answer of the slot's dialect (the slave set to
+    another PPO or dialect, say): ``request`` is the one the slot carried when it came
+    (None: none went out yet, the slot was waiting for AK 0)."""
+
+    request: pkw.PkwRequest | None
+    why: str
+
+
+@dataclass(frozen=True, slots=True)
 class SlotUpdate:
     """What one PPO-read brought: the decoded read (None when undecodable), the answer to
-    the request the slot carries (None: none went out, or it was AK 0 waiting)."""
+    the request the slot carries (None: none went out, or it was AK 0 waiting), and why
+    the read could not be decoded."""
 
     read: PpoRead | None
     answer: SlotAnswer | None
-    error: str = ""
+    garbled: SlotGarbled | None = None
+
+    @property
+    def error(self) -> str:
+        return self.garbled.why if self.garbled is not None else ""
 
 
 class PkwSlot:
@@ -273,7 +289,10 @@ class PkwSlot:
         try:
             read = decode_ppo_read(self.ppo, self.dialect, inputs, self.profile)
         except RemoteProtocolError as exc:
-            return SlotUpdate(None, None, str(exc))
+            if sent is None and self.request is not None:
+                self._idle_cycles += 1  # not AK 0: the wait for it runs out as for any other
+            why = f"its PPO-read is no PPO {self.ppo.number} answer of the {self.dialect.name}"
+            return SlotUpdate(None, None, SlotGarbled(sent, f"{why} dialect ({exc})"))
         response = read.pkw
         if sent is None:
             if isinstance(response, pkw.NoResponse):
