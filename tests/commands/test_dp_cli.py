@@ -347,6 +347,12 @@ def test_read_write_and_describe_through_data_record_47(
         code, out, err = run(capsys, "read", *dp(served, "--ppo", "3", "--address", "8", "r9999"))
         assert code != 0
         assert "Illegal parameter number" in out + err
+        # Without a catalog (nor --type) the drive's own answer names the type: a read
+        # first, then the write as FloatingPoint.
+        untyped = ("--ppo", "3", "--address", "8", "p1121", "7.25", "--catalog", "none")
+        code, out, err = run(capsys, "write", *dp(served, *untyped))
+        assert code == 0, err
+        assert served.sim.drives[8].params.number(1121) == 7.25
         # A change to EEPROM does not travel in the SINAMICS data set 47: refused, unsent.
         before = served.sim.slaves[8].record_writes
         code, out, err = run(capsys, "write", *dp(served, "--ppo", "3", "--address", "8",

@@ -37,7 +37,7 @@ NAMES = {8: "mixer", 9: "pump", 10: "fan"}
 POLLED = ("r0021", "r0027", "r0032", "p1120", "p1121", "p1082")
 
 
-def config_text(url: str, audit: Path, extra: str = "") -> str:
+def config_text(url: str, audit: Path, extra: str = "", keys: str = "catalog: siemens-g120") -> str:
     polls = ", ".join(f'{{parameter: "{p}", every: 100ms}}' for p in POLLED)
     drives = "\n".join(
         f"""      - name: {NAMES[a]}
@@ -46,7 +46,7 @@ def config_text(url: str, audit: Path, extra: str = "") -> str:
         ppo: 3
         ident: 0x80B5
         dpv1: true
-        catalog: siemens-g120
+        {keys}
         poll: [{polls}{extra}]
         writable: ["p1121"]"""
         for a in ADDRESSES
@@ -105,7 +105,9 @@ class Service:
 
 
 @asynccontextmanager
-async def service(tmp_path: Path, extra: str = "", not_ready: int = 1) -> AsyncIterator[Service]:
+async def service(
+    tmp_path: Path, extra: str = "", not_ready: int = 1, keys: str = "catalog: siemens-g120"
+) -> AsyncIterator[Service]:
     async with AsyncExitStack() as stack:
         sim = DpSimulator(
             ADDRESSES, dialect="profidrive", ppo_number=3, catalog="siemens-g120",
@@ -115,7 +117,8 @@ async def service(tmp_path: Path, extra: str = "", not_ready: int = 1) -> AsyncI
         end = await sim.serve_tcp("127.0.0.1", 0)
         stack.push_async_callback(end.close)
         config = parse_config(
-            config_text(end.url, tmp_path / "audit.sqlite", extra), environ={"TEST_TOKEN": TOKEN}
+            config_text(end.url, tmp_path / "audit.sqlite", extra, keys),
+            environ={"TEST_TOKEN": TOKEN},
         )
         runtime = await build_runtime(config)
         await runtime.start()
@@ -211,6 +214,29 @@ async def test_a_write_goes_through_the_record_and_is_read_back(tmp_path: Path) 
                 (svc.sample("pkwbus_parameter_value", drive="pump", parameter="p1121") or 0) - 12.15
             ) < 1e-5
         )  # fmt: skip
+
+
+async def test_a_write_takes_the_type_the_drive_names_in_its_answers(tmp_path: Path) -> None:
+    """No catalog and no description (describe: off): nothing but the drive's own answers,
+    each naming its format (FloatingPoint), types p1121; a write uses that type."""
+    async with service(tmp_path, keys="describe: off") as svc:
+        info = [
+            line for line in generate_latest(svc.runtime.registry).decode().splitlines()
+            if line.startswith("pkwbus_parameter_info") and 'parameter="p1121"' in line
+        ]  # fmt: skip
+        assert info and all('source="none"' in line for line in info)
+        r = await svc.client.put(
+            "/api/v1/drives/pump/parameters/p1121",
+            json={"value": 12.5},
+            headers={"Authorization": f"Bearer {TOKEN}"},
+        )
+        assert r.status_code == 200, r.text
+        assert svc.sim.drives[9].params.number(1121) == 12.5
+        (change,) = [
+            r for r in map(decode_request, svc.record_writes(9))
+            if r.request_id is not RequestId.READ
+        ]  # fmt: skip
+        assert change.changes[0].format.name == "FLOAT"
 
 
 async def test_an_unknown_parameter_is_refused_in_words_and_the_rest_still_read(

@@ -20,10 +20,12 @@ from pkwbus.commands.common import (
     duration_option,
 )
 from pkwbus.commands.dp import add_dp_options
-from pkwbus.commands.drive_access import checked, drive_access, resolve
+from pkwbus.commands.drive_access import DriveAccess, checked, drive_access, resolve
+from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import encode_text
+from pkwbus.protocol.params import ParameterRef, encode_text
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = [
     "add_parsers",
@@ -70,6 +72,8 @@ def run_read(args: argparse.Namespace) -> int:
 def run_write(args: argparse.Namespace) -> int:
     access = drive_access(args)
     ref, fmt = resolve(args, access)
+    if fmt.vtype is None and access.typed_answers:
+        fmt = fmt.with_type(_stated_type(access, ref))
     store = pkw.Store(args.store)
     d = access.dialect
     try:
@@ -89,3 +93,13 @@ def run_write(args: argparse.Namespace) -> int:
         value = args.value
     report_value(args, ref, raw, value, fmt, f" written ({store.value})")
     return Exit.OK
+
+
+def _stated_type(access: DriveAccess, ref: ParameterRef) -> ValueType | None:
+    """The type the drive names for ``ref`` in its answer to a read (a typed format of
+    data record 47); None where its answer names none (or no answer came: the write is
+    then refused for want of a type, unsent)."""
+    (req,) = checked(access, [pkw.read_parameter(access.dialect, ref.pnu, ref.index, text=False)])
+    (outcome,) = link.run(access.run([req], None))
+    response = outcome.response if isinstance(outcome, Answered) else None
+    return response.vtype if isinstance(response, pkw.ValueResponse) else None

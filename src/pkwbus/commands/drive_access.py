@@ -59,6 +59,8 @@ class DriveAccess:
     texts: bool  # whether a text parameter travels (not in the 4 PKW words of a PPO)
     check: Callable[[pkw.PkwRequest], object]  # LocalProtocolError: it cannot be sent
     run: Run
+    # Whether its answers name each value's type (PROFIdrive data record 47's formats).
+    typed_answers: bool = False
 
 
 def drive_access(args: argparse.Namespace) -> DriveAccess:
@@ -76,7 +78,8 @@ def drive_access(args: argparse.Namespace) -> DriveAccess:
             return session(args, ctx, args.address, requests, vtype)
 
         catalog = DP_CATALOGS.get(ctx.dialect.name) or "none"
-        return DriveAccess(ctx.dialect, catalog, False, check_ppo, run_dp)
+        typed = ctx.record is not None
+        return DriveAccess(ctx.dialect, catalog, False, check_ppo, run_dp, typed)
     try:
         target = build_target(args)
     except LocalProtocolError as exc:

@@ -222,6 +222,9 @@ class LineRecord:
 
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
+        response = event.outcome.response if isinstance(event.outcome, Answered) else None
+        if isinstance(response, pkw.ValueResponse) and response.vtype is not None:
+            self.snapshot.stated[(drive, work.request.pnu)] = response.vtype  # its own type
         result = self._result(event)
         reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import Value
 from pkwbus.protocol.dp_slave_model import SlaveState
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = ["DriveState", "LiveSlave", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
 
@@ -46,9 +47,15 @@ class Snapshot:
     drives: dict[str, DriveState] = field(default_factory=dict)
     lines: dict[str, bool] = field(default_factory=dict)
     latest: dict[ValueKey, Reading] = field(default_factory=dict)
+    # The value type each drive named for a parameter in its own answers (a typed format
+    # of data record 47: Unsigned32, FloatingPoint), by drive and PNU.
+    stated: dict[tuple[str, int], ValueType] = field(default_factory=dict)
 
     def copy(self) -> Snapshot:
-        return Snapshot(dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest))
+        return Snapshot(
+            dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
+            dict(self.stated),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)

@@ -31,6 +31,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.descriptions import DriveDescription
 from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.value_types import ValueType
 
 __all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime", "Trends"]
 
@@ -77,9 +78,16 @@ class DriveEntry:
         """Whether the drive's ``writable`` list allows writing ``ref``."""
         return self.parameters.describe(ref).writable
 
-    def format_of(self, ref: ParameterRef) -> ParameterDescription:
+    def format_of(self, ref: ParameterRef, stated: ValueType | None = None) -> ParameterDescription:
         """What is known of ``ref``: type, scaling, unit, limits (empty when nothing); the
-        configuration first, then what the drive described, then the catalog."""
+        configuration first, then what the drive described, then the catalog; where none
+        of them types it, the type the drive ``stated`` in its answers."""
+        described = self._described(ref)
+        if described.vtype is None and stated is not None:
+            return described.with_type(stated)
+        return described
+
+    def _described(self, ref: ParameterRef) -> ParameterDescription:
         known = self.parameters.describe(ref)
         drive = self.described.get(ref.pnu)
         if drive is None:

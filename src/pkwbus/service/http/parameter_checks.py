@@ -67,15 +67,18 @@ def check_names(drive: str, parameter: str) -> None:
         )
 
 
-def described_format(entry: DriveEntry, ref: ParameterRef) -> ParameterDescription:
+def described_format(
+    runtime: Runtime, entry: DriveEntry, ref: ParameterRef
+) -> ParameterDescription:
     """What ``ref`` is on the drive; 503 while the drive has not described it yet (a value
-    written or read now would be scaled as the catalog says, maybe not as the drive does)."""
+    written or read now would be scaled as the catalog says, maybe not as the drive does).
+    Where nothing else types it, the type the drive named in its own answers."""
     if ref.pnu in entry.pending:
         raise ApiError(
             503, "not_described",
             f"{entry.name} has not described {ref.name} yet: try again in a few seconds",
         )  # fmt: skip
-    return entry.format_of(ref)
+    return entry.format_of(ref, runtime.snapshot.stated.get((entry.name, ref.pnu)))
 
 
 def clip(name: str, limit: int) -> str:

@@ -53,7 +53,7 @@ class Reads:
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
         check_names(drive, parameter)
         entry, ref = locate(self.runtime, drive, parameter, index)
-        fmt = described_format(entry, ref)
+        fmt = described_format(self.runtime, entry, ref)
         ref = fit_index(ref, fmt)
         request = read_request(entry, ref, fmt)
         if self._waiting[entry.name] >= MAX_READS_PER_DRIVE:

@@ -91,7 +91,7 @@ class Writes:
             audit.parameter, audit.index = ref.name, ref.index or 0
             if not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
-            fmt = described_format(entry, ref)
+            fmt = described_format(self.runtime, entry, ref)
             ref = fit_index(ref, fmt)
             request = self._write_request(entry, ref, fmt, order)
             audit.raw_value = request.value if not request.text else None

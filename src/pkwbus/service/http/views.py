@@ -77,7 +77,7 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
         if not known.writable or (index is not None and index < 0):
             continue
         ref = entry.canonical(ParameterRef(pnu, index, ""))
-        fmt = entry.format_of(ref)
+        fmt = entry.format_of(ref, runtime.snapshot.stated.get((name, pnu)))
         latest = runtime.snapshot.latest.get((name, pnu, index or 0))
         views.append(
             WritableView(
