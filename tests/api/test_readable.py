@@ -75,6 +75,18 @@ def test_options_apply_only_to_an_unscaled_whole_number() -> None:
     assert not as_float.enumerates and as_float.option(4) == ""
 
 
+async def test_a_name_never_contradicts_the_unit_beside_it(tmp_path: Path) -> None:
+    """16-10 "Power [kW]" (the vendor's name) is read in W (its conversion index): the
+    view names it without the unit it would contradict."""
+    drives = [{"name": "fan1", "address": 1, "catalog": "danfoss-fc",
+               "poll": [("16-10", "50ms"), ("16-16", "50ms")]}]  # fmt: skip
+    async with service(tmp_path, fc=drives) as svc:
+        power = await _until(svc, "16-10", lambda v: v["value"] is not None)
+        torque = await _until(svc, "16-16", lambda v: v["value"] is not None)
+    assert (power["name"], power["unit"]) == ("Power", "W")
+    assert (torque["name"], torque["unit"]) == ("Torque [Nm]", "Nm")
+
+
 async def test_an_enumeration_in_words_and_a_write_form_with_its_options(tmp_path: Path) -> None:
     drives = [{"name": "fan1", "address": 1, "catalog": "danfoss-fc",
                "poll": [("0-01", "50ms")], "writable": ["0-01"]}]  # fmt: skip

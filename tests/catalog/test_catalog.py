@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import textwrap
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ from pkwbus.catalog import (
     load_catalog,
     load_catalog_file,
 )
+from pkwbus.catalog.description import ParameterDescription, name_for_unit
 from pkwbus.catalog.loader import _parse_key
 
 BUILT_IN = ["danfoss-fc", "siemens-g120"]
@@ -433,3 +435,26 @@ def test_an_override_that_reads_the_value_another_way_drops_the_options(
     changed = language.overridden(changes)
     assert (changed.options, changed.options_source) == ({}, "")
     assert language.overridden({"name": "Sprache"}).options == language.options  # kept
+
+
+@pytest.mark.parametrize("name", BUILT_IN)
+def test_a_unit_in_a_name_agrees_with_the_unit_shown(name: str) -> None:
+    """16-10 is "Power [kW]" in the vendor's list, but its conversion index scales it to W:
+    the name is shown without the unit it would contradict."""
+    for pnu, spec in load_catalog(name).parameters.items():
+        shown = ParameterDescription.from_spec(spec)
+        if "[" in shown.name:
+            unit = shown.name.rsplit("[", 1)[1].rstrip("]")
+            assert unit.casefold() == shown.unit.casefold(), (pnu, shown.name, shown.unit)
+
+
+def test_names_without_the_unit_they_would_contradict() -> None:
+    power = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(1610))
+    assert (power.name, power.unit) == ("Power", "W")
+    torque = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(1616))
+    assert (torque.name, torque.unit) == ("Torque [Nm]", "Nm")
+    assert ParameterDescription("Power [kW]", unit="kW").name == "Power [kW]"
+    assert replace(power, unit="kW").name == "Power"  # what was cut stays cut
+    assert name_for_unit("Speed [RPM]", "1/s") == "Speed"
+    assert name_for_unit("Speed [RPM]", "rpm") == "Speed [RPM]"
+    assert name_for_unit("Limit [x] of y", "W") == "Limit [x] of y"  # not at the end

@@ -16,6 +16,7 @@ carries no value (:meth:`ParameterDescription.value_of`).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -37,7 +38,14 @@ from pkwbus.protocol.params import (
 if TYPE_CHECKING:
     from pkwbus.catalog.loader import ParameterSpec
 
-__all__ = ["OTHER_INDEX", "ParameterDescription", "ParameterKey", "ParameterTable", "Value"]
+__all__ = [
+    "OTHER_INDEX",
+    "ParameterDescription",
+    "ParameterKey",
+    "ParameterTable",
+    "Value",
+    "name_for_unit",
+]
 
 Value = int | float | str
 _NO_OPTIONS: Final[Mapping[int, str]] = MappingProxyType({})
@@ -45,6 +53,17 @@ _NO_OPTIONS: Final[Mapping[int, str]] = MappingProxyType({})
 
 def _no_options() -> Mapping[int, str]:
     return _NO_OPTIONS
+
+
+_UNIT_IN_NAME = re.compile(r"^(.*?)\s*\[([^\[\]]*)\]$")
+
+
+def name_for_unit(name: str, unit: str) -> str:
+    """``name`` without the unit in brackets at its end where that is not ``unit``."""
+    found = _UNIT_IN_NAME.match(name)
+    if found is None or found.group(2).strip().casefold() == unit.strip().casefold():
+        return name
+    return found.group(1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,6 +87,12 @@ class ParameterDescription:
     prefix: str = ""  # Siemens r (read-only) or p (settable), when the catalog says
     # An enumeration's options (number -> the catalog's sourced text); empty for none.
     options: Mapping[int, str] = field(default_factory=_no_options, hash=False)
+
+    def __post_init__(self) -> None:
+        # A unit in the name ("Power [kW]", as the vendor names 16-10) that is not the unit
+        # the value is shown in (W, the base unit its conversion index scales to) would
+        # contradict the value beside it: the name is shown without it.
+        object.__setattr__(self, "name", name_for_unit(self.name, self.unit))
 
     @classmethod
     def from_spec(cls, spec: ParameterSpec | None) -> ParameterDescription:
