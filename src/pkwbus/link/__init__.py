@@ -1,15 +1,18 @@
 """The only layer that touches a serial port: pyserial-asyncio for device paths and URLs."""
 
 from pkwbus.link.eventloop import new_event_loop, run
+from pkwbus.link.ownership import PortBusy, same_line
 from pkwbus.link.port import Link, PortError, PortSettings
 from pkwbus.link.reconnect import LinkState, Reconnect
 
 __all__ = [
     "Link",
     "LinkState",
+    "PortBusy",
     "PortError",
     "PortSettings",
     "Reconnect",
     "new_event_loop",
     "run",
+    "same_line",
 ]

@@ -27,11 +27,13 @@ import termios
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import serial
 import serial.rs485
 
 from pkwbus.link.eventloop import has_fine_timers
+from pkwbus.link.ownership import PortBusy
 from pkwbus.link.reconnect import LinkState, Reconnect
 from pkwbus.link.serialport import (
     apply_adapter_settings,
@@ -40,6 +42,7 @@ from pkwbus.link.serialport import (
     is_pty,
     open_port,
     raw_fd,
+    release,
 )
 from pkwbus.link.settings import PARITIES, PortError, PortSettings, Rs485Mode
 from pkwbus.link.transport import SerialTransport, wrap_transport
@@ -94,6 +97,7 @@ class Link:
         self._echo = b""
         self._closing = False
         self._fd = -1
+        self._instance: Any = None  # the open pyserial port, whose lock goes when it is left
         self._pause = settings.start_pause
         self._char_time = settings.char_time
         self._fine_timer: ThreadPoolExecutor | None = None
@@ -116,19 +120,29 @@ class Link:
         """Open now; :class:`PortError` with the reason when the port cannot be opened."""
         loop = asyncio.get_running_loop()
         s = self.settings
+        error: PortError
         try:
             instance = await loop.run_in_executor(None, open_port, s)
+        except PortBusy as exc:
+            error = PortBusy(f"cannot open {exc}")
         except (serial.SerialException, OSError, ValueError, termios.error) as exc:
             reason = describe_error(exc).split(f"{s.url}: ", 1)[-1]
-            self._state = LinkState.FAILED
             error = PortError(f"cannot open {s.url}: {reason}")
-            self.reconnect.failed(str(error), loop.time())
-            raise error from None
+        else:
+            self._opened(loop, instance)
+            return
+        self._state = LinkState.FAILED
+        self.reconnect.failed(str(error), loop.time())
+        raise error from None
+
+    def _opened(self, loop: asyncio.AbstractEventLoop, instance: Any) -> None:
+        s = self.settings
         self._closing = False
         closer.start()
         self._protocol = protocol = _Protocol(self)
         self._transport = wrap_transport(loop, protocol, instance, s.url)
         self._fd = raw_fd(instance)
+        self._instance = instance
         self._loop = loop
         self._fine = has_fine_timers(loop)
         self._quiet_at = loop.time()
@@ -161,8 +175,16 @@ class Link:
             return False  # told to the listeners
         return True
 
+    def _leave(self) -> None:
+        """The port is given up: its lock goes at once, so that this process may open it
+        again while the old transport still ends (writes what it holds, closes)."""
+        instance, self._instance = self._instance, None
+        if instance is not None:
+            release(instance)
+
     async def close(self) -> None:
         self._closing = True
+        self._leave()
         transport, self._transport = self._transport, None
         self._protocol, self._fd = None, -1
         if transport is not None:
@@ -179,6 +201,7 @@ class Link:
         transport, self._transport = self._transport, None
         self._protocol, self._fd = None, -1
         self._closing = True
+        self._leave()
         if transport is not None:
             transport.abort()
         self._state = LinkState.FAILED
@@ -302,6 +325,7 @@ class Link:
             return  # an earlier opening's transport, closed since: not the current port
         self._transport = self._protocol = None
         self._fd = -1
+        self._leave()
         if self._closing:
             return
         reason = describe_error(exc) if exc else "closed by the other end"

@@ -11,6 +11,9 @@ or refuses RS-485 mode.
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import fcntl
 import logging
 import os
 import queue
@@ -24,6 +27,7 @@ from typing import Any
 import serial
 import serial.rs485
 
+from pkwbus.link.ownership import PortBusy, holders
 from pkwbus.link.settings import PARITIES, PortSettings
 
 __all__ = [
@@ -33,6 +37,7 @@ __all__ = [
     "is_pty",
     "open_port",
     "raw_fd",
+    "release",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -44,9 +49,40 @@ _PTY_FOLLOWER_MAJORS = frozenset({3, *range(136, 144)})
 
 
 def open_port(s: PortSettings) -> Any:
-    """Open the port (blocking: run in an executor)."""
+    """Open the port (blocking: run in an executor); a device exclusively, so that no
+    second master opens it (:class:`~pkwbus.link.ownership.PortBusy` when one holds it)."""
+    try:
+        port = _open(s)
+    except serial.SerialException as exc:
+        if exc.errno not in _LOCKED:
+            raise
+        # This process's own port, lost and closing in the closer's thread, may hold it
+        # still: once every close handed over is done, once more.
+        if not closer.wait(_OWN_CLOSE_WAIT):
+            raise _busy(s.url) from None
+        try:
+            port = _open(s)
+        except serial.SerialException as again:
+            if again.errno in _LOCKED:
+                raise _busy(s.url) from None
+            raise
+    try:
+        apply_adapter_settings(port, s)
+    except BaseException:
+        port.close()
+        raise
+    return port
+
+
+# A lock another open of the device holds (flock with LOCK_NB).
+_LOCKED = frozenset({errno.EWOULDBLOCK, errno.EAGAIN})
+_OWN_CLOSE_WAIT = 2.0  # seconds for this process's own closes before a port counts as busy
+
+
+def _open(s: PortSettings) -> Any:
+    device = "://" not in s.url  # a URL's far end decides who may connect
     parity = serial.PARITY_NONE if is_pty(s.url) else PARITIES[s.parity]
-    port = serial.serial_for_url(
+    return serial.serial_for_url(
         s.url,
         baudrate=s.baudrate,
         parity=parity,
@@ -54,13 +90,28 @@ def open_port(s: PortSettings) -> Any:
         bytesize=8,
         timeout=0,
         write_timeout=0,
+        exclusive=True if device else None,
     )
-    try:
-        apply_adapter_settings(port, s)
-    except BaseException:
-        port.close()
-        raise
-    return port
+
+
+def release(instance: Any) -> None:
+    """Give up the lock of a device opened exclusively (its descriptor may stay open a
+    while: a close writes out what it holds first)."""
+    fd = getattr(instance, "fd", None)
+    if type(instance).__module__ != "serial.serialposix" or not isinstance(fd, int):
+        return
+    if getattr(instance, "exclusive", None):
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_UN)
+
+
+def _busy(url: str) -> PortBusy:
+    held = holders(url)
+    by = f" ({'; '.join(held)})" if held else ""
+    return PortBusy(
+        f"{url}: in use by another process{by}: it would be a second master on the line;"
+        " nothing was sent"
+    )
 
 
 # Ports whose driver refused low latency: warned of once each, not at every reopen.

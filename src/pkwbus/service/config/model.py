@@ -21,6 +21,7 @@ from pydantic import (
 )
 
 from pkwbus.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
+from pkwbus.link import same_line
 from pkwbus.problems import plain, short
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
@@ -111,7 +112,18 @@ class Config(Model):
         problems: list[Place] = []
         lines: dict[str, int] = {}
         drives: dict[str, str] = {}
+        ports: dict[str, int] = {}
         for i, line in enumerate(self.lines):
+            first_port = ports.setdefault(same_line(line.port), i)
+            if first_port != i:
+                other = self.lines[first_port]
+                problems.append(
+                    (
+                        f"lines[{i}].port",
+                        f"{line.port} is the same device as lines[{first_port}] ({other.name}):"
+                        f" {other.port}; two masters on one RS-485 line would collide",
+                    )
+                )
             first_line = lines.setdefault(line.name, i)
             if first_line != i:
                 problems.append(

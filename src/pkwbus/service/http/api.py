@@ -21,12 +21,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.security import HTTPBearer
 from fastapi.staticfiles import StaticFiles
-from fastapi_offline import FastAPIOffline
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.recorder import AuditRecorder
+from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.models import (
     ERRORS,
     DriveView,
@@ -134,13 +134,17 @@ def create_app(
     write_token: str | None = None,
     read_token: str | None = None,
 ) -> FastAPI:
-    # /docs and /redoc with Swagger UI and ReDoc served from the package, no CDN.
-    app = FastAPIOffline(
-        static_url="/assets/docs",
+    # /docs and /redoc with Swagger UI and ReDoc served from the package, no CDN, and
+    # every URL the pages and the status page use relative: any path prefix works.
+    app = FastAPI(
         title="pkwbus",
         version=__version__,
         description="PKW parameter channel bus master: drives, values and parameter jobs",
+        docs_url=None,
+        redoc_url=None,
+        servers=SERVERS,
     )
+    add_docs(app)
     app.state.runtime = runtime
     recorder = AuditRecorder(audit, api_metrics(runtime.registry))
     app.state.recorder = recorder

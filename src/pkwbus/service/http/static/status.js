@@ -105,7 +105,7 @@ function drawTrend(spark, points) {
 async function refreshTrends() {
   if (Date.now() - trendsFetched < TREND_PERIOD_MS) return;
   trendsFetched = Date.now();
-  trendData = await getJson("/api/v1/trends");
+  trendData = await getJson("api/v1/trends");
   trendsVersion += 1;
 }
 
@@ -217,7 +217,7 @@ function drawWrites(entries) {
 
 async function refreshWrites() {
   if (!auditToken) return;
-  const response = await fetch("/api/v1/audit?limit=10", {
+  const response = await fetch("api/v1/audit?limit=10", {
     cache: "no-store", headers: { Authorization: `Bearer ${auditToken}` } });
   if (response.status === 401 || response.status === 403) {
     auditToken = "";
@@ -302,7 +302,7 @@ async function submitWrite(event) {
   button.textContent = "Write";
   const index = item.w.index ? `?index=${item.w.index}` : "";
   const response = await fetch(
-    `/api/v1/drives/${encodeURIComponent(item.drive)}/parameters/` +
+    `api/v1/drives/${encodeURIComponent(item.drive)}/parameters/` +
       `${encodeURIComponent(item.w.parameter)}${index}`,
     { method: "PUT", cache: "no-store",
       headers: { Authorization: `Bearer ${auditToken}`, "Content-Type": "application/json" },
@@ -368,7 +368,7 @@ async function refresh() {
   const problem = document.getElementById("problem");
   try {
     const [lines, drives, ready] = await Promise.all(
-      [getJson("/api/v1/lines"), getJson("/api/v1/drives"), getJson("/readyz")]);
+      [getJson("api/v1/lines"), getJson("api/v1/drives"), getJson("readyz")]);
     await refreshTrends().catch(() => {});  // the sparklines wait for the next try
     drawLines(lines);
     lastDrives = drives;
