@@ -38,7 +38,7 @@ lines:
           "3-41": {min: 1, max: 60}
           "3-42[1]": {max: 30}
   - name: l2
-    port: socket://127.0.0.1:9
+    port: socket://127.0.0.1:10
     protocol: uss
     baudrate: 19200
     drives:

@@ -98,6 +98,10 @@ def _audit_path(value: object) -> Path:
     return Path(value)
 
 
+def _what(port: str) -> str:
+    return "gateway port" if same_line(port).startswith("tcp:") else "device"
+
+
 class Config(Model):
     """The whole file."""
 
@@ -120,8 +124,9 @@ class Config(Model):
                 problems.append(
                     (
                         f"lines[{i}].port",
-                        f"{line.port} is the same device as lines[{first_port}] ({other.name}):"
-                        f" {other.port}; two masters on one RS-485 line would collide",
+                        f"{line.port} is the same {_what(line.port)} as lines[{first_port}]"
+                        f" ({other.name}): {other.port}; two masters on one RS-485 line would"
+                        " collide",
                     )
                 )
             first_line = lines.setdefault(line.name, i)
