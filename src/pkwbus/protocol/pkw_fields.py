@@ -17,6 +17,7 @@ import enum
 
 from pkwbus.protocol.dialects import Dialect, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.value_types import Width as Width
 
 __all__ = [
     "PAGE_SIZE",
@@ -34,11 +35,6 @@ _PNU_MASK_11 = 0x7FF
 # Bits of the page index byte for a + 2b + 4c + 8d + 16e + 32f (SINAMICS CU240S
 # operating instructions, USS page index).
 _PAGE_BITS = (0x80, 0x10, 0x20, 0x40, 0x04, 0x08)
-
-
-class Width(enum.Enum):
-    WORD = 16
-    DWORD = 32
 
 
 class Store(enum.StrEnum):

@@ -14,7 +14,6 @@ from fractions import Fraction
 from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw_fields import Width
 
 __all__ = [
     "CONVERSION_FACTORS",
@@ -23,11 +22,19 @@ __all__ = [
     "Rounding",
     "Scaling",
     "ValueType",
+    "Width",
     "parse_type",
 ]
 
 
 # ------------------------------------------------------------------ types
+
+
+class Width(enum.Enum):
+    """How wide a value travels: a word (16 bits) or a double word (32 bits)."""
+
+    WORD = 16
+    DWORD = 32
 
 
 class ValueType(enum.StrEnum):

@@ -15,8 +15,7 @@ from fractions import Fraction
 from typing import Final
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.pkw import Width
-from pkwbus.protocol.value_types import UNSCALED, Rounding, Scaling, ValueType
+from pkwbus.protocol.value_types import UNSCALED, Rounding, Scaling, ValueType, Width
 
 __all__ = [
     "F32_MIN_NORMAL",
