@@ -21,7 +21,7 @@ from _measure import BenchSetupError, stop_process
 
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 
 HERE = Path(__file__).resolve().parent
 FC_TELEGRAM = 16  # bytes of an FC parameter telegram (PKW 4 words + PCD 2 words), each way

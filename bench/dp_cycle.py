@@ -21,9 +21,11 @@ from typing import Any
 from pkwbus.link import PortSettings, new_event_loop
 from pkwbus.master.dp_line import DpLine
 from pkwbus.master.dp_master import DpMaster
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import dp_timing, fdl, ppo
-from pkwbus.protocol.dp_slave import SlaveSetup, SlaveState
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import SlaveSetup, SlaveState
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
 

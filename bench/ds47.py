@@ -27,7 +27,7 @@ from typing import Any
 from prometheus_client import generate_latest
 
 from pkwbus.link import new_event_loop
-from pkwbus.protocol import dp_timing
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.config.line_load import line_load

@@ -17,8 +17,8 @@ import socket
 import time
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC, USS
-from pkwbus.protocol.telegram import encode_block, frame
+from pkwbus.protocol.pkw.dialects import FC, USS
+from pkwbus.protocol.serial.telegram import encode_block, frame
 from pkwbus.sim import SimTiming, Simulator
 
 

@@ -17,7 +17,7 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
-    from pkwbus.protocol.telegram import (
+    from pkwbus.protocol.serial.telegram import (
         FC_PARAMETER,
         MAX_TELEGRAM,
         USS_DEFAULT,

@@ -19,8 +19,10 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
-    from pkwbus.protocol import dp_services, fdl, gsd, ppo
     from pkwbus.protocol.errors import RemoteProtocolError
+    from pkwbus.protocol.profibus import fdl, gsd
+    from pkwbus.protocol.profibus.dp import ppo
+    from pkwbus.protocol.profibus.dp import services as dp_services
 
 import _support
 

@@ -16,7 +16,7 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
-    from pkwbus.protocol import params
+    from pkwbus.protocol import values as params
     from pkwbus.protocol.errors import ProtocolError
     from pkwbus.protocol.pkw import Width
 

@@ -21,8 +21,8 @@ with atheris.instrument_imports():
     from pkwbus.master.target import DriveTarget
     from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, Reply
     from pkwbus.protocol import pkw
-    from pkwbus.protocol.dialects import DIALECTS, Command, Dialect, IndLayout
     from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+    from pkwbus.protocol.pkw.dialects import DIALECTS, Command, Dialect, IndLayout
 
 import _support
 

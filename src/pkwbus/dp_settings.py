@@ -17,11 +17,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from pkwbus.protocol import dp_services, gsd, ppo
-from pkwbus.protocol.dpv1 import Dpv1Setup
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.gsd import Gsd, GsdModule
-from pkwbus.protocol.ppo import PpoType
+from pkwbus.protocol.profibus import gsd
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dp_services
+from pkwbus.protocol.profibus.dp.ppo import PpoType
+from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
+from pkwbus.protocol.profibus.gsd import Gsd, GsdModule
 
 __all__ = [
     "MAX_GSD_BYTES",

@@ -21,8 +21,8 @@ import httpx
 import pytest
 
 from pkwbus.master.drive_identity import identity_requests
-from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
+from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import Config, parse_config

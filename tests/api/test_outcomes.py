@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 from pathlib import Path
 
-from pkwbus.protocol.dialects import Command
+from pkwbus.protocol.pkw.dialects import Command
 from tests.api.conftest import POLLED_WRITABLES, fc_drives, service
 
 

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.params import Scaling, ValueType
+from pkwbus.protocol.values import Scaling, ValueType
 from pkwbus.service.http.readable import readable
 from tests.api.conftest import USS_DRIVES, service
 

@@ -8,8 +8,8 @@ from types import MappingProxyType
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers, disagreements, resolve
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.value_types import Scaling, ValueType
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.values.types import Scaling, ValueType
 
 CATALOG = ParameterDescription(
     "Motor current", ValueType.I32, Scaling.conversion(-2), "A", 0.0, 100.0

@@ -14,9 +14,10 @@ from typing import Any
 import pytest
 
 from pkwbus.cli import main
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl, pzd
-from pkwbus.protocol.dp_slave import DpSlave, NoAnswer, SlaveSetup
+from pkwbus.protocol import pzd
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import DpSlave, NoAnswer, SlaveSetup
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
 from tests.master.dp_wire import DpWire, FakeMaster, record_dp_wire

@@ -17,7 +17,7 @@ from pkwbus.master.single_job import run_job as _run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome
 from pkwbus.protocol import pkw
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 
 

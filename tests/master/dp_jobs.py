@@ -12,8 +12,14 @@ from pkwbus.master.outcomes import LineFailed, Outcome, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import PkwAnswer, PkwTransaction
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dp_slave import Failed, FailureKind, SlaveEvent, SlaveState, StateChanged
-from pkwbus.protocol.ppo import SlotAnswer
+from pkwbus.protocol.profibus.dp.ppo import SlotAnswer
+from pkwbus.protocol.profibus.dp.slave import (
+    Failed,
+    FailureKind,
+    SlaveEvent,
+    SlaveState,
+    StateChanged,
+)
 
 
 async def run_dp_job(

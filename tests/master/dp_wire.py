@@ -8,8 +8,9 @@ from collections import Counter
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
-from pkwbus.protocol import fdl, pzd
-from pkwbus.protocol.dp_services import Service
+from pkwbus.protocol import pzd
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.services import Service
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.faults import Answer
 

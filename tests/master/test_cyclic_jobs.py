@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 from pkwbus.master.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import PkwAnswer, PkwTransaction
-from pkwbus.protocol import pkw, ppo
-from pkwbus.protocol.dialects import Command
-from pkwbus.protocol.ppo import PkwSlot
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot
 from tests.protocol.test_ppo import IDLE, PCV, PPO1, pkw_of, ppo_read, value
 
 TARGET = DriveTarget.create("profibus", 8, dialect_name="danfoss-pcv")

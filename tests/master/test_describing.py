@@ -28,9 +28,9 @@ from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DescriptionForm, DriveDescription, elements_to_read
-from pkwbus.protocol.dialects import Command
-from pkwbus.protocol.telegram import Telegram
+from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription, elements_to_read
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.sim import SimTiming, Simulator
 from tests.master.test_planner import TIMEOUT, FakeLine
 

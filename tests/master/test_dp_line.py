@@ -18,9 +18,11 @@ from pkwbus.link import PortError, PortSettings
 from pkwbus.master.dp_line import DpLine, ForeignMaster
 from pkwbus.master.dp_master import DpMaster, SlaveLocked
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import dp_timing, fdl, pkw, ppo
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol import pkw
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import (
     DpSlave,
     Failed,
     FailureKind,
@@ -30,9 +32,10 @@ from pkwbus.protocol.dp_slave import (
     SlaveState,
     TransferEnded,
 )
-from pkwbus.protocol.dpv1 import C1_SAP, Dpv1Setup
-from pkwbus.protocol.dpv1_transfer import RecordRead
-from pkwbus.protocol.profidrive import RECORD, ParameterAddress, ParameterRequest
+from pkwbus.protocol.profibus.dpv1.msac import C1_SAP, Dpv1Setup
+from pkwbus.protocol.profibus.dpv1.transfer import RecordRead
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profidrive.parameters import RECORD, ParameterAddress, ParameterRequest
 from pkwbus.sim import SimTiming
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.faults import Answer

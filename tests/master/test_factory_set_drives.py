@@ -17,10 +17,10 @@ from pkwbus.master.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import PkwTransaction, ResponseTelegram
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command
-from pkwbus.protocol.params import ValueType
-from pkwbus.protocol.pkw_length import VARIABLE
-from pkwbus.protocol.telegram import BlockShape, split_block
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.pkw.length import VARIABLE
+from pkwbus.protocol.serial.telegram import BlockShape, split_block
+from pkwbus.protocol.values import ValueType
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.table import USS_TABLE, ParamSpec
 from tests.master.conftest import make_sim, open_line, run_job, serve

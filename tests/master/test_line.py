@@ -21,10 +21,10 @@ from pkwbus.master.transaction import (
     TimedOut,
 )
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import IndLayout
-from pkwbus.protocol.params import Scaling, ValueType, encode_value
+from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pzd import takes_control
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import Scaling, ValueType, encode_value
 from pkwbus.sim import SimFaults, SimTiming
 from tests.master.conftest import make_sim, open_line, run_job, serve
 

@@ -42,7 +42,7 @@ from pkwbus.master.transaction import (
     TimedOut,
 )
 from pkwbus.protocol import pkw
-from pkwbus.protocol.telegram import Telegram
+from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 
 MS = 0.001

@@ -19,7 +19,7 @@ from pkwbus.master.record import REFUSAL_RETELL, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DriveDescription
+from pkwbus.protocol.pkw.descriptions import DriveDescription
 
 TARGET = DriveTarget.create("fc", 1)
 POLL = PollSpec("19-99", 0, pkw.read(TARGET.dialect, 1999), 1.0)

@@ -14,18 +14,19 @@ from pkwbus.master.planner import Planner
 from pkwbus.master.record_transaction import RecordItem, RecordTransaction
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.transaction import ErrorKind, Failure, ResponseTelegram
-from pkwbus.protocol import pkw, ppo
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.profidrive import (
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profidrive.drive import decode_request, encode_response
+from pkwbus.protocol.profidrive.parameters import (
     Format,
     ParameterError,
     RequestId,
     Values,
     decode_response,
 )
-from pkwbus.protocol.profidrive_drive import decode_request, encode_response
-from pkwbus.protocol.telegram import BlockShape, Protocol
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.values.types import ValueType
 
 SIEMENS = ppo.dp_dialect("profidrive")
 DANFOSS = ppo.dp_dialect("danfoss-pcv")

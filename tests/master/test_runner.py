@@ -24,7 +24,7 @@ from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.protocol import pkw
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim import SimTiming
 from tests.master.conftest import Trace, make_sim, serve, until
 

@@ -8,7 +8,7 @@ from pkwbus import limits
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import buses
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.telegram import FcAddressFormat, Protocol, fc_adr, uss_adr
+from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol, fc_adr, uss_adr
 
 
 @pytest.mark.parametrize(

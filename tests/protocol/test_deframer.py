@@ -7,7 +7,7 @@ import itertools
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.serial.telegram import (
     BadChecksum,
     BadLength,
     Deframer,

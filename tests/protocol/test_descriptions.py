@@ -10,13 +10,13 @@ import struct
 import pytest
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import (
+from pkwbus.protocol.pkw.descriptions import (
     DescriptionForm,
     DriveDescription,
     form_of,
     read_elements,
 )
-from pkwbus.protocol.dialects import (
+from pkwbus.protocol.pkw.dialects import (
     DANFOSS_PCV,
     FC,
     HITACHI_SJPB,
@@ -25,8 +25,8 @@ from pkwbus.protocol.dialects import (
     Dialect,
     Reply,
 )
-from pkwbus.protocol.params import ValueType
-from pkwbus.protocol.telegram import encode_block, frame
+from pkwbus.protocol.serial.telegram import encode_block, frame
+from pkwbus.protocol.values import ValueType
 
 FC_FORM = DescriptionForm.DANFOSS_FC
 PROFIDRIVE_FORM = DescriptionForm.PROFIDRIVE

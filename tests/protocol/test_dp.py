@@ -9,10 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl
-from pkwbus.protocol.dp_services import Diagnosis, Parameters, Service
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.services import Diagnosis, Parameters, Service
+from pkwbus.protocol.profibus.dp.slave import (
     DiagnosisRead,
     DpSlave,
     Failed,
@@ -27,8 +28,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveState,
     StateChanged,
 )
-from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.fdl import DataFrame, ShortAck, Status
+from pkwbus.protocol.profibus.fdl import DataFrame, ShortAck, Status
 
 # Captured from a Festo slave 8 with master 2 (pyprofibus issue 19).
 DIAG_REQUEST = bytes.fromhex("68 05 05 68 88 82 6D 3C 3E F1 16")

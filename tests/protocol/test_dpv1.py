@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus.protocol import fdl
-from pkwbus.protocol.dp_services import Parameters
-from pkwbus.protocol.dpv1 import (
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.services import Parameters
+from pkwbus.protocol.profibus.dpv1.msac import (
     C1_SAP,
     C1Error,
     C1Function,
@@ -22,9 +23,8 @@ from pkwbus.protocol.dpv1 import (
     with_dpv1,
     write_request,
 )
-from pkwbus.protocol.dpv1_transfer import NO_DATA, C1Transfer, RecordFailed, RecordRead
-from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.profidrive import (
+from pkwbus.protocol.profibus.dpv1.transfer import NO_DATA, C1Transfer, RecordFailed, RecordRead
+from pkwbus.protocol.profidrive.parameters import (
     Format,
     ParameterAddress,
     ParameterRequest,

@@ -6,9 +6,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from pkwbus.protocol import fdl
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.fdl import (
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.fdl import (
     BadChecksum,
     BadEnd,
     BadFrame,

@@ -18,10 +18,11 @@ from pkwbus.catalog import CatalogError
 from pkwbus.catalog.loader import _parse_catalog
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, ResponseTelegram
-from pkwbus.protocol import params, pkw
-from pkwbus.protocol.dialects import DIALECTS, USS, Command, Dialect, IndLayout
+from pkwbus.protocol import pkw
+from pkwbus.protocol import values as params
 from pkwbus.protocol.errors import LocalProtocolError, ProtocolError, RemoteProtocolError
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.pkw.dialects import DIALECTS, USS, Command, Dialect, IndLayout
+from pkwbus.protocol.serial.telegram import (
     MAX_TELEGRAM,
     USS_DEFAULT,
     BlockShape,

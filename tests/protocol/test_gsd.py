@@ -20,10 +20,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pkwbus.protocol import dp_services, gsd
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.gsd import GsdError
-from pkwbus.protocol.ppo import PPO_TYPES
+from pkwbus.protocol.profibus import gsd
+from pkwbus.protocol.profibus.dp import services as dp_services
+from pkwbus.protocol.profibus.dp.ppo import PPO_TYPES
+from pkwbus.protocol.profibus.gsd import GsdError
 
 FILES = Path(__file__).parent / "gsd_files"
 MM4 = FILES / "mm4_like.gse"

@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import (
+from pkwbus.protocol.pkw import Width
+from pkwbus.protocol.values import (
     UNSCALED,
     ParameterNotationError,
     ParameterRef,
@@ -29,7 +30,6 @@ from pkwbus.protocol.params import (
     parse_parameter,
     parse_type,
 )
-from pkwbus.protocol.pkw import Width
 
 
 @pytest.mark.parametrize(

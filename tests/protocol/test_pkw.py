@@ -10,7 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import (
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.pkw.dialects import (
     DANFOSS_PCV,
     DIALECTS,
     FC,
@@ -23,7 +24,6 @@ from pkwbus.protocol.dialects import (
     Reply,
     dialect,
 )
-from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 
 # The vendor pages live beside the repository, in shared/seeds.
 SEEDS = pathlib.Path(__file__).resolve().parents[3] / "shared" / "seeds"

@@ -19,9 +19,9 @@ import pytest
 
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command, IndLayout, dialect
-from pkwbus.protocol.pkw_length import AUTO, VARIABLE, Gate, PkwLength, told
-from pkwbus.protocol.telegram import BlockShape, bcc, frame
+from pkwbus.protocol.pkw.dialects import Command, IndLayout, dialect
+from pkwbus.protocol.pkw.length import AUTO, VARIABLE, Gate, PkwLength, told
+from pkwbus.protocol.serial.telegram import BlockShape, bcc, frame
 
 USS = dialect("uss")
 LAYOUT = IndLayout.USS

@@ -9,9 +9,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import DIALECTS, FC, HITACHI_SJPB, USS, Command, IndLayout, Reply
-from pkwbus.protocol.dialects import dialect as get_dialect
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.pkw.dialects import DIALECTS, FC, HITACHI_SJPB, USS, Command, IndLayout, Reply
+from pkwbus.protocol.pkw.dialects import dialect as get_dialect
 
 NUMERIC = [c for c in Command if c not in (Command.NONE, Command.TEXT)]
 

@@ -8,10 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.protocol import dp_services, pkw, ppo, pzd
-from pkwbus.protocol.dialects import Command, Dialect, IndLayout
+from pkwbus.protocol import pkw, pzd
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.ppo import PkwSlot, ppo_type
+from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dp_services
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, ppo_type
 from pkwbus.protocol.pzd import Profile
 
 PROFIDRIVE = ppo.dp_dialect("profidrive")

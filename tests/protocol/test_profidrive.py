@@ -7,7 +7,8 @@ import struct
 import pytest
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.profidrive import (
+from pkwbus.protocol.profidrive.drive import decode_request, encode_response
+from pkwbus.protocol.profidrive.parameters import (
     MAX_PARAMETERS,
     MAX_RECORD,
     Attribute,
@@ -20,7 +21,6 @@ from pkwbus.protocol.profidrive import (
     Values,
     decode_response,
 )
-from pkwbus.protocol.profidrive_drive import decode_request, encode_response
 
 # SINAMICS G120X operating instructions, "Parameter channel", example: change
 # p1121 (ramp-down time) to 12.15 s. Reference 0x80, change, DO 1, one parameter,
@@ -137,7 +137,7 @@ def test_thirty_nine_reads_fit_one_record() -> None:
 
 
 def test_error_numbers_in_the_vendors_words() -> None:
-    from pkwbus.protocol.profidrive_errors import error_text
+    from pkwbus.protocol.profidrive.errors import error_text
 
     # SINAMICS CU240S Operating Instructions, table 6-25
     assert error_text(0x00) == "Illegal parameter number"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC, USS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.pkw.dialects import FC, USS, IndLayout
+from pkwbus.protocol.serial.telegram import (
     FC_PARAMETER,
     FC_PROCESS,
     Address,
@@ -170,7 +170,7 @@ def test_lengths() -> None:
 
 
 def test_decode_adr_by_protocol() -> None:
-    from pkwbus.protocol.telegram import Protocol, decode_adr
+    from pkwbus.protocol.serial.telegram import Protocol, decode_adr
 
     assert decode_adr(Protocol.FC, 0x81) == Address(1)
     assert decode_adr(Protocol.USS, 0x41) == Address(1, mirror=True)

@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
 from pkwbus.master.line import Line as MasterLine
-from pkwbus.protocol.dialects import IndLayout
-from pkwbus.protocol.params import ParameterRef, Scaling, ValueType
-from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
+from pkwbus.protocol.pkw.dialects import IndLayout
+from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
+from pkwbus.protocol.values import ParameterRef, Scaling, ValueType
 from pkwbus.service.config import (
     Catalogs,
     Config,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus.protocol.params import parse_parameter
+from pkwbus.protocol.values import parse_parameter
 from pkwbus.service.config import ConfigError, parse_config
 
 

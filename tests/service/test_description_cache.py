@@ -13,9 +13,9 @@ from typing import Any
 import pytest
 
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.dialects import Command
-from pkwbus.protocol.params import Scaling
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.values import Scaling
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.config import parse_config

@@ -15,8 +15,8 @@ import pytest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.protocol.params import Scaling, ValueType
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import Scaling, ValueType
 from pkwbus.service.http.views import drive_view
 from pkwbus.service.metrics.devices import SnapshotCollector
 from pkwbus.service.runtime import Runtime

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from pkwbus.cli import main
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service.config import ConfigError, load_config, parse_config
 
 BAD = Path(__file__).parent / "bad_dp_configs"
@@ -153,7 +153,7 @@ def test_cfg_given_needs_no_module_of_the_gsd_file(tmp_path: Path) -> None:
 
 
 def test_the_slot_time_waits_for_the_slowest_slaves_max_tsdr(tmp_path: Path) -> None:
-    from pkwbus.protocol import dp_timing
+    from pkwbus.protocol.profibus.fdl import timing as dp_timing
 
     slow = BAD / "gsd" / "slow.gsd"
     assert dp_timing.default_slot_time(19200, 60) == dp_timing.default_slot_time(19200)
@@ -186,7 +186,7 @@ lines:
 
 
 def test_check_config_estimates_the_dp_cycle_and_warns_of_polls_it_cannot_carry() -> None:
-    from pkwbus.protocol import dp_timing
+    from pkwbus.protocol.profibus.fdl import timing as dp_timing
     from pkwbus.service.config.line_load import DP_JOB_CYCLES, check_config_report, line_load
 
     config = parse_config(SIM_LINE.format(baud=19200, every="50ms"), environ={})
@@ -221,7 +221,7 @@ lines:
 
 
 def test_check_config_estimates_parameters_per_second_through_data_record_47() -> None:
-    from pkwbus.protocol import dp_timing
+    from pkwbus.protocol.profibus.fdl import timing as dp_timing
     from pkwbus.service.config.line_load import (
         DP_JOB_CYCLES,
         check_config_report,

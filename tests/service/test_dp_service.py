@@ -26,9 +26,11 @@ from pkwbus.master.outcomes import Rejected
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, ResponseTelegram
-from pkwbus.protocol import fdl, pkw, ppo, pzd
-from pkwbus.protocol.dp_services import Service
-from pkwbus.protocol.dp_slave import RestartReason, SlaveState
+from pkwbus.protocol import pkw, pzd
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp.services import Service
+from pkwbus.protocol.profibus.dp.slave import RestartReason, SlaveState
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import parse_config

@@ -13,7 +13,8 @@ import pytest
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import JobKind
 from pkwbus.master.outcomes import TimedOut
-from pkwbus.protocol import fdl, pkw
+from pkwbus.protocol import pkw
+from pkwbus.protocol.profibus import fdl
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.faults import Answer
 from tests.service.test_dp_service import dp_service, until

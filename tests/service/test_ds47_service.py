@@ -18,10 +18,10 @@ import httpx
 from prometheus_client import generate_latest
 
 from pkwbus.protocol import pzd
-from pkwbus.protocol.dp_slave import RestartReason
-from pkwbus.protocol.dpv1 import C1_SAP, C1Function, decode_c1_request
-from pkwbus.protocol.profidrive import RequestId
-from pkwbus.protocol.profidrive_drive import decode_request
+from pkwbus.protocol.profibus.dp.slave import RestartReason
+from pkwbus.protocol.profibus.dpv1.msac import C1_SAP, C1Function, decode_c1_request
+from pkwbus.protocol.profidrive.drive import decode_request
+from pkwbus.protocol.profidrive.parameters import RequestId
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import parse_config

@@ -17,7 +17,7 @@ from prometheus_client.utils import floatToGoString
 from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.snapshot import DriveState, Reading, Snapshot
 from pkwbus.master.transaction import ErrorKind, Failure, Rejected, TimedOut
-from pkwbus.protocol.dialects import FC
+from pkwbus.protocol.pkw.dialects import FC
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service.metrics import devices, exposition
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector

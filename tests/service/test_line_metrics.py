@@ -19,7 +19,7 @@ from pkwbus.master.transaction import (
     TimedOut,
 )
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import DIALECTS, FC, Dialect, Reply
+from pkwbus.protocol.pkw.dialects import DIALECTS, FC, Dialect, Reply
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.metrics.instrumentation import ServiceMetrics

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service.config import Config, load_config
 from pkwbus.service.config.line_load import (
     check_config_report,

@@ -17,9 +17,9 @@ from pkwbus.master.record import LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd
-from pkwbus.protocol.dialects import FC, IndLayout
+from pkwbus.protocol.pkw.dialects import FC, IndLayout
 from pkwbus.protocol.pzd import Profile
-from pkwbus.protocol.telegram import FC_PROCESS, BlockShape, Protocol, split_block
+from pkwbus.protocol.serial.telegram import FC_PROCESS, BlockShape, Protocol, split_block
 from pkwbus.service.metrics.devices import DriveInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry, render
 

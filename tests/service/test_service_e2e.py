@@ -18,8 +18,8 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import ref_to_percent
+from pkwbus.protocol.values import ValueType, decode_value
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.http.api import create_app

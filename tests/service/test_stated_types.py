@@ -7,8 +7,8 @@ from types import MappingProxyType
 
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.master.target import DriveTarget
-from pkwbus.protocol.params import ParameterRef
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.values import ParameterRef
+from pkwbus.protocol.values.types import ValueType
 from pkwbus.service.runtime import DriveEntry
 
 TYPED = ParameterDescription("Ramp-down time", ValueType.F32, unit="s", writable=True)

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Dialect, IndLayout
 from pkwbus.protocol.pkw import PkwRequest
-from pkwbus.protocol.telegram import Telegram, encode_block, frame
+from pkwbus.protocol.pkw.dialects import Dialect, IndLayout
+from pkwbus.protocol.serial.telegram import Telegram, encode_block, frame
 
 
 class FakeClock:

@@ -7,10 +7,10 @@ import struct
 import pytest
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC, USS, IndLayout
 from pkwbus.protocol.pkw import Rejection, TextResponse, ValueResponse, Width
+from pkwbus.protocol.pkw.dialects import FC, USS, IndLayout
 from pkwbus.protocol.pzd import Profile, status_bits
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.serial.telegram import (
     BlockShape,
     FcAddressFormat,
     encode_block,

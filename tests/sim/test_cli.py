@@ -18,8 +18,8 @@ import serial
 
 from pkwbus.catalog import DEFAULT_CATALOGS, load_catalog
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import USS
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.pkw.dialects import USS
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim.catalogs import UNIT_FACTORS
 from pkwbus.sim.cli import configure, main, parse_addresses, parse_host_port, plan
 from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR

@@ -1,5 +1,5 @@
 """The simulated drives describe their parameters (PKW AK 4) in their dialect's form, which
-:func:`pkwbus.protocol.descriptions.read_elements` reads back to the spec's own type,
+:func:`pkwbus.protocol.pkw.descriptions.read_elements` reads back to the spec's own type,
 conversion, unit, name and limits; drives and parameters without a description refuse."""
 
 from __future__ import annotations
@@ -12,16 +12,16 @@ import pytest
 
 from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import (
+from pkwbus.protocol.pkw.descriptions import (
     BASE_UNITS,
     DescriptionForm,
     DriveDescription,
     form_of,
     read_elements,
 )
-from pkwbus.protocol.dialects import FC, USS, Dialect, IndLayout, dialect
-from pkwbus.protocol.params import ValueType
-from pkwbus.protocol.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.pkw.dialects import FC, USS, Dialect, IndLayout, dialect
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.values import ValueType
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.drive import SimDrive

@@ -11,9 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl, pkw, ppo, pzd
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol import pkw, pzd
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import (
     DpSlave,
     Inputs,
     NoAnswer,

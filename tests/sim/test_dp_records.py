@@ -5,19 +5,19 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import (
     DpSlave,
     NoAnswer,
     SlaveSetup,
     SlaveState,
     TransferEnded,
 )
-from pkwbus.protocol.dpv1 import Dpv1Setup
-from pkwbus.protocol.dpv1_transfer import RecordFailed, RecordRead
-from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.profidrive import (
+from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
+from pkwbus.protocol.profibus.dpv1.transfer import RecordFailed, RecordRead
+from pkwbus.protocol.profidrive.parameters import (
     AXES,
     RECORD,
     Change,
@@ -197,8 +197,8 @@ def test_a_transfer_needs_a_dpv1_slave_in_data_exchange() -> None:
 def test_a_transfer_ends_at_its_timeout_while_the_slave_keeps_its_diagnosis() -> None:
     # The slave answers its Data_Exchange "diagnosis waiting", then static diagnosis on
     # every Slave_Diag: the transfer cannot go on, and ends once its time is up.
-    from pkwbus.protocol.dp_services import Diagnosis, encode_diagnosis
-    from pkwbus.protocol.fdl import DataFrame, Status, response_fc
+    from pkwbus.protocol.profibus.dp.services import Diagnosis, encode_diagnosis
+    from pkwbus.protocol.profibus.fdl import DataFrame, Status, response_fc
 
     line = sim()
     bus = Bus(line, timeout=0.1)

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import random
 
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl, pkw, ppo
-from pkwbus.protocol.dialects import IndLayout
-from pkwbus.protocol.dp_slave import DpSlave, Inputs, NoAnswer, SlaveSetup, SlaveState
-from pkwbus.protocol.telegram import BlockShape, Protocol
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.dialects import IndLayout
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import DpSlave, Inputs, NoAnswer, SlaveSetup, SlaveState
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.dp_slave import SimDpSlave, SlaveMode
 from pkwbus.sim.drive import SimDrive

@@ -12,8 +12,8 @@ import serial
 import serial_asyncio
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC, USS
-from pkwbus.protocol.telegram import Deframer, Telegram, fc_lengths
+from pkwbus.protocol.pkw.dialects import FC, USS
+from pkwbus.protocol.serial.telegram import Deframer, Telegram, fc_lengths
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 from pkwbus.sim.ends import PathInUseError
 from tests.sim.conftest import request_telegram

@@ -7,9 +7,9 @@ from collections import Counter
 import pytest
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC, USS, IndLayout
 from pkwbus.protocol.pkw import NoResponse, ValueResponse, Width
-from pkwbus.protocol.telegram import Deframer, Telegram, fc_adr, fc_lengths, uss_lengths
+from pkwbus.protocol.pkw.dialects import FC, USS, IndLayout
+from pkwbus.protocol.serial.telegram import Deframer, Telegram, fc_adr, fc_lengths, uss_lengths
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 from pkwbus.sim.faults import Answer
 from tests.sim.conftest import FakeClock, request_telegram

@@ -9,9 +9,9 @@ import pytest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.params import ValueType, decode_value
 from pkwbus.protocol.pzd import Profile
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import ValueType, decode_value
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.catalogs import UNIT_FACTORS, CatalogError
 from pkwbus.sim.model import DriveModel, Limits

@@ -13,10 +13,12 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-from pkwbus.protocol import fdl, pkw, ppo
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.params import decode_value
-from pkwbus.protocol.telegram import Telegram, decode_adr, split_block
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.serial.telegram import Telegram, decode_adr, split_block
+from pkwbus.protocol.values import decode_value
 from pkwbus.sim import Simulator
 from pkwbus.sim.dp_line import DpSimulator
 from pkwbus.sim.drive import SimDrive

@@ -34,7 +34,7 @@ from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 from pkwbus.link import run as run_on_loop
-from pkwbus.protocol.notation import parse_parameter
+from pkwbus.protocol.values.notation import parse_parameter
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 from pkwbus.sim.dp_line import DpFaults, DpSimulator, SlaveKind
 from pkwbus.sim.ends import PtyEnd, TcpEnd, drop_at_random

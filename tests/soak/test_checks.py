@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import FC
+from pkwbus.protocol.pkw.dialects import FC
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 from tests.sim.conftest import request_telegram
 

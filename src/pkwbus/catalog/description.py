@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Final
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import (
+from pkwbus.protocol.values import (
     UNSCALED,
     ParameterRef,
     Scaling,
@@ -156,7 +156,7 @@ class ParameterDescription:
         """The raw number and width for writing ``value``; nothing is sent on an error.
 
         The one rule for writes, from the command line and the API: within the
-        limits and held exactly (:func:`~pkwbus.protocol.params.encode_exact`),
+        limits and held exactly (:func:`~pkwbus.protocol.values.encode_exact`),
         never rounded; the error names ``parameter`` and the nearest values.
         """
         if self.vtype is None:
@@ -223,6 +223,6 @@ class ParameterTable:
     def canonical(self, ref: ParameterRef) -> ParameterRef:
         """``ref`` under the drive's one name for it (``3-41`` for ``341`` on an FC drive,
         ``r0021`` when the catalog or configuration gives the prefix); a
-        :class:`~pkwbus.protocol.params.ParameterNotationError` for r/p on an FC drive."""
+        :class:`~pkwbus.protocol.values.ParameterNotationError` for r/p on an FC drive."""
         prefix = self.describe(ParameterRef(ref.pnu, None, ref.name)).prefix
         return canonical(ref, danfoss=self.danfoss, prefix=prefix)

@@ -21,9 +21,9 @@ from typing import Any, Literal, Self
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, model_validator
 
 from pkwbus.problems import plain
-from pkwbus.protocol import value_types
-from pkwbus.protocol.notation import MAX_PNU, ParameterRef, parse_parameter
-from pkwbus.protocol.value_types import CONVERSION_FACTORS, Scaling
+from pkwbus.protocol.values import types as value_types
+from pkwbus.protocol.values.notation import MAX_PNU, ParameterRef, parse_parameter
+from pkwbus.protocol.values.types import CONVERSION_FACTORS, Scaling
 from pkwbus.yamlfile import YamlError, load_yaml
 
 __all__ = [

@@ -4,7 +4,7 @@ catalog's, field by field; and where the drive and the catalog disagree.
 What the configuration sets explicitly (``type``, ``scale`` or ``conversion``,
 ``unit``, ``min``, ``max``, ``name``) comes first; then what the drive
 describes of itself (its description elements,
-:class:`~pkwbus.protocol.descriptions.DriveDescription`); then the catalog.
+:class:`~pkwbus.protocol.pkw.descriptions.DriveDescription`); then the catalog.
 A drive that described nothing leaves today's description (configuration over
 catalog) as it is. A drive's name that the catalog's name begins with is the
 catalog's cut to the drive's 16 characters: the whole name is shown. Pure: no
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field, replace
 from typing import Final
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.value_types import Scaling
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.values.types import Scaling
 
 __all__ = ["SOURCES", "Disagreement", "Layers", "Resolved", "disagreements", "resolve"]
 

@@ -24,8 +24,8 @@ from pkwbus.commands.drive_access import DriveAccess, checked, drive_access, res
 from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.values import ParameterRef, encode_text
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
     "add_parsers",

@@ -16,9 +16,9 @@ from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.commands.failures import command_failure
 from pkwbus.master.outcomes import Answered, Outcome
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Dialect
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.params import ParameterRef, canonical
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.values import ParameterRef, canonical
 
 __all__ = ["catalog_entry", "drive_name", "finish", "report_value", "show_read"]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 from pkwbus.catalog import CatalogError
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import parse_parameter
+from pkwbus.protocol.values import parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.config import Config, ConfigError
 

@@ -20,10 +20,10 @@ from pkwbus.link import PortSettings
 from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import buses
-from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw_length import AUTO, PkwSetting
-from pkwbus.protocol.telegram import FcAddressFormat, Protocol
+from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
+from pkwbus.protocol.pkw.length import AUTO, PkwSetting
+from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol
 
 __all__ = [
     "DEFAULT_BAUDRATE",

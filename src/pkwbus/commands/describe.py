@@ -23,7 +23,7 @@ from pkwbus.commands.drive_access import checked, drive_access, resolve
 from pkwbus.commands.failures import command_failure
 from pkwbus.master.outcomes import Answered, Rejected
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command
+from pkwbus.protocol.pkw.dialects import Command
 
 __all__ = ["add_parsers", "run_describe"]
 

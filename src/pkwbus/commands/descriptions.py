@@ -2,7 +2,8 @@
 the report `pkwbus describe` prints of them (FC, USS and PROFIBUS alike).
 
 The elements are read in the form of the drive's dialect
-(:func:`pkwbus.protocol.descriptions.form_of`, :func:`~pkwbus.protocol.descriptions.read_elements`):
+(:func:`pkwbus.protocol.pkw.descriptions.form_of`,
+:func:`~pkwbus.protocol.pkw.descriptions.read_elements`):
 the Danfoss FC form (FC protocol) or the PROFIdrive one (USS, PROFIBUS).
 
 Raises :class:`~pkwbus.commands.common.CommandError` when the drive describes none of
@@ -18,7 +19,7 @@ from typing import Any
 
 from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import (
+from pkwbus.protocol.pkw.descriptions import (
     DATA_TYPE,
     LIMITS,
     NAME,
@@ -29,8 +30,8 @@ from pkwbus.protocol.descriptions import (
     form_of,
     read_elements,
 )
-from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.values import ParameterRef
 
 __all__ = ["ELEMENTS", "describe", "report"]
 

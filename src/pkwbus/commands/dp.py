@@ -35,17 +35,19 @@ from pkwbus.master.record import NoEvents
 from pkwbus.master.single_job import JobSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import dp_timing, pkw, ppo
-from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.dp_slave import SlaveSetup, SlaveState
-from pkwbus.protocol.dpv1 import Dpv1Setup
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.gsd import Gsd
-from pkwbus.protocol.ppo import PkwSlot, PpoType
-from pkwbus.protocol.profidrive import AXES
-from pkwbus.protocol.telegram import BlockShape, Protocol
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType
+from pkwbus.protocol.profibus.dp.slave import SlaveSetup, SlaveState
+from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profibus.gsd import Gsd
+from pkwbus.protocol.profidrive.parameters import AXES
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
     "DEFAULT_BAUDRATE",

@@ -23,11 +23,11 @@ from pkwbus.commands.dp import DEFAULT_BAUDRATE, MAX_DP_RETRIES, dp_line
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.protocol import dp_services as dps
-from pkwbus.protocol import fdl
-from pkwbus.protocol.dp_slave import Answer
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.fdl import DataFrame, StationType
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.slave import Answer
+from pkwbus.protocol.profibus.fdl import DataFrame, StationType
 
 __all__ = ["run_scan", "slave_state"]
 

@@ -37,12 +37,13 @@ from pkwbus.master.outcomes import Outcome
 from pkwbus.master.plan import DriveSpec
 from pkwbus.master.single_job import JobSession
 from pkwbus.master.target import DriveTarget
-from pkwbus.protocol import pkw, ppo
-from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, parse_parameter, parse_type
-from pkwbus.protocol.telegram import Protocol
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import ParameterRef, parse_parameter, parse_type
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["DriveAccess", "checked", "drive_access", "resolve"]
 

@@ -17,9 +17,10 @@ from typing import Any
 
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.dp_settings import GsdFileError, read_gsd_file
-from pkwbus.protocol import dp_services, gsd
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.gsd import Gsd, GsdModule
+from pkwbus.protocol.profibus import gsd
+from pkwbus.protocol.profibus.dp import services as dp_services
+from pkwbus.protocol.profibus.gsd import Gsd, GsdModule
 
 __all__ = ["add_parsers", "gsd_report", "run_gsd"]
 

@@ -26,9 +26,9 @@ from pkwbus.master.line import Line
 from pkwbus.master.pkw_probe import NO_ANSWER, ask_description, ask_pkw_length
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Failure, ResponseTelegram
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.pkw_length import AUTO, shown
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.pkw.length import AUTO, shown
+from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import (
     describe_targets,

@@ -43,10 +43,10 @@ from pkwbus.master.transaction import Answered, ErrorKind, Failure, ResponseTele
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.params import ValueType
-from pkwbus.protocol.pkw_length import shown
+from pkwbus.protocol.pkw.length import shown
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.protocol.telegram import FcAddressFormat, Protocol, split_block
+from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol, split_block
+from pkwbus.protocol.values import ValueType
 
 __all__ = ["AUTO_BAUDRATES", "add_parsers", "run_scan"]
 

@@ -1,7 +1,7 @@
 """How a port is opened: its URL, character, start pause, reopen back-off and adapter settings.
 
 Raises: :class:`ValueError` from :class:`PortSettings` for a character
-:mod:`pkwbus.protocol.timing` cannot time (a bad parity or stop bits).
+:mod:`pkwbus.protocol.serial.timing` cannot time (a bad parity or stop bits).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import serial
 
-from pkwbus.protocol import timing
+from pkwbus.protocol.serial import timing
 
 __all__ = ["PARITIES", "PortError", "PortSettings", "Rs485Mode"]
 
@@ -35,7 +35,7 @@ class Rs485Mode:
 class PortSettings:
     """How to open the port. ``pause`` None = 3.5 character times at ``baudrate``.
 
-    The timing helpers are :mod:`pkwbus.protocol.timing`'s, for these settings.
+    The timing helpers are :mod:`pkwbus.protocol.serial.timing`'s, for these settings.
 
     ``low_latency`` asks the adapter's driver to pass on received bytes at once
     (an FTDI adapter otherwise holds them up to its 16 ms latency timer); a

@@ -50,8 +50,10 @@ from pkwbus.master.transaction import (
     PkwTransaction,
     ResponseTelegram,
 )
-from pkwbus.protocol.dp_services import Diagnosis
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
+from pkwbus.protocol.profibus.dp.services import Diagnosis
+from pkwbus.protocol.profibus.dp.slave import (
     DiagnosisRead,
     DpSlave,
     Failed,
@@ -65,10 +67,8 @@ from pkwbus.protocol.dp_slave import (
     StateChanged,
     TransferEnded,
 )
-from pkwbus.protocol.dpv1_transfer import RecordRead, TransferEnd
-from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
-from pkwbus.protocol.profidrive import RECORD
+from pkwbus.protocol.profibus.dpv1.transfer import RecordRead, TransferEnd
+from pkwbus.protocol.profidrive.parameters import RECORD
 
 __all__ = ["CycleWire", "DpEvents", "NoDpEvents", "SlaveSpec"]
 

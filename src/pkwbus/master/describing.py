@@ -26,14 +26,14 @@ from pkwbus.master.drive_identity import DescriptionBook, identity_of
 from pkwbus.master.outcomes import Answered, Cancelled, LineFailed, Outcome, Rejected
 from pkwbus.master.plan import PollSpec
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import (
+from pkwbus.protocol.pkw.descriptions import (
     DATA_TYPE,
     LIMITS,
     DescriptionForm,
     DriveDescription,
     read_elements,
 )
-from pkwbus.protocol.dialects import Command, Dialect
+from pkwbus.protocol.pkw.dialects import Command, Dialect
 
 __all__ = [
     "ASK_AGAIN",

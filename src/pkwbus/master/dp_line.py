@@ -19,9 +19,10 @@ import asyncio
 from collections.abc import Callable
 
 from pkwbus.link import Link, PortError, PortSettings
-from pkwbus.protocol import dp_timing, fdl
-from pkwbus.protocol.dp_slave import Answer, Garbled, NoAnswer
-from pkwbus.protocol.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.slave import Answer, Garbled, NoAnswer
+from pkwbus.protocol.profibus.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
 
 __all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame"]
 

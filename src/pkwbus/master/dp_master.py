@@ -1,16 +1,16 @@
 """The DP master of one line: its slaves in turn, one Data_Exchange each per cycle.
 
-Each slave has its start-up state machine (:class:`~pkwbus.protocol.dp_slave.DpSlave`)
+Each slave has its start-up state machine (:class:`~pkwbus.protocol.profibus.dp.slave.DpSlave`)
 and, when its PPO has a parameter channel, a PKW slot
-(:class:`~pkwbus.protocol.ppo.PkwSlot`) whose request goes in every PPO-write
+(:class:`~pkwbus.protocol.profibus.dp.ppo.PkwSlot`) whose request goes in every PPO-write
 until its job is over; every answer while it does goes to ``on_event`` as a
-:class:`~pkwbus.protocol.ppo.SlotAnswer`, for the job to judge. Who fills the
+:class:`~pkwbus.protocol.profibus.dp.ppo.SlotAnswer`, for the job to judge. Who fills the
 slots and ends their jobs is the caller's: the line runner's cycle wire, per
 slave and per cycle, with what its planner gives (``Planner.next_for``)
 through the ``feed`` hook. A DP-V1 slave's record transfer (PROFIdrive data
 record 47), started by the same hook, sends one MSAC_C1 request after the
 slave's Data_Exchange in each cycle, so every slave keeps its cycle; its end
-comes to ``on_event`` as a :class:`~pkwbus.protocol.dp_slave.TransferEnded`.
+comes to ``on_event`` as a :class:`~pkwbus.protocol.profibus.dp.slave.TransferEnded`.
 Stopping sends Global_Control Clear to every slave, then closes the port.
 """
 
@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 from pkwbus.link import PortError
 from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.protocol.dp_services import global_control_clear
-from pkwbus.protocol.dp_slave import (
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, SlotAnswer, SlotGarbled
+from pkwbus.protocol.profibus.dp.services import global_control_clear
+from pkwbus.protocol.profibus.dp.slave import (
     DpSlave,
     Failed,
     Inputs,
@@ -32,8 +33,7 @@ from pkwbus.protocol.dp_slave import (
     SlaveSetup,
     SlaveState,
 )
-from pkwbus.protocol.fdl import DataFrame
-from pkwbus.protocol.ppo import PkwSlot, SlotAnswer, SlotGarbled
+from pkwbus.protocol.profibus.fdl import DataFrame
 
 __all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
 

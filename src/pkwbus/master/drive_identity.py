@@ -26,9 +26,9 @@ from typing import Any, Final
 
 from pkwbus.master.outcomes import Answered, Outcome, Rejected
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.value_types import CONVERSION_FACTORS
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.values.types import CONVERSION_FACTORS
 
 __all__ = ["DescriptionBook", "identity_of", "identity_requests"]
 

@@ -27,9 +27,9 @@ from pkwbus.master.record_transaction import RecordItem, RecordTransaction
 from pkwbus.master.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.pkw_length import PkwLength
-from pkwbus.protocol.profidrive_pkw import carried, fits
-from pkwbus.protocol.telegram import Protocol, split_block
+from pkwbus.protocol.pkw.length import PkwLength
+from pkwbus.protocol.profidrive.pkw import carried, fits
+from pkwbus.protocol.serial.telegram import Protocol, split_block
 
 __all__ = ["Active", "DrivePlan", "PollState", "Work"]
 

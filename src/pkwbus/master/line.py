@@ -33,7 +33,7 @@ from pkwbus.master.transaction import (
     Failure,
     ResponseTelegram,
 )
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.serial.telegram import (
     BadChecksum,
     BadLength,
     Deframer,

@@ -5,7 +5,7 @@ For ``pkwbus scan`` and ``pkwbus check-config --probe``: each job by the
 planner, as on the service's lines (:func:`pkwbus.master.single_job.perform`).
 The read goes out with the target's PKW length (4 words while a length is learned: both a
 fixed-4 and a variable drive answer that), and the answer's length tells
-(:func:`pkwbus.protocol.pkw_length.told`). The parameter read is r0002, a
+(:func:`pkwbus.protocol.pkw.length.told`). The parameter read is r0002, a
 word on the Siemens drives (MICROMASTER 440 Parameter List: r0002 "Drive
 state", U16); a drive without it answers with a rejection, whose fault
 number is a word as well, so it tells the same.
@@ -21,14 +21,14 @@ from pkwbus.master.outcomes import Answered, Rejected
 from pkwbus.master.single_job import perform, run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import (
+from pkwbus.protocol.pkw.descriptions import (
     DATA_TYPE,
     DriveDescription,
     elements_to_read,
     form_of,
     read_elements,
 )
-from pkwbus.protocol.pkw_length import PkwWords, told
+from pkwbus.protocol.pkw.length import PkwWords, told
 
 __all__ = ["LENGTH_PNU", "NO_ANSWER", "ask_description", "ask_pkw_length"]
 

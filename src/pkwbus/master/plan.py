@@ -17,8 +17,8 @@ from pkwbus.master.jobs import Job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import Outcome, Tally
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DescriptionForm, DriveDescription
-from pkwbus.protocol.pkw_length import PkwLength
+from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription
+from pkwbus.protocol.pkw.length import PkwLength
 
 __all__ = [
     "Action",

@@ -39,7 +39,7 @@ from pkwbus.master.transaction import (
 )
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.pkw_length import AUTO, shown
+from pkwbus.protocol.pkw.length import AUTO, shown
 
 __all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
 

@@ -3,7 +3,7 @@ as a state machine without I/O.
 
 The planner's work stays in PKW terms (a poll's read, a job's change, a
 description element); here each becomes one parameter of a base mode request
-(:mod:`pkwbus.protocol.profidrive`), and each parameter of the response comes
+(:mod:`pkwbus.protocol.profidrive.parameters`), and each parameter of the response comes
 back as what the PKW channel would have answered: a value (with the type the
 drive names: a float is a float), a description element, the drive's error
 number as a refusal, or a change done (no value echoed). The wire carries the
@@ -12,7 +12,7 @@ or a response that is not this request's answer is tried again, the same
 request, up to ``retries`` times; then every job of it ends timed out.
 
 How a PKW request becomes a parameter of the request:
-:mod:`pkwbus.protocol.profidrive_pkw`.
+:mod:`pkwbus.protocol.profidrive.pkw`.
 """
 
 from __future__ import annotations
@@ -23,14 +23,15 @@ from collections.abc import Sequence
 from pkwbus.master.outcomes import Answered, LineFailed, Outcome, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure, PkwAnswer, Tally
-from pkwbus.protocol import pkw, profidrive
-from pkwbus.protocol.dialects import Command, Reply
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.pkw_fields import Width
-from pkwbus.protocol.profidrive import Format, ParameterError
-from pkwbus.protocol.profidrive_errors import error_text
-from pkwbus.protocol.profidrive_pkw import RecordItem, record_request
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.pkw.dialects import Command, Reply
+from pkwbus.protocol.pkw.fields import Width
+from pkwbus.protocol.profidrive import parameters as profidrive
+from pkwbus.protocol.profidrive.errors import error_text
+from pkwbus.protocol.profidrive.parameters import Format, ParameterError
+from pkwbus.protocol.profidrive.pkw import RecordItem, record_request
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["RecordItem", "RecordTransaction"]
 

@@ -27,7 +27,7 @@ from pkwbus.master.record import LineEvents
 from pkwbus.master.runner import LineRunner, Wire
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["JobSession", "SessionEnded", "perform", "run_job"]
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import Value
-from pkwbus.protocol.dp_slave_model import SlaveState
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.profibus.dp.slave_model import SlaveState
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["DriveState", "LiveSlave", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
 

@@ -15,13 +15,13 @@ from pkwbus.protocol.buses import (
     default_dialect,
     dialect_fits,
 )
-from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw_length import AUTO, UNKNOWN_SEND_WORDS, PkwSetting, PkwWords
-from pkwbus.protocol.ppo import DEFAULT_PROFILES
-from pkwbus.protocol.profidrive_pkw import RecordItem, record_request
+from pkwbus.protocol.pkw.dialects import Dialect, IndLayout, dialect
+from pkwbus.protocol.pkw.length import AUTO, UNKNOWN_SEND_WORDS, PkwSetting, PkwWords
+from pkwbus.protocol.profibus.dp.ppo import DEFAULT_PROFILES
+from pkwbus.protocol.profidrive.pkw import RecordItem, record_request
 from pkwbus.protocol.pzd import MONITORING_CTW, Profile
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.serial.telegram import (
     FC_PARAMETER,
     FC_PROCESS,
     BlockShape,
@@ -32,7 +32,7 @@ from pkwbus.protocol.telegram import (
     frame,
     uss_adr,
 )
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
     "DriveTarget",

@@ -24,7 +24,7 @@ from pkwbus.master.outcomes import Answered, LineFailed, Mismatch, Outcome, Reje
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.telegram import split_block
+from pkwbus.protocol.serial.telegram import split_block
 
 __all__ = [
     "Answered",

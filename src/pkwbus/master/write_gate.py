@@ -12,7 +12,7 @@ The read first does two things:
   length (USS specification, part C, 4.1.2; SINAMICS G120X Operating
   Instructions, "USS parameter channel"): sent with the wrong one, the drive
   takes another value. The read's answer tells a USS drive's length where it
-  is learned (``pkw_words: auto``; :mod:`pkwbus.protocol.pkw_length`), and
+  is learned (``pkw_words: auto``; :mod:`pkwbus.protocol.pkw.length`), and
   nothing is changed on a drive whose answers contradict the configured
   length, until the two agree.
 
@@ -29,10 +29,10 @@ from pkwbus.master.outcomes import Cancelled, LineFailed, NotSent, Outcome, Reje
 from pkwbus.master.plan import Finished, Send
 from pkwbus.master.record_transaction import RecordItem
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw_fields import Width
-from pkwbus.protocol.pkw_length import Gate, shown
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.pkw.fields import Width
+from pkwbus.protocol.pkw.length import Gate, shown
 
 __all__ = ["after_read", "gate_write"]
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from typing import Final
 
-from pkwbus.protocol.pkw_length import AUTO, PkwSetting
-from pkwbus.protocol.telegram import FcAddressFormat, Protocol
+from pkwbus.protocol.pkw.length import AUTO, PkwSetting
+from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol
 
 __all__ = [
     "DIALECTS_BY_PROTOCOL",

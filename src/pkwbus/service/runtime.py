@@ -29,9 +29,9 @@ from pkwbus.master.plan import PollSpec
 from pkwbus.master.snapshot import LiveSlave, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import DriveDescription
-from pkwbus.protocol.params import ParameterRef
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.values import ParameterRef
+from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime", "Trends"]
 

@@ -18,8 +18,8 @@ from __future__ import annotations
 import dataclasses
 
 from pkwbus.catalog import Catalog, CatalogError, ParameterSpec, load_catalog
-from pkwbus.protocol.params import ValueType
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import ValueType
 from pkwbus.sim.table import TABLES, ParamSpec
 
 # (model unit, catalog unit) -> factor. The simulated motor has two pole pairs.

@@ -14,8 +14,8 @@ from pkwbus import durations, hostport, limits
 from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
 from pkwbus.durations import DurationRange
 from pkwbus.protocol import buses
-from pkwbus.protocol.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.errors import ProtocolError
+from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
 from pkwbus.sim.dp_line import DpFaults, DpSimulator
 from pkwbus.sim.ends import PathInUseError, PtyEnd, TcpEnd, drop_at_random

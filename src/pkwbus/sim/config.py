@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from pkwbus.protocol import timing
+from pkwbus.protocol.serial import timing
 
 __all__ = ["FAULT_KINDS", "LAG_MODES", "LagMode", "SimFaults", "SimTiming"]
 

@@ -1,5 +1,5 @@
 """What a simulated drive says of one of its parameters: its description elements (PKW
-request AK 4), in the form of the drive's dialect (:mod:`pkwbus.protocol.descriptions`).
+request AK 4), in the form of the drive's dialect (:mod:`pkwbus.protocol.pkw.descriptions`).
 
 - **Danfoss FC** (Danfoss FC 300 Design Guide, "Read parameter description"): 1 the
   data type; 2 the number of array elements (0 when not an array); 4 the conversion
@@ -16,7 +16,7 @@ request AK 4), in the form of the drive's dialect (:mod:`pkwbus.protocol.descrip
   carry, is not available).
 
 The unit index (size index) is the one of the spec's unit in
-:data:`~pkwbus.protocol.descriptions.BASE_UNITS`: a simulated value scaled by its
+:data:`~pkwbus.protocol.pkw.descriptions.BASE_UNITS`: a simulated value scaled by its
 conversion index is in the spec's unit, so that unit is the base unit the index names.
 A unit not in that table ("kW", "h", "rpm") is sent as 0, no dimension: the drive
 never claims a base unit its scaled value is not in. The FC 300 Design Guide's unit
@@ -35,9 +35,9 @@ import struct
 from dataclasses import dataclass
 from typing import Final
 
-from pkwbus.protocol.descriptions import BASE_UNITS, DescriptionForm
-from pkwbus.protocol.params import ValueType, encode_value
 from pkwbus.protocol.pkw import Width
+from pkwbus.protocol.pkw.descriptions import BASE_UNITS, DescriptionForm
+from pkwbus.protocol.values import ValueType, encode_value
 from pkwbus.sim.table import ParamSpec
 
 __all__ = ["NAME_LENGTH", "SIZE_INDEXES", "TYPE_CODES", "Element", "element", "size_index"]

@@ -26,12 +26,13 @@ import time
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
-from pkwbus.protocol import fdl, ppo
-from pkwbus.protocol.dialects import IndLayout
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.fdl import BROADCAST, DataFrame, Status
-from pkwbus.protocol.profidrive import AXES
-from pkwbus.protocol.telegram import BlockShape, Protocol
+from pkwbus.protocol.pkw.dialects import IndLayout
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.fdl import BROADCAST, DataFrame, Status
+from pkwbus.protocol.profidrive.parameters import AXES
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol
 from pkwbus.sim import ends
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.dp_slave import SimDpSlave

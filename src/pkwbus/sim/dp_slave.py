@@ -19,15 +19,16 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable
 
-from pkwbus.protocol import fdl
-from pkwbus.protocol.dp_services import (
+from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.services import (
     Diagnosis,
     Service,
     decode_parameters,
     encode_diagnosis,
     io_lengths,
 )
-from pkwbus.protocol.dpv1 import (
+from pkwbus.protocol.profibus.dpv1.msac import (
     C1_SAP,
     NOT_READY,
     C1Function,
@@ -35,9 +36,8 @@ from pkwbus.protocol.dpv1 import (
     decode_c1_request,
     encode_c1_error,
 )
-from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.fdl import BROADCAST, DataFrame, ShortAck, Status
-from pkwbus.protocol.profidrive import RECORD
+from pkwbus.protocol.profibus.fdl import BROADCAST, DataFrame, ShortAck, Status
+from pkwbus.protocol.profidrive.parameters import RECORD
 
 __all__ = ["Respond", "SimDpSlave", "SlaveMode"]
 

@@ -11,11 +11,11 @@ from collections import deque
 from dataclasses import dataclass, replace
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Command, Dialect, IndLayout, Reply
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw import PkwResponse, Rejection, TextResponse, ValueResponse, Width
+from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout, Reply
 from pkwbus.protocol.pzd import Profile, takes_control
-from pkwbus.protocol.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.model import DriveModel, Limits, ModelConfig
 from pkwbus.sim.params import ParameterStore

@@ -5,7 +5,7 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from pkwbus.protocol.telegram import STX, Protocol, frame
+from pkwbus.protocol.serial.telegram import STX, Protocol, frame
 from pkwbus.sim.config import SimFaults
 
 __all__ = ["Answer", "apply", "other_adr", "pick"]

@@ -10,10 +10,10 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from pkwbus.protocol import pkw
-from pkwbus.protocol.descriptions import form_of
-from pkwbus.protocol.dialects import WRITE_COMMANDS, Command, Dialect, Reply
-from pkwbus.protocol.params import ValueType, decode_value, encode_value
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse, Width
+from pkwbus.protocol.pkw.descriptions import form_of
+from pkwbus.protocol.pkw.dialects import WRITE_COMMANDS, Command, Dialect, Reply
+from pkwbus.protocol.values import ValueType, decode_value, encode_value
 from pkwbus.sim import descriptions
 from pkwbus.sim.descriptions import TYPE_CODES
 from pkwbus.sim.table import ParamSpec

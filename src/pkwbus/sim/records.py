@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import struct
 
-from pkwbus.protocol import pkw, profidrive, profidrive_drive
-from pkwbus.protocol.dialects import Dialect
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw import Width
-from pkwbus.protocol.profidrive import (
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.profidrive import drive as profidrive_drive
+from pkwbus.protocol.profidrive import parameters as profidrive
+from pkwbus.protocol.profidrive.parameters import (
     Attribute,
     Format,
     ParameterAddress,
@@ -26,8 +28,8 @@ from pkwbus.protocol.profidrive import (
     RequestId,
     Values,
 )
-from pkwbus.protocol.profidrive_pkw import FORMATS
-from pkwbus.protocol.value_types import ValueType
+from pkwbus.protocol.profidrive.pkw import FORMATS
+from pkwbus.protocol.values.types import ValueType
 from pkwbus.sim.params import ParameterStore
 
 __all__ = ["RecordServer"]

@@ -7,10 +7,10 @@ import time
 from collections.abc import Callable, Collection, Iterable
 
 from pkwbus.protocol.buses import address_range, default_dialect
-from pkwbus.protocol.dialects import IndLayout
-from pkwbus.protocol.dialects import dialect as get_dialect
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.telegram import (
+from pkwbus.protocol.pkw.dialects import IndLayout
+from pkwbus.protocol.pkw.dialects import dialect as get_dialect
+from pkwbus.protocol.serial.telegram import (
     PCD_WORDS_FC,
     BlockShape,
     Deframer,

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Final
 
-from pkwbus.protocol.params import Scaling, ValueType
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import Scaling, ValueType
 
 __all__ = ["FC_TABLE", "MODEL_PARAMS", "TABLES", "USS_TABLE", "Initial", "ParamSpec"]
 

@@ -11,7 +11,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 from pkwbus import durations, limits
 from pkwbus.durations import parse_duration
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol.serial.telegram import Protocol
 
 __all__ = ["SimPort", "parse_sim_port"]
 

@@ -25,13 +25,15 @@ from pkwbus.master.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget, RecordAccess
-from pkwbus.protocol import dp_services, dp_timing, pkw
-from pkwbus.protocol.descriptions import NAME, DescriptionForm, elements_to_read, form_of
-from pkwbus.protocol.dp_slave import SlaveSetup
-from pkwbus.protocol.params import ParameterRef
-from pkwbus.protocol.pkw_length import AUTO
-from pkwbus.protocol.profidrive import AXES
-from pkwbus.protocol.telegram import Protocol
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.descriptions import NAME, DescriptionForm, elements_to_read, form_of
+from pkwbus.protocol.pkw.length import AUTO
+from pkwbus.protocol.profibus.dp import services as dp_services
+from pkwbus.protocol.profibus.dp.slave import SlaveSetup
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profidrive.parameters import AXES
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import ParameterRef
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink

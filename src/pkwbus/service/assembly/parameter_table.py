@@ -23,7 +23,7 @@ from pkwbus.catalog.description import (
     ParameterTable,
 )
 from pkwbus.catalog.precedence import Layers
-from pkwbus.protocol.params import MAX_INDEX, UNSCALED, ParameterRef, ValueType
+from pkwbus.protocol.values import MAX_INDEX, UNSCALED, ParameterRef, ValueType
 from pkwbus.service import config as cfg
 
 __all__ = ["explicit_layers", "layers_of", "parameter_table"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from pkwbus.catalog.alarms import CodeTable, WordTable, alarm_table
-from pkwbus.protocol.params import ParameterRef, parse_parameter
+from pkwbus.protocol.values import ParameterRef, parse_parameter
 
 if TYPE_CHECKING:
     from pkwbus.service.config.drive import Drive

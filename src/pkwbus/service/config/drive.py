@@ -18,17 +18,17 @@ from pydantic import (
 
 from pkwbus.catalog import ParameterSpec
 from pkwbus.protocol.buses import default_dialect
-from pkwbus.protocol.dialects import Dialect, IndLayout, dialect
-from pkwbus.protocol.params import (
+from pkwbus.protocol.pkw.dialects import Dialect, IndLayout, dialect
+from pkwbus.protocol.pkw.length import AUTO, UNKNOWN_SEND_WORDS
+from pkwbus.protocol.profibus.dp.ppo import LAYOUT as PPO_LAYOUT
+from pkwbus.protocol.profibus.dp.ppo import ppo_type
+from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape
+from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
+from pkwbus.protocol.values import (
     ParameterRef,
     canonical,
     siemens_name,
 )
-from pkwbus.protocol.pkw_length import AUTO, UNKNOWN_SEND_WORDS
-from pkwbus.protocol.ppo import LAYOUT as PPO_LAYOUT
-from pkwbus.protocol.ppo import ppo_type
-from pkwbus.protocol.telegram import FC_PARAMETER, BlockShape
-from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
 from pkwbus.service.config.fields import Alarms, Describe, Name, Notation, PkwWords

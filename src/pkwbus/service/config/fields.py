@@ -17,13 +17,13 @@ from pkwbus import durations
 from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.problems import short
 from pkwbus.protocol import buses
-from pkwbus.protocol.params import (
+from pkwbus.protocol.pkw.length import PkwSetting
+from pkwbus.protocol.values import (
     ParameterRef,
     ValueType,
     parse_parameter,
     parse_type,
 )
-from pkwbus.protocol.pkw_length import PkwSetting
 
 __all__ = [
     "Alarms",

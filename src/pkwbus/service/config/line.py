@@ -16,21 +16,21 @@ from pydantic import (
 
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.problems import short
-from pkwbus.protocol import timing
 from pkwbus.protocol.buses import (
     DIALECTS_BY_PROTOCOL,
     DP_MAX_ADDRESS,
     address_range,
     default_dialect,
 )
-from pkwbus.protocol.dialects import Dialect, dialect
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import (
+from pkwbus.protocol.pkw.dialects import Dialect, dialect
+from pkwbus.protocol.serial import timing
+from pkwbus.protocol.serial.telegram import FcAddressFormat
+from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
+from pkwbus.protocol.values import (
     ParameterRef,
     canonical,
 )
-from pkwbus.protocol.telegram import FcAddressFormat
-from pkwbus.protocol.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import (

@@ -16,7 +16,7 @@ not counted: a silent drive costs ``timeout`` per try on top of this.
 A PROFIBUS DP line instead cycles its slaves in turn, one Data_Exchange each
 per cycle, whatever is polled. The cycle at best is the sum of each slave's
 request and answer frames with the idle and reaction times of the bus timing
-(:func:`pkwbus.protocol.dp_timing.exchange_time`); a USB adapter's latency
+(:func:`pkwbus.protocol.profibus.fdl.timing.exchange_time`); a USB adapter's latency
 adds to each answer. A slave's PKW channel completes at most one job every
 :data:`DP_JOB_CYCLES` cycles (the request, then AK 0 before the next one),
 so its polls are refreshed at most ``1 / (DP_JOB_CYCLES * cycle)`` times a
@@ -41,10 +41,12 @@ from pathlib import Path
 from typing import Final
 
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
-from pkwbus.protocol import dp_timing, fdl, timing
-from pkwbus.protocol.ppo import ppo_type
-from pkwbus.protocol.profidrive import MAX_PARAMETERS
-from pkwbus.protocol.telegram import MAX_TELEGRAM, Protocol
+from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.ppo import ppo_type
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profidrive.parameters import MAX_PARAMETERS
+from pkwbus.protocol.serial import timing
+from pkwbus.protocol.serial.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.drive import Drive

@@ -11,7 +11,7 @@ from pydantic import (
     model_validator,
 )
 
-from pkwbus.protocol.params import (
+from pkwbus.protocol.values import (
     MAX_INDEX,
     ParameterRef,
     Scaling,

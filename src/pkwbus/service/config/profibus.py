@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING
 from pkwbus import dp_settings
 from pkwbus.dp_settings import DpGiven, DpSettings
 from pkwbus.problems import short
-from pkwbus.protocol import dp_timing, ppo
-from pkwbus.protocol.gsd import Gsd
-from pkwbus.protocol.profidrive import AXES
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profibus.gsd import Gsd
+from pkwbus.protocol.profidrive.parameters import AXES
 from pkwbus.service.config.base import Place
 
 if TYPE_CHECKING:

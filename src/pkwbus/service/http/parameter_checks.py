@@ -18,7 +18,7 @@ from typing import Any
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterNotationError, ParameterRef, parse_parameter
+from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.http.outcome_answers import http_failure
 from pkwbus.service.runtime import DriveEntry, Runtime
 

@@ -18,7 +18,7 @@ from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef
+from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.http.parameter_checks import (
     ApiError,
     check_names,

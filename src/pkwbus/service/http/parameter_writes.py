@@ -26,7 +26,7 @@ from pkwbus.master.jobs import JobKind, JobResult
 from pkwbus.master.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.params import ParameterRef, encode_text
+from pkwbus.protocol.values import ParameterRef, encode_text
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.recorder import AuditRecorder, AuditUnavailable
 from pkwbus.service.http.outcome_answers import audit_outcome

@@ -13,7 +13,7 @@ import math
 from fractions import Fraction
 
 from pkwbus.catalog.description import ParameterDescription, Value
-from pkwbus.protocol.params import ValueType
+from pkwbus.protocol.values import ValueType
 
 __all__ = ["SIGNIFICANT", "readable"]
 

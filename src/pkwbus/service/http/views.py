@@ -5,8 +5,8 @@ the trends of the values)."""
 from __future__ import annotations
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.params import ParameterRef
 from pkwbus.protocol.pzd import status_bits
+from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.http.models import (
     AlarmView,
     DriveView,

@@ -30,9 +30,9 @@ from pkwbus.master.plan import Described
 from pkwbus.master.snapshot import LiveSlave, Reading, ReadingKey
 from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
-from pkwbus.protocol.dialects import Dialect
-from pkwbus.protocol.dp_services import Diagnosis
-from pkwbus.protocol.dp_slave import RestartReason, SlaveState
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.profibus.dp.services import Diagnosis
+from pkwbus.protocol.profibus.dp.slave import RestartReason, SlaveState
 from pkwbus.service.metrics.exposition import CounterFamily
 
 __all__ = [

@@ -1,0 +1,138 @@
+"""The rooms one polled value crosses: which pkwbus modules run for each exchange on the
+service path, and how often a call crosses from one module (and one layer) into another.
+
+The service is built from a configuration as `pkwbus run` builds it (layout-free, as
+bench/service_path.py), an FC line and a PROFIBUS DP line in turn, each against a
+simulator in another process; for a window of exchanges in steady state every call of
+a pkwbus function is traced (``sys.setprofile``: slow, so only the counts matter, not
+the time). Printed per bus, per exchange: the modules that ran, the calls that crossed
+into another module, into another layer (``protocol``, ``master``, ``service`` ...),
+and the times the path came back into ``master`` from another layer.
+
+    .venv/bin/python bench/value_path.py [--n 300] [--tree NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import service_path
+from _common import sim_process
+from _measure import stop_process
+
+from pkwbus import link
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.config import parse_config
+
+PACKAGE = "pkwbus."
+
+
+class Tracer:
+    def __init__(self) -> None:
+        self.modules: Counter[str] = Counter()
+        self.crossings = 0
+        self.layer_crossings = 0
+        self.into_master = 0
+
+    def __call__(self, frame: FrameType, event: str, arg: Any) -> None:
+        if event != "call":
+            return
+        module = frame.f_globals.get("__name__", "")
+        if not module.startswith(PACKAGE):
+            return
+        self.modules[module] += 1
+        back = frame.f_back
+        caller = back.f_globals.get("__name__", "") if back is not None else ""
+        if not caller.startswith(PACKAGE) or caller == module:
+            return
+        self.crossings += 1
+        layer, from_layer = module.split(".")[1], caller.split(".")[1]
+        if layer != from_layer:
+            self.layer_crossings += 1
+            if layer == "master":
+                self.into_master += 1
+
+
+async def _trace(config_text: str, n: int) -> dict[str, float]:
+    runtime = await build_runtime(parse_config(config_text, environ={}))
+    await runtime.start()
+    tracer = Tracer()
+    try:
+        while service_path._telegrams(runtime.registry) < 300:
+            await asyncio.sleep(0.02)
+        t0 = service_path._telegrams(runtime.registry)
+        sys.setprofile(tracer)
+        try:
+            while service_path._telegrams(runtime.registry) - t0 < n:
+                await asyncio.sleep(0.01)
+        finally:
+            sys.setprofile(None)
+        count = service_path._telegrams(runtime.registry) - t0
+    finally:
+        await runtime.stop()
+    every = {m for m, c in tracer.modules.items() if c >= count * 0.5}  # in most exchanges
+    return {
+        "exchanges": count,
+        "modules_in_most_exchanges": len(every),
+        "calls_crossing_modules": tracer.crossings / count,
+        "calls_crossing_layers": tracer.layer_crossings / count,
+        "back_into_master": tracer.into_master / count,
+        "modules": sorted(every),
+    }
+
+
+def fc(n: int) -> dict[str, Any]:
+    with sim_process("fc", "1-3") as port:
+        return link.run(_trace(service_path._fc_config(port), n))
+
+
+def dp(n: int) -> dict[str, Any]:
+    folder = Path(tempfile.mkdtemp(prefix="pkwbus-bench-dp-"))
+    pty = folder / "ttyDP"
+    addresses = ",".join(str(a) for a in service_path.DP_ADDRESSES)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "profibus", "--pty", str(pty),
+         "--drives", addresses, "--dialect", "danfoss-pcv", "--ppo", "1"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    try:
+        end = time.monotonic() + 20
+        while not pty.exists():
+            if time.monotonic() > end or proc.poll() is not None:
+                raise RuntimeError("the DP simulator did not start")
+            time.sleep(0.05)
+        return link.run(_trace(service_path._dp_config(str(pty)), n))
+    finally:
+        stop_process(proc)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, default=300)
+    parser.add_argument("--tree", default="this tree")
+    parser.add_argument("--modules", action="store_true", help="list the modules too")
+    args = parser.parse_args()
+    for bus, run in (("fc", fc), ("dp", dp)):
+        found = run(args.n)
+        modules = found.pop("modules")
+        figures = ", ".join(
+            f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}" for k, v in found.items()
+        )
+        print(f"{args.tree} {bus}: {figures}")
+        if args.modules:
+            print("   " + " ".join(m.removeprefix(PACKAGE) for m in modules))
+
+
+if __name__ == "__main__":
+    main()
