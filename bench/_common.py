@@ -20,7 +20,7 @@ from pathlib import Path
 from _measure import BenchSetupError, stop_process
 
 from pkwbus.link import PortSettings
-from pkwbus.master.line import Line
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol.serial.telegram import Protocol
 
 HERE = Path(__file__).resolve().parent
@@ -164,7 +164,7 @@ class Counting:
         self.exchanges += 1
 
     def job_finished(self, drive: str, job: object, result: object) -> None:
-        from pkwbus.master.transaction import Answered
+        from pkwbus.master.planning.transaction import Answered
 
         outcome = getattr(result, "outcome", None)
         book = self.ok if isinstance(outcome, Answered) else self.failed
@@ -185,7 +185,7 @@ class Counting:
 
 def fc_drive(name: str, address: int, pnus: Sequence[int], every: float, protocol: str = "fc"):  # type: ignore[no-untyped-def]
     """A DriveSpec polling ``pnus`` every ``every`` seconds."""
-    from pkwbus.master.plan import DriveSpec, PollSpec
+    from pkwbus.master.planning.plan import DriveSpec, PollSpec
     from pkwbus.master.target import DriveTarget
     from pkwbus.protocol import pkw
 

@@ -34,11 +34,11 @@ from _common import best_median, make_line, sim_process
 from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.exchange_wire import ExchangeWire
-from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.planning.plan import DriveSpec, PollSpec
+from pkwbus.master.planning.transaction import Answered, ResponseTelegram
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ResponseTelegram
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector

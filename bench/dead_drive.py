@@ -27,8 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.exchange_wire import ExchangeWire
 from pkwbus.master.runner import LineRunner
+from pkwbus.master.wires.serial.wire import ExchangeWire
 
 BAUD = 115200
 DELAY = 0.002

@@ -19,15 +19,15 @@ from pathlib import Path
 from typing import Any
 
 from pkwbus.link import PortSettings, new_event_loop
-from pkwbus.master.dp_line import DpLine
-from pkwbus.master.dp_master import DpMaster
+from pkwbus.master.wires.profibus.cycle import DpMaster
+from pkwbus.master.wires.profibus.line import DpLine
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import SlaveSetup, SlaveState
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 
 USB_LATENCY = {"low latency (1 ms)": 0.001, "default (16 ms)": 0.016}
 

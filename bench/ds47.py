@@ -32,7 +32,7 @@ from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.config.line_load import line_load
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 
 ADDRESSES = (8, 9, 10)
 # The 20 numeric, non-array parameters of the simulated SINAMICS drive.

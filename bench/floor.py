@@ -15,7 +15,7 @@ same simulated drive, in the same run:
   everything a real master needs.
 - ``bare, pause by timer``: the same, but the request waits for the rest of
   the 3.5-character pause, counted from the last byte received, by a loop
-  timer (``call_later``), as ``pkwbus.master.line.Line`` does.
+  timer (``call_later``), as ``pkwbus.master.wires.serial.line.Line`` does.
 - ``bare, pause in place``: the rest of the pause spun away in the callback
   (no wake-up, but the pause is spent on the CPU: shown to bound the design).
 - ``Line.start chain``: pkwbus's line, each exchange started from the
@@ -58,8 +58,8 @@ from _measure import BenchSetupError, markdown_table, measure_cpu
 from cpu_per_exchange import raw_loop
 
 from pkwbus import link
+from pkwbus.master.planning.transaction import ResponseTelegram
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ResponseTelegram
 from pkwbus.protocol import pkw
 
 BAUDRATE = 115200

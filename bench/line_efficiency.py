@@ -30,9 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.single_job import perform, run_job
+from pkwbus.master.planning.transaction import Answered
+from pkwbus.master.sessions.jobs import perform, run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
 
 BAUDRATES = (9600, 19200, 115200)

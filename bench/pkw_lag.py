@@ -26,11 +26,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.exchange_wire import ExchangeWire
+from pkwbus.master.planning.transaction import Answered
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.single_job import run_job
+from pkwbus.master.sessions.jobs import run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 
 BAUD = 115200

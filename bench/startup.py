@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from pkwbus import link
-from pkwbus.master import describing
+from pkwbus.master.planning import describing
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.config import parse_config

@@ -77,7 +77,7 @@ async def _serve(port: str, baud: int, writes: int, gap: float, nodelay: bool) -
 async def _direct(runtime: Any, writes: int, gap: float) -> list[float]:
     """Write jobs submitted straight to the runtime: the master's share of the latency."""
     from pkwbus.catalog.description import ParameterDescription
-    from pkwbus.master.jobs import JobKind
+    from pkwbus.master.planning.jobs import JobKind
     from pkwbus.protocol import pkw
 
     entry = runtime.drives["l0d2"]

@@ -18,8 +18,8 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
+    from pkwbus.master.planning.transaction import ErrorKind, Failure, PkwTransaction, Reply
     from pkwbus.master.target import DriveTarget
-    from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, Reply
     from pkwbus.protocol import pkw
     from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
     from pkwbus.protocol.pkw.dialects import DIALECTS, Command, Dialect, IndLayout

@@ -58,8 +58,8 @@ def layer(name: str) -> str:
 
 
 def test_the_graph_is_seen() -> None:
-    assert "pkwbus.protocol.pkw" in GRAPH["pkwbus.master.transaction"]
-    assert "pkwbus.master.planner" in GRAPH["pkwbus.master.runner"]
+    assert "pkwbus.protocol.pkw" in GRAPH["pkwbus.master.planning.transaction"]
+    assert "pkwbus.master.planning.planner" in GRAPH["pkwbus.master.runner"]
 
 
 def test_no_import_cycle() -> None:

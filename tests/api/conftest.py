@@ -20,7 +20,7 @@ from typing import Any
 import httpx
 import pytest
 
-from pkwbus.master.drive_identity import identity_requests
+from pkwbus.master.planning.identity import identity_requests
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.service.assembly.build import build_runtime

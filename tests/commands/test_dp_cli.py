@@ -19,7 +19,7 @@ from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import DpSlave, NoAnswer, SlaveSetup
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.dp_wire import DpWire, FakeMaster, record_dp_wire
 
 

@@ -34,7 +34,7 @@ from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
 from pkwbus.service.metrics.instrumentation import ServiceMetrics
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.deploy.conftest import DP_DRIVES, DRIVES, service_config
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,10 +12,10 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.line import Line
-from pkwbus.master.single_job import run_job as _run_job
+from pkwbus.master.planning.transaction import Outcome
+from pkwbus.master.sessions.jobs import run_job as _run_job
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Outcome
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming, Simulator

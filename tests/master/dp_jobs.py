@@ -1,16 +1,16 @@
 """One job on a started DpMaster, through its slave's start-up and PKW slot: the DP
 master's own test harness (the command line and the service run jobs through the line
-runner, :mod:`pkwbus.master.single_job`)."""
+runner, :mod:`pkwbus.master.sessions.jobs`)."""
 
 from __future__ import annotations
 
 import asyncio
 
 from pkwbus.link import PortError
-from pkwbus.master.dp_master import DpMaster, SlaveLocked
-from pkwbus.master.outcomes import LineFailed, Outcome, TimedOut
+from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
+from pkwbus.master.planning.transaction import PkwAnswer, PkwTransaction
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwAnswer, PkwTransaction
+from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveLocked
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus.dp.ppo import SlotAnswer
 from pkwbus.protocol.profibus.dp.slave import (

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from pkwbus.protocol import pzd
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.services import Service
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.profibus.line import DpSimulator
 
 
 @dataclass

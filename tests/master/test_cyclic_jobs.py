@@ -9,9 +9,9 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.master.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
+from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
+from pkwbus.master.planning.transaction import PkwAnswer, PkwTransaction
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwAnswer, PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.profibus.dp import ppo

@@ -11,10 +11,10 @@ from fractions import Fraction
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
-from pkwbus.master.describing import ASK_AGAIN, UNANSWERED_AT_MOST, DriveDescriber
-from pkwbus.master.drive_identity import DescriptionBook, identity_requests
-from pkwbus.master.outcomes import Answered, LineFailed, Outcome, TimedOut
-from pkwbus.master.plan import (
+from pkwbus.master.planning.describing import ASK_AGAIN, UNANSWERED_AT_MOST, DriveDescriber
+from pkwbus.master.planning.identity import DescriptionBook, identity_requests
+from pkwbus.master.planning.outcomes import Answered, LineFailed, Outcome, TimedOut
+from pkwbus.master.planning.plan import (
     Described,
     DescribeTarget,
     DriveSpec,
@@ -24,9 +24,9 @@ from pkwbus.master.plan import (
     PollSpec,
     Send,
 )
-from pkwbus.master.planner import Planner
+from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription, elements_to_read
 from pkwbus.protocol.pkw.dialects import Command

@@ -15,9 +15,9 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortError, PortSettings
-from pkwbus.master.dp_line import DpLine, ForeignMaster
-from pkwbus.master.dp_master import DpMaster, SlaveLocked
-from pkwbus.master.outcomes import Answered, Outcome, Rejected
+from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
+from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveLocked
+from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
@@ -37,8 +37,8 @@ from pkwbus.protocol.profibus.dpv1.transfer import RecordRead
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profidrive.parameters import RECORD, ParameterAddress, ParameterRequest
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.conftest import serve
 from tests.master.dp_jobs import run_dp_job
 from tests.master.dp_wire import DpWire, fake_master, record_dp_wire

@@ -10,19 +10,19 @@ from typing import Any
 
 import pytest
 
-from pkwbus.master.health import HealthPolicy
-from pkwbus.master.outcomes import Answered, Mismatch, NotSent, Rejected
-from pkwbus.master.plan import PkwLengthTold
-from pkwbus.master.planner import Planner
+from pkwbus.master.planning.health import HealthPolicy
+from pkwbus.master.planning.outcomes import Answered, Mismatch, NotSent, Rejected
+from pkwbus.master.planning.plan import PkwLengthTold
+from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.transaction import PkwTransaction, ResponseTelegram
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import PkwTransaction, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.pkw.length import VARIABLE
 from pkwbus.protocol.serial.telegram import BlockShape, split_block
 from pkwbus.protocol.values import ValueType
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.table import USS_TABLE, ParamSpec
+from pkwbus.sim.drives.table import USS_TABLE, ParamSpec
 from tests.master.conftest import make_sim, open_line, run_job, serve
 from tests.master.test_planner import FakeLine, drives
 

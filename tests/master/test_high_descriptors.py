@@ -7,8 +7,8 @@ import gc
 import os
 
 from pkwbus.link.serialport import closer
+from pkwbus.master.planning.transaction import Answered
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered
 from pkwbus.protocol import pkw
 
 from .conftest import make_sim, open_line, run_job, serve

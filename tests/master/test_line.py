@@ -10,9 +10,7 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.line import Line
-from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import (
+from pkwbus.master.planning.transaction import (
     Answered,
     ErrorKind,
     Failure,
@@ -20,6 +18,8 @@ from pkwbus.master.transaction import (
     Rejected,
     TimedOut,
 )
+from pkwbus.master.target import DriveTarget
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pzd import takes_control

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import asyncio
 
+from pkwbus.master.planning.transaction import ExchangeResult, ResponseTelegram
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ExchangeResult, ResponseTelegram
 from pkwbus.protocol import pkw
 from tests.master.conftest import make_sim, open_line, serve
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import asyncio
 
+from pkwbus.master.planning.transaction import ErrorKind, Failure, ResponseTelegram
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, Failure, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimFaults
 from tests.master.conftest import make_sim, open_line, serve

@@ -16,10 +16,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.master import planner as planner_module
-from pkwbus.master.health import HealthPolicy
-from pkwbus.master.jobs import Cancelled, Job, JobKind, Priority
-from pkwbus.master.plan import (
+from pkwbus.master.planning import planner as planner_module
+from pkwbus.master.planning.health import HealthPolicy
+from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
+from pkwbus.master.planning.plan import (
     DriveSpec,
     Event,
     Finished,
@@ -30,9 +30,8 @@ from pkwbus.master.plan import (
     Send,
     StatusWord,
 )
-from pkwbus.master.planner import Planner
-from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import (
+from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.transaction import (
     Answered,
     ErrorKind,
     ExchangeResult,
@@ -41,6 +40,7 @@ from pkwbus.master.transaction import (
     ResponseTelegram,
     TimedOut,
 )
+from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.sim import SimFaults, SimTiming, Simulator

@@ -6,8 +6,8 @@ import logging
 
 import pytest
 
-from pkwbus.master.outcomes import Answered, Rejected
-from pkwbus.master.plan import (
+from pkwbus.master.planning.outcomes import Answered, Rejected
+from pkwbus.master.planning.plan import (
     Described,
     DescribeTarget,
     DriveSpec,
@@ -15,7 +15,7 @@ from pkwbus.master.plan import (
     HealthChanged,
     PollSpec,
 )
-from pkwbus.master.record import REFUSAL_RETELL, LineRecord, NoEvents
+from pkwbus.master.recorder import REFUSAL_RETELL, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw

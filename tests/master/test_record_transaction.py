@@ -8,12 +8,12 @@ import struct
 import pytest
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.outcomes import Answered, LineFailed, NotSent, Rejected, TimedOut
-from pkwbus.master.plan import DriveSpec, Finished, PollSpec, Send
-from pkwbus.master.planner import Planner
-from pkwbus.master.record_transaction import RecordItem, RecordTransaction
+from pkwbus.master.planning.outcomes import Answered, LineFailed, NotSent, Rejected, TimedOut
+from pkwbus.master.planning.plan import DriveSpec, Finished, PollSpec, Send
+from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.record_transaction import RecordItem, RecordTransaction
+from pkwbus.master.planning.transaction import ErrorKind, Failure, ResponseTelegram
 from pkwbus.master.target import DriveTarget, RecordAccess
-from pkwbus.master.transaction import ErrorKind, Failure, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp import ppo
@@ -165,7 +165,7 @@ def test_the_planner_sends_a_slaves_due_polls_in_one_request_and_keeps_them_toge
 
 
 def test_a_write_goes_before_the_polls_and_alone() -> None:
-    from pkwbus.master.jobs import Job, JobKind, Priority
+    from pkwbus.master.planning.jobs import Job, JobKind, Priority
 
     spec = DriveSpec("pump", target(), polls(5))
     planner = Planner([spec], poll_deadline=2.0, retries=1)
@@ -230,7 +230,7 @@ def test_a_read_answered_without_a_value_is_tried_again_and_the_deadline_ends_it
 
 
 def test_a_job_in_flight_ends_at_its_deadline_while_nothing_can_go_out() -> None:
-    from pkwbus.master.jobs import Job, JobKind, Priority
+    from pkwbus.master.planning.jobs import Job, JobKind, Priority
 
     planner = Planner([DriveSpec("pump", target())], poll_deadline=2.0, retries=3)
     planner.line_up(0.0)

@@ -15,14 +15,14 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.exchange_wire import ExchangeWire
-from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
-from pkwbus.master.line import Line
-from pkwbus.master.plan import DriveSpec, PollSpec
+from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.planning.plan import DriveSpec, PollSpec
+from pkwbus.master.planning.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ExchangeResult, LineFailed
+from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim import SimTiming

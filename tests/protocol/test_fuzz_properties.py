@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 from pkwbus.catalog import CatalogError
 from pkwbus.catalog.loader import _parse_catalog
+from pkwbus.master.planning.transaction import ErrorKind, Failure, PkwTransaction, ResponseTelegram
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import ErrorKind, Failure, PkwTransaction, ResponseTelegram
 from pkwbus.protocol import pkw
 from pkwbus.protocol import values as params
 from pkwbus.protocol.errors import LocalProtocolError, ProtocolError, RemoteProtocolError

@@ -22,7 +22,7 @@ from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.serial.telegram import Telegram, decode_adr, split_block
 from pkwbus.sim import Simulator
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.faults import Answer
 
 WRITE_COMMANDS = frozenset(c for c in Command if c.name.startswith("WRITE"))
 

@@ -14,7 +14,7 @@ from pkwbus.master.snapshot import Reading
 from pkwbus.service.http.api import create_app
 from pkwbus.service.metrics.alarms import AlarmBoard, Watched
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.model import ModelConfig
+from pkwbus.sim.drives.model import ModelConfig
 from tests.master.conftest import until
 from tests.service.test_service_e2e import fc_line, running, sample
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
-from pkwbus.master.line import Line as MasterLine
+from pkwbus.master.wires.serial.line import Line as MasterLine
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
 from pkwbus.protocol.values import ParameterRef, Scaling, ValueType

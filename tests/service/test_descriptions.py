@@ -21,9 +21,9 @@ from pkwbus.service.http.views import drive_view
 from pkwbus.service.metrics.devices import SnapshotCollector
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.catalogs import specs_from_catalog
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.table import ParamSpec
+from pkwbus.sim.drives.catalogs import specs_from_catalog
+from pkwbus.sim.drives.table import ParamSpec
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.conftest import until
 from tests.service.test_service_e2e import running, sample, samples
 

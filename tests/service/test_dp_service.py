@@ -20,12 +20,12 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.cycle_wire import CycleWire
-from pkwbus.master.jobs import JobKind, JobResult
-from pkwbus.master.outcomes import Rejected
+from pkwbus.master.planning.jobs import JobKind, JobResult
+from pkwbus.master.planning.outcomes import Rejected
+from pkwbus.master.planning.transaction import ExchangeResult, Failure, PkwAnswer, ResponseTelegram
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.master.transaction import ExchangeResult, Failure, PkwAnswer, ResponseTelegram
+from pkwbus.master.wires.profibus.wire import CycleWire
 from pkwbus.protocol import pkw, pzd
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
@@ -38,10 +38,10 @@ from pkwbus.service.http.api import create_app
 from pkwbus.service.metrics.instrumentation import ERROR_KINDS
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpFaults, DpSimulator
-from pkwbus.sim.ends import TcpEnd
-from pkwbus.sim.faults import Answer
-from pkwbus.sim.params import FaultNumbers
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.drives.params import FaultNumbers
+from pkwbus.sim.profibus.line import DpFaults, DpSimulator
+from pkwbus.sim.serving.ends import TcpEnd
 from tests.master.dp_wire import DpWire, record_dp_wire
 
 TOKEN = "s3cret-Write-Token-0123456789"

@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.jobs import JobKind
-from pkwbus.master.outcomes import TimedOut
+from pkwbus.master.planning.jobs import JobKind
+from pkwbus.master.planning.outcomes import TimedOut
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus import fdl
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.service.test_dp_service import dp_service, until
 
 
@@ -52,7 +52,7 @@ async def test_a_job_goes_out_and_ends_saying_the_answers_cannot_be_read(
 ) -> None:
     garble = Garble(9)
     async with dp_service(tmp_path, watch=garble) as svc:
-        caplog.set_level(logging.INFO, logger="pkwbus.master.cycle_wire")
+        caplog.set_level(logging.INFO, logger="pkwbus.master.wires.profibus.wire")
         before = svc.sample("pkwbus_telegram_errors_total", drive="pump", kind="unexpected")
         garble.on = True
         await until(lambda: garble.count >= 30)

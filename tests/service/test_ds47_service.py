@@ -28,7 +28,7 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.dp_wire import DpWire, record_dp_wire
 
 TOKEN = "s3cret-Write-Token-0123456789"

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.jobs import Cancelled, JobKind, JobResult
-from pkwbus.master.outcomes import metric_label
-from pkwbus.master.transaction import (
+from pkwbus.master.planning.jobs import Cancelled, JobKind, JobResult
+from pkwbus.master.planning.outcomes import metric_label
+from pkwbus.master.planning.transaction import (
     Answered,
     ErrorKind,
     Failure,

@@ -12,8 +12,8 @@ import asyncio
 from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 
-from pkwbus.master.plan import DriveSpec, HealthChanged, StatusWord
-from pkwbus.master.record import LineRecord, NoEvents
+from pkwbus.master.planning.plan import DriveSpec, HealthChanged, StatusWord
+from pkwbus.master.recorder import LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd

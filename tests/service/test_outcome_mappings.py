@@ -8,7 +8,7 @@ import pytest
 
 from pkwbus.commands.failures import command_failure
 from pkwbus.exits import Exit
-from pkwbus.master.outcomes import (
+from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
     JobOutcome,

@@ -20,10 +20,10 @@ from pkwbus.catalog import DEFAULT_CATALOGS, load_catalog
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import USS
 from pkwbus.protocol.serial.telegram import Protocol
-from pkwbus.sim.catalogs import UNIT_FACTORS
 from pkwbus.sim.cli import configure, main, parse_addresses, parse_host_port, plan
-from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR
-from pkwbus.sim.table import TABLES
+from pkwbus.sim.drives.catalogs import UNIT_FACTORS
+from pkwbus.sim.drives.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR
+from pkwbus.sim.drives.table import TABLES
 from tests.sim.conftest import request_telegram
 
 

@@ -23,10 +23,10 @@ from pkwbus.protocol.pkw.dialects import FC, USS, Dialect, IndLayout, dialect
 from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
 from pkwbus.protocol.values import ValueType
 from pkwbus.sim import ModelConfig, Simulator
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.drive import SimDrive
-from pkwbus.sim.params import FaultNumbers
-from pkwbus.sim.table import TABLES, ParamSpec
+from pkwbus.sim.drives.drive import SimDrive
+from pkwbus.sim.drives.params import FaultNumbers
+from pkwbus.sim.drives.table import TABLES, ParamSpec
+from pkwbus.sim.profibus.line import DpSimulator
 from tests.sim.conftest import FakeClock, parse, request_telegram
 
 ELEMENTS = (1, 2, 4, 6, 7, 8)

@@ -23,7 +23,7 @@ from pkwbus.protocol.profibus.dp.slave import (
     SlaveSetup,
     SlaveState,
 )
-from pkwbus.sim.dp_line import DEFAULT_IDENTS, DpFaults, DpSimulator
+from pkwbus.sim.profibus.line import DEFAULT_IDENTS, DpFaults, DpSimulator
 
 MASTER = 2
 # A parameter of each dialect's drive, read through the PPO.

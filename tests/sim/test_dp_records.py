@@ -28,7 +28,7 @@ from pkwbus.protocol.profidrive.parameters import (
     Values,
     decode_response,
 )
-from pkwbus.sim.dp_line import DpSimulator
+from pkwbus.sim.profibus.line import DpSimulator
 
 MASTER, ADDRESS = 2, 5
 

@@ -12,9 +12,9 @@ from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import DpSlave, Inputs, NoAnswer, SlaveSetup, SlaveState
 from pkwbus.protocol.serial.telegram import BlockShape, Protocol
 from pkwbus.sim.config import SimTiming
-from pkwbus.sim.dp_slave import SimDpSlave, SlaveMode
-from pkwbus.sim.drive import SimDrive
-from pkwbus.sim.table import TABLES
+from pkwbus.sim.drives.drive import SimDrive
+from pkwbus.sim.drives.table import TABLES
+from pkwbus.sim.profibus.slave import SimDpSlave, SlaveMode
 
 MASTER, ADDRESS, IDENT = 2, 8, 0x80B5
 PPO1 = ppo.ppo_type(1)

@@ -15,7 +15,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import FC, USS
 from pkwbus.protocol.serial.telegram import Deframer, Telegram, fc_lengths
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
-from pkwbus.sim.ends import PathInUseError
+from pkwbus.sim.serving.ends import PathInUseError
 from tests.sim.conftest import request_telegram
 
 QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)

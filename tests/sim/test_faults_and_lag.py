@@ -11,7 +11,7 @@ from pkwbus.protocol.pkw import NoResponse, ValueResponse, Width
 from pkwbus.protocol.pkw.dialects import FC, USS, IndLayout
 from pkwbus.protocol.serial.telegram import Deframer, Telegram, fc_adr, fc_lengths, uss_lengths
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.faults import Answer
 from tests.sim.conftest import FakeClock, request_telegram
 
 QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)

@@ -13,9 +13,9 @@ from pkwbus.protocol.pzd import Profile
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ValueType, decode_value
 from pkwbus.sim import ModelConfig, Simulator
-from pkwbus.sim.catalogs import UNIT_FACTORS, CatalogError
-from pkwbus.sim.model import DriveModel, Limits
-from pkwbus.sim.table import FC_TABLE, TABLES
+from pkwbus.sim.drives.catalogs import UNIT_FACTORS, CatalogError
+from pkwbus.sim.drives.model import DriveModel, Limits
+from pkwbus.sim.drives.table import FC_TABLE, TABLES
 from tests.sim.conftest import FakeClock
 
 QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)

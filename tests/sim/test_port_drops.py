@@ -18,7 +18,7 @@ import pytest
 import serial_asyncio
 
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
-from pkwbus.sim.ends import drop_at_random
+from pkwbus.sim.serving.ends import drop_at_random
 from tests.sim.test_ends import READ, Telegrams
 
 QUIET = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0)

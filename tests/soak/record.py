@@ -20,9 +20,9 @@ from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.serial.telegram import Telegram, decode_adr, split_block
 from pkwbus.protocol.values import decode_value
 from pkwbus.sim import Simulator
-from pkwbus.sim.dp_line import DpSimulator
-from pkwbus.sim.drive import SimDrive
-from pkwbus.sim.faults import Answer
+from pkwbus.sim.drives.drive import SimDrive
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.profibus.line import DpSimulator
 
 __all__ = ["Key", "SentValues", "rounded"]
 

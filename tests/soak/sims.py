@@ -2,7 +2,7 @@
 
 Each line of the plan (plan.py) gets its simulator on TCP or a pty, with faults
 on every answer, its port lost at random (the simulator's own
-:func:`pkwbus.sim.ends.drop_at_random`), a drive that dies for a while at
+:func:`pkwbus.sim.serving.ends.drop_at_random`), a drive that dies for a while at
 random, and on PROFIBUS lines slaves that restart at random. A small HTTP
 server answers the soak's questions (one JSON object each):
 
@@ -36,8 +36,8 @@ from urllib.parse import parse_qsl, urlsplit
 from pkwbus.link import run as run_on_loop
 from pkwbus.protocol.values.notation import parse_parameter
 from pkwbus.sim import SimFaults, SimTiming, Simulator
-from pkwbus.sim.dp_line import DpFaults, DpSimulator, SlaveKind
-from pkwbus.sim.ends import PtyEnd, TcpEnd, drop_at_random
+from pkwbus.sim.profibus.line import DpFaults, DpSimulator, SlaveKind
+from pkwbus.sim.serving.ends import PtyEnd, TcpEnd, drop_at_random
 
 from .plan import BAUDRATE, LineSpec, soak_lines
 from .record import SentValues

@@ -19,9 +19,9 @@ from pkwbus.commands.common import (
     add_line_options,
     duration_option,
 )
-from pkwbus.commands.dp import add_dp_options
 from pkwbus.commands.drive_access import DriveAccess, checked, drive_access, resolve
-from pkwbus.master.outcomes import Answered
+from pkwbus.commands.profibus.context import add_dp_options
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.values import ParameterRef, encode_text

@@ -14,7 +14,7 @@ from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.commands.common import CommandError, Exit, emit_json
 from pkwbus.commands.failures import command_failure
-from pkwbus.master.outcomes import Answered, Outcome
+from pkwbus.master.planning.outcomes import Answered, Outcome
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect

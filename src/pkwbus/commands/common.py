@@ -17,8 +17,8 @@ from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
-from pkwbus.master.line import Line
 from pkwbus.master.target import DriveTarget
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import buses
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout

@@ -18,10 +18,10 @@ from typing import Any
 from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit, add_drive_options, add_line_options
 from pkwbus.commands.descriptions import ELEMENTS, report
-from pkwbus.commands.dp import add_dp_options
 from pkwbus.commands.drive_access import checked, drive_access, resolve
 from pkwbus.commands.failures import command_failure
-from pkwbus.master.outcomes import Answered, Rejected
+from pkwbus.commands.profibus.context import add_dp_options
+from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
 

@@ -3,9 +3,9 @@
 :func:`drive_access` gives the drive's dialect, its catalog, how a request is
 checked before anything is sent, and how requests run on it one after the
 other, in one opening of the port, by the one line runner
-(:class:`pkwbus.master.single_job.JobSession`): on FC and USS over the
+(:class:`pkwbus.master.sessions.jobs.JobSession`): on FC and USS over the
 line's exchange wire, over PROFIBUS DP over the cycle wire, through the
-slave's start-up and its PKW slot (:func:`pkwbus.commands.dp.session`). The
+slave's start-up and its PKW slot (:func:`pkwbus.commands.profibus.context.session`). The
 commands themselves are the same for every bus.
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad
@@ -30,13 +30,13 @@ from pkwbus.commands.common import (
     build_line,
     build_target,
 )
-from pkwbus.commands.dp import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
+from pkwbus.commands.profibus.context import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
 from pkwbus.link import PortError
-from pkwbus.master.exchange_wire import ExchangeWire
-from pkwbus.master.outcomes import Outcome
-from pkwbus.master.plan import DriveSpec
-from pkwbus.master.single_job import JobSession
+from pkwbus.master.planning.outcomes import Outcome
+from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.sessions.jobs import JobSession
 from pkwbus.master.target import DriveTarget
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect

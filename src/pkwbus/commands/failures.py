@@ -1,7 +1,7 @@
 """How ``pkwbus read``, ``write`` and ``describe`` end for an outcome that is not an answer:
 the exit code (README.md's table), a kind for ``--json`` and a message.
 
-A ``match`` over the closed union :data:`pkwbus.master.outcomes.Outcome` that ends in
+A ``match`` over the closed union :data:`pkwbus.master.planning.outcomes.Outcome` that ends in
 ``assert_never``: a new kind of outcome cannot be forgotten here.
 """
 
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import assert_never
 
 from pkwbus.exits import Exit
-from pkwbus.master.outcomes import (
+from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
     LineFailed,

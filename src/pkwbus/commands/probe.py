@@ -22,10 +22,10 @@ from pkwbus import link
 from pkwbus.catalog.precedence import disagreements
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
-from pkwbus.master.line import Line
-from pkwbus.master.pkw_probe import NO_ANSWER, ask_description, ask_pkw_length
+from pkwbus.master.planning.transaction import Failure, ResponseTelegram
+from pkwbus.master.sessions.probe import NO_ANSWER, ask_description, ask_pkw_length
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Failure, ResponseTelegram
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.pkw.length import AUTO, shown
 from pkwbus.protocol.serial.telegram import Protocol

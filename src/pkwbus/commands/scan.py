@@ -21,7 +21,6 @@ from typing import Any
 
 from pkwbus import durations, limits, link
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.commands import dp_scan
 from pkwbus.commands.common import (
     DEFAULT_BAUDRATE,
     PROFIBUS,
@@ -32,14 +31,15 @@ from pkwbus.commands.common import (
     build_line,
     build_target,
 )
-from pkwbus.commands.dp import add_dp_options
+from pkwbus.commands.profibus import scan as dp_scan
+from pkwbus.commands.profibus.context import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
-from pkwbus.master.line import Line
-from pkwbus.master.pkw_probe import NO_ANSWER, ask_pkw_length
-from pkwbus.master.single_job import run_job
+from pkwbus.master.planning.transaction import Answered, ErrorKind, Failure, ResponseTelegram
+from pkwbus.master.sessions.jobs import run_job
+from pkwbus.master.sessions.probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.transaction import Answered, ErrorKind, Failure, ResponseTelegram
+from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError

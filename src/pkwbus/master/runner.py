@@ -1,11 +1,11 @@
 """The one runner of a line, whatever its bus: a planner fed through a wire, one recorder.
 
-The policy is the planner's (:mod:`pkwbus.master.planner`); how exchanges
+The policy is the planner's (:mod:`pkwbus.master.planning.planner`); how exchanges
 travel is the wire's (:class:`Wire`): FC and USS one exchange at a time
-(:mod:`pkwbus.master.exchange_wire`), PROFIBUS DP a cycle through the slaves
-(:mod:`pkwbus.master.cycle_wire`), as one ``poll(now, phy, app)`` drives any
+(:mod:`pkwbus.master.wires.serial.wire`), PROFIBUS DP a cycle through the slaves
+(:mod:`pkwbus.master.wires.profibus.wire`), as one ``poll(now, phy, app)`` drives any
 application in profirust. What the planner's events mean (values into the
-snapshot, job futures, metrics) is the recorder's (:mod:`pkwbus.master.record`),
+snapshot, job futures, metrics) is the recorder's (:mod:`pkwbus.master.recorder`),
 the only writer of the snapshot.
 
 The wire's port (its :class:`~pkwbus.link.Link`) owns the port's state and
@@ -34,13 +34,13 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from pkwbus.link import Link, LinkState, PortError
-from pkwbus.master.health import HealthPolicy
-from pkwbus.master.jobs import Job
-from pkwbus.master.plan import DriveSpec, Event, Finished, HealthChanged
-from pkwbus.master.planner import Planner
-from pkwbus.master.record import LineEvents, LineRecord, NoEvents
+from pkwbus.master.planning.health import HealthPolicy
+from pkwbus.master.planning.jobs import Job
+from pkwbus.master.planning.plan import DriveSpec, Event, Finished, HealthChanged
+from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.transaction import ExchangeResult
+from pkwbus.master.recorder import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
-from pkwbus.master.transaction import ExchangeResult
 
 __all__ = ["RECORD_EVERY", "LineRunner", "Wire"]
 

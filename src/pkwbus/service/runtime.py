@@ -24,8 +24,8 @@ from pkwbus.catalog.description import (
     ParameterTable,
 )
 from pkwbus.catalog.precedence import Layers, resolve
-from pkwbus.master.jobs import Cancelled, Job, JobKind, JobResult, Priority
-from pkwbus.master.plan import PollSpec
+from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import LiveSlave, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw

@@ -17,11 +17,11 @@ from pkwbus.protocol import buses
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
 from pkwbus.sim.config import LAG_MODES, SimFaults, SimTiming
-from pkwbus.sim.dp_line import DpFaults, DpSimulator
-from pkwbus.sim.ends import PathInUseError, PtyEnd, TcpEnd, drop_at_random
-from pkwbus.sim.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR, ModelConfig
+from pkwbus.sim.drives.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR, ModelConfig
+from pkwbus.sim.profibus.line import DpFaults, DpSimulator
+from pkwbus.sim.serving.ends import PathInUseError, PtyEnd, TcpEnd, drop_at_random
+from pkwbus.sim.serving.statsout import StatsServer, keep_stats_file
 from pkwbus.sim.simulator import Simulator
-from pkwbus.sim.statsout import StatsServer, keep_stats_file
 
 __all__ = [
     "EXIT_PORT",

@@ -21,15 +21,15 @@ from pkwbus.protocol.serial.telegram import (
     frame,
     uss_lengths,
 )
-from pkwbus.sim import ends
-from pkwbus.sim import faults as inject
 from pkwbus.sim.config import SimFaults, SimTiming
-from pkwbus.sim.drive import SimDrive
-from pkwbus.sim.ends import PtyEnd, TcpEnd
-from pkwbus.sim.faults import Answer
-from pkwbus.sim.model import ModelConfig
-from pkwbus.sim.stats import SimStats
-from pkwbus.sim.table import TABLES, ParamSpec
+from pkwbus.sim.drives import faults as inject
+from pkwbus.sim.drives.drive import SimDrive
+from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.drives.model import ModelConfig
+from pkwbus.sim.drives.table import TABLES, ParamSpec
+from pkwbus.sim.serving import ends
+from pkwbus.sim.serving.ends import PtyEnd, TcpEnd
+from pkwbus.sim.serving.stats import SimStats
 
 __all__ = [
     "Clock",
@@ -239,7 +239,7 @@ def check_refusing(refusing: Collection[int], drives: Collection[int]) -> None:
 
 def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:
     if catalog is not None:
-        from pkwbus.sim.catalogs import specs_from_catalog
+        from pkwbus.sim.drives.catalogs import specs_from_catalog
 
         return specs_from_catalog(protocol, catalog)
     return TABLES[protocol]

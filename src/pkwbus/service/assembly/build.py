@@ -16,15 +16,15 @@ import prometheus_client
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
-from pkwbus.master.cycle_wire import CycleWire, SlaveSpec
-from pkwbus.master.dp_line import DpLine
-from pkwbus.master.drive_identity import DescriptionBook
-from pkwbus.master.exchange_wire import ExchangeWire
-from pkwbus.master.line import Line
-from pkwbus.master.plan import DescribeTarget, DriveSpec, PollSpec
+from pkwbus.master.planning.identity import DescriptionBook
+from pkwbus.master.planning.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget, RecordAccess
+from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
+from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import NAME, DescriptionForm, elements_to_read, form_of
 from pkwbus.protocol.pkw.length import AUTO
@@ -51,7 +51,7 @@ from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, 
 from pkwbus.service.metrics.trends import Trends
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.dp_line import DpSimulator, SlaveKind
+from pkwbus.sim.profibus.line import DpSimulator, SlaveKind
 
 __all__ = [
     "DEFAULT_SIM_DELAY",

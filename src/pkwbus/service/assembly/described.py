@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import replace
 
 from pkwbus.catalog.precedence import Disagreement, resolve
-from pkwbus.master.plan import Described
+from pkwbus.master.planning.plan import Described
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.metrics.devices import Mismatch, ParameterInfo, SnapshotCollector
 from pkwbus.service.runtime import DriveEntry

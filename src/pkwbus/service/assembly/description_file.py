@@ -1,7 +1,7 @@
 """The drives' descriptions kept between runs: a small JSON file beside the audit database.
 
 Keyed by what identifies a drive's model and software
-(:mod:`pkwbus.master.drive_identity`), so that a restart does not describe
+(:mod:`pkwbus.master.planning.identity`), so that a restart does not describe
 everything again and a drive replaced by another model is described afresh.
 A file that cannot be read is logged once and started afresh: descriptions
 are read from the drives again, nothing is lost. A file that cannot be
@@ -15,7 +15,7 @@ import logging
 import os
 from pathlib import Path
 
-from pkwbus.master.drive_identity import DescriptionBook
+from pkwbus.master.planning.identity import DescriptionBook
 
 __all__ = ["DescriptionFile", "description_path"]
 

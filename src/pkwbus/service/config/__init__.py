@@ -28,7 +28,7 @@ The package's modules: :mod:`.base` (the error, the base model, constants),
 file), :mod:`.loading`; and :mod:`.line_load`, how busy each line of a valid
 configuration would be (``pkwbus check-config``'s estimate, not re-exported
 here). Problems are worded by :mod:`pkwbus.problems`, shared
-with the catalogs; ``sim://`` ports are parsed by :mod:`pkwbus.sim.url`.
+with the catalogs; ``sim://`` ports are parsed by :mod:`pkwbus.sim.serving.url`.
 """
 
 from pkwbus.durations import parse_duration
@@ -49,7 +49,7 @@ from pkwbus.service.config.line import Line, Rs485
 from pkwbus.service.config.loading import load_config, parse_config
 from pkwbus.service.config.model import Api, Config, Listen, parse_listen
 from pkwbus.service.config.parameters import OVERRIDE_FIELDS, ParameterOverrides, Poll
-from pkwbus.sim.url import SimPort, parse_sim_port
+from pkwbus.sim.serving.url import SimPort, parse_sim_port
 
 __all__ = [
     "DEFAULT_LISTEN",

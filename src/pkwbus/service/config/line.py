@@ -47,7 +47,7 @@ from pkwbus.service.config.fields import (
     upper,
 )
 from pkwbus.service.config.profibus import dp_drive_problems
-from pkwbus.sim.url import SimPort, parse_sim_port
+from pkwbus.sim.serving.url import SimPort, parse_sim_port
 
 __all__ = ["MAX_DP_RETRIES", "Line", "Rs485"]
 

@@ -1,6 +1,6 @@
 """What a job's outcome becomes in the HTTP API's answer and in the audit log.
 
-Each is a ``match`` over the closed union :data:`pkwbus.master.outcomes.Outcome`
+Each is a ``match`` over the closed union :data:`pkwbus.master.planning.outcomes.Outcome`
 that ends in ``assert_never``: a new kind of outcome cannot be forgotten here.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, assert_never
 
-from pkwbus.master.outcomes import (
+from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
     LineFailed,

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.jobs import JobResult
+from pkwbus.master.planning.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.http.outcome_answers import http_failure

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription, Value
-from pkwbus.master.jobs import JobKind, JobResult
-from pkwbus.master.outcomes import Answered
+from pkwbus.master.planning.jobs import JobKind, JobResult
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterRef, encode_text

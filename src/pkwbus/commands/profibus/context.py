@@ -1,0 +1,331 @@
+"""`pkwbus read`, `write` and `describe` with ``--protocol profibus``: pkwbus as DP master.
+
+The slave goes through its start-up (Slave_Diag, Set_Prm, Chk_Cfg, Slave_Diag
+until ready), then the job goes through the PKW part of its PPO until the
+matching answer comes; with ``--access ds47`` (the default on a PPO without
+PKW words) the slave is parametrised as a DP-V1 slave and the job goes as a
+PROFIdrive parameter request in data record 47. Set_Prm carries the ident
+number, the user parameters and the module identifiers given, or read from the
+drive's GSD file. A slave
+owned by another master is never parametrised (exit 3); a line another
+master runs is never used (exit 3). At the end Global_Control Clear goes to
+every slave and the port is closed.
+
+Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options,
+an unreadable GSD file, a port that cannot be opened or a line another master runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from pkwbus import dp_settings, durations, limits
+from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
+from pkwbus.dp_settings import DpGiven
+from pkwbus.link import LinkState, PortError, PortSettings
+from pkwbus.master.planning.outcomes import Outcome, TimedOut
+from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.planning.transaction import ErrorKind, ExchangeResult, Failure
+from pkwbus.master.recorder import NoEvents
+from pkwbus.master.sessions.jobs import JobSession, SessionEnded
+from pkwbus.master.target import DriveTarget, RecordAccess
+from pkwbus.master.wires.profibus.cycle import SlaveLocked, SlaveRun
+from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.wire import CycleWire, NoDpEvents, SlaveSpec
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType
+from pkwbus.protocol.profibus.dp.slave import SlaveSetup, SlaveState
+from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
+from pkwbus.protocol.profibus.gsd import Gsd
+from pkwbus.protocol.profidrive.parameters import AXES
+from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.values.types import ValueType
+
+__all__ = [
+    "DEFAULT_BAUDRATE",
+    "DEFAULT_DEADLINE",
+    "DP_CATALOGS",
+    "MAX_DP_RETRIES",
+    "DpContext",
+    "add_dp_options",
+    "build_context",
+    "dp_line",
+    "session",
+]
+
+DEFAULT_BAUDRATE = 19200
+DEFAULT_DIALECT = "profidrive"
+SLOT_TIME = durations.DP_SLOT_TIME
+MAX_DP_RETRIES = 8
+DEFAULT_DEADLINE = 2.0  # seconds for one job, the slave's start-up included
+# The catalog each dialect's parameters are named and scaled by, when none is given.
+DP_CATALOGS = {"danfoss-pcv": "danfoss-fc", "profidrive": "siemens-g120", "hitachi-sjpb": None}
+
+
+def add_dp_options(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("PROFIBUS DP (--protocol profibus)")
+    g.add_argument(
+        "--master-address", type=int_option(0, 125), default=2, help="pkwbus's station (2)"
+    )
+    g.add_argument("--ppo", type=int_option(1, 5), default=1, help="PPO type 1-5 (default 1)")
+    which = g.add_mutually_exclusive_group()
+    which.add_argument("--ident", default=None, help="the slave's ident number, e.g. 0x0402")
+    which.add_argument("--gsd", default=None, metavar="FILE", help="the drive's GSD file")
+    g.add_argument("--cfg", default=None, help='configuration identifiers, e.g. "F3 F1"')
+    g.add_argument("--user-prm", default=None, metavar="HEX", help="user parameter bytes")
+    g.add_argument(
+        "--access",
+        choices=("pkw", "ds47"),
+        default=None,
+        help="parameters through the PPO's PKW words or PROFIdrive data record 47 over"
+        " DP-V1 (default: pkw where the PPO has PKW words, else ds47)",
+    )
+    g.add_argument(
+        "--axis",
+        type=int_option(0, 255),
+        default=None,
+        help="the drive object of data record 47 (default: SINAMICS 1, Danfoss 0)",
+    )
+    g.add_argument(
+        "--slot-time",
+        type=duration_option(SLOT_TIME),
+        default=None,
+        help="how long an answer may take to start (default: 30ms at 19200, 8ms at 93750)",
+    )
+
+
+@dataclass(frozen=True)
+class DpContext:
+    """What a DP command needs: the dialect, the PPO, the Set_Prm parameters and cfg."""
+
+    dialect: Dialect
+    ppo: PpoType
+    parameters: dps.Parameters
+    cfg: bytes
+    master: int
+    retries: int
+    record: RecordAccess | None = None  # parameters through data record 47 (DP-V1)
+    dpv1: Dpv1Setup | None = None
+    slot_time: float | None = None  # None: the default at the line's rate
+
+    def setup(self, address: int) -> SlaveSetup:
+        try:
+            return SlaveSetup(
+                address, self.master, self.parameters, self.cfg, self.retries, dpv1=self.dpv1
+            )
+        except LocalProtocolError as exc:
+            raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+    def target(self, address: int) -> DriveTarget:
+        """The slave as the runner addresses it."""
+        shape = BlockShape(self.ppo.pkw_words, self.ppo.pzd_words)
+        try:
+            return DriveTarget(
+                Protocol.PROFIBUS, address, self.dialect, ppo.LAYOUT, shape, record=self.record
+            )
+        except LocalProtocolError as exc:
+            raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+    def slot(self) -> PkwSlot:
+        return PkwSlot(self.ppo, self.dialect)
+
+
+def _hex_bytes(text: str, what: str) -> bytes:
+    cleaned = text.replace(",", " ").replace("0x", "").replace("0X", "")
+    try:
+        return bytes.fromhex(cleaned)
+    except ValueError:
+        raise CommandError(f"{what}: {text[:40]!r} is not hex bytes", Exit.BAD_INPUT) from None
+
+
+def _option(key: str) -> str:
+    """A field of the DP settings as the command line names it."""
+    return "--" + key.replace("_", "-")
+
+
+def build_context(args: argparse.Namespace) -> DpContext:
+    """The DP settings of a command; exit 2 for anything unusable, before any port is opened."""
+    if args.parity != "E":
+        raise CommandError("PROFIBUS characters are always 8E1: --parity E", Exit.BAD_INPUT)
+    if args.retries > MAX_DP_RETRIES:
+        raise CommandError(f"--retries: at most {MAX_DP_RETRIES} over PROFIBUS", Exit.BAD_INPUT)
+    try:
+        dia = ppo.dp_dialect(args.dialect or DEFAULT_DIALECT)
+        kind = ppo.ppo_type(args.ppo)
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    ident = None
+    if args.ident is not None:
+        try:
+            ident = limits.check_int(int(args.ident, 0), 0, 0xFFFF)
+        except ValueError:
+            raise CommandError(
+                f"--ident: {args.ident[:40]!r} is not a 16-bit number such as 0x0402",
+                Exit.BAD_INPUT,
+            ) from None
+    cfg = _hex_bytes(args.cfg, "--cfg") if args.cfg is not None else None
+    user_prm = _hex_bytes(args.user_prm, "--user-prm") if args.user_prm is not None else None
+    given = DpGiven(args.ppo, ident, args.gsd, cfg, user_prm)
+    found, problems = dp_settings.resolve(given, _option)
+    if found is None:
+        key, text = problems[0]
+        where = f"{_option(key)}: " if key and key != "gsd" else ""
+        raise CommandError(f"{where}{text}", Exit.BAD_INPUT)
+    ident, user_prm, cfg, dpv1 = found.ident, found.user_prm, found.cfg, found.dpv1
+    slot = _slot_time(args, found.gsd)
+    # The watchdog: several worst-case cycles, at least a second.
+    watchdog = max(1.0, 10 * slot * (args.retries + 1))
+    try:
+        parameters = dps.Parameters(ident, dps.watchdog_factors(watchdog), user_prm=user_prm)
+        parameters.encode()
+    except LocalProtocolError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+    access = getattr(args, "access", None) or ("pkw" if kind.has_pkw else "ds47")
+    record = None
+    if access == "ds47":
+        axis = args.axis if args.axis is not None else AXES.get(dia.name)
+        if axis is None:
+            raise CommandError(
+                f"--access ds47: the {dia.name} dialect documents the PKW channel only"
+                " (give --axis to use data record 47 anyway)",
+                Exit.BAD_INPUT,
+            )
+        dpv1 = dpv1 or Dpv1Setup()
+        if not dpv1.read_write:
+            raise CommandError(
+                f"--access ds47: the GSD file says C1_Read_Write_supp = 0: the slave reads"
+                f" and writes no data records ({args.gsd})",
+                Exit.BAD_INPUT,
+            )
+        record = RecordAccess(axis, max_data=dpv1.max_data)
+    elif not kind.has_pkw:
+        raise CommandError(f"PPO {kind.number} has no PKW words: --access ds47", Exit.BAD_INPUT)
+    elif getattr(args, "axis", None) is not None:
+        raise CommandError("--axis applies to --access ds47 only", Exit.BAD_INPUT)
+    return DpContext(
+        dia, kind, parameters, cfg, args.master_address, args.retries, record,
+        dpv1 if record is not None else None, slot,
+    )  # fmt: skip
+
+
+def _slot_time(args: argparse.Namespace, found: Gsd | None) -> float:
+    """``--slot-time``, else the default at the rate, waiting for the slave's GSD MaxTsdr;
+    bad input where the GSD file says the slave does not run at the rate, or may answer
+    later than ``--slot-time``."""
+    rate = args.baudrate or DEFAULT_BAUDRATE
+    tsdr = found.max_tsdr.get(rate) if found is not None else None
+    if found is not None and found.supports(rate) is False:
+        raise CommandError(
+            f"--gsd {args.gsd}: the slave does not run at {rate} baud (the file names"
+            f" {found.rates_text()}): give --baudrate",
+            Exit.BAD_INPUT,
+        )
+    if args.slot_time is None:
+        return dp_timing.default_slot_time(rate, tsdr)
+    if tsdr is not None and args.slot_time < dp_timing.bits(tsdr, rate):
+        raise CommandError(
+            f"--slot-time: the slave may begin to answer {tsdr} bit times"
+            f" ({dp_timing.bits(tsdr, rate) * 1000:.3g} ms) after a request at {rate} baud"
+            f" (its GSD file's MaxTsdr): give a longer one",
+            Exit.BAD_INPUT,
+        )
+    return float(args.slot_time)
+
+
+def dp_line(args: argparse.Namespace, slot_time: float | None = None) -> DpLine:
+    try:
+        settings = PortSettings(
+            limits.check_port_url(args.port),
+            baudrate=args.baudrate or DEFAULT_BAUDRATE,
+            parity="E",
+            echo=args.echo,
+        )
+        return DpLine(
+            settings,
+            args.master_address,
+            slot_time=slot_time if slot_time is not None else args.slot_time,
+            trace=print_trace if args.trace else None,
+        )
+    except ValueError as exc:
+        raise CommandError(str(exc), Exit.BAD_INPUT) from None
+
+
+async def session(
+    args: argparse.Namespace,
+    ctx: DpContext,
+    address: int,
+    jobs: Sequence[pkw.PkwRequest],
+    vtype: ValueType | None = None,
+) -> list[Outcome]:
+    """Run ``jobs`` one after the other on slave ``address`` through the line runner (the
+    master listens first, parametrises the slave, and clears it at the end)."""
+    spec = DriveSpec("drive", ctx.target(address))
+    watch = _Watch(address)
+    wire = CycleWire(
+        dp_line(args, ctx.slot_time),
+        [SlaveSpec(spec, ctx.setup(address), ctx.ppo)],
+        dp_events=watch,
+    )
+    drive = watch.session = JobSession(wire, spec, retries=ctx.retries, events=watch)
+    watch.wire = wire
+    wire.link.reconnect.add_listener(watch.port)
+    loop = asyncio.get_running_loop()
+    outcomes: list[Outcome] = []
+    try:
+        await drive.open()
+        for request in jobs:
+            deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
+            outcomes.append((await drive.job(request, deadline, vtype)).outcome)
+    except PortError as exc:
+        raise CommandError(str(exc), Exit.PORT) from None
+    except SessionEnded as exc:
+        if exc.kind == "timeout":  # the slave does not answer: no valid answer
+            outcomes.append(TimedOut(str(exc)))
+        else:
+            raise CommandError(str(exc), Exit.NO_ANSWER, kind=exc.kind) from None
+    finally:
+        await drive.close()
+    return outcomes
+
+
+class _Watch(NoEvents, NoDpEvents):
+    """Ends a command's session early: the slave owned by another master, the slave not
+    answering at all, another master heard on the line."""
+
+    def __init__(self, address: int) -> None:
+        self.address = address
+        self.session: JobSession | None = None
+        self.wire: CycleWire | None = None
+
+    def _run(self) -> SlaveRun | None:
+        return self.wire.master.runs.get(self.address) if self.wire is not None else None
+
+    def _end(self, kind: str, reason: str) -> None:
+        if self.session is not None:
+            self.session.end(kind, reason)
+
+    def slave_state(self, drive: str, state: SlaveState) -> None:
+        run = self._run()
+        if state is SlaveState.LOCKED and run is not None:
+            diagnosis = run.slave.diagnosis
+            owner = diagnosis.master if diagnosis is not None else None
+            self._end("locked", str(SlaveLocked(self.address, owner)))
+
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+        run = self._run()
+        if not isinstance(result, Failure) or result.kind is not ErrorKind.TIMEOUT or run is None:
+            return
+        if run.slave.state is SlaveState.OFFLINE and not run.slave.waiting:
+            self._end("timeout", f"slave {self.address} does not answer ({result.detail})")
+
+    def port(self, state: LinkState, error: str | None) -> None:
+        if state is LinkState.FAILED and error:
+            self._end("line_error", error)

@@ -1,0 +1,397 @@
+"""A drive as the planner sees it: its queues, its transaction in flight, its polls, its health."""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections import deque
+from dataclasses import dataclass, replace
+
+from pkwbus.master.planning.describing import DescribeStep, DriveDescriber, Settled, described_poll
+from pkwbus.master.planning.health import DriveHealth, HealthPolicy
+from pkwbus.master.planning.identity import identity_requests
+from pkwbus.master.planning.jobs import Job, Priority
+from pkwbus.master.planning.outcomes import NotSent, Outcome
+from pkwbus.master.planning.plan import (
+    Described,
+    DriveSpec,
+    Event,
+    Finished,
+    Overrun,
+    PkwLengthTold,
+    PollSpec,
+    Send,
+    StatusWord,
+)
+from pkwbus.master.planning.record_transaction import RecordItem, RecordTransaction
+from pkwbus.master.planning.transaction import PkwTransaction
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.pkw.length import PkwLength
+from pkwbus.protocol.profidrive.pkw import carried, fits
+from pkwbus.protocol.serial.telegram import Protocol, split_block
+
+__all__ = ["Active", "DrivePlan", "PollState", "Work"]
+
+
+class PollState:
+    """A poll and when it is due; its request telegram is built once."""
+
+    __slots__ = ("due", "fresh", "send", "spec")
+
+    def __init__(self, spec: PollSpec, due: float, send: Send) -> None:
+        self.spec = spec
+        self.due = due
+        self.send = send
+        # Waited for its parameter's description: its first start is never an overrun.
+        self.fresh = False
+
+
+Work = Job | PollState | DescribeStep | tuple[PollState, ...]  # a tuple: polls in one record
+
+
+@dataclass(eq=False, slots=True)
+class Active:
+    """A drive's transaction in flight: a queued job's, a poll's, or (data record 47) the
+    polls due together."""
+
+    tx: PkwTransaction | RecordTransaction
+    priority: Priority
+    order: float
+    work: Work
+    send: Send
+    # The read of a change's parameter before the change (master.write_gate).
+    read_first: bool = False
+
+
+class DrivePlan:
+    __slots__ = (
+        "active",
+        "busy",
+        "describer",
+        "health",
+        "held",
+        "lagging",
+        "last_answer",
+        "name",
+        "pkw",
+        "polls",
+        "probe",
+        "probes",
+        "reads",
+        "references",
+        "seq",
+        "served",
+        "shown_up",
+        "slot",
+        "spec",
+        "target",
+        "version",
+        "writes",
+    )  # fmt: skip
+
+    def __init__(self, spec: DriveSpec, policy: HealthPolicy, slot: int, count: int) -> None:
+        self.spec = spec
+        self.name = spec.name
+        self.target = spec.target
+        self.slot = slot
+        self.served = slot - count  # never served yet: in configuration order
+        self.version = 0
+        self.busy = False  # its exchange is out: not in the ready heap
+        self.health = DriveHealth(policy)
+        self.shown_up = True
+        self.writes: deque[Job] = deque()
+        self.reads: deque[Job] = deque()
+        self.active: Active | None = None
+        self.lagging = False
+        self.probe = Send(spec.name, spec.target, spec.target.probe(), True)
+        self.seq = itertools.count()
+        self.polls: list[tuple[float, int, PollState]] = []
+        self.describer: DriveDescriber | None = None
+        if spec.form is not None and spec.describe:
+            wanted = ((t.pnu, t.elements) for t in spec.describe)
+            dialect, dp = spec.target.dialect, spec.target.protocol is Protocol.PROFIBUS
+            self.describer = DriveDescriber(
+                dialect, spec.form, wanted, book=spec.book,
+                identity=identity_requests(dialect, texts=not dp),
+            )  # fmt: skip
+        # Polls waiting for their parameter's description, by PNU.
+        self.held: dict[int, list[PollState]] = {}
+        for p in spec.polls:
+            send = self.send_of(p.request)
+            if self.describer is not None and self.describer.waiting(p.request.pnu):
+                self.held.setdefault(p.request.pnu, []).append(PollState(p, 0.0, send))
+            else:
+                self.push_poll(PollState(p, 0.0, send))
+        # USS: the drive's PKW length, configured or told by its answers.
+        target = spec.target
+        uss = target.protocol is Protocol.USS and target.has_pkw
+        self.pkw = PkwLength(target.pkw_setting) if uss else None
+        self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
+        self.probes = 0
+        self.references = itertools.count()  # data record 47: each request's own reference
+
+    def transaction(
+        self, items: list[RecordItem], *, retries: int, deadline: float, stale: bytes | None = None
+    ) -> PkwTransaction | RecordTransaction:
+        """One PKW job, or (data record 47) one request of all ``items``; LocalProtocolError
+        for what the drive's channel cannot carry."""
+        record = self.target.record
+        if record is None:
+            (item,) = items
+            return PkwTransaction(
+                self.target, item.request, retries=retries, deadline=deadline, stale=stale
+            )
+        reference = next(self.references) % 255 + 1
+        return RecordTransaction(
+            self.target, items, reference=reference, axis=record.axis, retries=retries,
+            deadline=deadline,
+        )  # fmt: skip
+
+    def send_of(self, request: pkw.PkwRequest) -> Send:
+        """A poll's request telegram, built once; none where the drive's parameters go
+        through data record 47 (its polls go out together, in a request of their own)."""
+        target = self.target
+        return Send(self.name, target, b"" if target.record else target.telegram(request))
+
+    def next_probe(self) -> Send:
+        """The probe of a down drive. While a learned PKW length is not known, every other
+        probe has 3 PKW words: a fixed-3 drive answers no 4-word request (SINAMICS S110
+        Function Manual, 9.5: with a fixed length "the slave will not respond" to another)."""
+        self.probes += 1
+        length = self.pkw
+        if length is None or length.known or not self.target.learn or self.probes % 2:
+            return self.probe
+        short = self.target.with_pkw_words(3)
+        return Send(self.name, short, short.probe(), True)
+
+    def probed(self, send: Send, data: bytes) -> PkwLengthTold | None:
+        """A probe was answered (``data``: its telegram's data); the event when a 3-word one
+        told the drive's length: 3 words back is a fixed-3 drive (its 4-word requests went
+        unanswered), any other length a variable one."""
+        length = self.pkw
+        if length is None or length.known or send.target.shape.pkw_words != 3:
+            return None
+        answer_words = len(data) // 2 - send.target.shape.pzd_words
+        if answer_words == 3:
+            length.words, length.known = 3, True
+        else:
+            length.observe(3, answer_words, pkw.NoResponse(0, 0, 0))
+        return self.retarget()
+
+    def heard(self, tx: PkwTransaction) -> PkwLengthTold | None:
+        """Take what the answer ``tx`` just decoded tells; the event when the drive's PKW
+        length, as known, changed (requests then go out with the new one)."""
+        answer, response = tx.answer_pkw, tx.response
+        if answer is None or response is None:
+            return None
+        if not isinstance(response, pkw.NoResponse):
+            self.last_answer = answer
+        length = self.pkw
+        if length is None:
+            return None
+        sent = self.target.pkw_words_of(tx.telegram)
+        if not length.observe(sent, len(answer) // 2, response):
+            return None
+        return self.retarget()
+
+    def forget_pkw(self) -> PkwLengthTold | None:
+        """The drive went down: a learned PKW length is learned again when it answers."""
+        length = self.pkw
+        if length is None or not self.target.learn or not length.known:
+            return None
+        length.forget()
+        return self.retarget()
+
+    def retarget(self) -> PkwLengthTold | None:
+        """Requests go out with the PKW length as known now (a learned one); the event
+        that tells what is known of it now."""
+        length = self.pkw
+        if length is None:
+            return None
+        if self.target.learn and length.words != self.target.shape.pkw_words:
+            target = self.target = self.target.with_pkw_words(length.words)
+            self.probe = Send(self.name, target, target.probe(), True)
+            for _, _, poll in self.polls:
+                poll.send = self.send_of(poll.spec.request)
+        return PkwLengthTold(self.name, replace(length))
+
+    def first_due(self) -> float | None:
+        """When the drive's next poll or description request is due (None: never)."""
+        due = self.polls[0][0] if self.polls else None
+        ask = self.describer.due() if self.describer is not None else None
+        if ask is not None and (due is None or ask <= due):
+            return ask
+        return due
+
+    def start_poll(
+        self, now: float, deadline: float, retries: int
+    ) -> tuple[Active | None, list[Event]]:
+        """The drive's next description request or due poll as a transaction in flight
+        (None: nothing to send now), and the events of starting it (an overrun; parameters
+        another drive of its kind described meanwhile)."""
+        events: list[Event] = []
+        describer = self.describer
+        ask = describer.due() if describer is not None else None
+        first = not self.polls or (ask is not None and self.polls[0][0] >= ask)  # no poll before
+        if describer is not None and ask is not None and ask <= now and first:
+            step = describer.next_request(now)
+            events += self.settle(describer.take_ready(), now)
+            if step is not None:
+                tx = self.transaction(
+                    [RecordItem(step.request)], retries=retries, deadline=deadline
+                )
+                send = Send(self.name, self.target, tx.telegram)
+                return Active(tx, Priority.POLL, now, step, send), events
+        if not self.polls or self.polls[0][0] > now:
+            return None, events
+        if self.target.record is not None:
+            return self._start_record(now, deadline, retries, events)
+        _, _, poll = heapq.heappop(self.polls)
+        spec = poll.spec
+        if now - poll.due > spec.every and not poll.fresh:
+            events.append(Overrun(self.name))
+        poll.fresh = False
+        # Long enough for the retries and a lagging answer; never the poll's whole
+        # interval, which would hold the drive's parameter channel for minutes.
+        tx = PkwTransaction(
+            self.target, spec.request, retries=retries, deadline=deadline,
+            telegram=poll.send.telegram,
+        )  # fmt: skip
+        return Active(tx, Priority.POLL, poll.due, poll, poll.send), events
+
+    def _start_record(
+        self, now: float, deadline: float, retries: int, events: list[Event]
+    ) -> tuple[Active | None, list[Event]]:
+        """The polls due now, as many as one data record 47 request takes, together; with
+        them those due within half the first one's interval, so that polls released at
+        different times come to share their requests (a poll is never read later than due,
+        only at times a little earlier)."""
+        due: list[PollState] = []
+        until = now + self.polls[0][2].spec.every / 2
+        record = self.target.record
+        assert record is not None
+        while self.polls and self.polls[0][0] <= until and fits(len(due) + 1, record.max_data):
+            poll = heapq.heappop(self.polls)[2]
+            if now - poll.due > poll.spec.every and not poll.fresh:
+                events.append(Overrun(self.name))
+            poll.fresh = False
+            why = carried(poll.spec.request)
+            if why:  # a text, say: ended unsent, polled (and refused) again at its interval
+                events.append(Finished(self.name, poll.spec, NotSent(why)))
+                poll.due = now + poll.spec.every
+                self.push_poll(poll)
+                continue
+            due.append(poll)
+        if not due:
+            return None, events
+        items = [RecordItem(p.spec.request, p.spec.fmt.vtype) for p in due]
+        tx = self.transaction(items, retries=retries, deadline=deadline)
+        send = Send(self.name, self.target, tx.telegram)
+        return Active(tx, Priority.POLL, due[0].due, tuple(due), send), events
+
+    @property
+    def describing(self) -> bool:
+        """Whether its exchange in flight is a description request (AK 4): some drives
+        leave those unanswered and answer everything else."""
+        work = self.active.work if self.active is not None else None
+        return isinstance(work, DescribeStep) and not work.identity
+
+    def went_down(self) -> PkwLengthTold | None:
+        """The drive is down: another drive of its kind describes what it was describing;
+        a learned PKW length is learned again when it answers."""
+        if self.describer is not None:
+            self.describer.release()
+        return self.forget_pkw()
+
+    def described(self, step: DescribeStep, outcome: Outcome, now: float) -> list[Described]:
+        """What came of a description request; the parameters it settled."""
+        describer = self.describer
+        assert describer is not None  # it made the request
+        settled = describer.took(step, outcome, now)
+        forgotten: list[Described] = []
+        if describer.changed:  # another drive now: its values wait for its description
+            describer.changed = False
+            self._hold_again()
+            why = f"another drive now ({describer.identity})"
+            forgotten = [
+                Described(self.name, t, None, (), why, identity=describer.identity,
+                          forgotten=True)
+                for t in self.spec.describe
+            ]  # fmt: skip
+        return forgotten + self.settle(settled, now)
+
+    def _hold_again(self) -> None:
+        describer = self.describer
+        assert describer is not None
+        kept = []
+        for entry in self.polls:
+            poll = entry[2]
+            if describer.waiting(poll.spec.request.pnu):
+                self.held.setdefault(poll.spec.request.pnu, []).append(poll)
+            else:
+                kept.append(entry)
+        self.polls[:] = kept
+        heapq.heapify(self.polls)
+
+    def settle(self, settled: list[Settled], now: float) -> list[Described]:
+        """Parameters whose description settled: their polls, decoded as now described,
+        go out from now on (those that waited are due now)."""
+        events = []
+        targets = {t.pnu: t for t in self.spec.describe}
+        for done in settled:
+            polls = self.held.pop(done.pnu, [])
+            waiting = {id(p) for p in polls}
+            polls += [e[2] for e in self.polls if e[2].spec.request.pnu == done.pnu]
+            work = self.active.work if self.active is not None else None
+            for active in work if isinstance(work, tuple) else (work,):
+                if isinstance(active, PollState) and active.spec.request.pnu == done.pnu:
+                    polls.append(active)
+            for poll in polls:
+                poll.spec = described_poll(poll.spec, done, self.target.dialect)
+                poll.send = self.send_of(poll.spec.request)
+            for poll in polls:
+                if id(poll) in waiting:
+                    poll.due, poll.fresh = now, True
+                    self.push_poll(poll)
+            specs = tuple(p.spec for p in polls)
+            events.append(
+                Described(self.name, targets[done.pnu], done.description, specs, done.why,
+                          done.first, done.identity, done.from_book, done.unanswered)
+            )  # fmt: skip
+        if any(e.polls for e in events):
+            heapq.heapify(self.polls)
+        return events
+
+    def status_of(self, data: bytes) -> StatusWord | None:
+        """The status word of a probe's answer (its telegram's ``data``), when it has one."""
+        try:
+            block = split_block(data, self.target.response_shape(len(data)))
+        except RemoteProtocolError:
+            return None
+        return StatusWord(self.name, block.pzd[0], block.main_actual) if block.pzd else None
+
+    def push_poll(self, poll: PollState) -> None:
+        if poll.send.target is not self.target:  # built before the PKW length was learned
+            poll.send = self.send_of(poll.spec.request)
+        heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
+
+    def back(self, now: float) -> list[Described]:
+        """The drive answers again after it was away: its polls are due now, its identity
+        is read again (it may have been replaced by another drive), and what it left
+        undescribed while away waits for its description again."""
+        self.restart_polls(now)
+        if self.describer is None or not (again := self.describer.recheck()):
+            return []
+        self._hold_again()
+        targets = [t for t in self.spec.describe if t.pnu in again]
+        why = "back after it was away"
+        return [Described(self.name, t, None, (), why, forgotten=True) for t in targets]
+
+    def restart_polls(self, now: float) -> None:
+        """Every poll due now: after the drive or its line was away, none of them is late."""
+        polls = [entry[2] for entry in self.polls]
+        self.polls.clear()
+        for poll in polls:
+            poll.due = now
+            self.push_poll(poll)

@@ -1,0 +1,165 @@
+"""What the planner is given and what it gives: drives and polls in; actions and events out.
+
+Actions are a closed union (:data:`Action`): send one telegram now, or stay
+idle until a time. Events (:data:`Event`) tell what the plan came to: a job
+or poll finished, a poll started late, a drive's health changed, a status
+word arrived. All are small frozen values: the planner does no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.catalog.precedence import Layers
+from pkwbus.master.planning.identity import DescriptionBook
+from pkwbus.master.planning.jobs import Job
+from pkwbus.master.planning.transaction import Outcome, Tally
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription
+from pkwbus.protocol.pkw.length import PkwLength
+
+__all__ = [
+    "Action",
+    "DescribeTarget",
+    "Described",
+    "DriveSpec",
+    "Event",
+    "Finished",
+    "HealthChanged",
+    "Idle",
+    "Overrun",
+    "PkwLengthTold",
+    "PollSpec",
+    "Send",
+    "StatusWord",
+]
+
+
+@dataclass(frozen=True)
+class PollSpec:
+    """One parameter a drive is polled for, every ``every`` seconds."""
+
+    parameter: str  # as configured: the metric label
+    index: int
+    request: pkw.PkwRequest
+    every: float
+    fmt: ParameterDescription = field(default_factory=ParameterDescription)
+    # What the configuration and the catalog say of it, for the drive's description to
+    # be put in between (None: the drive is not asked to describe it).
+    layers: Layers | None = None
+
+
+@dataclass(frozen=True)
+class DescribeTarget:
+    """A parameter the drive is asked to describe before its first value (AK 4)."""
+
+    pnu: int
+    parameter: str  # the drive's name for it: the metric label
+    elements: tuple[int, ...]
+    catalog: ParameterDescription | None = None  # its catalog entry, to cross-check
+    writable: bool = False  # the configuration lists it as writable
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    name: str
+    target: DriveTarget
+    polls: tuple[PollSpec, ...] = ()
+    describe: tuple[DescribeTarget, ...] = ()
+    form: DescriptionForm | None = None  # how the drive describes (None: it is not asked)
+    # Descriptions by drive identity, shared by every drive (None: none are kept).
+    book: DescriptionBook | None = None
+
+
+# ------------------------------------------------------------------ actions
+
+
+@dataclass(frozen=True, slots=True)
+class Send:
+    """Exchange ``telegram`` with ``drive`` now; give the result to ``Planner.exchanged``."""
+
+    drive: str
+    target: DriveTarget
+    telegram: bytes
+    probe: bool = False  # the drive is down: one short telegram to see whether it answers
+
+
+@dataclass(frozen=True, slots=True)
+class Idle:
+    """Nothing to send before ``until`` (loop time), unless a job comes in."""
+
+    until: float
+
+
+Action = Send | Idle
+
+
+# ------------------------------------------------------------------- events
+
+
+@dataclass(frozen=True, slots=True)
+class Finished:
+    """A job or a poll is over. ``tally``: what its exchanges cost (None when none went out)."""
+
+    drive: str
+    work: Job | PollSpec
+    outcome: Outcome
+    tally: Tally | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Overrun:
+    """A poll started later than one interval after it was due."""
+
+    drive: str
+
+
+@dataclass(frozen=True, slots=True)
+class HealthChanged:
+    """The drive is shown up or down. ``reason`` is empty when only its line changed."""
+
+    drive: str
+    up: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class StatusWord:
+    """A reply's status word, and its main actual value when it has a second PZD word."""
+
+    drive: str
+    word: int
+    main_actual: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PkwLengthTold:
+    """What a USS drive's answers told of its PKW length changed: learned (``auto``),
+    learned again, or in conflict with the configured length (or agreeing again)."""
+
+    drive: str
+    length: PkwLength  # a copy, as it was then
+
+
+@dataclass(frozen=True, slots=True)
+class Described:
+    """A parameter's description settled: what the drive said (None: nothing, ``why``), its
+    polls as they go out from now on, and its catalog entry (to cross-check)."""
+
+    drive: str
+    target: DescribeTarget
+    description: DriveDescription | None
+    polls: tuple[PollSpec, ...]
+    why: str = ""
+    first: bool = True
+    identity: str | None = None  # the drive's model and software, when known
+    from_book: bool = False  # known from a drive of that identity, or an earlier run
+    unanswered: bool = False  # left unanswered: the catalog stands, asked again later
+    # The drive is another one now (its identity changed): described afresh, its values
+    # waiting for it (``description`` is None).
+    forgotten: bool = False
+
+
+Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

@@ -1,0 +1,400 @@
+"""What a line sends next, as a state machine without I/O: time and results in, actions out.
+
+The policy, in order:
+
+- a drive's transaction in flight goes on before anything new of that drive
+  (its parameter channel holds one request);
+- across drives: writes, then on-demand reads, then due polls (and probes of
+  a down drive); among equals the earliest deadline or due time, then the
+  drive served longest ago (fairness);
+- a drive whose last answer was "not yet", or missing, yields to another
+  drive's exchange of the same priority before its repeat (lag interleaving);
+- a drive without a valid answer for ``down_after`` exchanges is down: its
+  poll in flight ends, and it is probed with one short telegram at capped
+  exponential back-off until it answers; then all its polls are due at once
+  (none counts as an overrun);
+- a poll that starts more than one interval after it was due is an overrun; nothing
+  is sent past its deadline; a job still queued at its deadline ends.
+
+Drives wait in two heaps (ready, by the key above; and by the time they
+become due), so one exchange costs O(log n) in the number of drives. A
+drive's heap entries carry its version: a change of the drive pushes a new
+entry and the old one is skipped when it surfaces.
+
+A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
+:meth:`Planner.next_for` for each slave's turn, under the same priorities.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections import deque
+from collections.abc import Sequence
+
+from pkwbus.master.planning.describing import DescribeStep
+from pkwbus.master.planning.drive import Active, DrivePlan, PollState
+from pkwbus.master.planning.health import HealthPolicy
+from pkwbus.master.planning.jobs import Cancelled, Job, Priority
+from pkwbus.master.planning.plan import (
+    Action,
+    DriveSpec,
+    Event,
+    Finished,
+    HealthChanged,
+    Idle,
+    PkwLengthTold,
+    Send,
+    StatusWord,
+)
+from pkwbus.master.planning.record_transaction import RecordTransaction
+from pkwbus.master.planning.transaction import (
+    ErrorKind,
+    ExchangeResult,
+    Failure,
+    LineFailed,
+    Outcome,
+    PkwTransaction,
+    ResponseTelegram,
+    TimedOut,
+)
+from pkwbus.master.planning.write_gate import after_read, gate_write
+
+__all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
+
+PORT_CLOSED = "the line's port is not open"
+IDLE_AT_MOST = 3600.0
+_EXPIRY = -1  # a timer entry that ends queued jobs at their deadline (not versioned)
+
+_Key = tuple[int, int, float, int, int]  # priority, lagging, order, last served, slot
+
+
+class Planner:
+    """Chooses every exchange of one line; reports what came of them as events."""
+
+    def __init__(
+        self,
+        drives: Sequence[DriveSpec],
+        *,
+        poll_deadline: float,
+        retries: int = 2,
+        policy: HealthPolicy | None = None,
+        stale_answers: bool = True,
+    ) -> None:
+        policy = policy or HealthPolicy()
+        self.retries = retries
+        # FC and USS drives may repeat their previous answer: a change goes out after a
+        # read of its parameter (master.write_gate); a DP PKW slot waits for AK 0 instead.
+        self.stale_answers = stale_answers
+        self.poll_deadline = poll_deadline  # a poll's transaction, retries included
+        self.drives = [DrivePlan(s, policy, i, len(drives)) for i, s in enumerate(drives)]
+        self._by_name = {d.name: d for d in self.drives}
+        self.events: list[Event] = []
+        self.up = False  # the line's port is open
+        self.stopping = False
+        self._ready: list[tuple[_Key, int, DrivePlan]] = []
+        self._timers: list[tuple[float, int, int, DrivePlan]] = []
+        self._timer_seq = itertools.count()
+        self._served = itertools.count()
+        self._job_seq = itertools.count()
+        self._lagging: list[DrivePlan] = []
+
+    def take_events(self) -> list[Event]:
+        events, self.events = self.events, []
+        return events
+
+    # ------------------------------------------------------------- inputs
+
+    def submit(self, job: Job, now: float) -> None:
+        """Queue a write or an on-demand read (KeyError for a drive not on this line)."""
+        d = self._by_name[job.drive]
+        if self.stopping:
+            self.events.append(Finished(d.name, job, Cancelled("the service is stopping")))
+            return
+        if not self.up:
+            self.events.append(Finished(d.name, job, LineFailed(PORT_CLOSED)))
+            return
+        (d.writes if job.priority is Priority.WRITE else d.reads).append(job)
+        heapq.heappush(self._timers, (job.deadline, next(self._timer_seq), _EXPIRY, d))
+        self._index(d, now)
+
+    def line_up(self, now: float) -> None:
+        """The port is open: every poll is due now (none is late: the line was away)."""
+        self.up = True
+        for d in self.drives:
+            d.restart_polls(now)
+            self._index(d, now)
+
+    def line_down(self, now: float) -> None:
+        """The port is not open: no job waits for it, nothing in flight is sent later."""
+        self.up = False
+        self._lagging.clear()
+        for d in self.drives:
+            d.busy = d.lagging = False
+            if d.describer is not None:
+                d.describer.release()  # another line's drive of its kind describes instead
+            if d.active is not None:
+                self._complete(d, d.active, LineFailed(PORT_CLOSED), now)
+            for queue in (d.writes, d.reads):
+                while queue:
+                    self.events.append(Finished(d.name, queue.popleft(), LineFailed(PORT_CLOSED)))
+            d.version += 1
+
+    def port_failed(self) -> None:
+        """The port failed: nobody can tell whether the drives answer."""
+        for d in self.drives:
+            self._show(d, False, "")
+
+    def stop(self, reason: str) -> None:
+        """Take no new jobs; cancel the queued ones and the jobs in flight."""
+        self.stopping = True
+        for d in self.drives:
+            active, d.active = d.active, None
+            if active is not None and isinstance(active.work, Job):
+                tally = None if active.read_first else active.tx.tally  # a write not yet sent
+                self.events.append(Finished(d.name, active.work, Cancelled(reason), tally))
+            for queue in (d.writes, d.reads):
+                while queue:
+                    self.events.append(Finished(d.name, queue.popleft(), Cancelled(reason)))
+            d.version += 1
+
+    # ------------------------------------------------------------ choices
+
+    def next_action(self, now: float) -> Action:
+        """The line's next exchange, or how long it may stay idle."""
+        if not self.up or self.stopping:
+            return Idle(now + IDLE_AT_MOST)
+        ready = self._ready
+        while True:
+            self._fire(now)
+            while ready and ready[0][1] != ready[0][2].version:
+                heapq.heappop(ready)
+            if not ready:
+                timers = self._timers
+                return Idle(min(timers[0][0], now + IDLE_AT_MOST) if timers else now + IDLE_AT_MOST)
+            d = heapq.heappop(ready)[2]
+            send = self._start(d, now)
+            if send is not None:
+                return send
+
+    def next_for(self, drive: str, now: float) -> Send | None:
+        """The next exchange of ``drive`` alone (one slot of a cyclic line), or None."""
+        d = self._by_name[drive]
+        if not self.up or self.stopping or d.busy:
+            return None
+        self._fire(now)
+        while self._claim(d, now)[0] is not None:
+            send = self._start(d, now)
+            if send is not None:
+                return send
+        return None
+
+    def active(self, drive: str) -> PkwTransaction | RecordTransaction | None:
+        """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
+        return a.tx if (a := self._by_name[drive].active) is not None else None
+
+    def expire_queued(self, drive: str, now: float) -> None:
+        """End the jobs of ``drive`` past their deadline while nothing can go out to it,
+        queued or in flight between its tries."""
+        d = self._by_name[drive]
+        self._expire(d, d.writes, now)
+        self._expire(d, d.reads, now)
+        active = d.active
+        if active is not None and not d.busy and now >= active.tx.deadline:
+            self._complete(d, active, TimedOut("deadline passed"), now)
+            self._index(d, now)
+
+    def told_health(self, drive: str, up: bool, reason: str, now: float) -> None:
+        """The wire tells ``drive``'s health (a DP slave in data exchange, or out of it); back
+        up, its polls are due now, none counted as an overrun."""
+        d = self._by_name[drive]
+        self._show(d, up, reason)
+        if up:
+            self.events.extend(d.back(now))
+            self._index(d, now)
+
+    def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
+        """The result of ``send``'s exchange."""
+        d = self._by_name[send.drive]
+        d.busy = False
+        d.served = next(self._served)
+        if self._lagging:  # another drive had its turn: the lagging ones may go again
+            for other in self._lagging:
+                if other is not d and other.lagging:
+                    other.lagging = False
+                    self._index(other, now)
+            self._lagging.clear()
+        self._health(d, result, now)
+        if send.probe:
+            if isinstance(result, ResponseTelegram):
+                if (status := d.status_of(result.data)) is not None:
+                    self.events.append(status)
+                self._tell(d.probed(send, result.data))
+        elif (active := d.active) is not None and active.send is send:
+            tx = active.tx
+            outcome = tx.feed(result, now)
+            if not isinstance(result, Failure) and isinstance(tx, PkwTransaction):
+                self._tell(d.heard(tx))
+            tally = tx.tally
+            if not isinstance(result, Failure) and tally.status_word is not None:
+                self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
+            if outcome is None:
+                # A "not yet" or a failed try: the repeat yields to another drive's
+                # exchange first, so a lagging or dying drive cannot hold the line.
+                d.lagging = tx.waiting or isinstance(result, Failure)
+                if d.lagging:
+                    self._lagging.append(d)
+            else:
+                self._complete(d, active, outcome, now)
+        self._index(d, now)
+
+    # ---------------------------------------------------------- internals
+
+    def _claim(self, d: DrivePlan, now: float) -> tuple[_Key | None, float | None]:
+        """The drive's claim on the next exchange, else when it will have one (None: never)."""
+        if d.writes:
+            self._expire(d, d.writes, now)
+        if d.reads:
+            self._expire(d, d.reads, now)
+        a = d.active
+        if a is not None:
+            return (a.priority, int(d.lagging), a.order, d.served, d.slot), None
+        if d.writes:
+            return (Priority.WRITE, 0, d.writes[0].deadline, d.served, d.slot), None
+        if d.reads:
+            return (Priority.READ, 0, d.reads[0].deadline, d.served, d.slot), None
+        if not d.health.up:
+            if d.health.probe_due(now):
+                return (Priority.POLL, 0, d.health.next_probe, d.served, d.slot), None
+            return None, d.health.next_probe
+        due = d.first_due()
+        if due is not None and due <= now:
+            return (Priority.POLL, 0, due, d.served, d.slot), None
+        return None, due
+
+    def _index(self, d: DrivePlan, now: float) -> None:
+        """Put the drive in the heap it belongs to now (its older entries go stale)."""
+        d.version += 1
+        key, at = self._claim(d, now)
+        if d.busy or not self.up or self.stopping:
+            return
+        if key is not None:
+            heapq.heappush(self._ready, (key, d.version, d))
+        elif at is not None:
+            heapq.heappush(self._timers, (at, next(self._timer_seq), d.version, d))
+        if len(self._ready) + len(self._timers) > 4 * len(self.drives) + 64:
+            self._compact()
+
+    def _compact(self) -> None:
+        self._ready = [e for e in self._ready if e[1] == e[2].version]
+        heapq.heapify(self._ready)
+        self._timers = [e for e in self._timers if e[2] in (_EXPIRY, e[3].version)]
+        heapq.heapify(self._timers)
+
+    def _fire(self, now: float) -> None:
+        timers = self._timers
+        while timers and timers[0][0] <= now:
+            _, _, version, d = heapq.heappop(timers)
+            if version == _EXPIRY or version == d.version:
+                self._index(d, now)
+
+    def _expire(self, d: DrivePlan, queue: deque[Job], now: float) -> None:
+        while queue and queue[0].deadline <= now:
+            job = queue.popleft()
+            self.events.append(
+                Finished(d.name, job, TimedOut("deadline passed before it was sent"))
+            )
+
+    def _start(self, d: DrivePlan, now: float) -> Send | None:
+        """Begin the drive's exchange; None when its transaction ended instead."""
+        d.version += 1  # out of the heaps until its result comes back
+        a = d.active
+        if a is not None:
+            if now >= a.tx.deadline:  # never resend a request past its deadline
+                self._complete(d, a, TimedOut("deadline passed"), now)
+                self._index(d, now)
+                return None
+            d.busy = True
+            return a.send
+        if self._claim(d, now)[0] is None:  # its queued jobs ended at their deadline
+            self._index(d, now)
+            return None
+        d.busy = True
+        queue = d.writes or d.reads
+        if queue:
+            job = queue.popleft()
+            order = float(next(self._job_seq))
+            first = gate_write(d, job, order, retries=self.retries, read_first=self.stale_answers)
+            if isinstance(first, Finished):  # not to be sent: the drive goes on
+                self.events.append(first)
+                d.busy = False
+                self._index(d, now)
+                return None
+            d.active = first
+            return first.send
+        if not d.health.up:
+            return d.next_probe()
+        active, events = d.start_poll(now, now + self.poll_deadline, self.retries)
+        self.events.extend(events)
+        if active is None:  # its descriptions are another drive's to ask
+            d.busy = False
+            self._index(d, now)
+            return None
+        d.active = active
+        return active.send
+
+    def _tell(self, event: PkwLengthTold | None) -> None:
+        if event is not None:
+            self.events.append(event)
+
+    def _complete(self, d: DrivePlan, active: Active, outcome: Outcome, now: float) -> None:
+        d.active = None
+        d.lagging = False
+        work = active.work
+        if active.read_first and isinstance(work, Job):  # the read before a change
+            after = after_read(d, active, work, outcome, retries=self.retries)
+            if isinstance(after, Finished):
+                self.events.append(after)
+            else:
+                d.active = after
+            return
+        if isinstance(work, DescribeStep):
+            self.events.extend(d.described(work, outcome, now))
+        elif isinstance(work, tuple):  # polls in one record: each with its own outcome
+            tx, each = active.tx, [outcome] * len(work)
+            if isinstance(tx, RecordTransaction) and tx.outcome is outcome:
+                each = list(tx.outcomes)
+            for i, (poll, result) in enumerate(zip(work, each, strict=True)):
+                # The request's cost counted once; due again from the request's first due,
+                # so that polls of one interval go out together (none later than due).
+                tally = tx.tally if i == 0 else None
+                self.events.append(Finished(d.name, poll.spec, result, tally))
+                poll.due = max(active.order + poll.spec.every, now)
+                d.push_poll(poll)
+        elif isinstance(work, PollState):
+            self.events.append(Finished(d.name, work.spec, outcome, active.tx.tally))
+            work.due = max(work.due + work.spec.every, now)
+            d.push_poll(work)
+        else:
+            self.events.append(Finished(d.name, work, outcome, active.tx.tally))
+
+    def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
+        if not isinstance(result, Failure):
+            if d.health.answered():
+                self._show(d, True, "answers again")
+                self.events.extend(d.back(now))  # not overruns: the drive was away
+            elif not d.shown_up:
+                self._show(d, True, "")  # back after its line was down
+            return
+        if result.kind is ErrorKind.PORT or d.describing:  # a drive may ignore AK 4 alone
+            return
+        if d.health.failed(now):
+            self._show(d, False, result.kind.value)
+            self._tell(d.went_down())  # its PKW length and identity are asked again
+            active = d.active
+            if active is not None and isinstance(active.work, PollState | tuple):
+                self._complete(d, active, TimedOut("drive is down"), now)
+
+    def _show(self, d: DrivePlan, up: bool, reason: str) -> None:
+        d.shown_up = up
+        self.events.append(HealthChanged(d.name, up, reason))

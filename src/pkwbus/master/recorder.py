@@ -1,0 +1,300 @@
+"""What the planner's events mean for the snapshot, the job's caller and the metrics.
+
+A finished job or poll is decoded here (the value in the drive's notation,
+or why there is none), the snapshot keeps only values a drive sent, and the
+line's :class:`LineEvents` hear of every exchange, job, overrun and new value.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Protocol
+
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.catalog.precedence import Disagreement, disagreements
+from pkwbus.master.planning.describing import ASK_AGAIN
+from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult
+from pkwbus.master.planning.plan import (
+    Described,
+    DriveSpec,
+    Event,
+    Finished,
+    HealthChanged,
+    Overrun,
+    PkwLengthTold,
+    PollSpec,
+    StatusWord,
+)
+from pkwbus.master.planning.transaction import (
+    Answered,
+    ExchangeResult,
+    Outcome,
+    Rejected,
+    Tally,
+    TimedOut,
+)
+from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
+from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.pkw.length import AUTO, shown
+
+__all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
+
+log = logging.getLogger("pkwbus.master.runner")  # what the runner records
+
+REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
+
+
+class LineEvents(Protocol):
+    """What a line reports (the service turns it into metrics). ``value``: a polled
+    parameter's new reading, as it lands in the snapshot."""
+
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None: ...
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None: ...
+    def overrun(self, drive: str) -> None: ...
+    def value(self, key: ReadingKey, reading: Reading) -> None: ...
+    def pkw_length(self, drive: str, conflict: bool) -> None: ...
+    def described(self, event: Described, found: list[Disagreement]) -> None: ...
+
+
+class NoEvents:
+    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
+        pass
+
+    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
+        pass
+
+    def overrun(self, drive: str) -> None:
+        pass
+
+    def value(self, key: ReadingKey, reading: Reading) -> None:
+        pass
+
+    def pkw_length(self, drive: str, conflict: bool) -> None:
+        pass
+
+    def described(self, event: Described, found: list[Disagreement]) -> None:
+        pass
+
+
+def job_result(
+    outcome: Outcome, tally: Tally | None, request: pkw.PkwRequest, fmt: ParameterDescription
+) -> JobResult:
+    """The result of a finished job: its value when the answer carries one.
+
+    RemoteProtocolError when the answer carries a value that cannot be decoded.
+    """
+    if not isinstance(outcome, Answered):
+        return JobResult(outcome, tally=tally)
+    if not isinstance(outcome.response, pkw.ValueResponse | pkw.TextResponse):
+        return JobResult(outcome, tally=tally)  # a description element, a count: no value
+    raw, value = fmt.value_of(outcome.response)
+    return JobResult(outcome, raw, value, tally)
+
+
+class LineRecord:
+    """Applies one line's events to the snapshot, the jobs' futures and the metrics."""
+
+    def __init__(
+        self,
+        line: str,
+        drives: Sequence[DriveSpec],
+        snapshot: Snapshot,
+        events: LineEvents,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.line = line
+        self.snapshot = snapshot
+        self.events = events
+        self._clock = clock
+        # A poll the drive refuses, by (drive, parameter, index): when it was last told.
+        self._refused: dict[tuple[str, str, int], float] = {}
+        self._polls = {d.name: d.polls for d in drives}
+        # Parameters whose description is awaited: no value of theirs lands before it.
+        self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
+        self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
+        self._targets = {d.name: d.describe for d in drives}
+        snapshot.lines[line] = False
+        for d in drives:
+            snapshot.drives[d.name] = DriveState()
+
+    def apply(self, events: list[Event], at: float | None = None) -> None:
+        """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now)."""
+        if at is None:
+            at = time.time()
+        for event in events:
+            if isinstance(event, Finished):
+                self._finished(event, at)
+            elif isinstance(event, StatusWord):
+                old = self.snapshot.drives.get(event.drive, DriveState())
+                self.snapshot.drives[event.drive] = DriveState(
+                    old.up, event.word, at, event.main_actual
+                )
+            elif isinstance(event, HealthChanged):
+                self._health(event)
+            elif isinstance(event, Overrun):
+                self.events.overrun(event.drive)
+            elif isinstance(event, PkwLengthTold):
+                self._pkw_length(event)
+            elif isinstance(event, Described):
+                self._described(event)
+
+    def _described(self, event: Described) -> None:
+        """A parameter's description settled: its polls decode as it says from now on; one
+        log line when the drive gave none, one per field it contradicts the catalog on."""
+        drive, target, found = event.drive, event.target, event.description
+        ctx = {"line": self.line, "drive": drive}
+        if event.forgotten:  # another drive now: no value of its parameters until described
+            if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
+                log.warning("drive %s is %s: its parameters are described afresh", drive,
+                            event.why, extra=ctx)  # fmt: skip
+            self._waiting.add((drive, target.pnu))
+            self.events.described(event, [])
+            return
+        self._waiting.discard((drive, target.pnu))
+        new = {(p.parameter, p.index): p for p in event.polls}
+        self._polls[drive] = tuple(
+            new.get((p.parameter, p.index), p) for p in self._polls.get(drive, ())
+        )
+        contradicts: list[Disagreement] = []
+        if found is None:
+            if event.unanswered and drive not in self._silent:
+                self._silent.add(drive)  # one line for all its parameters still waiting
+                log.warning("drive %s: %s: the catalog's descriptions are used for the"
+                            " parameters still waiting, and it is asked again in %d minutes",
+                            drive, event.why, ASK_AGAIN // 60, extra=ctx)  # fmt: skip
+            elif event.unanswered:
+                pass
+            elif event.first:
+                log.info("drive %s: %s: %s; the catalog's description is used", drive,
+                         target.parameter, event.why, extra=ctx)  # fmt: skip
+        else:
+            self._silent.discard(drive)
+        if found is not None and found.read_only and target.writable and event.first:
+            log.warning(
+                "drive %s describes %s as read-only, but the configuration lists it as"
+                " writable: the drive will refuse its writes", drive, target.parameter,
+                extra=ctx,
+            )  # fmt: skip
+        if found is not None and target.catalog is not None:
+            contradicts = disagreements(found, target.catalog)
+            for d in contradicts:
+                log.warning(
+                    "drive %s: %s: the drive gives its %s as %s, the catalog as %s; the"
+                    " drive's is used", drive, target.parameter, d.field, d.drive, d.catalog,
+                    extra=ctx,
+                )  # fmt: skip
+        self.events.described(event, contradicts)
+
+    def _pkw_length(self, event: PkwLengthTold) -> None:
+        """One log line per change of what a drive's PKW length is known to be."""
+        length, drive = event.length, event.drive
+        ctx = {"line": self.line, "drive": drive}
+        conflict = length.conflict
+        if not isinstance(conflict, str):
+            log.warning(
+                "drive %s answers with a PKW length of %s, but pkw_words is %s: no write goes"
+                " out to it until they agree (set pkw_words: %s, or auto)",
+                drive, shown(conflict), shown(length.configured),
+                "127" if conflict is None else conflict, extra=ctx,
+            )  # fmt: skip
+        elif length.configured != AUTO:
+            log.info("drive %s answers with its configured PKW length again", drive, extra=ctx)
+        elif length.known:
+            log.info("drive %s: PKW length %s, learned from its answers", drive,
+                     shown(length.words), extra=ctx)  # fmt: skip
+        self.events.pkw_length(drive, length.in_conflict)
+
+    def _health(self, event: HealthChanged) -> None:
+        ctx = {"line": self.line, "drive": event.drive}
+        if event.reason and event.up:
+            log.info("drive %s %s", event.drive, event.reason, extra=ctx)
+        elif event.reason:
+            log.warning(
+                "drive %s is down: %s (probing at back-off)", event.drive, event.reason, extra=ctx
+            )
+        old = self.snapshot.drives.get(event.drive, DriveState())
+        self.snapshot.drives[event.drive] = replace(old, up=event.up)
+
+    def _finished(self, event: Finished, at: float) -> None:
+        work, drive = event.work, event.drive
+        response = event.outcome.response if isinstance(event.outcome, Answered) else None
+        if isinstance(response, pkw.ValueResponse) and response.vtype is not None:
+            self.snapshot.stated[(drive, work.request.pnu)] = response.vtype  # its own type
+        result = self._result(event)
+        reading, previous = self._remember(drive, work.request, result, at)
+        if isinstance(work, PollSpec):
+            self._tell_refusal(drive, work, event.outcome)
+            self.events.job_finished(drive, JobKind.READ, result)
+            if reading is not None:
+                self._land((drive, work.parameter, work.index), reading)
+            return
+        if reading is not None:
+            self._show_confirmed(drive, work, reading)
+        if event.tally is not None and not isinstance(event.outcome, Cancelled):
+            result = replace(result, previous=previous)  # it ran: a write's old value
+        self.events.job_finished(drive, work.kind, result)
+        work.resolve(result)
+
+    def _tell_refusal(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
+        """A poll the drive refuses is logged once with the fault text, then once a day
+        while the refusals last; its first answer after them is logged too."""
+        key = (drive, poll.parameter, poll.index)
+        ctx = {"line": self.line, "drive": drive}
+        where = poll.parameter + (f"[{poll.index}]" if poll.index else "")
+        if isinstance(outcome, Rejected):
+            now = self._clock()
+            told = self._refused.get(key)
+            if told is None or now - told >= REFUSAL_RETELL:
+                again = "" if told is None else " (still, every poll)"
+                log.warning(
+                    "drive %s refuses the poll of %s%s: %s",
+                    drive, where, again, outcome.text or outcome.short, extra=ctx,
+                )  # fmt: skip
+                self._refused[key] = now
+        elif isinstance(outcome, Answered) and self._refused.pop(key, None) is not None:
+            log.info("drive %s answers the poll of %s again", drive, where, extra=ctx)
+
+    def _result(self, event: Finished) -> JobResult:
+        work = event.work
+        try:
+            return job_result(event.outcome, event.tally, work.request, work.fmt)
+        except RemoteProtocolError as exc:
+            ctx = {"line": self.line, "drive": event.drive}
+            log.warning("%s/%s: %s", self.line, event.drive, exc, extra=ctx)
+            return JobResult(TimedOut(f"unusable answer: {exc}"), tally=event.tally)
+
+    def _remember(
+        self, drive: str, request: pkw.PkwRequest, result: JobResult, at: float
+    ) -> tuple[Reading | None, Reading | None]:
+        """(the value the drive just confirmed, the latest one before it).
+
+        An answer that carries the parameter's value - a poll, a read, or a write
+        the drive acknowledged by echoing the value it now holds - makes that value
+        the parameter's latest, so that the next write's old value is not stale.
+        """
+        key = (drive, request.pnu, request.subindex)
+        previous = self.snapshot.latest.get(key)
+        if result.value is None:
+            return None, previous
+        reading = Reading(result.value, result.raw, at)
+        self.snapshot.latest[key] = reading
+        return reading, previous
+
+    def _show_confirmed(self, drive: str, job: Job, reading: Reading) -> None:
+        """A polled parameter shows what a read or an acknowledged write confirmed,
+        when the job decoded it as the poll does."""
+        if (drive, job.request.pnu) in self._waiting:
+            return  # decoded as the catalog says, before the drive described it
+        for spec in self._polls.get(drive, ()):
+            same = spec.request.pnu == job.request.pnu
+            if same and spec.request.subindex == job.request.subindex and spec.fmt == job.fmt:
+                self._land((drive, spec.parameter, spec.index), reading)
+
+    def _land(self, key: ReadingKey, reading: Reading) -> None:
+        self.snapshot.readings[key] = reading
+        self.events.value(key, reading)

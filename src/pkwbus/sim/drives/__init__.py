@@ -1,0 +1,3 @@
+"""drives."""
+
+__all__: list[str] = []

@@ -1,0 +1,131 @@
+"""Built-in parameter tables of the simulated drives (until catalogs exist).
+
+Numbers, types and conversion indexes follow the Danfoss FC 102/302 and
+SINAMICS G120 lists where we know them; where a guide disagrees or is silent
+we chose and say so:
+
+- FC 16-10 Power [kW]: i32 with conversion -2 (0.01 kW). Some FC guides list
+  another index; a catalog will override it.
+- FC 4-14 Motor Speed High Limit [Hz] is the simulated drive's maximum
+  frequency (MAV 0x4000 = 100 % of it). The example telegram of the Danfoss FC 300
+  Design Manual writes 1000 to it (100.0 Hz).
+- FC 15-30 Alarm Log: Error Code is UInt8 on the drive; here u16.
+- USS p0199 stands in for a text parameter (G120's p0199 is numeric).
+- USS p2000 reference frequency scales MAV; p1082 limits the setpoint.
+
+``live`` names a quantity of the drive model (see ``model.py``); such a
+parameter reads the model, never the store.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Final
+
+from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.values import Scaling, ValueType
+
+__all__ = ["FC_TABLE", "MODEL_PARAMS", "TABLES", "USS_TABLE", "Initial", "ParamSpec"]
+
+Initial = float | str | tuple[float, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ParamSpec:
+    """How one parameter of a simulated drive behaves: its initial value, the model
+    quantity it reads (``live``), whether it changes only while stopped, and the
+    type, scaling, unit, limits and writability it answers with. Limits are
+    engineering values. ``described``: False for a parameter whose description
+    elements (AK 4) the drive refuses ("description not available").
+
+    It describes the simulated drive, not what the master knows of a parameter
+    (that is :class:`pkwbus.catalog.ParameterDescription`); a catalog's entries
+    are merged into it by :mod:`pkwbus.sim.drives.catalogs`.
+    """
+
+    pnu: int
+    name: str
+    vtype: ValueType
+    conversion: int = 0
+    unit: str = ""
+    minimum: float | None = None
+    maximum: float | None = None
+    writable: bool = False
+    stopped_only: bool = False  # cannot change while the motor runs
+    array: int = 0  # number of elements; 0 = not an array
+    initial: Initial = 0
+    live: str | None = None
+    scale: float | None = None  # instead of the conversion index
+    unit_factor: float = 1.0  # model units (table.py) -> this parameter's unit
+    described: bool = True  # answers description requests (AK 4)
+
+    @property
+    def scaling(self) -> Scaling:
+        if self.scale is not None:
+            return Scaling.scale(self.scale)
+        return Scaling.conversion(self.conversion)
+
+    @property
+    def elements(self) -> int:
+        return self.array or 1
+
+
+U16, I16, U32, I32, F32, TEXT = (
+    ValueType.U16,
+    ValueType.I16,
+    ValueType.U32,
+    ValueType.I32,
+    ValueType.F32,
+    ValueType.TEXT,
+)
+
+FC_TABLE: Final = (
+    ParamSpec(120, "1-20", U32, -2, "kW", 0.09, 1000.0, True, True, initial=15.0),
+    ParamSpec(341, "3-41", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
+    ParamSpec(342, "3-42", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
+    ParamSpec(414, "4-14", U16, -1, "Hz", 0.0, 500.0, True, initial=50.0),
+    ParamSpec(1500, "15-00", U32, 0, "h", live="hours"),
+    ParamSpec(1502, "15-02", U32, 0, "kWh", live="energy"),
+    ParamSpec(1530, "15-30", U16, array=10, live="alarm_log"),
+    ParamSpec(1540, "15-40", TEXT, writable=False, initial="FC-102"),
+    ParamSpec(1543, "15-43", TEXT, writable=False, initial="05.11"),  # software version
+    ParamSpec(1600, "16-00", U16, live="control_word"),
+    ParamSpec(1603, "16-03", U16, live="status_word"),
+    ParamSpec(1610, "16-10", I32, -2, "kW", live="power"),
+    ParamSpec(1613, "16-13", U16, -1, "Hz", live="frequency"),
+    ParamSpec(1614, "16-14", I32, -2, "A", live="current"),
+    ParamSpec(1630, "16-30", U16, 0, "V", live="dc_link"),
+    ParamSpec(1690, "16-90", U32, live="alarm_word"),
+    ParamSpec(1692, "16-92", U32, live="warning_word"),
+)
+
+USS_TABLE: Final = (
+    ParamSpec(21, "r0021", F32, 0, "Hz", live="frequency"),
+    ParamSpec(24, "r0024", F32, 0, "Hz", live="frequency"),
+    ParamSpec(25, "r0025", F32, 0, "V", live="output_voltage"),
+    ParamSpec(26, "r0026", F32, 0, "V", live="dc_link"),
+    ParamSpec(27, "r0027", F32, 0, "A", live="current"),
+    ParamSpec(32, "r0032", F32, 0, "kW", live="power"),
+    ParamSpec(39, "r0039", F32, 0, "kWh", live="energy"),
+    ParamSpec(52, "r0052", U16, live="status_word"),
+    ParamSpec(199, "p0199", TEXT, writable=True, initial="PUMP"),
+    ParamSpec(304, "p0304", U16, 0, "V", 10.0, 2000.0, True, True, initial=400.0),
+    ParamSpec(947, "r0947", U16, array=8, live="alarm_log"),
+    # Device identification: company (42), device type, firmware version (identity of a drive).
+    ParamSpec(964, "r0964", U16, array=3, initial=(42.0, 1.0, 4710.0)),
+    ParamSpec(1082, "p1082", F32, 0, "Hz", 0.0, 650.0, True, initial=50.0),
+    ParamSpec(1120, "p1120", F32, 0, "s", 0.0, 650.0, True, initial=10.0),
+    ParamSpec(1121, "p1121", F32, 0, "s", 0.0, 650.0, True, initial=10.0),
+    ParamSpec(2000, "p2000", F32, 0, "Hz", 6.0, 650.0, True, initial=50.0),
+    ParamSpec(2050, "r2050", U16, array=8, live="received_pzd"),
+)
+
+# Which parameters steer the model: maximum frequency (MAV scale), ramp times.
+MODEL_PARAMS: Final = MappingProxyType(
+    {
+        Protocol.FC: {"max_frequency": 414, "ramp_up": 341, "ramp_down": 342},
+        Protocol.USS: {"max_frequency": 2000, "ramp_up": 1120, "ramp_down": 1121},
+    }
+)
+TABLES: Final = MappingProxyType({Protocol.FC: FC_TABLE, Protocol.USS: USS_TABLE})
