@@ -48,7 +48,7 @@ soak: $(STAMP)
 # docs/status-page.png: the status page in headless chromium (deploy/browser-setup).
 status-page: $(STAMP)
 	PKWBUS_STATUS_SCREENSHOT=docs/status-page.png $(BIN)/python -m pytest -q -s \
-		tests/api/test_status_page.py -k browser
+		tests/service/http/test_status_page.py -k browser
 
 run: $(STAMP)
 	$(BIN)/pkwbus run --config config/demo.yaml

@@ -20,7 +20,7 @@ from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import DpSlave, NoAnswer, SlaveSetup
 from pkwbus.sim import SimTiming
 from pkwbus.sim.profibus.line import DpSimulator
-from tests.master.dp_wire import DpWire, FakeMaster, record_dp_wire
+from tests.master.wires.profibus.dp_wire import DpWire, FakeMaster, record_dp_wire
 
 
 class Served:
@@ -268,7 +268,7 @@ def test_gsd_file(capsys: pytest.CaptureFixture[str], danfoss: Served, tmp_path:
     assert code == 2 and "GSD line 3" in err
 
 
-VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "gsd_files" / "mm4_like.gse"
+VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "profibus" / "gsd_files" / "mm4_like.gse"
 
 
 def test_a_vendor_shaped_gsd_file_as_it_ships(capsys: pytest.CaptureFixture[str], end: str) -> None:

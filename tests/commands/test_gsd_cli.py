@@ -12,7 +12,7 @@ import pytest
 
 from pkwbus.cli import main
 
-VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "gsd_files" / "mm4_like.gse"
+VENDOR_SHAPED = Path(__file__).parents[1] / "protocol" / "profibus" / "gsd_files" / "mm4_like.gse"
 
 
 def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

@@ -3,7 +3,7 @@
 one line per refused write without a traceback, and writes again once there is room.
 
 The file system is a small tmpfs mounted for the test (root only; skipped where it
-cannot be mounted). tests/api/test_audit_store.py covers the same rules everywhere,
+cannot be mounted). tests/service/http/test_audit_store.py covers the same rules everywhere,
 with the failure made at the SQLite connection.
 """
 

@@ -18,7 +18,7 @@ from pkwbus import cli
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.sim import SimTiming, Simulator
-from tests.service.test_config import BAD, EXPECTED
+from tests.service.config.test_config import BAD, EXPECTED
 
 from .helpers import config_text, fc_line
 from .service import TOKEN

@@ -14,9 +14,9 @@ import pytest
 from pkwbus.cli import main
 from pkwbus.link import Link, LinkState, PortBusy, PortSettings, same_line
 from pkwbus.sim import SimTiming, Simulator
-from tests.api.conftest import line_yaml
 from tests.reliability.helpers import record_wire
 from tests.reliability.service import start_run
+from tests.service.http.conftest import line_yaml
 
 
 def drives(*addresses: int) -> list[dict[str, object]]:

@@ -1,0 +1,3 @@
+"""planning."""
+
+__all__: list[str] = []

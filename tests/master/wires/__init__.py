@@ -1,0 +1,3 @@
+"""wires."""
+
+__all__: list[str] = []

@@ -1,0 +1,3 @@
+"""profibus."""
+
+__all__: list[str] = []

@@ -1,0 +1,117 @@
+"""A PKW job over a PROFIBUS PPO: the slot carries the request, the job's transaction judges
+every answer by the one rule of every bus (the rule of the Siemens CU240 operating
+instructions, "rules for editing requests and responses"): the same request until the
+matching answer, a change acknowledged with another value ends at once, but not before
+the slave showed AK 0 (it may still be answering an earlier request)."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
+from pkwbus.master.planning.transaction import PkwAnswer, PkwTransaction
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.dialects import Command
+from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot
+from tests.protocol.profibus.test_ppo import IDLE, PCV, PPO1, pkw_of, ppo_read, value
+
+TARGET = DriveTarget.create("profibus", 8, dialect_name="danfoss-pcv")
+
+
+class Job:
+    """A slot and the transaction of its job, fed one PPO-read a cycle."""
+
+    def __init__(self, request: pkw.PkwRequest, deadline: float = 10.0) -> None:
+        self.slot = PkwSlot(PPO1, PCV)
+        self.tx = PkwTransaction(TARGET, request, retries=2, deadline=deadline)
+        self.slot.submit(request)
+
+    def cycle(self, data: bytes, now: float) -> Outcome | None:
+        update = self.slot.feed(data)
+        if update.answer is None:
+            return self.tx.feed(TimedOutAnswer, now) if now >= self.tx.deadline else None
+        answer = PkwAnswer(update.answer.response, b"", None, None, 0.001, cyclic=True,
+                           earlier=update.answer.earlier)  # fmt: skip
+        outcome = self.tx.feed(answer, now)
+        if outcome is not None:
+            self.slot.finish()
+        return outcome
+
+
+TimedOutAnswer = PkwAnswer(pkw.NoResponse(0, 0, 0), b"", None, None, 0.0, cyclic=True)
+
+
+def test_the_request_goes_on_until_the_matching_answer_and_no_retry_is_counted() -> None:
+    request = pkw.read(PCV, 1613)
+    job = Job(request)
+    assert job.cycle(value(1613, 7), 0.1) is None  # before AK 0: not even sent
+    assert job.cycle(IDLE, 0.2) is None
+    for t, answer in ((0.3, IDLE), (0.4, value(1614, 9)), (0.5, IDLE)):
+        assert pkw_of(job.slot.outputs()) == request
+        assert job.cycle(answer, t) is None
+    outcome = job.cycle(value(1613, 503), 0.6)
+    assert isinstance(outcome, Answered) and isinstance(outcome.response, pkw.ValueResponse)
+    assert outcome.response.raw == 503
+    # Answering every cycle is how the channel works: no retry, no unexpected answer.
+    assert job.tx.tally.retries == 0 and not job.tx.tally.errors
+    assert pkw_of(job.slot.outputs()).command is Command.NONE
+
+
+def test_a_write_needs_its_echo_and_another_value_ends_it_at_once() -> None:
+    job = Job(pkw.write(PCV, 302, 1500, pkw.Width.WORD))
+    job.cycle(IDLE, 0.0)
+    assert job.cycle(IDLE, 0.1) is None  # AK 0 while the slave works: not yet
+    assert isinstance(job.cycle(value(302, 1500), 0.2), Answered)
+    other = Job(pkw.write(PCV, 302, 1500, pkw.Width.WORD))
+    other.cycle(IDLE, 0.0)
+    assert isinstance(other.cycle(value(302, 1400), 0.1), Mismatch)
+
+
+def test_without_the_ak0_handshake_another_value_is_not_yet_a_mismatch() -> None:
+    job = Job(pkw.write(PCV, 302, 1500, pkw.Width.WORD))
+    for n in range(ppo.IDLE_WAIT_CYCLES):  # the slave keeps answering its poll of 302
+        assert job.cycle(value(302, 1400), n * 0.01) is None
+    assert job.cycle(value(302, 1400), 0.2) is None  # sent now; still an earlier answer?
+    assert isinstance(job.cycle(value(302, 1500), 0.3), Answered)
+
+
+def test_a_rejection_ends_the_job() -> None:
+    job = Job(pkw.read(PCV, 9999 % 2048))
+    job.cycle(IDLE, 0.0)
+    rejected = ppo_read(pkw.Rejection(7, 9999 % 2048, 0, 0, "Illegal PNU", "x"), PCV)
+    assert isinstance(job.cycle(rejected, 0.1), Rejected)
+
+
+def test_the_deadline_ends_the_job() -> None:
+    job = Job(pkw.read(PCV, 1), deadline=1.0)
+    job.cycle(IDLE, 0.0)
+    assert job.cycle(IDLE, 0.5) is None
+    assert isinstance(job.cycle(IDLE, 1.0), TimedOut)
+
+
+answers = st.one_of(
+    st.just(IDLE),
+    st.builds(value, st.integers(0, 3), st.integers(0, 3)),
+    st.binary(min_size=12, max_size=12),
+)
+
+
+@settings(deadline=None)
+@given(st.integers(0, 3), st.lists(answers, max_size=30))
+def test_a_job_never_ends_on_an_answer_that_does_not_match(pnu: int, reads: list[bytes]) -> None:
+    request = pkw.read(PCV, pnu)
+    job = Job(request, deadline=1000.0)
+    for n, data in enumerate(reads):
+        wire = job.slot.outputs()
+        assert wire[8:] == bytes(4)  # never a control word
+        sent = pkw_of(wire)
+        assert sent.command in (Command.NONE, Command.READ)
+        outcome = job.cycle(data, float(n))
+        if outcome is not None:
+            assert sent == request
+            assert isinstance(outcome, Answered | Rejected)
+            assert pkw.matches(request, job.tx.response, PCV) if job.tx.response else False
+            break

@@ -1,0 +1,3 @@
+"""profidrive."""
+
+__all__: list[str] = []

@@ -1,0 +1,3 @@
+"""serial."""
+
+__all__: list[str] = []

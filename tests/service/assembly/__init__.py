@@ -1,0 +1,3 @@
+"""assembly."""
+
+__all__: list[str] = []

@@ -1,0 +1,197 @@
+"""The status page at / in a real headless browser (Debian's chromium, driven by Playwright):
+it loads with no internet, shows the simulated drives' values, and follows their changes.
+
+.ci/run installs chromium (deploy/browser-setup); without it, or without Playwright,
+the test is skipped with the reason.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.service.http.conftest import AUTH, TOKEN, service
+from tests.service.http.threaded import ServedInThread, served_in_thread
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+]  # fmt: skip
+DRIVES = [
+    {"name": "fan1", "address": 1, "catalog": "danfoss-fc",
+     "poll": [("3-41", "100ms"), ("16-13", "200ms"), ("16-90", "200ms"), ("0-01", "1s")],
+     "writable": ["3-41", "0-01"]},
+    {"name": "fan2", "address": 2, "catalog": "danfoss-fc",
+     "poll": [("3-41", "100ms"), ("16-90", "200ms")], "writable": []},
+]  # fmt: skip
+
+
+@pytest.fixture
+def served(tmp_path: Path) -> Iterator[ServedInThread]:
+    with served_in_thread(tmp_path, TOKEN, fc=DRIVES) as running:
+        yield running
+
+
+def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> None:
+    sync_api = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no chromium at {CHROMIUM} (deploy/browser-setup installs it)")
+    elsewhere: list[str] = []
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1100, "height": 800})
+
+            def only_here(route: Any) -> None:  # no internet: anything else is refused
+                if route.request.url.startswith(served.url):
+                    route.continue_()
+                else:
+                    elsewhere.append(route.request.url)
+                    route.abort()
+
+            page.route("**/*", only_here)
+            # A quarter of an hour of trend behind two values (the sparklines' points).
+            served.history("fan1", "16-13", [30.0 + (k % 12) for k in range(59)])
+            served.history("fan2", "3-41", [5.0 + (k // 20) for k in range(59)])
+            page.goto(served.url + "/")
+            fan1 = page.locator('[data-drive="fan1"]')
+            ramp = fan1.locator('[data-parameter="3-41"] .value')
+            sync_api.expect(ramp).to_have_text(re.compile(r"^\d+(\.\d+)? s$"), timeout=20_000)
+            sync_api.expect(fan1.locator(".state")).to_have_text("up")
+            # to the resolution of its conversion index (-1), with the catalog's name
+            frequency = fan1.locator('[data-parameter="16-13"]')
+            sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
+            sync_api.expect(frequency.locator(".title")).to_have_text("Frequency")
+            sync_api.expect(frequency.locator(".trend svg.spark")).to_have_count(1)
+            # Its sparkline: a line through the points of the last 15 minutes.
+            spark = frequency.locator(".trend svg.spark")
+            sync_api.expect(spark.locator("title")).to_have_text(
+                re.compile(r"^last 15 min: 30 to \d+(\.\d+)?$")
+            )
+            drawn = spark.locator("path").get_attribute("d") or ""
+            assert drawn.startswith("M") and drawn.count("L") >= 50, drawn
+            # New trends redraw a kept row's sparkline in its place (asked for now rather
+            # than at the page's next 15 s).
+            ramp_spark = fan1.locator('[data-parameter="3-41"] .trend svg.spark')
+            served.history("fan1", "3-41", [2.0 + (k % 3) for k in range(59)])
+            page.evaluate("trendsFetched = 0")
+            sync_api.expect(ramp_spark.locator("title")).to_have_text(
+                re.compile(r"^last 15 min: 2 to \d+(\.\d+)?$"), timeout=20_000
+            )
+            # An enumeration: the option's text as the Danfoss design guide words it.
+            language = fan1.locator('[data-parameter="0-01"]')
+            sync_api.expect(language.locator(".value")).to_have_text("English [0]")
+            sync_api.expect(language.locator(".title")).to_have_text("Language")
+            sync_api.expect(page.locator('[data-drive="fan2"]')).to_be_visible()
+            sync_api.expect(page.locator('#lines [data-line="line_fc"]')).to_contain_text("open")
+            sync_api.expect(fan1.locator(".bits")).to_contain_text("running")
+            # The line's share of busy time from the second refresh on; the drive's counts.
+            busy = page.locator('#lines [data-line="line_fc"] .busy')
+            sync_api.expect(busy).to_have_text(re.compile(r"^\d+ %$"), timeout=20_000)
+            sync_api.expect(fan1.locator(".counts")).to_contain_text("faults")
+
+            served.set_value(1, 341, 4321)  # the drive changes: the page follows by itself
+            sync_api.expect(ramp).to_have_text("43.21 s", timeout=20_000)
+
+            # A trip: its alarm in the vendor's words (16-90 bit 2, Danfoss MCA 121 manual),
+            # and the drive in alarm comes first.
+            served.trip(2, 14, 2)
+            fan2 = page.locator('[data-drive="fan2"]')
+            alarm = fan2.locator('ul.alarms li[data-code="16-90 bit 2"]')
+            sync_api.expect(alarm).to_contain_text("Earth fault", timeout=20_000)
+            sync_api.expect(alarm).to_have_class("alarm")
+            first = page.locator("#drives .drive").first
+            sync_api.expect(first).to_have_attribute("data-drive", "fan2")
+            # A drive's section folds, and stays folded across refreshes.
+            fan2.locator("button.fold").click()
+            sync_api.expect(fan2.locator("table")).to_be_hidden()
+            page.wait_for_timeout(2500)
+            sync_api.expect(fan2.locator("table")).to_be_hidden()
+            fan2.locator("button.fold").click()
+            sync_api.expect(fan2.locator("table")).to_be_visible()
+
+            # The last write attempts show once the page is given a token.
+            audit = page.locator("#audit")
+            sync_api.expect(audit).to_be_hidden()
+            written = httpx.put(
+                f"{served.url}/api/v1/drives/fan1/parameters/3-41",
+                json={"value": 7.5}, headers=AUTH, timeout=30,
+            )  # fmt: skip
+            assert written.status_code == 200, written.text
+            page.fill("#token", TOKEN)
+            page.click("#token-form button")
+            sync_api.expect(audit).to_contain_text("fan1", timeout=20_000)
+            sync_api.expect(audit).to_contain_text("7.5")
+            sync_api.expect(audit.locator("tbody tr").first).to_contain_text("ok")
+            assert page.input_value("#token") == ""  # not left in the form
+
+            # An enumeration's form lists its options with their texts.
+            page.select_option("#write-target", "fan1/0-01")
+            sync_api.expect(page.locator("#write-now")).to_contain_text(
+                "Language: now English [0]; options 0 English, 4 Danish"
+            )
+            # The write form: the parameter, its limits and value, a confirmation, the answer.
+            page.select_option("#write-target", "fan1/3-41")
+            sync_api.expect(page.locator("#write-now")).to_contain_text("now 7.5 s")
+            page.fill("#write-value", "12.5")
+            page.click("#write-button")
+            sync_api.expect(page.locator("#write-button")).to_have_text(
+                re.compile(r"^Confirm: 7\.5 \u2192 12\.5 s$")
+            )
+            assert served.svc.sim.drives[1].value(341) == 750  # nothing sent before the confirm
+            page.click("#write-button")
+            result = page.locator("#write-result")
+            sync_api.expect(result).to_contain_text("fan1/3-41: written 12.5 s", timeout=20_000)
+            assert served.svc.sim.drives[1].value(341) == 1250
+            sync_api.expect(audit.locator("tbody tr").first).to_contain_text("12.5", timeout=20_000)
+            # A value outside the limits: the API's refusal, in words, and nothing sent.
+            page.fill("#write-value", "99999")
+            page.click("#write-button")
+            page.click("#write-button")
+            sync_api.expect(result).to_contain_text("refused (422", timeout=20_000)
+            assert served.svc.sim.drives[1].value(341) == 1250
+            # A wrong token: refused.
+            page.fill("#token", "not-the-token")
+            page.click("#token-form button")
+            sync_api.expect(result).to_contain_text("token: the token was refused", timeout=20_000)
+            page.fill("#write-value", "10")
+            page.click("#write-button")
+            sync_api.expect(result).to_contain_text("type the write token below first")
+            sync_api.expect(ramp).to_have_text("12.50 s", timeout=20_000)  # what the drive holds
+
+            shot = tmp_path / "status-page.png"
+            page.screenshot(path=str(shot), full_page=True)
+            print(f"\nstatus page screenshot: {shot}")
+            wanted = os.environ.get("PKWBUS_STATUS_SCREENSHOT")  # make status-page
+            if wanted:
+                shutil.copyfile(shot, wanted)
+                print(f"copied to {wanted}")
+        finally:
+            browser.close()
+    assert elsewhere == []
+
+
+async def test_status_page_and_assets_are_served_locally(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        page = await svc.client.get("/")
+        assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+        assets = re.findall(r"""(?:src|href)="([^"]+)""", page.text)
+        assert {"assets/status/status.js", "assets/status/status.css"} <= set(assets)
+        for asset in assets:
+            # Relative to the page: from this host, under whatever prefix serves it.
+            assert not asset.startswith("/") and "//" not in asset, asset
+            assert (await svc.client.get("/" + asset)).status_code == 200, asset
+        script = (await svc.client.get("/assets/status/status.js")).text
+        # The SVG namespace is a name the browser never fetches; nothing else is a URL.
+        script = script.replace('"http://www.w3.org/2000/svg"', '"svg-namespace"')
+        assert "http://" not in script and "https://" not in script
+        assert '"api/v1/drives"' in script
+        assert not re.search(r"""["'`]/(api|readyz|metrics|docs|assets)""", script)

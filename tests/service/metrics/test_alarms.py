@@ -1,0 +1,156 @@
+"""Alarms in words: a simulated drive trips, its alarm word is shown with the vendor's text
+on the page's API and as pkwbus_drive_alarm, and goes when the drive is reset."""
+
+from __future__ import annotations
+
+import logging
+
+import httpx
+import pytest
+from prometheus_client import CollectorRegistry, generate_latest
+
+from pkwbus.catalog.alarms import alarm_table
+from pkwbus.master.snapshot import Reading
+from pkwbus.service.http.api import create_app
+from pkwbus.service.metrics.alarms import AlarmBoard, Watched
+from pkwbus.sim import SimTiming, Simulator
+from pkwbus.sim.drives.model import ModelConfig
+from tests.master.conftest import until
+from tests.service.assembly.test_service_e2e import fc_line, running, sample
+
+DRIVES = """
+      - name: press
+        address: 1
+        catalog: danfoss-fc
+        poll: [{parameter: "16-90", every: 100ms}, {parameter: "16-13", every: 100ms}]
+      - name: saw
+        address: 2
+        catalog: danfoss-fc
+        poll: [{parameter: "16-90", every: 100ms}]
+"""
+
+
+def test_the_danfoss_alarm_word_against_its_table() -> None:
+    # Danfoss VLT EtherNet/IP MCA 121 manual, the table of 16-90: 00000004 Earth fault,
+    # 00000040 Over current; bit 13 is not explained there: its code alone.
+    table = alarm_table("danfoss-fc")
+    assert table is not None
+    word = table.decoder(1690)
+    assert word is not None
+    alarms = word.decode(0x00000004 | 0x00000040 | 0x00002000)
+    assert [(a.code, a.text) for a in alarms] == [
+        ("16-90 bit 2", "Earth fault"), ("16-90 bit 6", "Over current"), ("16-90 bit 13", "")
+    ]  # fmt: skip
+    assert word.decode(0) == ()
+    assert table.decoder(1613) is None  # not an alarm parameter
+
+
+def test_the_danfoss_extended_status_word_is_told_bit_by_bit_and_never_an_alarm() -> None:
+    # 16-94 Ext. Status Word (Danfoss BACnet OI MG.14.C1.02, 7.1: one bit each); no
+    # reachable document words its bits: each set bit is its code alone.
+    table = alarm_table("danfoss-fc")
+    assert table is not None
+    word = table.decoder(1694)
+    assert word is not None and word.kind == "status" and not word.polled
+    alarms = word.decode(0x00000001 | 0x00000008)
+    assert [(a.code, a.text, a.kind) for a in alarms] == [
+        ("16-94 bit 0", "", "status"), ("16-94 bit 3", "", "status")
+    ]  # fmt: skip
+    # Polled, its value is told in bits on the page; no alarm comes of it.
+    registry = CollectorRegistry()
+    board = AlarmBoard({("press", "16-94", 0): Watched("line_fc", word)}, registry)
+    board.landed(("press", "16-94", 0), Reading(0x9, 0x9, 1000.0))
+    assert board.said(("press", "16-94", 0), 0x9) == "16-94 bit 0; 16-94 bit 3"
+    assert board.active("press") == []
+    assert "pkwbus_drive_alarm{" not in generate_latest(registry).decode()
+
+
+async def test_a_trip_is_shown_in_words_and_goes_with_the_reset(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    calm = ModelConfig(trip_rate=0.0, warning_rate=0.0, trip_reset_seconds=0.0)
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.001), catalog="danfoss-fc",
+                    model=calm)  # fmt: skip
+    server = await sim.serve_tcp("127.0.0.1", 0)
+    caplog.set_level(logging.INFO, logger="pkwbus.service.metrics.alarms")
+    try:
+        async with running(f"lines:{fc_line('l1', server.url, DRIVES)}") as runtime:
+            app = create_app(runtime, audit=None, write_token=None)
+            async with httpx.AsyncClient(
+                transport=httpx.ASGITransport(app=app), base_url="http://t"
+            ) as client:
+                await until(lambda: sample(runtime, "pkwbus_parameter_value", drive="press",
+                                           parameter="16-90") == 0)  # fmt: skip
+                assert sample(runtime, "pkwbus_drive_alarm", drive="press") is None
+                sim.drives[1].model.trip(14, 2)  # earth fault, bit 2 of 16-90
+                labels = {"drive": "press", "code": "16-90 bit 2", "text": "Earth fault",
+                          "kind": "alarm", "line": "l1"}  # fmt: skip
+                await until(lambda: sample(runtime, "pkwbus_drive_alarm", **labels) == 1)
+                view = (await client.get("/api/v1/drives")).json()
+                press = next(d for d in view if d["name"] == "press")
+                (alarm,) = press["alarms"]
+                assert (alarm["code"], alarm["text"], alarm["kind"]) == (
+                    "16-90 bit 2", "Earth fault", "alarm"
+                )  # fmt: skip
+                assert alarm["parameter"] == "16-90" and alarm["since"] > 0
+                saw = next(d for d in view if d["name"] == "saw")
+                assert saw["alarms"] == []  # the other drive is not in alarm
+                assert any("alarm 16-90 bit 2 Earth fault" in r.message for r in caplog.records)
+                # Reset at the drive: the alarm goes, its series with it.
+                sim.drives[1].model.reset()
+                await until(lambda: sample(runtime, "pkwbus_drive_alarm", drive="press") is None)
+                view = (await client.get("/api/v1/drives")).json()
+                assert next(d for d in view if d["name"] == "press")["alarms"] == []
+                assert any("is gone" in r.message for r in caplog.records)
+    finally:
+        await server.close()
+
+
+USS_DRIVES = """
+      - name: conveyor
+        address: 3
+        dialect: uss
+        pkw_words: 4
+        catalog: siemens-g120
+        poll: [{parameter: "r0947[0]", every: 100ms}, {parameter: r0021, every: 100ms}]
+"""
+
+
+def test_the_sinamics_fault_numbers_against_the_list_manual() -> None:
+    # SINAMICS G120 CU240B-2/CU240E-2 List Manual 02/2023: F30001 "Power unit: Overcurrent";
+    # r0947 holds the number without its letter (LH9 3.1.1: F01003 = 1003).
+    table = alarm_table("siemens-g120")
+    assert table is not None
+    faults, alarms = table.decoder(947), table.decoder(2122)
+    assert faults is not None and alarms is not None
+    assert [(a.code, a.text) for a in faults.decode(30001)] == [
+        ("F30001", "Power unit: Overcurrent")
+    ]
+    assert [(a.code, a.text, a.kind) for a in alarms.decode(7409)] == [
+        ("A07409", "Drive: U/f control, current limiting controller active", "warning")
+    ]
+    assert [(a.code, a.text) for a in faults.decode(1)] == [("F00001", "")]  # unexplained
+    assert faults.decode(0) == ()
+
+
+async def test_a_sinamics_fault_number_is_shown_in_words_until_acknowledged() -> None:
+    calm = ModelConfig(trip_rate=0.0, warning_rate=0.0, trip_reset_seconds=0.0)
+    sim = Simulator("uss", [3], timing=SimTiming(response_delay=0.001), catalog="siemens-g120",
+                    model=calm)  # fmt: skip
+    server = await sim.serve_tcp("127.0.0.1", 0)
+    line = fc_line("l2", server.url, USS_DRIVES).replace("protocol: fc", "protocol: uss")
+    try:
+        async with running(f"lines:{line}") as runtime:
+            labels = {"drive": "conveyor", "code": "F30001", "text": "Power unit: Overcurrent",
+                      "kind": "alarm"}  # fmt: skip
+            await until(lambda: sample(runtime, "pkwbus_parameter_value", drive="conveyor",
+                                       parameter="r0947") == 0)  # fmt: skip
+            sim.drives[3].model.trip(30001, 0)
+            await until(lambda: sample(runtime, "pkwbus_drive_alarm", **labels) == 1)
+            assert runtime.alarms is not None
+            (active,) = runtime.alarms.active("conveyor")
+            assert active.alarm.shown == "F30001 Power unit: Overcurrent"
+            sim.drives[3].model.reset()  # acknowledged: out of the current entries
+            await until(lambda: sample(runtime, "pkwbus_drive_alarm", drive="conveyor") is None)
+    finally:
+        await server.close()
