@@ -20,6 +20,7 @@ from pathlib import Path
 from _measure import BenchSetupError, stop_process
 
 from pkwbus.link import PortSettings
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol.serial.telegram import Protocol
 
@@ -164,7 +165,7 @@ class Counting:
         self.exchanges += 1
 
     def job_finished(self, drive: str, job: object, result: object) -> None:
-        from pkwbus.master.planning.transaction import Answered
+        from pkwbus.master.planning.outcomes import Answered
 
         outcome = getattr(result, "outcome", None)
         book = self.ok if isinstance(outcome, Answered) else self.failed
@@ -191,7 +192,7 @@ def fc_drive(name: str, address: int, pnus: Sequence[int], every: float, protoco
 
     target = DriveTarget.create(protocol, address)
     polls = tuple(PollSpec(str(p), 0, pkw.read(target.dialect, p), every) for p in pnus)
-    return DriveSpec(name, target, polls)
+    return DriveSpec(name, carrier_for(target), polls)
 
 
 def service_config(

@@ -34,8 +34,10 @@ from _common import best_median, make_line, sim_process
 from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import Reply
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
-from pkwbus.master.planning.transaction import Answered, ResponseTelegram
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.wire import ExchangeWire
@@ -55,10 +57,10 @@ async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
     bad = 0
     try:
         for _ in range(warmup):
-            await line.exchange(target, telegram)
+            await line.exchange(target.adr, telegram)
         with measure_cpu(ops=n) as t:
             for _ in range(n):
-                if not isinstance(await line.exchange(target, telegram), ResponseTelegram):
+                if not isinstance(await line.exchange(target.adr, telegram), Reply):
                     bad += 1
     finally:
         await line.close()
@@ -107,9 +109,9 @@ async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
             PollSpec(p, 0, pkw.read(target.dialect, int(p.replace("-", ""))), 0.0)
             for p in ("16-13", "16-14", "16-10")
         )
-        drives.append(DriveSpec(name, target, polls))
+        drives.append(DriveSpec(name, carrier_for(target), polls))
     line = make_line(port, "fc", BAUDRATE, timeout=0.5)
-    line_metrics = metrics.for_line("bench", {d.name: d.target.dialect for d in drives})
+    line_metrics = metrics.for_line("bench", {d.name: d.carrier.dialect for d in drives})
     counting = Counting(line_metrics)
     sched = LineRunner(
         "bench",

@@ -58,7 +58,7 @@ from _measure import BenchSetupError, markdown_table, measure_cpu
 from cpu_per_exchange import raw_loop
 
 from pkwbus import link
-from pkwbus.master.planning.transaction import ResponseTelegram
+from pkwbus.master.planning.answers import Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 
@@ -160,7 +160,7 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
         def done(result: object) -> None:
             nonlocal count, bad
             count += 1
-            bad += not isinstance(result, ResponseTelegram)
+            bad += not isinstance(result, Reply)
             if count >= total:
                 finished.set_result(bad)
             else:

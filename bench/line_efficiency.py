@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.planning.transaction import Answered
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.sessions.jobs import perform, run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
-from pkwbus.master.planning.transaction import Answered
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.sessions.jobs import run_job
 from pkwbus.master.target import DriveTarget

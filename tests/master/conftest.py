@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.planning.transaction import Outcome
+from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.sessions.jobs import run_job as _run_job
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line

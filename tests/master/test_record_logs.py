@@ -6,6 +6,7 @@ import logging
 
 import pytest
 
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.master.planning.plan import (
     Described,
@@ -28,7 +29,11 @@ REFUSED = Rejected(0, "Illegal PNU", "illegal PNU")
 
 def record(clock: list[float]) -> LineRecord:
     return LineRecord(
-        "l1", [DriveSpec("fan", TARGET, (POLL,))], Snapshot(), NoEvents(), clock=lambda: clock[0]
+        "l1",
+        [DriveSpec("fan", carrier_for(TARGET), (POLL,))],
+        Snapshot(),
+        NoEvents(),
+        clock=lambda: clock[0],
     )
 
 

@@ -15,9 +15,11 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
+from pkwbus.master.planning.outcomes import Answered, LineFailed
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
-from pkwbus.master.planning.transaction import Answered, ExchangeResult, LineFailed
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
@@ -69,7 +71,7 @@ def drive_specs(
     for a in addresses:
         target = DriveTarget.create(protocol, a)
         polls = tuple(PollSpec(str(p), 0, pkw.read(target.dialect, p), every) for p in pnus)
-        specs.append(DriveSpec(f"d{a}", target, polls))
+        specs.append(DriveSpec(f"d{a}", carrier_for(target), polls))
     return specs
 
 
@@ -139,7 +141,7 @@ async def test_stop_cancels_queued_jobs_and_returns() -> None:
         futures = []
         for _ in range(3):
             f: asyncio.Future[JobResult] = loop.create_future()
-            req = pkw.read(specs[0].target.dialect, 1614)
+            req = pkw.read(specs[0].carrier.dialect, 1614)
             s.submit(Job("d1", req, JobKind.READ, Priority.READ, loop.time() + 5, future=f))
             futures.append(f)
         s.stop()
@@ -193,7 +195,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
     loop = asyncio.get_running_loop()
     try:
         await asyncio.sleep(0.2)
-        target = specs[0].target
+        target = specs[0].carrier
         write = pkw.write(target.dialect, 1121, 0x41200000, pkw.Width.DWORD)
         future: asyncio.Future[JobResult] = loop.create_future()
         s.submit(Job("d1", write, JobKind.WRITE, Priority.WRITE, loop.time() + 30, future=future))
@@ -253,7 +255,7 @@ async def test_a_job_is_recorded_at_once_however_long_a_batch_may_last() -> None
             assert not s.snapshot.readings, "the polls wait for their batch"
             loop = asyncio.get_running_loop()
             future: asyncio.Future[JobResult] = loop.create_future()
-            request = pkw.read(specs[0].target.dialect, 341)
+            request = pkw.read(specs[0].carrier.dialect, 341)
             s.submit(
                 Job("d1", request, JobKind.READ, Priority.READ, loop.time() + 5, future=future)
             )

@@ -16,7 +16,10 @@ from hypothesis import strategies as st
 
 from pkwbus.catalog import CatalogError
 from pkwbus.catalog.loader import _parse_catalog
-from pkwbus.master.planning.transaction import ErrorKind, Failure, PkwTransaction, ResponseTelegram
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
+from pkwbus.master.planning.carrier import Item
+from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol import values as params
@@ -177,7 +180,7 @@ def test_decoded_response_encodes_back_to_the_same_pke_and_ind(
 
 
 @st.composite
-def transactions(draw: st.DrawFn) -> PkwTransaction:
+def transactions(draw: st.DrawFn) -> tuple[PkwTransaction, DriveTarget]:
     protocol = draw(st.sampled_from(["fc", "uss"]))
     names = ["fc"] if protocol == "fc" else [n for n in DIALECTS if n != "fc"]
     try:
@@ -199,18 +202,18 @@ def transactions(draw: st.DrawFn) -> PkwTransaction:
             value=draw(st.integers(0, 0xFFFF)),
             text=text if draw(st.booleans()) else b"",
         )
-        return PkwTransaction(
-            target, req, retries=draw(st.integers(0, 4)), deadline=draw(st.integers(1, 50))
+        tx = carrier_for(target).transaction(
+            [Item(req)], retries=draw(st.integers(0, 4)), deadline=draw(st.integers(1, 50))
         )
+        assert isinstance(tx, PkwTransaction)
+        return tx, target
     except LocalProtocolError:
         assume(False)
         raise
 
 
-def replies(job: PkwTransaction) -> st.SearchStrategy[ResponseTelegram | Failure]:
-    target = job.target
-
-    def answer(ak: int, own_pnu: bool, raw: int) -> ResponseTelegram:
+def replies(job: PkwTransaction, target: DriveTarget) -> st.SearchStrategy[Reply | Failure]:
+    def answer(ak: int, own_pnu: bool, raw: int) -> Reply:
         resp = pkw.ValueResponse(
             ak, job.request.pnu if own_pnu else 7, job.request.subindex, raw, pkw.Width.WORD
         )
@@ -218,10 +221,10 @@ def replies(job: PkwTransaction) -> st.SearchStrategy[ResponseTelegram | Failure
             body = pkw.encode_response(resp, target.dialect, target.ind_layout, 4)
         except LocalProtocolError:
             body = b""
-        return ResponseTelegram(target.adr, body + bytes(2 * target.shape.pzd_words), 0.01)
+        return Reply(target.adr, body + bytes(2 * target.shape.pzd_words), 0.01)
 
     return st.one_of(
-        st.binary(max_size=30).map(lambda b: ResponseTelegram(target.adr, b, 0.01)),
+        st.binary(max_size=30).map(lambda b: Reply(target.adr, b, 0.01)),
         st.builds(answer, st.integers(0, 15), st.booleans(), st.integers(0, 0xFFFF)),
         st.builds(Failure, st.sampled_from(list(ErrorKind)), st.just("test")),
     )
@@ -230,10 +233,10 @@ def replies(job: PkwTransaction) -> st.SearchStrategy[ResponseTelegram | Failure
 @FAST
 @given(st.data())
 def test_transaction_never_raises_and_ends_by_its_last_retry(data: st.DataObject) -> None:
-    job = data.draw(transactions())
+    job, target = data.draw(transactions())
     counted = 0
     for step in range(int(job.deadline) + 1):  # one step a second, up to the deadline itself
-        result = data.draw(replies(job))
+        result = data.draw(replies(job, target))
         if isinstance(result, Failure):
             counted += result.kind not in (ErrorKind.UNEXPECTED, ErrorKind.PORT)
         outcome = job.feed(result, now=float(step))

@@ -32,6 +32,7 @@ from pkwbus.commands.common import (
 )
 from pkwbus.commands.profibus.context import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
 from pkwbus.link import PortError
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.jobs import JobSession
@@ -100,7 +101,9 @@ async def _jobs(
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
     drive = JobSession(
-        ExchangeWire(build_line(args)), DriveSpec("drive", target), retries=args.retries
+        ExchangeWire(build_line(args)),
+        DriveSpec("drive", carrier_for(target)),
+        retries=args.retries,
     )
     try:
         await drive.open()

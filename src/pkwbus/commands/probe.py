@@ -22,7 +22,7 @@ from pkwbus import link
 from pkwbus.catalog.precedence import disagreements
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
-from pkwbus.master.planning.transaction import Failure, ResponseTelegram
+from pkwbus.master.planning.answers import Failure, Reply
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_description, ask_pkw_length
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
@@ -78,12 +78,12 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
             target = target_for(line, drive)
             result = None
             for _ in range(line.retries + 1):
-                result = await bus.exchange(target, target.probe())
-                if isinstance(result, ResponseTelegram) or (
+                result = await bus.exchange(target.adr, target.probe())
+                if isinstance(result, Reply) or (
                     isinstance(result, Failure) and result.kind.value == "port"
                 ):
                     break
-            if isinstance(result, ResponseTelegram):
+            if isinstance(result, Reply):
                 told = await _pkw_length(bus, line, target)
                 out.append(f"  {drive.name} (address {drive.address}): answers{told}")
                 out += await _descriptions(bus, line, drive, target)

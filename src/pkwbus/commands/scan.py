@@ -35,7 +35,8 @@ from pkwbus.commands.profibus import scan as dp_scan
 from pkwbus.commands.profibus.context import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
-from pkwbus.master.planning.transaction import Answered, ErrorKind, Failure, ResponseTelegram
+from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.sessions.jobs import run_job
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.target import DriveTarget
@@ -159,10 +160,10 @@ async def _probe(
     args: argparse.Namespace, line: Line, target: DriveTarget
 ) -> dict[str, Any] | None:
     for _ in range(args.retries + 1):
-        result = await line.exchange(target, target.probe())
+        result = await line.exchange(target.adr, target.probe())
         if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
             raise CommandError(result.detail, Exit.NO_ANSWER)
-        if isinstance(result, ResponseTelegram):
+        if isinstance(result, Reply):
             entry = _status(target, result)
             entry["type"] = await _drive_type(line, target)
             if target.protocol is Protocol.USS:
@@ -171,7 +172,7 @@ async def _probe(
     return None
 
 
-def _status(target: DriveTarget, reply: ResponseTelegram) -> dict[str, Any]:
+def _status(target: DriveTarget, reply: Reply) -> dict[str, Any]:
     entry: dict[str, Any] = {"address": target.address, "status_word": None, "status": {}}
     try:
         block = split_block(reply.data, target.response_shape(len(reply.data)))

@@ -15,8 +15,10 @@ from typing import Protocol
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Disagreement, disagreements
+from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.describing import ASK_AGAIN
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult
+from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
     DriveSpec,
@@ -28,14 +30,7 @@ from pkwbus.master.planning.plan import (
     PollSpec,
     StatusWord,
 )
-from pkwbus.master.planning.transaction import (
-    Answered,
-    ExchangeResult,
-    Outcome,
-    Rejected,
-    Tally,
-    TimedOut,
-)
+from pkwbus.master.planning.transaction import Tally
 from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError

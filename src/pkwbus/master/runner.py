@@ -34,11 +34,11 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from pkwbus.link import Link, LinkState, PortError
+from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job
 from pkwbus.master.planning.plan import DriveSpec, Event, Finished, HealthChanged
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import ExchangeResult
 from pkwbus.master.recorder import LineEvents, LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
 

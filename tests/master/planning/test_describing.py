@@ -11,6 +11,8 @@ from fractions import Fraction
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.describing import ASK_AGAIN, UNANSWERED_AT_MOST, DriveDescriber
 from pkwbus.master.planning.identity import DescriptionBook, identity_requests
 from pkwbus.master.planning.outcomes import Answered, LineFailed, Outcome, TimedOut
@@ -25,7 +27,6 @@ from pkwbus.master.planning.plan import (
     Send,
 )
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription, elements_to_read
@@ -45,9 +46,11 @@ def spec(address: int, *, describe: bool) -> DriveSpec:
     request = pkw.read(target.dialect, CURRENT)
     poll = PollSpec("16-14", 0, request, 0.1, catalog, layers)
     if not describe:
-        return DriveSpec(f"d{address}", target, (poll,))
+        return DriveSpec(f"d{address}", carrier_for(target), (poll,))
     wanted = DescribeTarget(CURRENT, "16-14", elements_to_read(limits=False), catalog)
-    return DriveSpec(f"d{address}", target, (poll,), (wanted,), DescriptionForm.DANFOSS_FC)
+    return DriveSpec(
+        f"d{address}", carrier_for(target), (poll,), (wanted,), DescriptionForm.DANFOSS_FC
+    )
 
 
 class SilentOnDescriptions(FakeLine):
@@ -58,7 +61,9 @@ class SilentOnDescriptions(FakeLine):
             e for e in self.sim.deframer().feed(send.telegram) if isinstance(e, Telegram)
         )
         ak = (request.data[0] >> 4) if request.adr & 0x1F == 1 else 0
-        if send.drive == "d1" and ak == send.target.dialect.request_id(Command.READ_DESCRIPTION):
+        if send.drive == "d1" and ak == self.planner.drive(send.drive).carrier.dialect.request_id(
+            Command.READ_DESCRIPTION
+        ):
             self.now += TIMEOUT
             return Failure(ErrorKind.TIMEOUT, "no answer")
         return super().answer(send)
@@ -185,7 +190,9 @@ def test_no_overrun_for_polls_that_waited_for_their_description() -> None:
         request = pkw.read(target.dialect, pnu)
         polls.append(PollSpec(name, 0, request, 0.004, entry, Layers(entry, catalog=entry)))
         wanted.append(DescribeTarget(pnu, name, elements_to_read(limits=False), entry))
-    drive = DriveSpec("d1", target, tuple(polls), tuple(wanted), DescriptionForm.DANFOSS_FC)
+    drive = DriveSpec(
+        "d1", carrier_for(target), tuple(polls), tuple(wanted), DescriptionForm.DANFOSS_FC
+    )
     sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
     fake = FakeLine(Planner([drive], poll_deadline=0.5), sim)
     fake.run(0.1)
@@ -272,7 +279,7 @@ def test_the_book_keeps_no_limits_a_drive_may_change() -> None:
     target = DriveTarget.create("fc", 1)
     entry = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341))
     wanted = DescribeTarget(341, "3-41", elements_to_read(limits=True), entry)
-    drive = DriveSpec("d1", target, (), (wanted,), DescriptionForm.DANFOSS_FC, book)
+    drive = DriveSpec("d1", carrier_for(target), (), (wanted,), DescriptionForm.DANFOSS_FC, book)
     fake = FakeLine(Planner([drive], poll_deadline=0.5), sim)
     fake.run(1.0)
     (done,) = [e for e in fake.events if isinstance(e, Described)]
@@ -290,7 +297,7 @@ def test_a_drive_of_a_described_kind_reads_only_its_own_limits() -> None:
     entry = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(341))
     wanted = DescribeTarget(341, "3-41", elements_to_read(limits=True), entry)
     drives = [
-        DriveSpec(f"d{a}", DriveTarget.create("fc", a), (), (wanted,),
+        DriveSpec(f"d{a}", carrier_for(DriveTarget.create("fc", a)), (), (wanted,),
                   DescriptionForm.DANFOSS_FC, book)
         for a in (1, 2)
     ]  # fmt: skip

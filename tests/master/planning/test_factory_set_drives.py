@@ -10,11 +10,13 @@ from typing import Any
 
 import pytest
 
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import Reply
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.outcomes import Answered, Mismatch, NotSent, Rejected
 from pkwbus.master.planning.plan import PkwLengthTold
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import PkwTransaction, ResponseTelegram
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
@@ -211,7 +213,7 @@ def test_a_double_word_change_to_a_fixed_3_drive_ends_unsent() -> None:
     exception out of the planner, no job left unfinished)."""
     sim = Simulator("uss", [1], specs=SPECS, pkw_words=3, timing=SimTiming(response_delay=0.0))
     line = down_then_back(sim)
-    dialect = line.planner.drives[0].target.dialect
+    dialect = line.planner.drives[0].carrier.dialect
     job = line.submit("d1", pkw.write(dialect, 1120, f32(12.5), pkw.Width.DWORD))
     line.run(1.0)
     (finished,) = line.finished(job)
@@ -231,14 +233,15 @@ def test_a_repeated_rejection_of_the_read_is_not_the_changes() -> None:
     refusal = pkw.encode_response(
         pkw.Rejection(7, 2010, 0, 4, "", ""), d, target.ind_layout, VARIABLE
     )
-    change = PkwTransaction(target, pkw.write(d, 2010, 9, pkw.Width.WORD), retries=2,
-                            deadline=10.0, stale=refusal)  # fmt: skip
-    repeated = ResponseTelegram(1, refusal + bytes(4), 0.001)
+    change = carrier_for(target).transaction(
+        [Item(pkw.write(d, 2010, 9, pkw.Width.WORD))], retries=2, deadline=10.0, stale=refusal
+    )
+    repeated = Reply(1, refusal + bytes(4), 0.001)
     assert change.feed(repeated, 0.0) is None and change.waiting
     other = pkw.encode_response(
         pkw.Rejection(7, 2010, 0, 2, "", ""), d, target.ind_layout, VARIABLE
     )
-    outcome = change.feed(ResponseTelegram(1, other + bytes(4), 0.001), 0.1)
+    outcome = change.feed(Reply(1, other + bytes(4), 0.001), 0.1)
     assert isinstance(outcome, Rejected) and outcome.fault == 2
 
 

@@ -7,7 +7,7 @@ import gc
 import os
 
 from pkwbus.link.serialport import closer
-from pkwbus.master.planning.transaction import Answered
+from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from tests.master.conftest import make_sim, open_line, run_job, serve

@@ -16,9 +16,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pkwbus.master.carriers import SerialCarrier, carrier_for
 from pkwbus.master.planning import planner as planner_module
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
+from pkwbus.master.planning.outcomes import Answered, LineFailed, TimedOut
 from pkwbus.master.planning.plan import (
     DriveSpec,
     Event,
@@ -31,15 +34,6 @@ from pkwbus.master.planning.plan import (
     StatusWord,
 )
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import (
-    Answered,
-    ErrorKind,
-    ExchangeResult,
-    Failure,
-    LineFailed,
-    ResponseTelegram,
-    TimedOut,
-)
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Telegram
@@ -55,8 +49,15 @@ def drives(protocol: str, addresses: list[int], pnus: list[int], every: float) -
     for a in addresses:
         target = DriveTarget.create(protocol, a)
         polls = tuple(PollSpec(str(p), 0, pkw.read(target.dialect, p), every) for p in pnus)
-        specs.append(DriveSpec(f"d{a}", target, polls))
+        specs.append(DriveSpec(f"d{a}", carrier_for(target), polls))
     return specs
+
+
+def target_of(planner: Planner, drive: str) -> DriveTarget:
+    """A serial drive's target as its carrier builds requests with it now."""
+    carrier = planner.drive(drive).carrier
+    assert isinstance(carrier, SerialCarrier)
+    return carrier.target
 
 
 @dataclass
@@ -84,7 +85,7 @@ class FakeLine:
             return Failure(ErrorKind.TIMEOUT, "no answer")
         self.now += EXCHANGE
         reply = next(e for e in self.sim.deframer().feed(answer.data) if isinstance(e, Telegram))
-        return ResponseTelegram(reply.adr, reply.data, EXCHANGE)
+        return Reply(reply.adr, reply.data, EXCHANGE)
 
     def step(self, until: float) -> Send | None:
         action = self.planner.next_action(self.now)
@@ -180,32 +181,33 @@ def test_a_reply_that_is_no_block_tells_no_status_word() -> None:
     send = line.planner.next_action(line.now)
     assert isinstance(send, Send)
     # The drive answers another parameter: "not yet", with its status word.
-    other = send.target.telegram(pkw.read(send.target.dialect, 1530))
+    target = target_of(line.planner, send.drive)
+    other = target.telegram(pkw.read(target.dialect, 1530))
     not_ours = line.answer(dataclasses.replace(send, telegram=other))
-    assert isinstance(not_ours, ResponseTelegram)
+    assert isinstance(not_ours, Reply)
     line.planner.exchanged(send, not_ours, line.now)
     told = [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
     assert [e.word for e in told] == [line.sim.drives[1].status_word]
     # The repeat's answer is no block of this drive's shape: an unexpected answer.
     again = line.planner.next_action(line.now)
     assert again == send
-    line.planner.exchanged(send, ResponseTelegram(1, b"\x01\x02\x03", EXCHANGE), line.now)
+    line.planner.exchanged(send, Reply(1, b"\x01\x02\x03", EXCHANGE), line.now)
     assert not [e for e in line.planner.take_events() if isinstance(e, StatusWord)]
 
 
 def test_writes_then_reads_then_polls_after_the_exchange_in_flight() -> None:
     line = fake_line("fc", [1, 2, 3], [1613, 1614, 1610], MS)  # polls always due
     line.run(0.2)
-    dialect = line.planner.drives[0].target.dialect
+    dialect = line.planner.drives[0].carrier.target.dialect
     read = line.submit("d3", pkw.read(dialect, 1530))
     write = line.submit("d2", pkw.write(dialect, 341, 777, pkw.Width.DWORD))
     before = len(line.sent)
     line.run(0.05)
     order = [s.telegram for s in line.sent[before : before + 3]]
     assert order == [  # a change goes out after a read of its parameter (write_gate)
-        line.planner.drives[1].target.telegram(pkw.read(dialect, 341)),
-        line.planner.drives[1].target.telegram(write.request),
-        line.planner.drives[2].target.telegram(read.request),
+        line.planner.drives[1].carrier.target.telegram(pkw.read(dialect, 341)),
+        line.planner.drives[1].carrier.target.telegram(write.request),
+        line.planner.drives[2].carrier.target.telegram(read.request),
     ]
     assert isinstance(line.finished(write)[0].outcome, Answered)
     assert line.sim.drives[2].value(341) == 777
@@ -289,7 +291,7 @@ def test_a_dying_drives_retries_let_the_others_in_between() -> None:
 def test_a_job_that_waits_past_its_deadline_ends_unsent() -> None:
     timing = SimTiming(response_delay=0.0, lag_telegrams=1000, lag_mode="none")
     line = fake_line("uss", [1], [], 1.0, timing=timing)
-    dialect = line.planner.drives[0].target.dialect
+    dialect = line.planner.drives[0].carrier.target.dialect
     first = line.submit("d1", pkw.read(dialect, 1120), within=0.3)
     second = line.submit("d1", pkw.read(dialect, 1121), within=0.1)
     line.run(0.5)
@@ -297,7 +299,8 @@ def test_a_job_that_waits_past_its_deadline_ends_unsent() -> None:
     (ended,) = line.finished(second)
     assert isinstance(ended.outcome, TimedOut) and ended.tally is None  # never sent
     assert all(
-        s.telegram != line.planner.drives[0].target.telegram(second.request) for s in line.sent
+        s.telegram != line.planner.drives[0].carrier.target.telegram(second.request)
+        for s in line.sent
     )
     assert line.now - 0.5 < TIMEOUT and all(t < 0.3 for t in line.times)  # never past its deadline
 
@@ -306,7 +309,7 @@ def test_a_port_outage_fails_jobs_and_shows_drives_down() -> None:
     timing = SimTiming(response_delay=0.0, lag_telegrams=1000, lag_mode="none")
     line = fake_line("uss", [1, 2], [1120], 50 * MS, timing=timing)
     line.run(0.2)
-    dialect = line.planner.drives[0].target.dialect
+    dialect = line.planner.drives[0].carrier.target.dialect
     write = line.submit("d1", pkw.write(dialect, 1121, 0x41200000, pkw.Width.DWORD), within=30)
     line.run(0.2)
     assert not line.finished(write)  # it lags: in flight, repeated
@@ -322,7 +325,7 @@ def test_a_port_outage_fails_jobs_and_shows_drives_down() -> None:
     line.planner.line_up(line.now)
     line.run(0.3)
     assert write.request not in [s.telegram for s in line.sent[before:]]
-    telegram = line.planner.drives[0].target.telegram(write.request)
+    telegram = line.planner.drives[0].carrier.target.telegram(write.request)
     assert telegram not in [s.telegram for s in line.sent[before:]]
     assert line.shown("d1") and line.shown("d2")
 
@@ -330,7 +333,7 @@ def test_a_port_outage_fails_jobs_and_shows_drives_down() -> None:
 def test_stop_cancels_queued_and_running_jobs() -> None:
     timing = SimTiming(response_delay=0.0, lag_telegrams=1000, lag_mode="none")
     line = fake_line("uss", [1], [1120], 1.0, timing=timing)
-    dialect = line.planner.drives[0].target.dialect
+    dialect = line.planner.drives[0].carrier.target.dialect
     jobs = [line.submit("d1", pkw.read(dialect, 1121)) for _ in range(3)]
     line.run(0.1)
     line.planner.stop("the service is stopping")
@@ -345,21 +348,24 @@ def test_one_job_per_slot_on_a_cyclic_line() -> None:
     """A PROFIBUS DP line: a slave's PKW slot carries one job at a time, by the same priorities."""
     line = fake_line("fc", [1, 2], [1613], 10 * MS)
     planner = line.planner
-    planner.stale_answers = False  # as a DP line's: its slot waits for AK 0 before a job
-    dialect = planner.drives[0].target.dialect
+    for d in planner.drives:  # as a DP slot's carrier: it waits for AK 0 before a job
+        d.carrier.repeats_answers = False  # type: ignore[misc]
+    dialect = planner.drives[0].carrier.target.dialect
     write = line.submit("d1", pkw.write(dialect, 341, 5, pkw.Width.DWORD))
     read = line.submit("d1", pkw.read(dialect, 1530))
     cycle: list[Send | None] = [planner.next_for(d, line.now) for d in ("d1", "d2")]
     assert [s.telegram if s else None for s in cycle] == [
-        planner.drives[0].target.telegram(write.request),
-        planner.drives[1].target.telegram(pkw.read(dialect, 1613)),
+        planner.drives[0].carrier.target.telegram(write.request),
+        planner.drives[1].carrier.target.telegram(pkw.read(dialect, 1613)),
     ]
     assert planner.next_for("d1", line.now) is None  # its slot is taken until the result
     for send in cycle:
         assert send is not None
         planner.exchanged(send, line.answer(send), line.now)
     nxt = planner.next_for("d1", line.now)
-    assert nxt is not None and nxt.telegram == planner.drives[0].target.telegram(read.request)
+    assert nxt is not None and nxt.telegram == planner.drives[0].carrier.target.telegram(
+        read.request
+    )
 
 
 def test_an_exchange_costs_the_same_with_thousands_of_drives(
@@ -378,7 +384,7 @@ def test_an_exchange_costs_the_same_with_thousands_of_drives(
     for n in (10, 2000):
         line = fake_line("fc", list(range(1, 127))[: min(n, 126)], [1613], 0.0)
         specs = drives("fc", [1] * n, [1613], 1000.0)
-        specs = [DriveSpec(f"x{i}", s.target, s.polls) for i, s in enumerate(specs)]
+        specs = [DriveSpec(f"x{i}", s.carrier, s.polls) for i, s in enumerate(specs)]
         planner = Planner(specs, poll_deadline=0.5)
         line = FakeLine(planner, line.sim)
         line.run(0.0)
@@ -425,7 +431,7 @@ OPS = st.lists(
 def test_the_heap_chooses_what_the_policy_says(ops: list[tuple[object, ...]], every: float) -> None:
     line = fake_line("fc", [1, 2, 3], [1613, 1614], every, policy=HealthPolicy(2, 0.05, 0.2))
     planner = line.planner
-    dialect = planner.drives[0].target.dialect
+    dialect = planner.drives[0].carrier.target.dialect
     jobs: list[Job] = []
     current: dict[str, bytes] = {}
     for op in ops:
@@ -464,7 +470,8 @@ def test_the_heap_chooses_what_the_policy_says(ops: list[tuple[object, ...]], ev
             if not action.probe:
                 if action.drive in current:
                     # a change goes out after the read of its parameter, in the same job
-                    read_first = action.target.telegram(pkw.read(action.target.dialect, 341))
+                    target = target_of(planner, action.drive)
+                    read_first = target.telegram(pkw.read(target.dialect, 341))
                     went_on = current[action.drive] in (action.telegram, read_first)
                     assert went_on, "one transaction at a time"
                 current[action.drive] = action.telegram

@@ -20,9 +20,9 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.planning.answers import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Rejected
-from pkwbus.master.planning.transaction import ExchangeResult, Failure, PkwAnswer, ResponseTelegram
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.wires.profibus.wire import CycleWire
@@ -581,7 +581,7 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
         await svc.runtime.stop()
     timeouts = [busy for _, r, busy in seen if isinstance(r, Failure)]
     assert all(busy >= slot for busy in timeouts), timeouts
-    replies = [(r, busy) for _, r, busy in seen if isinstance(r, ResponseTelegram)]
+    replies = [(r, busy) for _, r, busy in seen if isinstance(r, Reply)]
     # busy: from the start, the line's idle time before the request included; the answer's
     # duration: from the request written, as on FC and USS lines
     assert replies and all(busy > r.duration > 0 for r, busy in replies)
@@ -625,7 +625,7 @@ async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
         planner.exchanged = spy  # type: ignore[method-assign]
         await until(lambda: len(seen) >= 6)
     answers = [r for r in seen if isinstance(r, PkwAnswer)]
-    assert answers and not [r for r in seen if isinstance(r, ResponseTelegram)]
+    assert answers and not [r for r in seen if isinstance(r, Reply)]
     for answer in answers:
         assert answer.duration > 0 and answer.cyclic
         assert answer.status_word is None  # told by the cycle's Inputs, not twice

@@ -12,6 +12,7 @@ import asyncio
 from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.plan import DriveSpec, HealthChanged, StatusWord
 from pkwbus.master.recorder import LineRecord, NoEvents
 from pkwbus.master.snapshot import Snapshot
@@ -43,7 +44,7 @@ def plant(drives: list[str]) -> tuple[MetricsRegistry, LineRecord]:
     registry = MetricsRegistry()
     snapshot = Snapshot()
     specs = [
-        DriveSpec(d, DriveTarget(Protocol.FC, i + 1, FC, IndLayout.USS, FC_PROCESS))
+        DriveSpec(d, carrier_for(DriveTarget(Protocol.FC, i + 1, FC, IndLayout.USS, FC_PROCESS)))
         for i, d in enumerate(drives)
     ]
     record = LineRecord("l1", specs, snapshot, NoEvents())

@@ -14,8 +14,9 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.utils import floatToGoString
 
+from pkwbus.master.planning.answers import ErrorKind, Failure
 from pkwbus.master.planning.jobs import JobKind, JobResult
-from pkwbus.master.planning.transaction import ErrorKind, Failure, Rejected, TimedOut
+from pkwbus.master.planning.outcomes import Rejected, TimedOut
 from pkwbus.master.snapshot import DriveState, Reading, Snapshot
 from pkwbus.protocol.pkw.dialects import FC
 from pkwbus.protocol.pzd import Profile

@@ -8,16 +8,10 @@ from pathlib import Path
 import pytest
 from prometheus_client import CollectorRegistry
 
+from pkwbus.master.planning.answers import ErrorKind, Failure
 from pkwbus.master.planning.jobs import Cancelled, JobKind, JobResult
-from pkwbus.master.planning.outcomes import metric_label
-from pkwbus.master.planning.transaction import (
-    Answered,
-    ErrorKind,
-    Failure,
-    Rejected,
-    Tally,
-    TimedOut,
-)
+from pkwbus.master.planning.outcomes import Answered, Rejected, TimedOut, metric_label
+from pkwbus.master.planning.transaction import Tally
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import DIALECTS, FC, Dialect, Reply
 from pkwbus.service.assembly.build import build_runtime

@@ -26,9 +26,10 @@ from pkwbus import dp_settings, durations, limits
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
 from pkwbus.dp_settings import DpGiven
 from pkwbus.link import LinkState, PortError, PortSettings
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.outcomes import Outcome, TimedOut
 from pkwbus.master.planning.plan import DriveSpec
-from pkwbus.master.planning.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.recorder import NoEvents
 from pkwbus.master.sessions.jobs import JobSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
@@ -267,7 +268,7 @@ async def session(
 ) -> list[Outcome]:
     """Run ``jobs`` one after the other on slave ``address`` through the line runner (the
     master listens first, parametrises the slave, and clears it at the end)."""
-    spec = DriveSpec("drive", ctx.target(address))
+    spec = DriveSpec("drive", carrier_for(ctx.target(address)))
     watch = _Watch(address)
     wire = CycleWire(
         dp_line(args, ctx.slot_time),

@@ -7,6 +7,8 @@ import itertools
 from collections import deque
 from dataclasses import dataclass, replace
 
+from pkwbus.master.planning.answers import ExchangeResult
+from pkwbus.master.planning.carrier import Item, Transaction
 from pkwbus.master.planning.describing import DescribeStep, DriveDescriber, Settled, described_poll
 from pkwbus.master.planning.health import DriveHealth, HealthPolicy
 from pkwbus.master.planning.identity import identity_requests
@@ -23,26 +25,21 @@ from pkwbus.master.planning.plan import (
     Send,
     StatusWord,
 )
-from pkwbus.master.planning.record_transaction import RecordItem, RecordTransaction
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.protocol import pkw
-from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.length import PkwLength
-from pkwbus.protocol.profidrive.pkw import carried, fits
-from pkwbus.protocol.serial.telegram import Protocol, split_block
 
 __all__ = ["Active", "DrivePlan", "PollState", "Work"]
 
 
 class PollState:
-    """A poll and when it is due; its request telegram is built once."""
+    """A poll and when it is due."""
 
-    __slots__ = ("due", "fresh", "send", "spec")
+    __slots__ = ("due", "fresh", "spec")
 
-    def __init__(self, spec: PollSpec, due: float, send: Send) -> None:
+    def __init__(self, spec: PollSpec, due: float) -> None:
         self.spec = spec
         self.due = due
-        self.send = send
         # Waited for its parameter's description: its first start is never an overrun.
         self.fresh = False
 
@@ -55,7 +52,7 @@ class Active:
     """A drive's transaction in flight: a queued job's, a poll's, or (data record 47) the
     polls due together."""
 
-    tx: PkwTransaction | RecordTransaction
+    tx: Transaction
     priority: Priority
     order: float
     work: Work
@@ -68,24 +65,20 @@ class DrivePlan:
     __slots__ = (
         "active",
         "busy",
+        "carrier",
         "describer",
         "health",
         "held",
         "lagging",
         "last_answer",
         "name",
-        "pkw",
         "polls",
-        "probe",
-        "probes",
         "reads",
-        "references",
         "seq",
         "served",
         "shown_up",
         "slot",
         "spec",
-        "target",
         "version",
         "writes",
     )  # fmt: skip
@@ -93,91 +86,59 @@ class DrivePlan:
     def __init__(self, spec: DriveSpec, policy: HealthPolicy, slot: int, count: int) -> None:
         self.spec = spec
         self.name = spec.name
-        self.target = spec.target
+        self.carrier = carrier = spec.carrier
         self.slot = slot
         self.served = slot - count  # never served yet: in configuration order
         self.version = 0
         self.busy = False  # its exchange is out: not in the ready heap
+        if carrier.tells_health:  # the wire tells it: missing answers never take it down
+            policy = replace(policy, from_answers=False)
         self.health = DriveHealth(policy)
         self.shown_up = True
         self.writes: deque[Job] = deque()
         self.reads: deque[Job] = deque()
         self.active: Active | None = None
         self.lagging = False
-        self.probe = Send(spec.name, spec.target, spec.target.probe(), True)
         self.seq = itertools.count()
         self.polls: list[tuple[float, int, PollState]] = []
         self.describer: DriveDescriber | None = None
         if spec.form is not None and spec.describe:
             wanted = ((t.pnu, t.elements) for t in spec.describe)
-            dialect, dp = spec.target.dialect, spec.target.protocol is Protocol.PROFIBUS
+            dialect = carrier.dialect
             self.describer = DriveDescriber(
                 dialect, spec.form, wanted, book=spec.book,
-                identity=identity_requests(dialect, texts=not dp),
+                identity=identity_requests(dialect, texts=carrier.texts),
             )  # fmt: skip
         # Polls waiting for their parameter's description, by PNU.
         self.held: dict[int, list[PollState]] = {}
         for p in spec.polls:
-            send = self.send_of(p.request)
             if self.describer is not None and self.describer.waiting(p.request.pnu):
-                self.held.setdefault(p.request.pnu, []).append(PollState(p, 0.0, send))
+                self.held.setdefault(p.request.pnu, []).append(PollState(p, 0.0))
             else:
-                self.push_poll(PollState(p, 0.0, send))
-        # USS: the drive's PKW length, configured or told by its answers.
-        target = spec.target
-        uss = target.protocol is Protocol.USS and target.has_pkw
-        self.pkw = PkwLength(target.pkw_setting) if uss else None
+                self.push_poll(PollState(p, 0.0))
         self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
-        self.probes = 0
-        self.references = itertools.count()  # data record 47: each request's own reference
 
     def transaction(
-        self, items: list[RecordItem], *, retries: int, deadline: float, stale: bytes | None = None
-    ) -> PkwTransaction | RecordTransaction:
-        """One PKW job, or (data record 47) one request of all ``items``; LocalProtocolError
-        for what the drive's channel cannot carry."""
-        record = self.target.record
-        if record is None:
-            (item,) = items
-            return PkwTransaction(
-                self.target, item.request, retries=retries, deadline=deadline, stale=stale
-            )
-        reference = next(self.references) % 255 + 1
-        return RecordTransaction(
-            self.target, items, reference=reference, axis=record.axis, retries=retries,
-            deadline=deadline,
-        )  # fmt: skip
+        self, items: list[Item], *, retries: int, deadline: float, stale: bytes | None = None
+    ) -> Transaction:
+        """One PKW job, or where its carrier takes several, one request of all ``items``;
+        LocalProtocolError for what the drive's carrier cannot carry."""
+        return self.carrier.transaction(items, retries=retries, deadline=deadline, stale=stale)
 
-    def send_of(self, request: pkw.PkwRequest) -> Send:
-        """A poll's request telegram, built once; none where the drive's parameters go
-        through data record 47 (its polls go out together, in a request of their own)."""
-        target = self.target
-        return Send(self.name, target, b"" if target.record else target.telegram(request))
+    def send_of(self, tx: Transaction) -> Send:
+        """The exchange that carries ``tx``'s request."""
+        return Send(self.name, self.carrier.address, tx.telegram)
 
-    def next_probe(self) -> Send:
-        """The probe of a down drive. While a learned PKW length is not known, every other
-        probe has 3 PKW words: a fixed-3 drive answers no 4-word request (SINAMICS S110
-        Function Manual, 9.5: with a fixed length "the slave will not respond" to another)."""
-        self.probes += 1
-        length = self.pkw
-        if length is None or length.known or not self.target.learn or self.probes % 2:
-            return self.probe
-        short = self.target.with_pkw_words(3)
-        return Send(self.name, short, short.probe(), True)
-
-    def probed(self, send: Send, data: bytes) -> PkwLengthTold | None:
-        """A probe was answered (``data``: its telegram's data); the event when a 3-word one
-        told the drive's length: 3 words back is a fixed-3 drive (its 4-word requests went
-        unanswered), any other length a variable one."""
-        length = self.pkw
-        if length is None or length.known or send.target.shape.pkw_words != 3:
+    def next_probe(self) -> Send | None:
+        """The probe of a down drive (None: its carrier never probes)."""
+        probe = self.carrier.probe()
+        if probe is None:
             return None
-        answer_words = len(data) // 2 - send.target.shape.pzd_words
-        if answer_words == 3:
-            length.words, length.known = 3, True
-        else:
-            length.observe(3, answer_words, pkw.NoResponse(0, 0, 0))
-        return self.retarget()
+        return Send(self.name, self.carrier.address, probe.telegram, True, probe.words)
+
+    def probed(self, send: Send, result: ExchangeResult) -> PkwLengthTold | None:
+        """A probe was answered: the event when it told how requests go out."""
+        return self._told(self.carrier.probed(send.words, result))
 
     def heard(self, tx: PkwTransaction) -> PkwLengthTold | None:
         """Take what the answer ``tx`` just decoded tells; the event when the drive's PKW
@@ -187,34 +148,14 @@ class DrivePlan:
             return None
         if not isinstance(response, pkw.NoResponse):
             self.last_answer = answer
-        length = self.pkw
-        if length is None:
-            return None
-        sent = self.target.pkw_words_of(tx.telegram)
-        if not length.observe(sent, len(answer) // 2, response):
-            return None
-        return self.retarget()
+        return self._told(self.carrier.heard(tx))
 
     def forget_pkw(self) -> PkwLengthTold | None:
         """The drive went down: a learned PKW length is learned again when it answers."""
-        length = self.pkw
-        if length is None or not self.target.learn or not length.known:
-            return None
-        length.forget()
-        return self.retarget()
+        return self._told(self.carrier.forget())
 
-    def retarget(self) -> PkwLengthTold | None:
-        """Requests go out with the PKW length as known now (a learned one); the event
-        that tells what is known of it now."""
-        length = self.pkw
-        if length is None:
-            return None
-        if self.target.learn and length.words != self.target.shape.pkw_words:
-            target = self.target = self.target.with_pkw_words(length.words)
-            self.probe = Send(self.name, target, target.probe(), True)
-            for _, _, poll in self.polls:
-                poll.send = self.send_of(poll.spec.request)
-        return PkwLengthTold(self.name, replace(length))
+    def _told(self, length: PkwLength | None) -> PkwLengthTold | None:
+        return PkwLengthTold(self.name, length) if length is not None else None
 
     def first_due(self) -> float | None:
         """When the drive's next poll or description request is due (None: never)."""
@@ -238,15 +179,12 @@ class DrivePlan:
             step = describer.next_request(now)
             events += self.settle(describer.take_ready(), now)
             if step is not None:
-                tx = self.transaction(
-                    [RecordItem(step.request)], retries=retries, deadline=deadline
-                )
-                send = Send(self.name, self.target, tx.telegram)
-                return Active(tx, Priority.POLL, now, step, send), events
+                tx = self.transaction([Item(step.request)], retries=retries, deadline=deadline)
+                return Active(tx, Priority.POLL, now, step, self.send_of(tx)), events
         if not self.polls or self.polls[0][0] > now:
             return None, events
-        if self.target.record is not None:
-            return self._start_record(now, deadline, retries, events)
+        if self.carrier.room(2):  # several parameters in one request: the polls due together
+            return self._start_batch(now, deadline, retries, events)
         _, _, poll = heapq.heappop(self.polls)
         spec = poll.spec
         if now - poll.due > spec.every and not poll.fresh:
@@ -254,29 +192,25 @@ class DrivePlan:
         poll.fresh = False
         # Long enough for the retries and a lagging answer; never the poll's whole
         # interval, which would hold the drive's parameter channel for minutes.
-        tx = PkwTransaction(
-            self.target, spec.request, retries=retries, deadline=deadline,
-            telegram=poll.send.telegram,
-        )  # fmt: skip
-        return Active(tx, Priority.POLL, poll.due, poll, poll.send), events
+        tx = self.transaction([Item(spec.request)], retries=retries, deadline=deadline)
+        return Active(tx, Priority.POLL, poll.due, poll, self.send_of(tx)), events
 
-    def _start_record(
+    def _start_batch(
         self, now: float, deadline: float, retries: int, events: list[Event]
     ) -> tuple[Active | None, list[Event]]:
-        """The polls due now, as many as one data record 47 request takes, together; with
+        """The polls due now, as many as one request of its carrier takes, together; with
         them those due within half the first one's interval, so that polls released at
         different times come to share their requests (a poll is never read later than due,
         only at times a little earlier)."""
         due: list[PollState] = []
         until = now + self.polls[0][2].spec.every / 2
-        record = self.target.record
-        assert record is not None
-        while self.polls and self.polls[0][0] <= until and fits(len(due) + 1, record.max_data):
+        carrier = self.carrier
+        while self.polls and self.polls[0][0] <= until and carrier.room(len(due) + 1):
             poll = heapq.heappop(self.polls)[2]
             if now - poll.due > poll.spec.every and not poll.fresh:
                 events.append(Overrun(self.name))
             poll.fresh = False
-            why = carried(poll.spec.request)
+            why = carrier.refuses(poll.spec.request)
             if why:  # a text, say: ended unsent, polled (and refused) again at its interval
                 events.append(Finished(self.name, poll.spec, NotSent(why)))
                 poll.due = now + poll.spec.every
@@ -285,10 +219,9 @@ class DrivePlan:
             due.append(poll)
         if not due:
             return None, events
-        items = [RecordItem(p.spec.request, p.spec.fmt.vtype) for p in due]
+        items = [Item(p.spec.request, p.spec.fmt.vtype) for p in due]
         tx = self.transaction(items, retries=retries, deadline=deadline)
-        send = Send(self.name, self.target, tx.telegram)
-        return Active(tx, Priority.POLL, due[0].due, tuple(due), send), events
+        return Active(tx, Priority.POLL, due[0].due, tuple(due), self.send_of(tx)), events
 
     @property
     def describing(self) -> bool:
@@ -348,8 +281,7 @@ class DrivePlan:
                 if isinstance(active, PollState) and active.spec.request.pnu == done.pnu:
                     polls.append(active)
             for poll in polls:
-                poll.spec = described_poll(poll.spec, done, self.target.dialect)
-                poll.send = self.send_of(poll.spec.request)
+                poll.spec = described_poll(poll.spec, done, self.carrier.dialect)
             for poll in polls:
                 if id(poll) in waiting:
                     poll.due, poll.fresh = now, True
@@ -363,17 +295,12 @@ class DrivePlan:
             heapq.heapify(self.polls)
         return events
 
-    def status_of(self, data: bytes) -> StatusWord | None:
-        """The status word of a probe's answer (its telegram's ``data``), when it has one."""
-        try:
-            block = split_block(data, self.target.response_shape(len(data)))
-        except RemoteProtocolError:
-            return None
-        return StatusWord(self.name, block.pzd[0], block.main_actual) if block.pzd else None
+    def status_of(self, result: ExchangeResult) -> StatusWord | None:
+        """The status word of a probe's answer, when it has one."""
+        found = self.carrier.status(result)
+        return StatusWord(self.name, found[0], found[1]) if found is not None else None
 
     def push_poll(self, poll: PollState) -> None:
-        if poll.send.target is not self.target:  # built before the PKW length was learned
-            poll.send = self.send_of(poll.spec.request)
         heapq.heappush(self.polls, (poll.due, next(self.seq), poll))
 
     def back(self, now: float) -> list[Described]:

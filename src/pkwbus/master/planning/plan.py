@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
+from pkwbus.master.planning.carrier import Carrier
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.planning.jobs import Job
-from pkwbus.master.planning.transaction import Outcome, Tally
-from pkwbus.master.target import DriveTarget
+from pkwbus.master.planning.outcomes import Outcome
+from pkwbus.master.planning.transaction import Tally
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DescriptionForm, DriveDescription
 from pkwbus.protocol.pkw.length import PkwLength
@@ -64,8 +65,10 @@ class DescribeTarget:
 
 @dataclass(frozen=True)
 class DriveSpec:
+    """A drive on a line: its name, how its jobs travel, its polls and what it describes."""
+
     name: str
-    target: DriveTarget
+    carrier: Carrier
     polls: tuple[PollSpec, ...] = ()
     describe: tuple[DescribeTarget, ...] = ()
     form: DescriptionForm | None = None  # how the drive describes (None: it is not asked)
@@ -78,12 +81,15 @@ class DriveSpec:
 
 @dataclass(frozen=True, slots=True)
 class Send:
-    """Exchange ``telegram`` with ``drive`` now; give the result to ``Planner.exchanged``."""
+    """Exchange ``telegram`` with ``drive`` (its answers come from ``address``) now; give the
+    result to ``Planner.exchanged``. Empty ``telegram``: its carrier's wire builds what goes
+    out (a PPO's PKW slot, a data record transfer)."""
 
     drive: str
-    target: DriveTarget
+    address: int
     telegram: bytes
     probe: bool = False  # the drive is down: one short telegram to see whether it answers
+    words: int | None = None  # a probe's PKW words, where its carrier keeps them apart
 
 
 @dataclass(frozen=True, slots=True)

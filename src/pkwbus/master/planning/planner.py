@@ -32,10 +32,14 @@ import itertools
 from collections import deque
 from collections.abc import Sequence
 
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
+from pkwbus.master.planning.batch import BatchTransaction
+from pkwbus.master.planning.carrier import Transaction
 from pkwbus.master.planning.describing import DescribeStep
 from pkwbus.master.planning.drive import Active, DrivePlan, PollState
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, Priority
+from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
 from pkwbus.master.planning.plan import (
     Action,
     DriveSpec,
@@ -47,17 +51,7 @@ from pkwbus.master.planning.plan import (
     Send,
     StatusWord,
 )
-from pkwbus.master.planning.record_transaction import RecordTransaction
-from pkwbus.master.planning.transaction import (
-    ErrorKind,
-    ExchangeResult,
-    Failure,
-    LineFailed,
-    Outcome,
-    PkwTransaction,
-    ResponseTelegram,
-    TimedOut,
-)
+from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.planning.write_gate import after_read, gate_write
 
 __all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
@@ -79,13 +73,9 @@ class Planner:
         poll_deadline: float,
         retries: int = 2,
         policy: HealthPolicy | None = None,
-        stale_answers: bool = True,
     ) -> None:
         policy = policy or HealthPolicy()
         self.retries = retries
-        # FC and USS drives may repeat their previous answer: a change goes out after a
-        # read of its parameter (master.write_gate); a DP PKW slot waits for AK 0 instead.
-        self.stale_answers = stale_answers
         self.poll_deadline = poll_deadline  # a poll's transaction, retries included
         self.drives = [DrivePlan(s, policy, i, len(drives)) for i, s in enumerate(drives)]
         self._by_name = {d.name: d for d in self.drives}
@@ -98,6 +88,10 @@ class Planner:
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
+
+    def drive(self, name: str) -> DrivePlan:
+        """The plan of drive ``name`` (KeyError for a drive not on this line)."""
+        return self._by_name[name]
 
     def take_events(self) -> list[Event]:
         events, self.events = self.events, []
@@ -189,7 +183,7 @@ class Planner:
                 return send
         return None
 
-    def active(self, drive: str) -> PkwTransaction | RecordTransaction | None:
+    def active(self, drive: str) -> Transaction | None:
         """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
         return a.tx if (a := self._by_name[drive].active) is not None else None
 
@@ -226,10 +220,10 @@ class Planner:
             self._lagging.clear()
         self._health(d, result, now)
         if send.probe:
-            if isinstance(result, ResponseTelegram):
-                if (status := d.status_of(result.data)) is not None:
+            if not isinstance(result, Failure):
+                if (status := d.status_of(result)) is not None:
                     self.events.append(status)
-                self._tell(d.probed(send, result.data))
+                self._tell(d.probed(send, result))
         elif (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
@@ -324,7 +318,7 @@ class Planner:
         if queue:
             job = queue.popleft()
             order = float(next(self._job_seq))
-            first = gate_write(d, job, order, retries=self.retries, read_first=self.stale_answers)
+            first = gate_write(d, job, order, retries=self.retries)
             if isinstance(first, Finished):  # not to be sent: the drive goes on
                 self.events.append(first)
                 d.busy = False
@@ -333,7 +327,10 @@ class Planner:
             d.active = first
             return first.send
         if not d.health.up:
-            return d.next_probe()
+            probe = d.next_probe()
+            if probe is None:  # its carrier never probes: its health is told
+                d.busy = False
+            return probe
         active, events = d.start_poll(now, now + self.poll_deadline, self.retries)
         self.events.extend(events)
         if active is None:  # its descriptions are another drive's to ask
@@ -362,7 +359,7 @@ class Planner:
             self.events.extend(d.described(work, outcome, now))
         elif isinstance(work, tuple):  # polls in one record: each with its own outcome
             tx, each = active.tx, [outcome] * len(work)
-            if isinstance(tx, RecordTransaction) and tx.outcome is outcome:
+            if isinstance(tx, BatchTransaction) and tx.outcome is outcome:
                 each = list(tx.outcomes)
             for i, (poll, result) in enumerate(zip(work, each, strict=True)):
                 # The request's cost counted once; due again from the request's first due,

@@ -16,13 +16,14 @@ The read first does two things:
   nothing is changed on a drive whose answers contradict the configured
   length, until the two agree.
 
-A PROFIBUS PKW slot waits for AK 0 before each job instead (no stale answer
-can be taken), so there the change goes out at once; so does a change in data
-record 47, whose response answers its own request reference.
+Where the drive's carrier says it never repeats an answer (a PROFIBUS PKW slot
+waits for AK 0 before each job; a data record 47 response answers its own
+request reference), the change goes out at once.
 """
 
 from __future__ import annotations
 
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.drive import Active, DrivePlan
 from pkwbus.master.planning.jobs import Job
 from pkwbus.master.planning.outcomes import (
@@ -33,13 +34,11 @@ from pkwbus.master.planning.outcomes import (
     Rejected,
     TimedOut,
 )
-from pkwbus.master.planning.plan import Finished, Send
-from pkwbus.master.planning.record_transaction import RecordItem
+from pkwbus.master.planning.plan import Finished
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Command
-from pkwbus.protocol.pkw.fields import Width
-from pkwbus.protocol.pkw.length import Gate, shown
+from pkwbus.protocol.pkw.length import Gate
 
 __all__ = ["after_read", "gate_write"]
 
@@ -54,27 +53,10 @@ _ARRAY_CHANGES = frozenset(
 )
 
 
-def _gate(d: DrivePlan, request: pkw.PkwRequest) -> tuple[Gate, str]:
-    """Whether ``request`` may go out to ``d`` now; why not, in words, when refused."""
-    length = d.pkw
-    if length is None or (not request.is_write and not request.text):
-        return Gate.SEND, ""
-    word = request.width is Width.WORD and not request.text
-    gate, why = length.gate(word=word, text=bool(request.text))
-    if gate is Gate.REFUSE and length.in_conflict:
-        conflict = length.conflict
-        told = "?" if isinstance(conflict, str) else shown(conflict)
-        why = (
-            f"the drive answers with a PKW length of {told}, the configuration says"
-            f" {shown(length.configured)}: no change until they agree (pkw_words)"
-        )
-    return gate, why
-
-
 def _read_of(d: DrivePlan, request: pkw.PkwRequest) -> pkw.PkwRequest:
     """The read of the parameter (the element) a change is for."""
     index = request.subindex if request.command in _ARRAY_CHANGES else None
-    return pkw.read_parameter(d.target.dialect, request.pnu, index, text=bool(request.text))
+    return pkw.read_parameter(d.carrier.dialect, request.pnu, index, text=bool(request.text))
 
 
 def _active(
@@ -83,26 +65,23 @@ def _active(
 ) -> Active | Finished:  # fmt: skip
     """``request`` of ``job`` in flight; a request the drive's PKW block cannot carry ends
     the job unsent (its length learned meanwhile, say)."""
-    item = RecordItem(request, job.fmt.vtype)
+    item = Item(request, job.fmt.vtype)
     try:
         tx = d.transaction([item], retries=retries, deadline=job.deadline, stale=stale)
     except LocalProtocolError as exc:
         return Finished(d.name, job, NotSent(str(exc)))
-    return Active(tx, job.priority, order, job, Send(d.name, d.target, tx.telegram), first)
+    return Active(tx, job.priority, order, job, d.send_of(tx), first)
 
 
-def gate_write(
-    d: DrivePlan, job: Job, order: float, *, retries: int, read_first: bool
-) -> Active | Finished:
+def gate_write(d: DrivePlan, job: Job, order: float, *, retries: int) -> Active | Finished:
     """The job in flight, with the read before its change where one goes first; or the
     job finished unsent."""
     request = job.request
-    gate, why = _gate(d, request)
+    gate, why = d.carrier.gate(request)
     if gate is Gate.REFUSE:
         return Finished(d.name, job, NotSent(why))
     changes = request.is_write or bool(request.text)
-    read_first = read_first and d.target.record is None  # a record answers its own request
-    first = changes and (read_first or gate is Gate.LEARN)
+    first = changes and (d.carrier.repeats_answers or gate is Gate.LEARN)
     if first:
         request = _read_of(d, request)
     return _active(d, request, job, order, first, retries=retries, stale=None)
@@ -120,7 +99,7 @@ def after_read(
         # sent, the refusal is the job's answer. (Sent anyway, its own refusal would read
         # as the read's repeated, and the change would go out again until its deadline.)
         return Finished(d.name, job, outcome)
-    gate, why = _gate(d, job.request)
+    gate, why = d.carrier.gate(job.request)
     if gate is Gate.LEARN:
         why = (
             "the drive's answer to a read of the parameter fits both 4 fixed PKW words and"

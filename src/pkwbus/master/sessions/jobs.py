@@ -18,6 +18,7 @@ import contextlib
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortError
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec, Finished, Send
@@ -129,7 +130,9 @@ async def perform(
 ) -> Finished:
     """:func:`run_job`, with what its exchanges cost (``tally``)."""
     loop = asyncio.get_running_loop()
-    planner = Planner([DriveSpec("drive", target)], poll_deadline=deadline, retries=retries)
+    planner = Planner(
+        [DriveSpec("drive", carrier_for(target))], poll_deadline=deadline, retries=retries
+    )
     planner.line_up(loop.time())
     kind = JobKind.WRITE if request.is_write else JobKind.READ
     priority = Priority.WRITE if request.is_write else Priority.READ
@@ -140,7 +143,7 @@ async def perform(
                 return event
         action = planner.next_action(loop.time())
         if isinstance(action, Send):
-            result = await line.exchange(action.target, action.telegram)
+            result = await line.exchange(action.address, action.telegram)
             planner.exchanged(action, result, loop.time())
         elif not planner.events:  # nothing to do before the job's deadline: it has ended
             await asyncio.sleep(max(0.0, min(action.until, deadline) - loop.time()))

@@ -16,6 +16,7 @@ import prometheus_client
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.planning.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
@@ -265,7 +266,7 @@ def _drive(
             sources=sources,
         )
     )
-    return DriveSpec(drive.name, target, tuple(polls), describe, form, book)
+    return DriveSpec(drive.name, carrier_for(target), tuple(polls), describe, form, book)
 
 
 def description_form(line: cfg.Line, drive: cfg.Drive) -> DescriptionForm | None:

@@ -32,6 +32,7 @@ from pkwbus.protocol.values import (
     canonical,
 )
 from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
+from pkwbus.service.config.dp_problems import DpLineSettings, dp_drive_problems
 from pkwbus.service.config.drive import Drive
 from pkwbus.service.config.fields import (
     Alarms,
@@ -46,7 +47,6 @@ from pkwbus.service.config.fields import (
     Watchdog,
     upper,
 )
-from pkwbus.service.config.profibus import dp_drive_problems
 from pkwbus.sim.serving.url import SimPort, parse_sim_port
 
 __all__ = ["MAX_DP_RETRIES", "Line", "Rs485"]
@@ -298,7 +298,8 @@ def _drive_problems(line: Line, drive: Drive) -> list[Place]:
             if key in drive.model_fields_set
         ]
     if line.protocol is BusProtocol.PROFIBUS:
-        problems += dp_drive_problems(line, drive)
+        settings = DpLineSettings(line.master_address, line.baudrate, line.slot_time)
+        problems += dp_drive_problems(settings, drive)
     elif line.protocol is BusProtocol.FC:
         for key in ("pkw_words", "pzd_words"):
             if key in drive.model_fields_set:

@@ -24,10 +24,10 @@ from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from pkwbus import __version__
 from pkwbus.catalog.precedence import Disagreement
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.planning.plan import Described
-from pkwbus.master.planning.transaction import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.snapshot import LiveSlave, Reading, ReadingKey
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect

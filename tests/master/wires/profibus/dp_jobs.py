@@ -7,9 +7,10 @@ from __future__ import annotations
 import asyncio
 
 from pkwbus.link import PortError
+from pkwbus.master.carriers import SlotCarrier
+from pkwbus.master.planning.answers import PkwAnswer
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
-from pkwbus.master.planning.transaction import PkwAnswer, PkwTransaction
-from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveLocked
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus.dp.ppo import SlotAnswer
@@ -36,8 +37,8 @@ async def run_dp_job(
         raise ValueError(f"slave {address} has no parameter channel")
     loop = asyncio.get_running_loop()
     # The job judged by the one rule of every bus: the master's PKW transaction.
-    target = DriveTarget.create("profibus", address, dialect_name=slot.dialect.name)
-    tx = PkwTransaction(target, request, retries=0, deadline=deadline)
+    carrier = SlotCarrier(address, slot.ppo, slot.dialect)
+    tx = carrier.transaction([Item(request)], retries=0, deadline=deadline)
     slot.submit(request)
     result: list[Outcome] = []
     gone: list[str] = []

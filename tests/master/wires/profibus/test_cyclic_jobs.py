@@ -9,8 +9,11 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.answers import PkwAnswer
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
-from pkwbus.master.planning.transaction import PkwAnswer, PkwTransaction
+from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
@@ -26,7 +29,9 @@ class Job:
 
     def __init__(self, request: pkw.PkwRequest, deadline: float = 10.0) -> None:
         self.slot = PkwSlot(PPO1, PCV)
-        self.tx = PkwTransaction(TARGET, request, retries=2, deadline=deadline)
+        tx = carrier_for(TARGET).transaction([Item(request)], retries=2, deadline=deadline)
+        assert isinstance(tx, PkwTransaction)
+        self.tx = tx
         self.slot.submit(request)
 
     def cycle(self, data: bytes, now: float) -> Outcome | None:

@@ -10,14 +10,8 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
-from pkwbus.master.planning.transaction import (
-    Answered,
-    ErrorKind,
-    Failure,
-    LineFailed,
-    Rejected,
-    TimedOut,
-)
+from pkwbus.master.planning.answers import ErrorKind, Failure
+from pkwbus.master.planning.outcomes import Answered, LineFailed, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
@@ -268,7 +262,7 @@ async def test_only_foreign_answers_end_as_an_address_error() -> None:
     sim = make_sim("fc", [1], faults=SimFaults(wrong_address=1.0))
     target = DriveTarget.create("fc", 1)
     async with serve(sim, "tcp") as port, open_line(port, "fc", timeout=0.05) as (line, _):
-        result = await line.exchange(target, target.telegram(pkw.read(target.dialect, 341)))
+        result = await line.exchange(target.adr, target.telegram(pkw.read(target.dialect, 341)))
     assert isinstance(result, Failure) and result.kind is ErrorKind.ADDRESS
 
 

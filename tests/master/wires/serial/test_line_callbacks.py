@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
-from pkwbus.master.planning.transaction import ExchangeResult, ResponseTelegram
+from pkwbus.master.planning.answers import ExchangeResult, Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from tests.master.conftest import make_sim, open_line, serve
@@ -22,7 +22,7 @@ async def test_an_exchange_runs_in_callbacks_and_hands_its_result_over() -> None
         line.start(target.adr, _telegram(target), got.set_result)
         assert line.busy
         result = await asyncio.wait_for(got, 2.0)
-        assert isinstance(result, ResponseTelegram) and result.adr == target.adr
+        assert isinstance(result, Reply) and result.adr == target.adr
         assert not line.busy
         assert trace.tx == [_telegram(target)]
 
@@ -36,7 +36,7 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
     async with serve(sim, "pty") as port, open_line(port, "fc", pause=0.004) as (line, trace):
         loop = asyncio.get_running_loop()
         pause = line.link.settings.start_pause
-        assert isinstance(await line.exchange(target, telegram), ResponseTelegram)
+        assert isinstance(await line.exchange(target.adr, telegram), Reply)
         answered = loop.time()
         # at once after the answer: the request waits for the pause
         got: asyncio.Future[ExchangeResult] = loop.create_future()
@@ -52,14 +52,14 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
             real_trace(direction, data)
 
         line.trace = stamp
-        assert isinstance(await asyncio.wait_for(got, 2.0), ResponseTelegram)
+        assert isinstance(await asyncio.wait_for(got, 2.0), Reply)
         assert len(trace.tx) == 2 and sent_at[0] - answered >= pause
         # preparation longer than the pause: no wait is left, the request goes out at once
         await asyncio.sleep(2 * pause)
         got = loop.create_future()
         line.start(target.adr, telegram, got.set_result)
         assert len(trace.tx) == 3
-        assert isinstance(await asyncio.wait_for(got, 2.0), ResponseTelegram)
+        assert isinstance(await asyncio.wait_for(got, 2.0), Reply)
 
 
 async def test_input_is_discarded_only_when_stray_bytes_arrived() -> None:
@@ -77,10 +77,10 @@ async def test_input_is_discarded_only_when_stray_bytes_arrived() -> None:
 
         line.link._discard_input = count  # type: ignore[method-assign]
         for _ in range(5):
-            assert isinstance(await line.exchange(target, telegram), ResponseTelegram)
+            assert isinstance(await line.exchange(target.adr, telegram), Reply)
         clean = flushes
         line._on_data(b"\x00\x01")  # bytes nobody asked for, between exchanges
-        assert isinstance(await line.exchange(target, telegram), ResponseTelegram)
-        assert isinstance(await line.exchange(target, telegram), ResponseTelegram)
+        assert isinstance(await line.exchange(target.adr, telegram), Reply)
+        assert isinstance(await line.exchange(target.adr, telegram), Reply)
     assert clean <= 1  # at most the first request after opening
     assert flushes == clean + 1

@@ -11,9 +11,10 @@ while it carries the job goes to the planner decoded once, as it is
 transaction judges it, as on every bus; a job whose deadline passes ends as
 timed out. A job that ended leaves the slot to AK 0.
 
-A DP-V1 slave whose parameters go through PROFIdrive data record 47
-(``DriveTarget.record``) has no PKW slot: the planner's request for it (its
-polls due together, or a job alone) goes out as a record transfer, carried by
+A DP-V1 slave whose parameters go through PROFIdrive data record 47 (its
+carrier a :class:`~pkwbus.master.carriers.RecordCarrier`) has no PKW slot:
+the planner's request for it (its polls due together, or a job alone) goes
+out as a record transfer, carried by
 the cycle between Data_Exchanges, and its response (or why none came) goes to
 the planner as the exchange's result.
 
@@ -36,18 +37,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from pkwbus.link import Link
+from pkwbus.master.carriers import RecordCarrier
+from pkwbus.master.planning.answers import ErrorKind, Failure, PkwAnswer, Reply
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.plan import DriveSpec, Send, StatusWord
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import (
-    ErrorKind,
-    Failure,
-    PkwAnswer,
-    PkwTransaction,
-    ResponseTelegram,
-)
+from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.target import RecordAccess
 from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveRun
 from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
 from pkwbus.protocol.errors import LocalProtocolError
@@ -74,8 +70,6 @@ __all__ = ["CycleWire", "DpEvents", "NoDpEvents", "SlaveSpec"]
 
 log = logging.getLogger(__name__)
 
-# A slave's health is its state machine's: the planner never counts it down.
-_FROM_THE_WIRE = HealthPolicy(from_answers=False)
 _ERROR_KINDS = {
     FailureKind.TIMEOUT: ErrorKind.TIMEOUT,
     FailureKind.GARBLED: ErrorKind.CHECKSUM,
@@ -117,16 +111,17 @@ class SlaveSpec:
         return self.spec.name
 
     @property
-    def record(self) -> RecordAccess | None:
-        """Where its parameters go through data record 47 (None: through PKW)."""
-        return self.spec.target.record
+    def record(self) -> RecordCarrier | None:
+        """Its carrier where its parameters go through data record 47 (None: through PKW)."""
+        carrier = self.spec.carrier
+        return carrier if isinstance(carrier, RecordCarrier) else None
 
     def slot(self) -> PkwSlot | None:
         """Its PKW slot: none on a PPO without PKW, or where parameters go through
         data record 47 (the PKW words then stay at AK 0)."""
         if not self.ppo.has_pkw or self.record is not None:
             return None
-        return PkwSlot(self.ppo, self.spec.target.dialect)
+        return PkwSlot(self.ppo, self.spec.carrier.dialect)
 
 
 class CycleWire:
@@ -177,7 +172,7 @@ class CycleWire:
     ) -> Planner:
         return Planner(
             drives, poll_deadline=poll_deadline or DEFAULT_POLL_DEADLINE, retries=retries,
-            policy=_FROM_THE_WIRE, stale_answers=False,  # the PKW slot waits for AK 0 instead
+            policy=policy,
         )  # fmt: skip
 
     def attach(self, runner: LineRunner) -> None:
@@ -283,9 +278,9 @@ class CycleWire:
         send = self._sends.pop(name, None)
         if send is None:
             return
-        result: ResponseTelegram | Failure
+        result: Reply | Failure
         if isinstance(end, RecordRead):
-            result = ResponseTelegram(address, end.data, self.master.answer_time)
+            result = Reply(address, end.data, self.master.answer_time)
         else:
             kind = ErrorKind.TIMEOUT if end.timed_out else ErrorKind.UNEXPECTED
             result = Failure(kind, end.why)
@@ -299,9 +294,7 @@ class CycleWire:
         # request included); the answer took the time from the request written to it.
         if isinstance(event, Inputs):
             garbled = self._garbled.pop(name, None)
-            result: ResponseTelegram | Failure = ResponseTelegram(
-                address, event.data, master.answer_time
-            )
+            result: Reply | Failure = Reply(address, event.data, master.answer_time)
             if garbled is not None and garbled.request is None:  # no job counts it
                 result = Failure(ErrorKind.UNEXPECTED, garbled.why)
             runner.exchanged(name, result, master.exchange_time)
@@ -311,7 +304,9 @@ class CycleWire:
             self._garbled[name] = event
             send = self._sends.get(name)
             if event.request is not None and send is not None:
-                self._done(name, send, Failure(ErrorKind.UNEXPECTED, event.why, True), now)
+                unreadable = PkwAnswer(None, b"", None, None, master.answer_time, cyclic=True,
+                                       why=event.why)  # fmt: skip
+                self._done(name, send, unreadable, now)
         elif isinstance(event, Failed):
             failure = Failure(_ERROR_KINDS[event.kind], event.detail)
             runner.exchanged(name, failure, master.exchange_time)
@@ -370,7 +365,7 @@ class CycleWire:
     def _on_answered(self, address: int, answer: float, took: float) -> None:
         """A start-up request (diagnosis, Set_Prm, Chk_Cfg) answered: a telegram that held
         the line, like a Data_Exchange."""
-        self.runner.exchanged(self._names[address], ResponseTelegram(address, b"", answer), took)
+        self.runner.exchanged(self._names[address], Reply(address, b"", answer), took)
 
     def _state(self, name: str, event: StateChanged, now: float) -> None:
         self.dp_events.slave_state(name, event.new)

@@ -26,13 +26,7 @@ import time
 from collections.abc import Callable
 
 from pkwbus.link import Link, LinkState, PortError, PortSettings
-from pkwbus.master.planning.transaction import (
-    ErrorKind,
-    ExchangeResult,
-    Failure,
-    ResponseTelegram,
-)
-from pkwbus.master.target import DriveTarget
+from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.protocol.serial.telegram import (
     BadChecksum,
     BadLength,
@@ -137,9 +131,10 @@ class Line:
             self._stray = True  # unread input may be waiting: discard it before a request
 
     async def exchange(
-        self, target: DriveTarget, telegram: bytes, timeout: float | None = None
+        self, adr: int, telegram: bytes, timeout: float | None = None
     ) -> ExchangeResult:
-        """Send ``telegram`` to ``target`` and wait for its answer."""
+        """Send ``telegram`` to the drive whose answers come from ``adr``, and wait for its
+        answer."""
         async with self._lock:
             loop = self._loop = asyncio.get_running_loop()
             timeout = timeout or self.timeout
@@ -149,7 +144,7 @@ class Line:
                 except PortError as exc:
                     return Failure(ErrorKind.PORT, str(exc))
             waiter: asyncio.Future[ExchangeResult] = loop.create_future()
-            self.start(target.adr, telegram, waiter.set_result, timeout)
+            self.start(adr, telegram, waiter.set_result, timeout)
             try:
                 return await waiter
             except asyncio.CancelledError:
@@ -244,7 +239,7 @@ class Line:
         if self._send_timer is not None:
             self._send_timer.cancel()
             self._send_timer = None
-        if not isinstance(result, ResponseTelegram) or self._deframer.buffered:
+        if not isinstance(result, Reply) or self._deframer.buffered:
             self._stray = True  # what follows a bad answer must not start the next one
         done, self._done = self._done, None
         self._state = _State.IDLE
@@ -343,7 +338,7 @@ class Line:
                 loop = self._loop
                 assert loop is not None
                 duration = loop.time() - self._started
-                self._finish(ResponseTelegram(event.adr, event.data, duration))
+                self._finish(Reply(event.adr, event.data, duration))
                 return
             if isinstance(event, BadChecksum):
                 self._finish(Failure(ErrorKind.CHECKSUM, event.raw.hex(" ")))

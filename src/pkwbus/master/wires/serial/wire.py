@@ -12,10 +12,10 @@ import asyncio
 from collections.abc import Sequence
 
 from pkwbus.link import Link
+from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.plan import DriveSpec, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.transaction import ExchangeResult
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.wires.serial.line import Line
 
@@ -78,7 +78,7 @@ class ExchangeWire:
     def _start(self, send: Send, loop: asyncio.AbstractEventLoop) -> None:
         self._send = send
         self._sent_at = loop.time()
-        self.line.start(send.target.adr, send.telegram, self._exchanged)
+        self.line.start(send.address, send.telegram, self._exchanged)
 
     def _exchanged(self, result: ExchangeResult) -> None:
         """The line's callback: account for the result, start the next exchange."""

@@ -1,5 +1,6 @@
-"""Several PKW jobs as one data record 47 request, and the planner that batches a DP-V1
-slave's due polls: pure, on a fake clock."""
+"""Several PKW jobs as one data record 47 request (the record carrier and its batch
+transaction), and the planner that batches a DP-V1 slave's due polls: pure, on a fake
+clock."""
 
 from __future__ import annotations
 
@@ -8,12 +9,13 @@ import struct
 import pytest
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.carriers import RecordCarrier
+from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
+from pkwbus.master.planning.batch import BatchTransaction
+from pkwbus.master.planning.carrier import Item as RecordItem
 from pkwbus.master.planning.outcomes import Answered, LineFailed, NotSent, Rejected, TimedOut
 from pkwbus.master.planning.plan import DriveSpec, Finished, PollSpec, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.planning.record_transaction import RecordItem, RecordTransaction
-from pkwbus.master.planning.transaction import ErrorKind, Failure, ResponseTelegram
-from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp import ppo
@@ -25,24 +27,29 @@ from pkwbus.protocol.profidrive.parameters import (
     Values,
     decode_response,
 )
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol
 from pkwbus.protocol.values.types import ValueType
 
 SIEMENS = ppo.dp_dialect("profidrive")
 DANFOSS = ppo.dp_dialect("danfoss-pcv")
 
 
-def target(dialect: object = SIEMENS, axis: int = 1) -> DriveTarget:
-    return DriveTarget(
-        Protocol.PROFIBUS, 8, dialect, ppo.LAYOUT, BlockShape(0, 2),  # type: ignore[arg-type]
-        record=RecordAccess(axis),
-    )  # fmt: skip
+def target(axis: int = 1, max_data: int = 240, reference: int = 1) -> RecordCarrier:
+    return RecordCarrier(8, SIEMENS, axis, max_data, first_reference=reference)
 
 
-def answer(tx: RecordTransaction, results: list[object]) -> ResponseTelegram:
+def RecordTransaction(
+    carrier: RecordCarrier, items: list[RecordItem], *, reference: int, axis: int,
+    retries: int, deadline: float,
+) -> BatchTransaction:  # fmt: skip
+    carrier = RecordCarrier(8, carrier.dialect, axis, carrier.max_data,
+                            first_reference=reference)  # fmt: skip
+    return carrier.transaction(items, retries=retries, deadline=deadline)
+
+
+def answer(tx: BatchTransaction, results: list[object]) -> Reply:
     """The drive's response to the transaction's request, built on the drive's side."""
     request = decode_request(tx.telegram)
-    return ResponseTelegram(8, encode_response(request, results), 0.01)  # type: ignore[arg-type]
+    return Reply(8, encode_response(request, results), 0.01)  # type: ignore[arg-type]
 
 
 def test_reads_together_each_with_its_own_outcome_and_type() -> None:
@@ -75,7 +82,7 @@ def test_a_failed_transfer_is_tried_again_then_every_job_times_out() -> None:
     items = [RecordItem(pkw.read(SIEMENS, 21)), RecordItem(pkw.read(SIEMENS, 27))]
     tx = RecordTransaction(target(), items, reference=1, axis=1, retries=1, deadline=10.0)
     assert tx.feed(Failure(ErrorKind.TIMEOUT, "response timeout"), 0.1) is None
-    wrong = ResponseTelegram(8, bytes((9, 1, 1, 2)), 0.01)  # another request's reference
+    wrong = Reply(8, bytes((9, 1, 1, 2)), 0.01)  # another request's reference
     outcome = tx.feed(wrong, 0.2)
     assert isinstance(outcome, TimedOut) and "another request" in outcome.reason
     assert all(o is outcome for o in tx.outcomes) and len(tx.outcomes) == 2
@@ -134,7 +141,7 @@ def test_the_planner_sends_a_slaves_due_polls_in_one_request_and_keeps_them_toge
     request = decode_request(send.telegram)
     assert len(request.addresses) == 39  # as many as one request takes
     tx = planner.active("pump")
-    assert isinstance(tx, RecordTransaction)
+    assert isinstance(tx, BatchTransaction)
     results = [Values(Format.FLOAT, (float(n),)) for n in range(39)]
     planner.exchanged(send, answer(tx, results), 0.05)
     finished = [e for e in planner.take_events() if isinstance(e, Finished)]
@@ -145,7 +152,7 @@ def test_the_planner_sends_a_slaves_due_polls_in_one_request_and_keeps_them_toge
     rest = planner.next_for("pump", 0.06)
     assert rest is not None and len(decode_request(rest.telegram).addresses) == 6
     tx = planner.active("pump")
-    assert isinstance(tx, RecordTransaction)
+    assert isinstance(tx, BatchTransaction)
     planner.exchanged(rest, answer(tx, [Values(Format.FLOAT, (1.0,))] * 6), 0.1)
     planner.take_events()
     # A second later all 45 are due together again: the first 39 from their request's
@@ -155,7 +162,7 @@ def test_the_planner_sends_a_slaves_due_polls_in_one_request_and_keeps_them_toge
     again = planner.next_for("pump", 1.0)
     assert again is not None and len(decode_request(again.telegram).addresses) == 39
     tx = planner.active("pump")
-    assert isinstance(tx, RecordTransaction)
+    assert isinstance(tx, BatchTransaction)
     planner.exchanged(again, answer(tx, [Values(Format.FLOAT, (2.0,))] * 39), 1.05)
     last = planner.next_for("pump", 1.06)
     assert last is not None and len(decode_request(last.telegram).addresses) == 6
@@ -197,8 +204,7 @@ def test_a_text_poll_is_ended_unsent_and_the_others_go() -> None:
 
 
 def test_the_slaves_largest_record_bounds_a_request() -> None:
-    small = DriveTarget(Protocol.PROFIBUS, 8, SIEMENS, ppo.LAYOUT, BlockShape(0, 2),
-                        record=RecordAccess(1, max_data=64))  # fmt: skip
+    small = target(max_data=64)
     planner = Planner([DriveSpec("pump", small, polls(13))], poll_deadline=2.0, retries=1)
     planner.line_up(0.0)
     send = planner.next_for("pump", 0.0)
