@@ -154,31 +154,25 @@ def now() -> float:
 
 
 class Counting:
-    """Scheduler events that count finished jobs per drive (the benchmarks' yardstick)."""
+    """An observer of the line's events that counts finished jobs per drive (the
+    benchmarks' yardstick)."""
 
     def __init__(self) -> None:
         self.ok: dict[str, int] = {}
         self.failed: dict[str, int] = {}
         self.exchanges = 0
 
-    def exchange(self, drive: str, result: object, busy: float) -> None:
-        self.exchanges += 1
-
-    def job_finished(self, drive: str, job: object, result: object) -> None:
+    def on_events(self, events: Sequence[object]) -> None:
+        from pkwbus.master.events import Exchanged, JobDone
         from pkwbus.master.planning.outcomes import Answered
 
-        outcome = getattr(result, "outcome", None)
-        book = self.ok if isinstance(outcome, Answered) else self.failed
-        book[drive] = book.get(drive, 0) + 1
-
-    def overrun(self, drive: str) -> None:
-        pass
-
-    def pkw_length(self, drive: str, conflict: bool) -> None:
-        pass
-
-    def value(self, key: object, reading: object) -> None:
-        pass
+        for event in events:
+            if isinstance(event, Exchanged):
+                self.exchanges += 1
+            elif isinstance(event, JobDone):
+                answered = isinstance(event.result.outcome, Answered)
+                book = self.ok if answered else self.failed
+                book[event.drive] = book.get(event.drive, 0) + 1
 
     def total(self, drives: Sequence[str] | None = None) -> int:
         return sum(n for d, n in self.ok.items() if drives is None or d in drives)

@@ -23,6 +23,7 @@ import argparse
 import asyncio
 import statistics
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.carriers import carrier_for
+from pkwbus.master.events import Event, Exchanged, JobDone
 from pkwbus.master.planning.answers import Reply
 from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
@@ -79,23 +81,13 @@ class Counting:
         self.telegrams = 0
         self.ok = 0
 
-    def exchange(self, drive: str, result: Any, busy: float) -> None:
-        self.telegrams += 1
-        self.inner.exchange(drive, result, busy)
-
-    def job_finished(self, drive: str, kind: Any, result: Any) -> None:
-        if isinstance(result.outcome, Answered):
-            self.ok += 1
-        self.inner.job_finished(drive, kind, result)
-
-    def overrun(self, drive: str) -> None:
-        self.inner.overrun(drive)
-
-    def pkw_length(self, drive: str, conflict: bool) -> None:
-        self.inner.pkw_length(drive, conflict)
-
-    def value(self, key: Any, reading: Any) -> None:
-        self.inner.value(key, reading)
+    def on_events(self, events: Sequence[Event]) -> None:
+        for event in events:
+            if isinstance(event, Exchanged):
+                self.telegrams += 1
+            elif isinstance(event, JobDone) and isinstance(event.result.outcome, Answered):
+                self.ok += 1
+        self.inner.on_events(events)
 
 
 async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
@@ -117,7 +109,7 @@ async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
         "bench",
         ExchangeWire(line),
         drives,
-        events=counting,
+        observers=[counting],
         poll_deadline=1.0,
     )
     # The device values' collector, wired as build_runtime wires it.

@@ -5,7 +5,8 @@ takes its 11 bits a character at the baud rate), pkwbus's DP master cycling
 it. Printed per baud rate: the measured cycles/s, the theoretical best
 (request + TSYN + min TSDR + answer + TID1, EN 50170 bus timing), and what a
 USB adapter would cost (its latency timer, 1 ms in low-latency mode, 16 ms
-otherwise, on each answer).
+otherwise, on each answer). The master is the service's: the line runner with
+the DP wire, no job queued (the PKW slot stays at AK 0).
 
     python bench/dp_cycle.py [--seconds 3] [--baudrates 19200,93750]
 """
@@ -15,12 +16,18 @@ from __future__ import annotations
 import argparse
 import asyncio
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from pkwbus.link import PortSettings, new_event_loop
-from pkwbus.master.wires.profibus.cycle import DpMaster
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.events import Event, Exchanged
+from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.runner import LineRunner
+from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dps
@@ -38,6 +45,16 @@ def _frame_bytes(kind: ppo.PpoType) -> int:
     return len(fdl.encode(frame))
 
 
+class _Count:
+    """Counts the exchanges of the line's event stream."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        self.count += sum(isinstance(e, Exchanged) for e in events)
+
+
 async def measure(baudrate: int, seconds: float) -> dict[str, Any]:
     # The simulated slave answers after min TSDR (11 bit times), as a quick real one would.
     delay = dp_timing.bits(dp_timing.MIN_TSDR_BITS, baudrate)
@@ -46,21 +63,28 @@ async def measure(baudrate: int, seconds: float) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         end = await sim.serve_pty(str(Path(tmp) / "ttyDP"))
         try:
-            line = DpLine(PortSettings(end.path, baudrate=baudrate), 2)
+            line = DpLine(PortSettings(end.path, baudrate=baudrate), 2, listen=0.01)
             prm = dps.Parameters(sim.ident, dps.watchdog_factors(2.0))
             setup = SlaveSetup(8, 2, prm, sim.ppo.cfg, retries=2)
-            master = DpMaster(line, [(setup, ppo.PkwSlot(sim.ppo, sim.dialect))])
-            await master.start(listen=0.01)
+            target = DriveTarget.create("profibus", 8, dialect_name=sim.dialect.name)
+            spec = DriveSpec("slave", carrier_for(target))
+            wire = CycleWire(line, [SlaveSpec(spec, setup, sim.ppo)])
+            exchanges = _Count()
+            runner = LineRunner("bench", wire, [spec], observers=[exchanges])
+            task = asyncio.create_task(runner.run())
             loop = asyncio.get_running_loop()
             try:
-                while master.runs[8].slave.state is not SlaveState.DATA_EXCHANGE:
-                    await master.cycle()
-                start, count = loop.time(), 0
-                while loop.time() - start < seconds:
-                    count += await master.cycle()
-                elapsed = loop.time() - start
+                slave = wire.cycle.runs[8].slave
+                while slave.state is not SlaveState.DATA_EXCHANGE:
+                    await asyncio.sleep(0.01)
+                runner.flush()
+                start, first = loop.time(), exchanges.count
+                await asyncio.sleep(seconds)
+                runner.flush()
+                count, elapsed = exchanges.count - first, loop.time() - start
             finally:
-                await master.stop()
+                runner.stop()
+                await task
         finally:
             await end.close()
     size = _frame_bytes(sim.ppo)

@@ -164,9 +164,9 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
             if count >= total:
                 finished.set_result(bad)
             else:
-                line.start(target.adr, telegram, done)
+                line.send(target.adr, telegram, done)
 
-        line.start(target.adr, telegram, done)
+        line.send(target.adr, telegram, done)
         return await asyncio.wait_for(finished, 120)
 
     await line.open()

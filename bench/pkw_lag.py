@@ -43,8 +43,8 @@ async def interleaved(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, 0.0, "uss") for a in (1, 2, 3, 4)]
     sched = LineRunner(
-        "bench", ExchangeWire(make_line(port, "uss", BAUD, timeout=0.1)), drives, events=events,
-        poll_deadline=2.0,
+        "bench", ExchangeWire(make_line(port, "uss", BAUD, timeout=0.1)), drives,
+        observers=[events], poll_deadline=2.0,
     )  # fmt: skip
     task = asyncio.create_task(sched.run())
     await asyncio.sleep(0.5)

@@ -16,7 +16,7 @@ from pkwbus.master.planning.plan import (
     HealthChanged,
     PollSpec,
 )
-from pkwbus.master.recorder import REFUSAL_RETELL, LineRecord, NoEvents
+from pkwbus.master.recorder import REFUSAL_RETELL, LineRecorder
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
@@ -27,13 +27,9 @@ POLL = PollSpec("19-99", 0, pkw.read(TARGET.dialect, 1999), 1.0)
 REFUSED = Rejected(0, "Illegal PNU", "illegal PNU")
 
 
-def record(clock: list[float]) -> LineRecord:
-    return LineRecord(
-        "l1",
-        [DriveSpec("fan", carrier_for(TARGET), (POLL,))],
-        Snapshot(),
-        NoEvents(),
-        clock=lambda: clock[0],
+def record(clock: list[float]) -> LineRecorder:
+    return LineRecorder(
+        "l1", [DriveSpec("fan", carrier_for(TARGET), (POLL,))], Snapshot(), clock=lambda: clock[0]
     )
 
 

@@ -9,19 +9,19 @@ from __future__ import annotations
 import asyncio
 import itertools
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import pytest
 
 from pkwbus.link import PortSettings
 from pkwbus.master.carriers import carrier_for
-from pkwbus.master.planning.answers import ExchangeResult
+from pkwbus.master.events import Event, Exchanged, JobDone, Overrun
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Answered, LineFailed
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
 from pkwbus.master.wires.serial.wire import ExchangeWire
@@ -32,29 +32,28 @@ from tests.master.conftest import Trace, make_sim, serve, until
 
 
 class Recorder:
-    """LineEvents that keeps what happened, per drive."""
+    """An observer of the line's stream that keeps what happened, per drive."""
 
     def __init__(self) -> None:
-        self.exchanges: list[tuple[str, ExchangeResult]] = []
+        self.exchanges: list[tuple[str, ErrorKind | None]] = []
         self.busy: Counter[str] = Counter()
         self.done: list[tuple[str, JobKind, JobResult]] = []
         self.overruns: Counter[str] = Counter()
+        self.batches = 0  # batches of events told so far
 
-    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
-        self.exchanges.append((drive, result))
-        self.busy[drive] += busy
+    def on_events(self, events: Sequence[Event]) -> None:
+        self.batches += 1
+        for event in events:
+            if isinstance(event, Exchanged):
+                self.exchanges.append((event.drive, event.error))
+                self.busy[event.drive] += event.busy
+            elif isinstance(event, JobDone):
+                self.job_finished(event.drive, event.kind, event.result)
+            elif isinstance(event, Overrun):
+                self.overruns[event.drive] += 1
 
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         self.done.append((drive, kind, result))
-
-    def overrun(self, drive: str) -> None:
-        self.overruns[drive] += 1
-
-    def pkw_length(self, drive: str, conflict: bool) -> None:
-        pass
-
-    def value(self, key: ReadingKey, reading: Reading) -> None:
-        pass
 
     def polls_ok(self, drive: str) -> int:
         return sum(
@@ -83,7 +82,7 @@ def runner(
         PortSettings(port, baudrate=115200), Protocol(protocol), timeout=timeout, trace=trace
     )
     events = Recorder()
-    return LineRunner("line1", ExchangeWire(line), specs, events=events, **kw), events, trace
+    return LineRunner("line1", ExchangeWire(line), specs, observers=[events], **kw), events, trace
 
 
 async def run_until(s: LineRunner, check: Callable[[], bool]) -> None:
@@ -190,7 +189,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
         timeout=0.05,
         trace=trace,
     )
-    s = LineRunner("line1", ExchangeWire(line), specs, events=Recorder())
+    s = LineRunner("line1", ExchangeWire(line), specs, observers=[Recorder()])
     task = asyncio.create_task(s.run())
     loop = asyncio.get_running_loop()
     try:
@@ -228,11 +227,11 @@ async def test_polls_are_recorded_in_batches_each_with_its_own_time_and_none_los
             port, "fc", drive_specs("fc", [1, 2], [1613, 1614], 0.0),
             wall_clock=lambda: float(next(stamps)),
         )  # fmt: skip
-        seen: list[int] = []  # exchanges recorded when each finished poll was recorded
+        seen: list[int] = []  # the batch each finished poll was recorded in
         job_finished = events.job_finished
 
         def record(drive: str, kind: JobKind, result: JobResult) -> None:
-            seen.append(len(events.exchanges))
+            seen.append(events.batches)
             job_finished(drive, kind, result)
 
         events.job_finished = record  # type: ignore[method-assign]

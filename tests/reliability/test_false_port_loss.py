@@ -147,7 +147,7 @@ async def run_lines(folder: Path, seconds: float, faults: float) -> None:
         )  # fmt: skip
         runtime = await build_runtime(parse_config(text, environ={}))
         for name, runner in runtime.runners.items():
-            runner.wire.link.reconnect.add_listener(losses.listener(name))  # every bus alike
+            runner.link.reconnect.add_listener(losses.listener(name))  # every bus alike
         with burning(min(BURNERS, os.cpu_count() or 1)):
             await runtime.start()
             try:

@@ -1,8 +1,12 @@
-"""What the planner's events mean for the snapshot, the job's caller and the metrics.
+"""What a line's events mean for the snapshot and the job's caller: the snapshot's one writer.
 
 A finished job or poll is decoded here (the value in the drive's notation,
-or why there is none), the snapshot keeps only values a drive sent, and the
-line's :class:`LineEvents` hear of every exchange, job, overrun and new value.
+or why there is none), the snapshot keeps only values a drive sent, and what
+the recorder makes of the stream goes back on it as events of its own
+(:class:`~pkwbus.master.events.JobDone`, :class:`~pkwbus.master.events.ValueLanded`,
+:class:`~pkwbus.master.events.DescriptionChecked`) for the line's observers.
+Drive health, status words, the line's port and the DP slaves' states and
+diagnoses land in the snapshot here too.
 """
 
 from __future__ import annotations
@@ -11,68 +15,41 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Protocol
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Disagreement, disagreements
-from pkwbus.master.planning.answers import ExchangeResult
+from pkwbus.master.events import (
+    DescriptionChecked,
+    Event,
+    JobDone,
+    LineState,
+    SlaveDiagnosed,
+    SlaveStateChanged,
+    ValueLanded,
+)
 from pkwbus.master.planning.describing import ASK_AGAIN
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
     DriveSpec,
-    Event,
     Finished,
     HealthChanged,
-    Overrun,
     PkwLengthTold,
     PollSpec,
     StatusWord,
 )
 from pkwbus.master.planning.transaction import Tally
-from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
+from pkwbus.master.snapshot import DriveState, LiveSlave, Reading, ReadingKey, Snapshot
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.length import AUTO, shown
 
-__all__ = ["REFUSAL_RETELL", "LineEvents", "LineRecord", "NoEvents", "job_result"]
+__all__ = ["REFUSAL_RETELL", "LineRecorder", "job_result"]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
 
 REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
-
-
-class LineEvents(Protocol):
-    """What a line reports (the service turns it into metrics). ``value``: a polled
-    parameter's new reading, as it lands in the snapshot."""
-
-    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None: ...
-    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None: ...
-    def overrun(self, drive: str) -> None: ...
-    def value(self, key: ReadingKey, reading: Reading) -> None: ...
-    def pkw_length(self, drive: str, conflict: bool) -> None: ...
-    def described(self, event: Described, found: list[Disagreement]) -> None: ...
-
-
-class NoEvents:
-    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
-        pass
-
-    def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
-        pass
-
-    def overrun(self, drive: str) -> None:
-        pass
-
-    def value(self, key: ReadingKey, reading: Reading) -> None:
-        pass
-
-    def pkw_length(self, drive: str, conflict: bool) -> None:
-        pass
-
-    def described(self, event: Described, found: list[Disagreement]) -> None:
-        pass
 
 
 def job_result(
@@ -90,21 +67,20 @@ def job_result(
     return JobResult(outcome, raw, value, tally)
 
 
-class LineRecord:
-    """Applies one line's events to the snapshot, the jobs' futures and the metrics."""
+class LineRecorder:
+    """Applies one line's events to the snapshot and the jobs' futures."""
 
     def __init__(
         self,
         line: str,
         drives: Sequence[DriveSpec],
         snapshot: Snapshot,
-        events: LineEvents,
         *,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.line = line
         self.snapshot = snapshot
-        self.events = events
+        self._out: list[Event] = []  # what this recorder makes of the events it applies
         self._clock = clock
         # A poll the drive refuses, by (drive, parameter, index): when it was last told.
         self._refused: dict[tuple[str, str, int], float] = {}
@@ -117,26 +93,39 @@ class LineRecord:
         for d in drives:
             snapshot.drives[d.name] = DriveState()
 
-    def apply(self, events: list[Event], at: float | None = None) -> None:
-        """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now)."""
+    def apply(self, events: Sequence[Event], at: float | None = None) -> list[Event]:
+        """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now).
+        What the recorder made of them: its own events, for the line's observers."""
         if at is None:
             at = time.time()
+        out: list[Event] = []
+        self._out = out
+        snapshot = self.snapshot
         for event in events:
             if isinstance(event, Finished):
                 self._finished(event, at)
             elif isinstance(event, StatusWord):
-                old = self.snapshot.drives.get(event.drive, DriveState())
-                self.snapshot.drives[event.drive] = DriveState(
-                    old.up, event.word, at, event.main_actual
-                )
+                old = snapshot.drives.get(event.drive, DriveState())
+                snapshot.drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)
             elif isinstance(event, HealthChanged):
                 self._health(event)
-            elif isinstance(event, Overrun):
-                self.events.overrun(event.drive)
             elif isinstance(event, PkwLengthTold):
                 self._pkw_length(event)
             elif isinstance(event, Described):
                 self._described(event)
+            elif isinstance(event, LineState):
+                snapshot.lines[event.line] = event.up
+            elif isinstance(event, SlaveStateChanged):
+                old_slave = snapshot.slaves.get(event.drive, LiveSlave(self.line))
+                snapshot.slaves[event.drive] = replace(old_slave, state=event.state)
+            elif isinstance(event, SlaveDiagnosed):
+                old_slave = snapshot.slaves.get(event.drive, LiveSlave(self.line))
+                found = event.diagnosis
+                snapshot.slaves[event.drive] = replace(
+                    old_slave, ident=found.ident, owner=found.master, flags=found.flags,
+                    diagnosed=at,
+                )  # fmt: skip
+        return out
 
     def _described(self, event: Described) -> None:
         """A parameter's description settled: its polls decode as it says from now on; one
@@ -148,7 +137,7 @@ class LineRecord:
                 log.warning("drive %s is %s: its parameters are described afresh", drive,
                             event.why, extra=ctx)  # fmt: skip
             self._waiting.add((drive, target.pnu))
-            self.events.described(event, [])
+            self._out.append(DescriptionChecked(event))
             return
         self._waiting.discard((drive, target.pnu))
         new = {(p.parameter, p.index): p for p in event.polls}
@@ -183,7 +172,7 @@ class LineRecord:
                     " drive's is used", drive, target.parameter, d.field, d.drive, d.catalog,
                     extra=ctx,
                 )  # fmt: skip
-        self.events.described(event, contradicts)
+        self._out.append(DescriptionChecked(event, tuple(contradicts)))
 
     def _pkw_length(self, event: PkwLengthTold) -> None:
         """One log line per change of what a drive's PKW length is known to be."""
@@ -202,7 +191,6 @@ class LineRecord:
         elif length.known:
             log.info("drive %s: PKW length %s, learned from its answers", drive,
                      shown(length.words), extra=ctx)  # fmt: skip
-        self.events.pkw_length(drive, length.in_conflict)
 
     def _health(self, event: HealthChanged) -> None:
         ctx = {"line": self.line, "drive": event.drive}
@@ -224,7 +212,7 @@ class LineRecord:
         reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):
             self._tell_refusal(drive, work, event.outcome)
-            self.events.job_finished(drive, JobKind.READ, result)
+            self._out.append(JobDone(drive, JobKind.READ, result))
             if reading is not None:
                 self._land((drive, work.parameter, work.index), reading)
             return
@@ -232,7 +220,7 @@ class LineRecord:
             self._show_confirmed(drive, work, reading)
         if event.tally is not None and not isinstance(event.outcome, Cancelled):
             result = replace(result, previous=previous)  # it ran: a write's old value
-        self.events.job_finished(drive, work.kind, result)
+        self._out.append(JobDone(drive, work.kind, result))
         work.resolve(result)
 
     def _tell_refusal(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
@@ -292,4 +280,4 @@ class LineRecord:
 
     def _land(self, key: ReadingKey, reading: Reading) -> None:
         self.snapshot.readings[key] = reading
-        self.events.value(key, reading)
+        self._out.append(ValueLanded(key, reading))

@@ -1,26 +1,27 @@
-"""The one runner of a line, whatever its bus: a planner fed through a wire, one recorder.
+"""The one runner of a line, whatever its bus: a planner, a wire, a port, one stream.
 
-The policy is the planner's (:mod:`pkwbus.master.planning.planner`); how exchanges
-travel is the wire's (:class:`Wire`): FC and USS one exchange at a time
-(:mod:`pkwbus.master.wires.serial.wire`), PROFIBUS DP a cycle through the slaves
-(:mod:`pkwbus.master.wires.profibus.wire`), as one ``poll(now, phy, app)`` drives any
-application in profirust. What the planner's events mean (values into the
-snapshot, job futures, metrics) is the recorder's (:mod:`pkwbus.master.recorder`),
-the only writer of the snapshot.
+The policy is the planner's (:mod:`pkwbus.master.planning`); what goes out on
+the bus and what an answer means is the wire's (:class:`Wire`: FC and USS,
+:mod:`pkwbus.master.wires.serial`; PROFIBUS DP, :mod:`pkwbus.master.wires.profibus`),
+a few pure calls that the runner makes and that never reach back into it, as
+profirust's FDL station drives its application (``transmit``, ``receive``,
+``handle_timeout``). The runner is the only one that opens and closes the
+line's port (:class:`Port`), starts each request and hands its answer over.
 
-The wire's port (its :class:`~pkwbus.link.Link`) owns the port's state and
-back-off; the runner listens there, and reopens the port through it when it
-is due. A line never stops for an error: it is reported, the port given up
-and reopened at back-off.
+A run of exchanges goes on in the port's callbacks: each answer goes to the
+wire, and the next request starts from the same callback while the line's
+start pause runs, until the wire has nothing to send now; then the runner may
+idle until the wire's time, or until a job comes in.
 
-During a run of exchanges, the exchanges' counters and the planner's events
-are recorded in batches, at most :data:`RECORD_EVERY` seconds after the first
-exchange of the batch (a loop timer), each with the time it happened: one
-batch of the same work keeps the interpreter's caches warm, where the same
-work between every two wake-ups runs cold. What someone waits for is
-recorded at once: a finished write or on-demand read (its caller), a
-drive's change of health (its log line); so is everything at the end of a
-run, when the port fails, and when the line stops.
+Everything that happens - the planner's events, the wire's, the port's state -
+is one stream of events (:mod:`pkwbus.master.events`), recorded in batches at
+most :data:`RECORD_EVERY` seconds after the first of a batch (a loop timer),
+each with the time it happened: the recorder (the snapshot's one writer) first,
+then the observers given at construction. What someone waits for is recorded
+at once: a finished write or on-demand read (its caller), a drive's change of
+health (its log line); so is everything at the end of a run, when the port
+fails, and when the line stops. A line never stops for an error: it is
+reported, the port given up and reopened at back-off.
 """
 
 from __future__ import annotations
@@ -31,60 +32,88 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 from pkwbus.link import Link, LinkState, PortError
-from pkwbus.master.planning.answers import ExchangeResult
+from pkwbus.master.events import Event, LineState, Observer
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job
-from pkwbus.master.planning.plan import DriveSpec, Event, Finished, HealthChanged
+from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.recorder import LineEvents, LineRecord, NoEvents
+from pkwbus.master.recorder import LineRecorder
 from pkwbus.master.snapshot import Snapshot
 
-__all__ = ["RECORD_EVERY", "LineRunner", "Wire"]
+__all__ = ["RECORD_EVERY", "Done", "LineRefused", "LineRunner", "Port", "Wire"]
 
 log = logging.getLogger(__name__)
 
-# Seconds at most between two batches of recorded polls and counters during a run.
+# Seconds at most between two batches of recorded events during a run.
 RECORD_EVERY = 0.05
 
+Done = Callable[[Any], None]
 
-class Wire(Protocol):
-    """A kind of line under the runner: how its exchanges travel."""
+
+class LineRefused(PortError):
+    """The line cannot be used though its port is open (another master runs it): the port
+    is given up, and opened again at back-off."""
+
+
+class Port(Protocol):
+    """The I/O of one line: its link, and one request at a time."""
 
     @property
-    def link(self) -> Link:
-        """The port: its state, back-off and listeners."""
-        ...
+    def link(self) -> Link: ...
 
-    def planner_for(
-        self, drives: Sequence[DriveSpec], retries: int, policy: HealthPolicy | None,
-        poll_deadline: float | None,
-    ) -> Planner: ...  # fmt: skip
-
-    def attach(self, runner: LineRunner) -> None:
-        """Called once, before anything runs: the runner whose planner and recorder it feeds."""
+    @property
+    def sent_at(self) -> float:
+        """Loop time the latest request was written."""
         ...
 
     async def started(self) -> None:
-        """The port just opened: what the wire does before its first request (DP listens)."""
+        """The port just opened: what the bus asks before the first request (a DP master
+        listens for other masters); :class:`LineRefused` when the line is not to be used."""
         ...
 
-    async def carry(self) -> float | None:
-        """Exchanges, as many as the planner has ready; the time the line may idle until."""
-        ...
-
-    def lost(self) -> None:
-        """The port is gone: what the wire had under way starts afresh."""
+    def start(self, request: Any, done: Done) -> None:
+        """Send ``request``; ``done`` gets its answer, or the exception that ended it."""
         ...
 
     async def close(self) -> None:
-        """The line stops: close the port (what the bus asks first, first)."""
+        """The line stops: what the bus asks first (a DP master clears its slaves), then
+        the port closes."""
         ...
 
 
-def _waited_for(events: list[Event]) -> bool:
+class Wire(Protocol):
+    """A kind of line: pure calls about what goes out and what came back; no runner."""
+
+    @property
+    def port(self) -> Port: ...
+
+    def poll_deadline(self, retries: int) -> float:
+        """How long a poll's transaction may take on this bus, its retries included."""
+        ...
+
+    def transmit(self, planner: Planner, now: float) -> Any:
+        """The next request to send, or :class:`~pkwbus.master.planning.plan.Idle`."""
+        ...
+
+    def received(
+        self, planner: Planner, request: Any, answer: Any, now: float, busy: float,
+        answered: float,
+    ) -> None:  # fmt: skip
+        """The answer to ``request`` (it held the line ``busy`` seconds, its answer took
+        ``answered`` from the request written)."""
+        ...
+
+    def lost(self) -> None:
+        """The port is gone: what was under way starts afresh."""
+        ...
+
+    def take_events(self) -> list[Event]: ...
+
+
+def _waited_for(events: Sequence[Event]) -> bool:
     """Whether any of ``events`` is one somebody waits for: record it at once."""
     for event in events:
         if isinstance(event, Finished):
@@ -107,7 +136,7 @@ class LineRunner:
         retries: int = 2,
         policy: HealthPolicy | None = None,
         snapshot: Snapshot | None = None,
-        events: LineEvents | None = None,
+        observers: Sequence[Observer] = (),
         poll_deadline: float | None = None,
         wall_clock: Callable[[], float] = time.time,
         record_every: float = RECORD_EVERY,
@@ -115,19 +144,28 @@ class LineRunner:
         self.name = name
         self.wire = wire
         self.snapshot = snapshot if snapshot is not None else Snapshot()
-        self.events: LineEvents = events or NoEvents()
-        self.record = LineRecord(name, drives, self.snapshot, self.events)
-        self.planner = wire.planner_for(drives, retries, policy, poll_deadline)
+        self.observers = list(observers)
+        self.recorder = LineRecorder(name, drives, self.snapshot)
+        self.planner = Planner(
+            drives, poll_deadline=poll_deadline or wire.poll_deadline(retries), retries=retries,
+            policy=policy,
+        )  # fmt: skip
         self.stopping = False
         self._wake = asyncio.Event()
-        # Not yet recorded: the exchanges, the planner's events with their wall time.
-        self._exchanges: deque[tuple[str, ExchangeResult, float]] = deque()
         self._unrecorded: deque[tuple[list[Event], float]] = deque()
         self._record_timer: asyncio.TimerHandle | None = None  # the batch's deadline
         self._wall = wall_clock  # the events' time of day
         self._record_every = record_every
-        wire.link.reconnect.add_listener(self._on_port)
-        wire.attach(self)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._run_over: asyncio.Future[float | None] | None = None  # one per run of exchanges
+        self._request: Any = None
+        self._started = 0.0
+        self._collect()  # what the wire tells from the start (a DP slave offline)
+        wire.port.link.reconnect.add_listener(self._on_port)
+
+    @property
+    def link(self) -> Link:
+        return self.wire.port.link
 
     # ------------------------------------------------------------ the service's
 
@@ -142,15 +180,27 @@ class LineRunner:
         self.stopping = True
         self._wake.set()
 
+    async def open(self) -> None:
+        """Open the port now (PortError with the reason, LineRefused), before :meth:`run`:
+        a command that must know at once."""
+        await self.link.open()
+        try:
+            await self.wire.port.started()
+        except LineRefused as exc:
+            self._refused(exc)
+            raise
+
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-        link = self.wire.link
-        if link.is_open:  # opened by its owner before
+        loop = self._loop = asyncio.get_running_loop()
+        link = self.link
+        if link.is_open:  # opened by :meth:`open` before
             self.planner.line_up(loop.time())
         try:
             while not self.stopping:
                 try:
                     await self._step(loop, link)
+                except LineRefused as exc:
+                    self._refused(exc)
                 except Exception as exc:  # a line never stops: report, reopen, go on
                     log.exception(
                         "line %s: unexpected error, reopening its port",
@@ -163,27 +213,82 @@ class LineRunner:
             self.planner.stop("the service is stopping")
             self.flush()
             with contextlib.suppress(Exception):
-                await self.wire.close()
+                await self.wire.port.close()
             self.snapshot.lines[self.name] = False
+
+    def _refused(self, exc: LineRefused) -> None:
+        log.error("line %s: %s", self.name, exc, extra={"line": self.name})
+        if self.link.is_open:
+            self.link.abort(str(exc))
 
     async def _step(self, loop: asyncio.AbstractEventLoop, link: Link) -> None:
         if not link.is_open:
             self.planner.line_down(loop.time())
             self.flush()
             if await link.reopen(self._wake) and not self.stopping:
-                await self.wire.started()
+                await self.wire.port.started()
                 if link.is_open:
                     self.planner.line_up(loop.time())
             return
         try:
-            until = await self.wire.carry()
-        except PortError as exc:  # the wire found the port gone
+            until = await self._carry(loop)
+        except PortError as exc:  # the port found gone
+            if isinstance(exc, LineRefused):
+                raise
             if link.is_open:
                 link.abort(str(exc))
             return
         self.flush()
         if until is not None and not self.stopping:
             await self._idle(loop, until)
+
+    async def _carry(self, loop: asyncio.AbstractEventLoop) -> float | None:
+        """One run of exchanges; the time the line may idle until (None: ask again now)."""
+        action = self.wire.transmit(self.planner, loop.time())
+        self._collect()
+        if isinstance(action, Idle):
+            return action.until
+        over = self._run_over = loop.create_future()
+        self._start(action, loop)
+        self.flush()
+        until: float | None = await over
+        return until
+
+    def _start(self, request: Any, loop: asyncio.AbstractEventLoop) -> None:
+        self._request = request
+        self._started = loop.time()
+        self.wire.port.start(request, self._done)
+
+    def _done(self, answer: Any) -> None:
+        """The port's callback: the answer to the wire, the next request out."""
+        over = self._run_over
+        try:
+            if isinstance(answer, BaseException):
+                raise answer
+            loop = self._loop
+            assert loop is not None
+            now = loop.time()
+            wire, planner, port = self.wire, self.planner, self.wire.port
+            wire.received(planner, self._request, answer, now, now - self._started,
+                          now - port.sent_at)  # fmt: skip
+            until: float | None = None
+            if not self.stopping and self.link.is_open:
+                action = wire.transmit(planner, now)
+                if not isinstance(action, Idle):
+                    self._start(action, loop)
+                    self._collect()  # recorded while the start pause runs
+                    return
+                until = action.until
+            self._collect()
+            self.flush()
+        except BaseException as exc:  # the runner's task reports it and reopens the port
+            self._run_over = None
+            if over is not None and not over.done():
+                over.set_exception(exc)
+            return
+        self._run_over = None
+        if over is not None and not over.done():
+            over.set_result(until)
 
     async def _idle(self, loop: asyncio.AbstractEventLoop, until: float) -> None:
         delay = until - loop.time()
@@ -193,24 +298,25 @@ class LineRunner:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._wake.wait(), delay)
 
-    # ------------------------------------------------------------ the wire's
+    # ------------------------------------------------------------ the stream
 
-    def exchanged(self, drive: str, result: ExchangeResult, busy: float) -> None:
-        """An exchange with ``drive`` is over (it held the line ``busy`` seconds): recorded
-        with its batch, at most :data:`RECORD_EVERY` seconds from now."""
-        if self._record_timer is None:  # a batch begins
-            self._arm()
-        self._exchanges.append((drive, result, busy))
+    def _taken(self) -> list[Event]:
+        """The wire's new events, then the planner's (each exchange before what it led to)."""
+        events: list[Event] = self.wire.take_events()
+        planned = self.planner.take_events()
+        if planned:
+            events += planned
+        return events
 
-    def batch(self) -> None:
-        """Keep the planner's events for the batch; what somebody waits for, at once."""
-        planner = self.planner
-        if planner.events:
-            self.tell(planner.take_events())
+    def _collect(self) -> None:
+        """The planner's and the wire's new events, into the batch; what somebody waits
+        for is recorded at once."""
+        events = self._taken()
+        if events:
+            self.tell(events)
 
     def tell(self, events: list[Event]) -> None:
-        """Events for the batch (the planner's, or a DP slave's status word from its PZD);
-        what somebody waits for is recorded at once."""
+        """Events for the batch; what somebody waits for is recorded at once."""
         if self._record_timer is None:  # a batch begins
             self._arm()
         self._unrecorded.append((events, self._wall()))
@@ -222,21 +328,30 @@ class LineRunner:
         self._record_timer = loop.call_later(self._record_every, self._on_record_timer)
 
     def flush(self) -> None:
-        """Record everything not recorded yet, in order: each exchange before the
-        events it led to. What is not recorded when one of them raises stays queued."""
+        """Record everything not recorded yet, in order: the recorder first, each event
+        with its time, then every observer, the whole batch in one call. What the recorder
+        has not taken when it raises stays queued."""
         if self._record_timer is not None:
             self._record_timer.cancel()
             self._record_timer = None
-        exchanges = self._exchanges
-        exchange = self.events.exchange
-        while exchanges:
-            exchange(*exchanges.popleft())
+        self._collect_quietly()
         unrecorded = self._unrecorded
+        batch: list[Event] = []
         while unrecorded:
-            events, at = unrecorded.popleft()
-            self.record.apply(events, at)
-        if self.planner.events:
-            self.record.apply(self.planner.take_events(), self._wall())
+            events, at = unrecorded[0]
+            made = self.recorder.apply(events, at)
+            unrecorded.popleft()
+            batch += events
+            if made:
+                batch += made
+        if batch:
+            for observer in self.observers:
+                observer.on_events(batch)
+
+    def _collect_quietly(self) -> None:
+        events = self._taken()
+        if events:
+            self._unrecorded.append((events, self._wall()))
 
     def _on_record_timer(self) -> None:
         self._record_timer = None
@@ -247,12 +362,15 @@ class LineRunner:
 
     def _on_port(self, state: LinkState, error: str | None) -> None:
         up = state is LinkState.OPEN
-        self.snapshot.lines[self.name] = up
         ctx = {"line": self.name}
         if up:
-            log.info("line %s: port %s open", self.name, self.wire.link.settings.url, extra=ctx)
+            log.info("line %s: port %s open", self.name, self.link.settings.url, extra=ctx)
+            self._unrecorded.append(([LineState(self.name, True)], self._wall()))
         elif state is LinkState.FAILED:
             log.warning("line %s: %s", self.name, error, extra=ctx)
             self.planner.port_failed()
             self.wire.lost()
+            self._unrecorded.append(([LineState(self.name, False, error)], self._wall()))
             self.flush()
+        else:
+            self._unrecorded.append(([LineState(self.name, False)], self._wall()))

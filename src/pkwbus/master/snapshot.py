@@ -50,11 +50,13 @@ class Snapshot:
     # The value type each drive named for a parameter in its own answers (a typed format
     # of data record 47: Unsigned32, FloatingPoint), by drive and PNU.
     stated: dict[tuple[str, int], ValueType] = field(default_factory=dict)
+    # The PROFIBUS DP slaves as the live list shows them, by drive.
+    slaves: dict[str, LiveSlave] = field(default_factory=dict)
 
     def copy(self) -> Snapshot:
         return Snapshot(
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
-            dict(self.stated),
+            dict(self.stated), dict(self.slaves),
         )  # fmt: skip
 
 

@@ -26,7 +26,7 @@ from pkwbus.catalog.description import (
 from pkwbus.catalog.precedence import Layers, resolve
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.plan import PollSpec
-from pkwbus.master.snapshot import LiveSlave, ReadingKey, Snapshot
+from pkwbus.master.snapshot import ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DriveDescription
@@ -161,7 +161,6 @@ class Runtime:
         job_timeout: float = 5.0,
         alarms: Alarms | None = None,
         trends: Trends | None = None,
-        live: Mapping[str, LiveSlave] | None = None,
     ) -> None:
         self.runners = {s.name: s for s in runners}
         self.drives = {d.name: d for d in drives}
@@ -170,7 +169,6 @@ class Runtime:
         self.job_timeout = job_timeout
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
-        self.live = live if live is not None else {}  # the DP slaves' live list, by drive
         self._tasks: list[asyncio.Task[None]] = []
         self.cleanups: list[Callable[[], object]] = []
         # What the status page shows of each line besides the snapshot (service.metrics).

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import Counter
-from collections.abc import AsyncIterator, Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
 from fractions import Fraction
@@ -20,11 +20,11 @@ from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.master.planning.answers import ExchangeResult, Failure, PkwAnswer, Reply
-from pkwbus.master.planning.jobs import JobKind, JobResult
+from pkwbus.master.events import Event, Exchanged
+from pkwbus.master.planning.answers import ExchangeResult, PkwAnswer, Reply
+from pkwbus.master.planning.jobs import JobKind
 from pkwbus.master.planning.outcomes import Rejected
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.master.wires.profibus.wire import CycleWire
 from pkwbus.protocol import pkw, pzd
 from pkwbus.protocol.profibus import fdl
@@ -261,7 +261,7 @@ async def window(svc: DpService, cycles: int) -> Window:
     """The wire over the next ``cycles`` cycles of the DP master: counts, not a duration."""
     runner = svc.runtime.runners["dp"]
     assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
-    master = runner.wire.master
+    master = runner.wire.cycle
     first_cycle, first_frame = master.cycles, len(svc.wire.frames)
     await until(lambda: master.cycles >= first_cycle + cycles)
     frames = svc.wire.frames[first_frame:]
@@ -552,39 +552,25 @@ async def test_the_line_is_busy_for_as_long_as_each_exchange_held_it(tmp_path: P
     USS lines: a request without answer held it for the whole slot time at least; an
     answer's duration runs from the request written, the idle time before it left out."""
     slot = 0.2
-    seen: list[tuple[str, ExchangeResult, float]] = []
+    seen: list[Exchanged] = []
     async with dp_service(tmp_path, slot_time=f"{slot * 1000:.0f}ms") as svc:
         runner = svc.runtime.runners["dp"]
         assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
-        inner = runner.events
 
         class Tap:
-            def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
-                seen.append((drive, result, busy))
-                inner.exchange(drive, result, busy)
+            def on_events(self, events: Sequence[Event]) -> None:
+                seen.extend(e for e in events if isinstance(e, Exchanged))
 
-            def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
-                inner.job_finished(drive, kind, result)
-
-            def overrun(self, drive: str) -> None:
-                inner.overrun(drive)
-
-            def pkw_length(self, drive: str, conflict: bool) -> None:
-                inner.pkw_length(drive, conflict)
-
-            def value(self, key: ReadingKey, reading: Reading) -> None:
-                inner.value(key, reading)
-
-        runner.events = Tap()
+        runner.observers.append(Tap())
         svc.sim.kill(10)
-        await until(lambda: sum(isinstance(r, Failure) for _, r, _ in seen) >= 3)
+        await until(lambda: sum(e.error is not None for e in seen) >= 3)
         await svc.runtime.stop()
-    timeouts = [busy for _, r, busy in seen if isinstance(r, Failure)]
+    timeouts = [e.busy for e in seen if e.error is not None]
     assert all(busy >= slot for busy in timeouts), timeouts
-    replies = [(r, busy) for _, r, busy in seen if isinstance(r, Reply)]
+    replies = [e for e in seen if e.error is None]
     # busy: from the start, the line's idle time before the request included; the answer's
     # duration: from the request written, as on FC and USS lines
-    assert replies and all(busy > r.duration > 0 for r, busy in replies)
+    assert replies and all(e.answered is not None and e.busy > e.answered > 0 for e in replies)
 
 
 async def test_every_request_a_slave_received_is_one_telegram_of_the_line(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.plan import DriveSpec, HealthChanged, StatusWord
-from pkwbus.master.recorder import LineRecord, NoEvents
+from pkwbus.master.recorder import LineRecorder
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd
@@ -40,14 +40,14 @@ def exported(registry: MetricsRegistry) -> dict[tuple[str, str], float]:
     }
 
 
-def plant(drives: list[str]) -> tuple[MetricsRegistry, LineRecord]:
+def plant(drives: list[str]) -> tuple[MetricsRegistry, LineRecorder]:
     registry = MetricsRegistry()
     snapshot = Snapshot()
     specs = [
         DriveSpec(d, carrier_for(DriveTarget(Protocol.FC, i + 1, FC, IndLayout.USS, FC_PROCESS)))
         for i, d in enumerate(drives)
     ]
-    record = LineRecord("l1", specs, snapshot, NoEvents())
+    record = LineRecorder("l1", specs, snapshot)
     infos = {d: DriveInfo("l1", Profile.FC) for d in drives}
     registry.register(SnapshotCollector(snapshot, infos, []))
     return registry, record

@@ -14,7 +14,8 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.utils import floatToGoString
 
-from pkwbus.master.planning.answers import ErrorKind, Failure
+from pkwbus.master.events import Exchanged, Overrun, ValueLanded
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Rejected, TimedOut
 from pkwbus.master.snapshot import DriveState, Reading, Snapshot
@@ -74,7 +75,7 @@ class Plant:
                 value = "text"  # a text value: in the API, not in the metrics
             key, reading = (p.drive, p.parameter, p.index), Reading(value, i, t)
             self.snapshot.readings[key] = reading
-            self.lines[p.line].value(key, reading)
+            self.lines[p.line].on_events([ValueLanded(key, reading)])
         for i, p in enumerate(self.infos[::4]):
             word = None if i % 5 == 4 else (int(t) * 97 + i) & 0xFFFF
             # A main actual value of either sign, or none (a drive without a second PZD word).
@@ -86,10 +87,10 @@ class Plant:
     def traffic(self) -> None:
         for n, line in enumerate(self.lines.values()):
             drive = f"l{n}d0"
-            line.exchange(drive, Failure(ErrorKind.TIMEOUT), 0.02)
+            line.on_events([Exchanged(drive, ErrorKind.TIMEOUT, 0.02)])
             line.job_finished(drive, JobKind.READ, JobResult(Rejected(3, "x", "y")))
             line.job_finished(drive, JobKind.READ, JobResult(TimedOut("gone")))
-            line.overrun(drive)
+            line.on_events([Overrun(drive)])
         self.lines["line0"].job_finished(
             "stranger", JobKind.WRITE, JobResult(Rejected(None, "", ""))
         )
@@ -132,7 +133,7 @@ def test_the_text_is_generate_latest_of_the_same_registry(landed: bool) -> None:
     for t, value in enumerate([0.0, -0.0, 0.0, "text", 5.0, -0.0], start=1):
         reading = Reading(value, 0, 1_700_000_100.0 + t)
         plant.snapshot.readings[key] = reading
-        line.value(key, reading)
+        line.on_events([ValueLanded(key, reading)])
         plant.snapshot.drives[info.drive] = DriveState(
             t % 2 == 0, drive.status_word, 1_700_000_100.0 + t, (drive.main_actual or 0) + t
         )
@@ -145,7 +146,7 @@ def test_unchanged_series_reuse_their_line_and_changed_ones_are_made_again() -> 
     first = _text(plant)
     assert _text(plant) == first
     plant.snapshot.readings[("l0d0", "16-00", 0)] = Reading(42.5, 425, 101.0)
-    plant.lines["line0"].overrun("l0d0")
+    plant.lines["line0"].on_events([Overrun("l0d0")])
     second = _text(plant)
     assert (
         'pkwbus_parameter_value{drive="l0d0",index="0",line="line0",parameter="16-00"} 42.5\n'

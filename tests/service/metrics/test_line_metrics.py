@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.planning.answers import ErrorKind, Failure
+from pkwbus.master.events import Exchanged, Overrun
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, JobKind, JobResult
 from pkwbus.master.planning.outcomes import Answered, Rejected, TimedOut, metric_label
 from pkwbus.master.planning.transaction import Tally
@@ -64,8 +65,7 @@ def test_only_the_counters_an_alert_needs_at_zero_exist_before_they_move() -> No
         "pkwbus_job_retries_total",
     }
     assert not quiet & exported
-    metrics.exchange("d1", Failure(ErrorKind.TIMEOUT), 0.01)
-    metrics.overrun("d1")
+    metrics.on_events([Exchanged("d1", ErrorKind.TIMEOUT, 0.01), Overrun("d1")])
     kinds = {
         sample.labels["kind"]: sample.value
         for family in registry.collect()
@@ -82,13 +82,13 @@ def test_the_plain_counts_agree_with_the_exported_counters() -> None:
     """The status page's and benchmarks' plain counts: what /metrics says, without a collect()."""
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry).for_line("l", {"d1": FC, "d2": FC})
-    for drive, result in [
-        ("d1", Failure(ErrorKind.TIMEOUT)),
-        ("d2", Failure(ErrorKind.CHECKSUM)),
-        ("d1", Failure(ErrorKind.PORT)),  # nothing went on the wire
-        ("d2", Failure(ErrorKind.TIMEOUT)),
+    for drive, error in [
+        ("d1", ErrorKind.TIMEOUT),
+        ("d2", ErrorKind.CHECKSUM),
+        ("d1", ErrorKind.PORT),  # nothing went on the wire
+        ("d2", ErrorKind.TIMEOUT),
     ]:
-        metrics.exchange(drive, result, 0.01)
+        metrics.on_events([Exchanged(drive, error, 0.01)])
     exported = sum(
         sample.value
         for family in registry.collect()

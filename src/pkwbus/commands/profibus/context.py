@@ -25,17 +25,17 @@ from dataclasses import dataclass
 from pkwbus import dp_settings, durations, limits
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
 from pkwbus.dp_settings import DpGiven
-from pkwbus.link import LinkState, PortError, PortSettings
+from pkwbus.link import PortError, PortSettings
 from pkwbus.master.carriers import carrier_for
-from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
+from pkwbus.master.events import Event, Exchanged, LineState, SlaveDiagnosed, SlaveStateChanged
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.outcomes import Outcome, TimedOut
 from pkwbus.master.planning.plan import DriveSpec
-from pkwbus.master.recorder import NoEvents
 from pkwbus.master.sessions.jobs import JobSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
-from pkwbus.master.wires.profibus.cycle import SlaveLocked, SlaveRun
+from pkwbus.master.wires.profibus.cycle import SlaveLocked
 from pkwbus.master.wires.profibus.line import DpLine
-from pkwbus.master.wires.profibus.wire import CycleWire, NoDpEvents, SlaveSpec
+from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
@@ -270,14 +270,9 @@ async def session(
     master listens first, parametrises the slave, and clears it at the end)."""
     spec = DriveSpec("drive", carrier_for(ctx.target(address)))
     watch = _Watch(address)
-    wire = CycleWire(
-        dp_line(args, ctx.slot_time),
-        [SlaveSpec(spec, ctx.setup(address), ctx.ppo)],
-        dp_events=watch,
-    )
-    drive = watch.session = JobSession(wire, spec, retries=ctx.retries, events=watch)
-    watch.wire = wire
-    wire.link.reconnect.add_listener(watch.port)
+    line = dp_line(args, ctx.slot_time)
+    wire = CycleWire(line, [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], name="command line")
+    drive = watch.session = JobSession(wire, spec, retries=ctx.retries, observers=[watch])
     loop = asyncio.get_running_loop()
     outcomes: list[Outcome] = []
     try:
@@ -297,36 +292,31 @@ async def session(
     return outcomes
 
 
-class _Watch(NoEvents, NoDpEvents):
-    """Ends a command's session early: the slave owned by another master, the slave not
-    answering at all, another master heard on the line."""
+class _Watch:
+    """Ends a command's session early, from the line's stream of events: the slave owned by
+    another master, the slave not answering at all, the line given up (another master
+    heard on it)."""
 
     def __init__(self, address: int) -> None:
         self.address = address
         self.session: JobSession | None = None
-        self.wire: CycleWire | None = None
-
-    def _run(self) -> SlaveRun | None:
-        return self.wire.master.runs.get(self.address) if self.wire is not None else None
+        self.state = SlaveState.OFFLINE
+        self.owner: int | None = None
 
     def _end(self, kind: str, reason: str) -> None:
         if self.session is not None:
             self.session.end(kind, reason)
 
-    def slave_state(self, drive: str, state: SlaveState) -> None:
-        run = self._run()
-        if state is SlaveState.LOCKED and run is not None:
-            diagnosis = run.slave.diagnosis
-            owner = diagnosis.master if diagnosis is not None else None
-            self._end("locked", str(SlaveLocked(self.address, owner)))
-
-    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
-        run = self._run()
-        if not isinstance(result, Failure) or result.kind is not ErrorKind.TIMEOUT or run is None:
-            return
-        if run.slave.state is SlaveState.OFFLINE and not run.slave.waiting:
-            self._end("timeout", f"slave {self.address} does not answer ({result.detail})")
-
-    def port(self, state: LinkState, error: str | None) -> None:
-        if state is LinkState.FAILED and error:
-            self._end("line_error", error)
+    def on_events(self, events: Sequence[Event]) -> None:
+        for event in events:
+            if isinstance(event, SlaveDiagnosed):
+                self.owner = event.diagnosis.master
+            elif isinstance(event, SlaveStateChanged):
+                self.state = event.state
+                if event.state is SlaveState.LOCKED:
+                    self._end("locked", str(SlaveLocked(self.address, self.owner)))
+            elif isinstance(event, Exchanged):
+                if event.error is ErrorKind.TIMEOUT and self.state is SlaveState.OFFLINE:
+                    self._end("timeout", f"slave {self.address} does not answer (no answer)")
+            elif isinstance(event, LineState) and not event.up and event.error:
+                self._end("line_error", event.error)

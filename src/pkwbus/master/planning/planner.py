@@ -16,10 +16,9 @@ The policy, in order:
 - a poll that starts more than one interval after it was due is an overrun; nothing
   is sent past its deadline; a job still queued at its deadline ends.
 
-Drives wait in two heaps (ready, by the key above; and by the time they
-become due), so one exchange costs O(log n) in the number of drives. A
-drive's heap entries carry its version: a change of the drive pushes a new
-entry and the old one is skipped when it surfaces.
+Drives wait in two heaps (ready, by the key above; and by the time they become due), so
+one exchange costs O(log n) in the number of drives; a change of a drive pushes a new
+entry with its version, and the old one is skipped when it surfaces.
 
 A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
 :meth:`Planner.next_for` for each slave's turn, under the same priorities.
@@ -186,6 +185,10 @@ class Planner:
     def active(self, drive: str) -> Transaction | None:
         """The transaction ``drive``'s slot carries (after :meth:`next_for` gave its Send)."""
         return a.tx if (a := self._by_name[drive].active) is not None else None
+
+    def sending(self, drive: str) -> Send | None:
+        """The exchange carrying ``drive``'s transaction (a cyclic slot's, over many cycles)."""
+        return a.send if (a := self._by_name[drive].active) is not None else None
 
     def expire_queued(self, drive: str, now: float) -> None:
         """End the jobs of ``drive`` past their deadline while nothing can go out to it,

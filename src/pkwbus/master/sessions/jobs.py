@@ -15,16 +15,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Sequence
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.link import PortError
 from pkwbus.master.carriers import carrier_for
+from pkwbus.master.events import Observer
 from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec, Finished, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.recorder import LineEvents
-from pkwbus.master.runner import LineRunner, Wire
+from pkwbus.master.runner import LineRefused, LineRunner, Wire
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
@@ -45,11 +46,11 @@ class JobSession:
     """One drive's line, driven by the one runner, for jobs one after the other."""
 
     def __init__(
-        self, wire: Wire, spec: DriveSpec, *, retries: int, events: LineEvents | None = None
+        self, wire: Wire, spec: DriveSpec, *, retries: int, observers: Sequence[Observer] = ()
     ) -> None:
         self.wire = wire
         self.drive = spec.name
-        self.runner = LineRunner("command line", wire, [spec], retries=retries, events=events)
+        self.runner = LineRunner("command line", wire, [spec], retries=retries, observers=observers)
         # Set (to SessionEnded) by the watcher; a job waits for it beside its own result.
         self.ended: asyncio.Future[JobResult] | None = None
         self._task: asyncio.Task[None] | None = None
@@ -64,9 +65,9 @@ class JobSession:
         :class:`SessionEnded` when the wire gave it up while starting."""
         loop = asyncio.get_running_loop()
         self.ended = loop.create_future()
-        link = self.wire.link
-        await link.open()
-        await self.wire.started()
+        link = self.runner.link
+        with contextlib.suppress(LineRefused):  # given up: told to the watcher as a loss
+            await self.runner.open()
         if self.ended.done():
             self.ended.result()  # raises what ended it
         if not link.is_open:
@@ -103,8 +104,8 @@ class JobSession:
         if task is not None:
             with contextlib.suppress(Exception):
                 await task
-        elif self.wire.link.is_open:
-            await self.wire.close()
+        elif self.runner.link.is_open:
+            await self.wire.port.close()
 
 
 async def run_job(

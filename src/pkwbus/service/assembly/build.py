@@ -107,21 +107,26 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
             port, close = await start(line, line.sim)
             cleanups.append(close)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
-        uss = line.protocol is Protocol.USS
-        events = metrics.for_line(line.name, dialects, landed, uss=uss, descriptions=descriptions)
+        uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
+        events = metrics.for_line(
+            line.name, dialects, landed, uss=uss, dp=dp, descriptions=descriptions
+        )
         counts[line.name] = events
-        if line.protocol is Protocol.PROFIBUS:
-            runners.append(_dp_runner(line, port, specs, snapshot, metrics, events))
+        if dp:
+            runners.append(_dp_runner(line, port, specs, snapshot, events))
             continue
         wire = ExchangeWire(line_for(line, port))
         runners.append(
             LineRunner(
-                line.name, wire, specs, retries=line.retries, snapshot=snapshot, events=events
+                line.name,
+                wire,
+                specs,
+                retries=line.retries,
+                snapshot=snapshot,
+                observers=[events],
             )
         )
-    runtime = Runtime(
-        runners, entries, snapshot, registry, alarms=board, trends=trends, live=metrics.live
-    )
+    runtime = Runtime(runners, entries, snapshot, registry, alarms=board, trends=trends)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)
     return runtime
@@ -152,7 +157,6 @@ def _dp_runner(
     port: str,
     specs: list[DriveSpec],
     snapshot: Snapshot,
-    metrics: ServiceMetrics,
     events: LineMetrics,
 ) -> LineRunner:
     """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
@@ -187,10 +191,9 @@ def _dp_runner(
         slaves.append(SlaveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
     deadline = max(2.0, 20 * dp.slot_time * len(specs))
-    dp_events = metrics.for_dp_line(line.name, [d.name for d in line.drives])
-    wire = CycleWire(dp, slaves, dp_events=dp_events)
+    wire = CycleWire(dp, slaves, name=line.name)
     return LineRunner(
-        line.name, wire, specs, snapshot=snapshot, events=events, poll_deadline=deadline,
+        line.name, wire, specs, snapshot=snapshot, observers=[events], poll_deadline=deadline,
         retries=line.retries,
     )  # fmt: skip
 

@@ -92,7 +92,7 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
 
 def slave_view(runtime: Runtime, name: str) -> SlaveView | None:
     """The drive's place in its DP line's live list (None: no DP slave)."""
-    live = runtime.live.get(name)
+    live = runtime.snapshot.slaves.get(name)
     if live is None:
         return None
     flags = sorted(flag.replace("_", " ") for flag in live.flags)

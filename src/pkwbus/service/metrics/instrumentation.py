@@ -1,7 +1,7 @@
 """The service's own metrics (its instrumentation), with exactly the names and labels
 the README documents: exchanges, faults, jobs, line time and overruns per line
-(:class:`LineMetrics`), DP slave states (:class:`DpMetrics`), the audit log's and the
-API's refusals (:class:`ApiMetrics`).
+and DP slave states (:class:`LineMetrics`, an observer of the line's stream of events),
+the audit log's and the API's refusals (:class:`ApiMetrics`).
 
 Device values (parameter values, drive and line state, status words) are not here:
 they come from :class:`~pkwbus.service.metrics.devices.SnapshotCollector`, built from
@@ -15,23 +15,33 @@ from __future__ import annotations
 
 import collections
 import platform
-import time
 import weakref
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import replace
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from pkwbus import __version__
 from pkwbus.catalog.precedence import Disagreement
-from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
+from pkwbus.master.events import (
+    DescriptionChecked,
+    Event,
+    Exchanged,
+    JobDone,
+    Overrun,
+    PkwLengthTold,
+    SlaveDiagnosed,
+    SlaveRestarted,
+    SlaveStateChanged,
+    ValueLanded,
+)
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import JobOutcome, Rejected, metric_label
 from pkwbus.master.planning.plan import Described
-from pkwbus.master.snapshot import LiveSlave, Reading, ReadingKey
+from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
-from pkwbus.protocol.profibus.dp.services import Diagnosis
 from pkwbus.protocol.profibus.dp.slave import RestartReason, SlaveState
 from pkwbus.service.metrics.exposition import CounterFamily
 
@@ -71,7 +81,6 @@ class ServiceMetrics:
 
     def __init__(self, registry: CollectorRegistry) -> None:
         # The live list of the DP slaves, by drive, as their lines report them.
-        self.live: dict[str, LiveSlave] = {}
         ld = ["line", "drive"]
         self.faults = CounterFamily(
             "pkwbus_pkw_faults",
@@ -162,60 +171,19 @@ class ServiceMetrics:
         values: Landed | None = None,
         *,
         uss: bool = False,
+        dp: bool = False,
         descriptions: Descriptions | None = None,
     ) -> LineMetrics:
         """The counters of ``line``; ``drives`` maps each configured drive to its dialect,
         ``values`` renders a new reading as it lands (the exposition's), ``uss``: a USS
-        line, whose drives' PKW length can contradict the configuration; ``descriptions``
-        takes each parameter's description as it settles."""
-        return LineMetrics(self, line, drives, values, uss=uss, descriptions=descriptions)
-
-    def for_dp_line(self, line: str, drives: Iterable[str]) -> DpMetrics:
-        """The PROFIBUS DP gauges and counters of ``line``'s slaves."""
-        return DpMetrics(self, line, drives)
-
-
-class DpMetrics:
-    """A DP line's slave states, restarts and diagnosis flags.
-
-    Every slave has a ``pkwbus_dp_slave_state`` series for each state (1 for the
-    current one, 0 for the others) and a restart series for each reason at 0
-    from the start, so that an alert sees the first change. Diagnosis flags
-    appear when first seen.
-    """
-
-    def __init__(self, m: ServiceMetrics, line: str, drives: Iterable[str]) -> None:
-        self._m = m
-        self._line = line
-        self._states = {
-            d: {s: m.dp_state.labels(line, d, s.value) for s in SlaveState} for d in drives
-        }
-        self._restarts = {
-            (d, r): m.dp_restarts.labels(line, d, r.value, zero=True)
-            for d in self._states
-            for r in RestartReason
-        }
-
-    def slave_state(self, drive: str, state: SlaveState) -> None:
-        for s, gauge in self._states[drive].items():
-            gauge.set(1 if s is state else 0)
-        self._m.live[drive] = replace(self._m.live.get(drive, LiveSlave(self._line)), state=state)
-
-    def restarted(self, drive: str, reason: RestartReason) -> None:
-        self._restarts[(drive, reason)].inc()
-
-    def diagnosis(self, drive: str, diagnosis: Diagnosis) -> None:
-        for flag in sorted(diagnosis.flags):
-            self._m.dp_diagnostics.labels(self._line, drive, flag).inc()
-        old = self._m.live.get(drive, LiveSlave(self._line))
-        self._m.live[drive] = replace(
-            old, ident=diagnosis.ident, owner=diagnosis.master, flags=diagnosis.flags,
-            diagnosed=time.time(),
-        )  # fmt: skip
+        line, whose drives' PKW length can contradict the configuration; ``dp``: a
+        PROFIBUS DP line, whose slaves have states; ``descriptions`` takes each
+        parameter's description as it settles."""
+        return LineMetrics(self, line, drives, values, uss=uss, dp=dp, descriptions=descriptions)
 
 
 class LineMetrics:
-    """A line runner's events, turned into counter increments.
+    """A line's stream of events, turned into counter increments (an observer of it).
 
     A labelled counter has no series until its first increment, and
     ``increase()``/``rate()`` cannot see that first step (no earlier sample).
@@ -233,7 +201,10 @@ class LineMetrics:
       ``PkwbusLineOverloaded``; one series per line);
     - ``pkwbus_poll_overruns_total`` per drive (dashboard panel "Poll
       overruns": one series per drive, and a first overrun is a rare event
-      that must show).
+      that must show);
+    - on a DP line, ``pkwbus_dp_slave_state`` for each slave and state (1 for
+      the current one, 0 for the others) and ``pkwbus_dp_restarts_total`` for
+      each reason. Diagnosis flags appear when first seen.
 
     The other counters appear at their first increment: a zero series for
     each drive and kind would be most of the scrape (eight lines of 126
@@ -252,6 +223,7 @@ class LineMetrics:
         values: Landed | None = None,
         *,
         uss: bool = False,
+        dp: bool = False,
         descriptions: Descriptions | None = None,
     ) -> None:
         self._m = m
@@ -286,19 +258,50 @@ class LineMetrics:
             for kind in ("read", "write")
             for outcome in JobOutcome
         }
+        self._states = {
+            d: {s: m.dp_state.labels(line, d, s.value) for s in SlaveState}
+            for d in (drives if dp else ())
+        }
+        self._restarts = {
+            (d, r): m.dp_restarts.labels(line, d, r.value, zero=True)
+            for d in self._states
+            for r in RestartReason
+        }
+        self._on: dict[type, Callable[[Any], None]] = {
+            Exchanged: self._exchanged,
+            JobDone: self._job_done,
+            Overrun: self._overrun,
+            PkwLengthTold: self._pkw_length,
+            ValueLanded: self._value,
+            DescriptionChecked: self._described,
+            SlaveStateChanged: self._slave_state,
+            SlaveRestarted: self._restarted,
+            SlaveDiagnosed: self._diagnosed,
+        }
 
-    def exchange(self, drive: str, result: ExchangeResult, busy: float) -> None:
-        if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
+    def on_events(self, events: Sequence[Event]) -> None:
+        on = self._on
+        for event in events:
+            handler = on.get(type(event))
+            if handler is not None:
+                handler(event)
+
+    def _exchanged(self, event: Exchanged) -> None:
+        error, drive, busy = event.error, event.drive, event.busy
+        if error is ErrorKind.PORT:
             return  # nothing went on the wire
         self._telegrams[drive].inc()
         self.telegram_total += 1
         self._busy.inc(busy)
         self.busy_total += busy
-        if isinstance(result, Failure):
-            self._errors[(drive, result.kind.value)].inc()
+        if error is not None:
+            self._errors[(drive, error.value)].inc()
             self.error_counts[drive] += 1
-        else:
-            self._duration.observe(result.duration)
+        elif event.answered is not None:
+            self._duration.observe(event.answered)
+
+    def _job_done(self, event: JobDone) -> None:
+        self.job_finished(event.drive, event.kind, event.result)
 
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
@@ -323,19 +326,31 @@ class LineMetrics:
             fault.inc()
             self.fault_counts[drive] += 1
 
-    def overrun(self, drive: str) -> None:
-        self._overruns[drive].inc()
+    def _overrun(self, event: Overrun) -> None:
+        self._overruns[event.drive].inc()
 
-    def pkw_length(self, drive: str, conflict: bool) -> None:
-        self._m.pkw_conflict.labels(self._line, drive).set(int(conflict))
+    def _pkw_length(self, event: PkwLengthTold) -> None:
+        conflict = event.length.in_conflict
+        self._m.pkw_conflict.labels(self._line, event.drive).set(int(conflict))
 
-    def value(self, key: ReadingKey, reading: Reading) -> None:
+    def _value(self, event: ValueLanded) -> None:
         if self.values is not None:
-            self.values(key, reading)
+            self.values(event.key, event.reading)
 
-    def described(self, event: Described, found: list[Disagreement]) -> None:
+    def _described(self, event: DescriptionChecked) -> None:
         if self.descriptions is not None:
-            self.descriptions(self._line, event, found)
+            self.descriptions(self._line, event.event, list(event.found))
+
+    def _slave_state(self, event: SlaveStateChanged) -> None:
+        for s, gauge in self._states[event.drive].items():
+            gauge.set(1 if s is event.state else 0)
+
+    def _restarted(self, event: SlaveRestarted) -> None:
+        self._restarts[(event.drive, event.reason)].inc()
+
+    def _diagnosed(self, event: SlaveDiagnosed) -> None:
+        for flag in sorted(event.diagnosis.flags):
+            self._m.dp_diagnostics.labels(self._line, event.drive, flag).inc()
 
 
 AUDIT_STAGES = ("attempt", "outcome", "refusals")

@@ -1,26 +1,99 @@
-"""One job on a started DpMaster, through its slave's start-up and PKW slot: the DP
-master's own test harness (the command line and the service run jobs through the line
-runner, :mod:`pkwbus.master.sessions.jobs`)."""
+"""The DP cycle over a real :class:`DpLine`, one cycle at a time, and one job through a
+slave's start-up and PKW slot: the test harness of the cycle and the line (the command
+line and the service drive both through the line runner, :mod:`pkwbus.master.runner`)."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+from collections.abc import Callable, Sequence
 
 from pkwbus.link import PortError
 from pkwbus.master.carriers import SlotCarrier
 from pkwbus.master.planning.answers import PkwAnswer
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
-from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveLocked
+from pkwbus.master.wires.profibus.cycle import IDLE_STEP, CycleEvent, SlaveCycle, SlaveLocked
+from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
 from pkwbus.protocol import pkw
-from pkwbus.protocol.profibus.dp.ppo import SlotAnswer
+from pkwbus.protocol.profibus.dp.ppo import PkwSlot, SlotAnswer
+from pkwbus.protocol.profibus.dp.services import global_control_clear
 from pkwbus.protocol.profibus.dp.slave import (
     Failed,
     FailureKind,
-    SlaveEvent,
+    SlaveSetup,
     SlaveState,
     StateChanged,
 )
+from pkwbus.protocol.profibus.fdl import DataFrame
+
+EventHook = Callable[[int, CycleEvent], None]
+
+
+class DpMaster:
+    """The pure :class:`SlaveCycle` of a few slaves, its requests sent on a :class:`DpLine`
+    and its answers fed back, one whole cycle per :meth:`cycle`; every event to ``on_event``."""
+
+    def __init__(
+        self,
+        line: DpLine,
+        slaves: Sequence[tuple[SlaveSetup, PkwSlot | None]],
+        *,
+        on_event: EventHook | None = None,
+    ) -> None:
+        self.line = line
+        self.slave_cycle = SlaveCycle(slaves)
+        self.runs = self.slave_cycle.runs
+        self.on_event = on_event
+        self._held: DataFrame | None = None  # the next cycle's first request
+
+    async def start(self, *, listen: float | None = None) -> None:
+        """Open the port and listen for other masters; :class:`ForeignMaster`, PortError."""
+        self.line.listen_for = listen
+        await self.line.open()
+        try:
+            await self.line.started()
+        except ForeignMaster:
+            await self.line.close()
+            raise
+
+    async def stop(self) -> None:
+        """Global_Control Clear to every slave (when the port is still there), then close."""
+        with contextlib.suppress(PortError, ForeignMaster):
+            if self.line.is_open and self.line.foreign is None and self.line.requests:
+                await self.line.broadcast(global_control_clear(self.line.master))
+        await self.line.close()
+
+    @property
+    def cycles(self) -> int:
+        return self.slave_cycle.cycles
+
+    async def cycle(self) -> int:
+        """One Data_Exchange (or start-up request) per slave, in turn; the requests sent."""
+        loop = asyncio.get_running_loop()
+        cycle = self.slave_cycle
+        begun = cycle.cycles
+        sent = 0
+        while True:
+            frame, self._held = self._held, None
+            if frame is None:
+                frame = cycle.transmit(loop.time(), lambda run, now: None)
+                self._tell()
+            if frame is None:
+                await asyncio.sleep(IDLE_STEP)
+                return sent
+            if cycle.cycles != begun:  # the first request of the next cycle
+                self._held = frame
+                return sent
+            answer = await self.line.exchange(frame)
+            cycle.received(answer, loop.time())
+            sent += 1
+            self._tell()
+
+    def _tell(self) -> None:
+        for run, event in self.slave_cycle.take_events():
+            if self.on_event is not None:
+                self.on_event(run.address, event)
 
 
 async def run_dp_job(
@@ -44,7 +117,7 @@ async def run_dp_job(
     gone: list[str] = []
     hook = master.on_event
 
-    def watch(addr: int, event: SlaveEvent | SlotAnswer) -> None:
+    def watch(addr: int, event: CycleEvent) -> None:
         if hook is not None:
             hook(addr, event)
         if addr != address:

@@ -16,7 +16,7 @@ import pytest
 
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
-from pkwbus.master.wires.profibus.cycle import DpMaster, SlaveLocked
+from pkwbus.master.wires.profibus.cycle import SlaveLocked
 from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus import fdl
@@ -40,7 +40,7 @@ from pkwbus.sim import SimTiming
 from pkwbus.sim.drives.faults import Answer
 from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.conftest import serve
-from tests.master.wires.profibus.dp_jobs import run_dp_job
+from tests.master.wires.profibus.dp_jobs import DpMaster, run_dp_job
 from tests.master.wires.profibus.dp_wire import DpWire, fake_master, record_dp_wire
 
 MASTER = 2

@@ -19,7 +19,7 @@ async def test_an_exchange_runs_in_callbacks_and_hands_its_result_over() -> None
     target = DriveTarget.create("fc", 1)
     async with serve(sim, "pty") as port, open_line(port, "fc") as (line, trace):
         got: asyncio.Future[ExchangeResult] = asyncio.get_running_loop().create_future()
-        line.start(target.adr, _telegram(target), got.set_result)
+        line.send(target.adr, _telegram(target), got.set_result)
         assert line.busy
         result = await asyncio.wait_for(got, 2.0)
         assert isinstance(result, Reply) and result.adr == target.adr
@@ -40,7 +40,7 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
         answered = loop.time()
         # at once after the answer: the request waits for the pause
         got: asyncio.Future[ExchangeResult] = loop.create_future()
-        line.start(target.adr, telegram, got.set_result)
+        line.send(target.adr, telegram, got.set_result)
         assert len(trace.tx) == 1
         sent_at: list[float] = []
         real_trace = line.trace
@@ -57,7 +57,7 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
         # preparation longer than the pause: no wait is left, the request goes out at once
         await asyncio.sleep(2 * pause)
         got = loop.create_future()
-        line.start(target.adr, telegram, got.set_result)
+        line.send(target.adr, telegram, got.set_result)
         assert len(trace.tx) == 3
         assert isinstance(await asyncio.wait_for(got, 2.0), Reply)
 

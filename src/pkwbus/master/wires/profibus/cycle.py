@@ -1,31 +1,28 @@
-"""The DP master of one line: its slaves in turn, one Data_Exchange each per cycle.
+"""The slaves of one DP line in turn, one Data_Exchange (or start-up request) each a cycle:
+what to send next and what an answer told, without I/O.
 
-Each slave has its start-up state machine (:class:`~pkwbus.protocol.profibus.dp.slave.DpSlave`)
-and, when its PPO has a parameter channel, a PKW slot
-(:class:`~pkwbus.protocol.profibus.dp.ppo.PkwSlot`) whose request goes in every PPO-write
-until its job is over; every answer while it does goes to ``on_event`` as a
-:class:`~pkwbus.protocol.profibus.dp.ppo.SlotAnswer`, for the job to judge. Who fills the
-slots and ends their jobs is the caller's: the line runner's cycle wire, per
-slave and per cycle, with what its planner gives (``Planner.next_for``)
-through the ``feed`` hook. A DP-V1 slave's record transfer (PROFIdrive data
-record 47), started by the same hook, sends one MSAC_C1 request after the
-slave's Data_Exchange in each cycle, so every slave keeps its cycle; its end
-comes to ``on_event`` as a :class:`~pkwbus.protocol.profibus.dp.slave.TransferEnded`.
-Stopping sends Global_Control Clear to every slave, then closes the port.
+Each slave has its start-up state machine
+(:class:`~pkwbus.protocol.profibus.dp.slave.DpSlave`) and, when its PPO has a
+parameter channel, a PKW slot (:class:`~pkwbus.protocol.profibus.dp.ppo.PkwSlot`)
+whose request goes in every PPO-write until its job is over; the slot decodes
+each PPO-read once, and its answer (:class:`~pkwbus.protocol.profibus.dp.ppo.SlotAnswer`)
+or why it could not be read (:class:`~pkwbus.protocol.profibus.dp.ppo.SlotGarbled`)
+is among the events of the exchange. Who fills the slots is the caller's,
+before each slave's turn (``before``). A DP-V1 slave's record transfer
+(PROFIdrive data record 47) puts one MSAC_C1 request after the slave's
+Data_Exchange, repeated at once while unanswered, so every slave keeps its
+cycle; its end is a :class:`~pkwbus.protocol.profibus.dp.slave.TransferEnded`
+event.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from pkwbus.link import PortError
-from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, SlotAnswer, SlotGarbled
-from pkwbus.protocol.profibus.dp.services import global_control_clear
 from pkwbus.protocol.profibus.dp.slave import (
+    Answer,
     DpSlave,
     Failed,
     Inputs,
@@ -35,9 +32,9 @@ from pkwbus.protocol.profibus.dp.slave import (
 )
 from pkwbus.protocol.profibus.fdl import DataFrame
 
-__all__ = ["DpMaster", "ForeignMaster", "SlaveLocked", "SlaveRun"]
+__all__ = ["IDLE_STEP", "CycleEvent", "SlaveCycle", "SlaveLocked", "SlaveRun", "StartupAnswered"]
 
-IDLE_STEP = 0.01  # seconds a cycle with nothing due waits before the next
+IDLE_STEP = 0.01  # seconds a cycle with nothing to send waits before the next
 
 
 class SlaveLocked(Exception):
@@ -64,106 +61,85 @@ class SlaveRun:
         return self.slave.setup.address
 
 
-EventHook = Callable[[int, "SlaveEvent | SlotAnswer | SlotGarbled"], None]
-# A request other than Data_Exchange answered (diagnosis, Set_Prm, Chk_Cfg): the slave's
-# address, how long the answer took and how long the request held the line.
-AnsweredHook = Callable[[int, float, float], None]
-# Each cycle, before its slave's turn: fill an idle slot, end a job past its deadline.
-Feed = Callable[[SlaveRun, float], None]
+@dataclass(frozen=True, slots=True)
+class StartupAnswered:
+    """A request other than Data_Exchange (diagnosis, Set_Prm, Chk_Cfg) was answered."""
 
 
-class DpMaster:
-    """The slaves of one DP line, cycled in turn over its :class:`DpLine`."""
+CycleEvent = SlaveEvent | SlotAnswer | SlotGarbled | StartupAnswered
+Before = Callable[[SlaveRun, float], None]
 
-    def __init__(
-        self,
-        line: DpLine,
-        slaves: Sequence[tuple[SlaveSetup, PkwSlot | None]],
-        *,
-        on_event: EventHook | None = None,
-        feed: Feed | None = None,
-        on_answered: AnsweredHook | None = None,
-    ) -> None:
-        self.line = line
+
+class SlaveCycle:
+    """The slaves of one line, cycled in turn: pure calls, the caller does the I/O."""
+
+    def __init__(self, slaves: Sequence[tuple[SlaveSetup, PkwSlot | None]]) -> None:
         self.runs = {s.address: SlaveRun(DpSlave(s), slot) for s, slot in slaves}
-        self.on_event = on_event
-        self.feed = feed
-        self.on_answered = on_answered
         self.cycles = 0
-        # How long the latest request held the line: from its start (the idle time before
-        # it included) to its answer or the end of the slot time, in loop seconds; and
-        # how long its answer took from the request written, as on FC and USS lines.
-        self.exchange_time = 0.0
-        self.answer_time = 0.0
+        self.events: list[tuple[SlaveRun, CycleEvent]] = []  # in order, until taken
+        self._order = list(self.runs)
+        self._next = 0  # the next slave's place in the cycle
+        self._sent = 0  # requests of this cycle so far
+        self._out: SlaveRun | None = None  # the slave whose request is out
+        self._acyclic_out = False
+        self._pending: DataFrame | None = None  # an acyclic request that follows at once
 
-    async def start(self, *, listen: float | None = None) -> None:
-        """Open the port and listen for other masters; :class:`ForeignMaster`, PortError."""
-        await self.line.open()
-        try:
-            await self.line.listen(listen)
-        except ForeignMaster:
-            await self.line.close()
-            raise
+    def transmit(self, now: float, before: Before) -> DataFrame | None:
+        """The next request of the cycle (None: a cycle went by with nothing to send)."""
+        pending = self._pending
+        if pending is not None:
+            self._pending = None
+            self._acyclic_out = True
+            return pending
+        while True:
+            while self._next < len(self._order):
+                run = self.runs[self._order[self._next]]
+                self._next += 1
+                before(run, now)
+                slave, slot = run.slave, run.slot
+                exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
+                outputs = slot.outputs() if exchanging and slot is not None else None
+                frame = slave.poll(now, outputs)
+                self.events += [(run, e) for e in slave.take_events()]
+                if frame is not None:
+                    self._out, self._acyclic_out = run, False
+                    self._sent += 1
+                    return frame
+            self._next = 0
+            self.cycles += 1
+            sent, self._sent = self._sent, 0
+            if not sent:
+                return None
 
-    async def stop(self) -> None:
-        """Global_Control Clear to every slave (when the port is still there), then close."""
-        with contextlib.suppress(PortError, ForeignMaster):
-            if self.line.is_open and self.line.foreign is None and self.line.requests:
-                await self.line.broadcast(global_control_clear(self.line.master))
-        await self.line.close()
-
-    async def cycle(self) -> int:
-        """One Data_Exchange (or start-up request) per slave, in turn; the requests sent."""
-        loop = asyncio.get_running_loop()
-        sent = 0
-        for run in self.runs.values():
-            now = loop.time()
-            slot = run.slot
-            if self.feed is not None:
-                self.feed(run, now)
-            slave = run.slave
-            exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
-            outputs = slot.outputs() if exchanging and slot is not None else None
-            frame = slave.poll(now, outputs)
-            for event in slave.take_events():
-                self._emit(run, event)
-            if frame is None:
-                continue
-            await self._exchange(run, frame)
-            sent += 1
-            acyclic = slave.poll_acyclic()  # a record transfer's next request, if any
-            while acyclic is not None:  # and its repeats, while unanswered
-                await self._exchange(run, acyclic)
-                sent += 1
-                acyclic = slave.repeat_acyclic()
-        self.cycles += 1
-        if not sent:
-            await asyncio.sleep(IDLE_STEP)
-        return sent
-
-    async def _exchange(self, run: SlaveRun, frame: DataFrame) -> None:
-        """One request to the slave and its answer fed back; its events told."""
-        loop = asyncio.get_running_loop()
-        started = loop.time()
-        answer = await self.line.exchange(frame)
-        now = loop.time()
-        self.exchange_time = now - started
-        self.answer_time = now - self.line.sent_at
+    def received(self, answer: Answer, now: float) -> None:
+        """The answer to the request out (a frame, or why none came)."""
+        run = self._out
+        if run is None:
+            return
         slot = run.slot
-        told = False  # an Inputs or a Failed event tells the exchange to on_event
+        told = False  # an Inputs or a Failed event tells the exchange itself
         for event in run.slave.feed(answer, now):
             update = None
             if isinstance(event, Inputs) and slot is not None:
                 update = slot.feed(event.data)
                 if update.garbled is not None:  # told before the exchange it came with
-                    self._emit(run, update.garbled)
-            self._emit(run, event)
+                    self.events.append((run, update.garbled))
+            self.events.append((run, event))
             told = told or isinstance(event, Inputs | Failed)
             if update is not None and update.answer is not None:
-                self._emit(run, update.answer)
-        if not told and self.on_answered is not None:
-            self.on_answered(run.address, self.answer_time, self.exchange_time)
+                self.events.append((run, update.answer))
+        if not told:
+            self.events.append((run, StartupAnswered()))
+        slave = run.slave
+        self._pending = slave.repeat_acyclic() if self._acyclic_out else slave.poll_acyclic()
 
-    def _emit(self, run: SlaveRun, event: SlaveEvent | SlotAnswer | SlotGarbled) -> None:
-        if self.on_event is not None:
-            self.on_event(run.address, event)
+    def take_events(self) -> list[tuple[SlaveRun, CycleEvent]]:
+        events, self.events = self.events, []
+        return events
+
+    def restart(self, runs: Sequence[tuple[SlaveSetup, PkwSlot | None]]) -> None:
+        """Every slave afresh (the port was lost): the cycle begins again."""
+        for setup, slot in runs:
+            self.runs[setup.address] = SlaveRun(DpSlave(setup), slot)
+        self._next = self._sent = 0
+        self._out, self._pending = None, None

@@ -16,10 +16,13 @@ means another master runs the line, and pkwbus never shares a line with one
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable
 
 from pkwbus.link import Link, PortError, PortSettings
+from pkwbus.master.runner import Done, LineRefused
 from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp.services import global_control_clear
 from pkwbus.protocol.profibus.dp.slave import Answer, Garbled, NoAnswer
 from pkwbus.protocol.profibus.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
@@ -29,7 +32,7 @@ __all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame"]
 TraceHook = Callable[[str, str], None]  # direction ("tx"/"rx"), the decoded frame
 
 
-class ForeignMaster(Exception):
+class ForeignMaster(LineRefused):
     """Another master is active on the line: pkwbus does not go active."""
 
 
@@ -80,6 +83,7 @@ class DpLine:
         *,
         slot_time: float | None = None,
         trace: TraceHook | None = None,
+        listen: float | None = None,
     ) -> None:
         baud = settings.baudrate
         self.master = master
@@ -101,6 +105,8 @@ class DpLine:
             rs485=settings.rs485,
         )
         self.trace = trace
+        self.listen_for = listen  # how long to listen before going active (None: TTO)
+        self.clear_on_close = False  # Global_Control Clear to every slave before closing
         self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost)
         self.foreign: str | None = None  # another master heard, and how
         self.requests = 0
@@ -122,7 +128,29 @@ class DpLine:
         await self.link.open()
 
     async def close(self) -> None:
+        """Close the port; first Global_Control Clear to every slave where the line's master
+        leaves it (``clear_on_close``), while the port is there and nobody else runs it."""
+        with contextlib.suppress(PortError, ForeignMaster):
+            if self.clear_on_close and self.is_open and self.foreign is None and self.requests:
+                await self.broadcast(global_control_clear(self.master))
         await self.link.close()
+
+    async def started(self) -> None:
+        """The port just opened: listen for other masters before the first request
+        (:class:`ForeignMaster` when one is heard)."""
+        await self.listen(self.listen_for)
+
+    def start(self, request: DataFrame, done: Done) -> None:
+        """The runner's request: ``done`` gets its answer, or the exception that ended it."""
+        task = asyncio.get_running_loop().create_task(self.exchange(request))
+
+        def finished(task: asyncio.Task[Answer]) -> None:
+            if task.cancelled():
+                return
+            exc = task.exception()
+            done(exc if exc is not None else task.result())
+
+        task.add_done_callback(finished)
 
     def token_lost_time(self) -> float:
         return dp_timing.token_lost_time(self.slot_time, self.master)

@@ -27,6 +27,7 @@ from collections.abc import Callable
 
 from pkwbus.link import Link, LinkState, PortError, PortSettings
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
+from pkwbus.master.planning.plan import Send
 from pkwbus.protocol.serial.telegram import (
     BadChecksum,
     BadLength,
@@ -144,14 +145,26 @@ class Line:
                 except PortError as exc:
                     return Failure(ErrorKind.PORT, str(exc))
             waiter: asyncio.Future[ExchangeResult] = loop.create_future()
-            self.start(adr, telegram, waiter.set_result, timeout)
+            self.send(adr, telegram, waiter.set_result, timeout)
             try:
                 return await waiter
             except asyncio.CancelledError:
                 self._abandon()
                 raise
 
-    def start(self, adr: int, telegram: bytes, done: Done, timeout: float | None = None) -> None:
+    async def started(self) -> None:
+        """Nothing to do before the first request: the line discards stray input itself."""
+
+    @property
+    def sent_at(self) -> float:
+        """Loop time the latest request was written."""
+        return self._started
+
+    def start(self, request: Send, done: Done) -> None:
+        """The runner's request: ``request``'s telegram, answered from its drive's address."""
+        self.send(request.address, request.telegram, done)
+
+    def send(self, adr: int, telegram: bytes, done: Done, timeout: float | None = None) -> None:
         """Begin one exchange; ``done`` gets its result, from a later callback.
 
         The request waits for what remains of the start pause. One exchange at

@@ -1,22 +1,18 @@
-"""FC and USS lines under the runner: one exchange at a time, run from the line's callbacks.
+"""FC and USS lines under the runner: one exchange at a time, as the planner chooses them.
 
-The runner's task awaits a run of exchanges: each result goes to the planner
-in the line's callback, and the next exchange starts from the same callback
-while the start pause runs, until the planner has nothing ready. Then the
-runner may idle until the planner's next due time, or until a job comes in.
+Pure calls, holding no runner (:class:`~pkwbus.master.runner.Wire`): the next
+request is the planner's next action; an answer goes to the planner as it
+came (its carrier decodes it, once), and its cost goes on the stream as an
+:class:`~pkwbus.master.events.Exchanged`. The line itself
+(:class:`~pkwbus.master.wires.serial.line.Line`) is the port the runner drives.
 """
 
 from __future__ import annotations
 
-import asyncio
-from collections.abc import Sequence
-
-from pkwbus.link import Link
-from pkwbus.master.planning.answers import ExchangeResult
-from pkwbus.master.planning.health import HealthPolicy
-from pkwbus.master.planning.plan import DriveSpec, Send
+from pkwbus.master.events import Event, Exchanged
+from pkwbus.master.planning.answers import ExchangeResult, Failure, Reply
+from pkwbus.master.planning.plan import Action, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.runner import LineRunner
 from pkwbus.master.wires.serial.line import Line
 
 __all__ = ["ExchangeWire"]
@@ -27,82 +23,33 @@ class ExchangeWire:
 
     def __init__(self, line: Line) -> None:
         self.line = line
-        self._runner: LineRunner | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._run_over: asyncio.Future[None] | None = None  # one per run of exchanges
-        self._send: Send | None = None
-        self._sent_at = 0.0
+        self._events: list[Event] = []
 
     @property
-    def link(self) -> Link:
-        return self.line.link
+    def port(self) -> Line:
+        return self.line
 
-    def planner_for(
-        self,
-        drives: Sequence[DriveSpec],
-        retries: int,
-        policy: HealthPolicy | None,
-        poll_deadline: float | None,
-    ) -> Planner:
-        # Long enough for the retries and a lagging answer.
-        deadline = poll_deadline or 4 * (retries + 1) * self.line.timeout
-        return Planner(drives, poll_deadline=deadline, retries=retries, policy=policy)
+    def poll_deadline(self, retries: int) -> float:
+        """Long enough for the retries and a lagging answer."""
+        return 4 * (retries + 1) * self.line.timeout
 
-    def attach(self, runner: LineRunner) -> None:
-        self._runner = runner
+    def transmit(self, planner: Planner, now: float) -> Action:
+        return planner.next_action(now)
 
-    async def started(self) -> None:
-        """Nothing to do before the first request: the line discards stray input itself."""
-
-    async def carry(self) -> float | None:
-        runner = self._runner
-        assert runner is not None  # attached at the runner's construction
-        loop = self._loop = asyncio.get_running_loop()
-        action = runner.planner.next_action(loop.time())
-        if not isinstance(action, Send):
-            return action.until
-        over = self._run_over = loop.create_future()
-        self._start(action, loop)
-        runner.flush()
-        await over
-        return None
+    def received(
+        self, planner: Planner, request: Send, answer: ExchangeResult, now: float, busy: float,
+        answered: float,
+    ) -> None:  # fmt: skip
+        if isinstance(answer, Failure):
+            self._events.append(Exchanged(request.drive, answer.kind, busy))
+        else:
+            took = answer.duration if isinstance(answer, Reply) else answered
+            self._events.append(Exchanged(request.drive, None, busy, took))
+        planner.exchanged(request, answer, now)
 
     def lost(self) -> None:
         """The exchange in flight ends in the line's own loss callback."""
 
-    async def close(self) -> None:
-        await self.line.close()
-
-    # ------------------------------------------------------------ internals
-
-    def _start(self, send: Send, loop: asyncio.AbstractEventLoop) -> None:
-        self._send = send
-        self._sent_at = loop.time()
-        self.line.start(send.address, send.telegram, self._exchanged)
-
-    def _exchanged(self, result: ExchangeResult) -> None:
-        """The line's callback: account for the result, start the next exchange."""
-        over = self._run_over
-        try:
-            send, self._send = self._send, None
-            loop, runner = self._loop, self._runner
-            assert send is not None and loop is not None and runner is not None
-            now = loop.time()
-            runner.exchanged(send.drive, result, now - self._sent_at)
-            planner = runner.planner
-            planner.exchanged(send, result, now)
-            if not runner.stopping and self.line.is_open:
-                action = planner.next_action(now)
-                if isinstance(action, Send):
-                    self._start(action, loop)
-                    runner.batch()  # while the start pause runs
-                    return
-            runner.flush()
-        except Exception as exc:  # the runner's task reports it and reopens the port
-            self._run_over = None
-            if over is not None and not over.done():
-                over.set_exception(exc)
-            return
-        self._run_over = None
-        if over is not None and not over.done():
-            over.set_result(None)
+    def take_events(self) -> list[Event]:
+        events, self._events = self._events, []
+        return events

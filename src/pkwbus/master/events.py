@@ -1,0 +1,143 @@
+"""Everything that happens on a line, on one stream: what its planner decided, what its wire
+saw on the bus, what its runner saw of the port, and what its recorder made of them.
+
+The runner publishes them in the order they happened, in batches, to the
+observers it was given at its construction (the service's metrics, the
+history, a command's watcher): each observer takes the whole stream and
+keeps what it needs (:class:`Observer`). The snapshot has one writer, the
+recorder, which reads the same stream and adds its own events to it: a job's
+result, a value that landed, a description checked against the catalog.
+All are small frozen values.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+from pkwbus.catalog.precedence import Disagreement
+from pkwbus.master.planning.answers import ErrorKind
+from pkwbus.master.planning.jobs import JobKind, JobResult
+from pkwbus.master.planning.plan import (
+    Described,
+    Finished,
+    HealthChanged,
+    Overrun,
+    PkwLengthTold,
+    StatusWord,
+)
+from pkwbus.master.planning.plan import Event as PlanEvent
+from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.protocol.profibus.dp.services import Diagnosis
+from pkwbus.protocol.profibus.dp.slave_model import RestartReason, SlaveState
+
+__all__ = [
+    "Described",
+    "DescriptionChecked",
+    "Event",
+    "Exchanged",
+    "Finished",
+    "HealthChanged",
+    "JobDone",
+    "LineState",
+    "Observer",
+    "Overrun",
+    "PkwLengthTold",
+    "SlaveDiagnosed",
+    "SlaveRestarted",
+    "SlaveStateChanged",
+    "StatusWord",
+    "ValueLanded",
+]
+
+
+# ------------------------------------------------------------------ the wire's
+
+
+@dataclass(frozen=True, slots=True)
+class Exchanged:
+    """A request went out to ``drive`` and held the line ``busy`` seconds (its idle time
+    before it included); ``answered`` how long its answer took from the request written
+    (None: none came, ``error`` says why)."""
+
+    drive: str
+    error: ErrorKind | None
+    busy: float
+    answered: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveStateChanged:
+    """A PROFIBUS DP slave's state changed (offline, wait_prm, wait_cfg, data_exchange,
+    locked)."""
+
+    drive: str
+    state: SlaveState
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveRestarted:
+    """A DP slave had to be parametrised again, and why."""
+
+    drive: str
+    reason: RestartReason
+
+
+@dataclass(frozen=True, slots=True)
+class SlaveDiagnosed:
+    """A DP slave's diagnosis was read: its flags, ident number and owning master."""
+
+    drive: str
+    diagnosis: Diagnosis
+
+
+# ---------------------------------------------------------------- the runner's
+
+
+@dataclass(frozen=True, slots=True)
+class LineState:
+    """The line's port opened (``up``) or was lost or given up (``error`` says why)."""
+
+    line: str
+    up: bool
+    error: str | None = None
+
+
+# -------------------------------------------------------------- the recorder's
+
+
+@dataclass(frozen=True, slots=True)
+class JobDone:
+    """A job or a poll (a read) is over, decoded: its outcome and value."""
+
+    drive: str
+    kind: JobKind
+    result: JobResult
+
+
+@dataclass(frozen=True, slots=True)
+class ValueLanded:
+    """A polled parameter's new value, as it landed in the snapshot."""
+
+    key: ReadingKey
+    reading: Reading
+
+
+@dataclass(frozen=True, slots=True)
+class DescriptionChecked:
+    """A parameter's description settled, and the fields on which the drive contradicts
+    its catalog (the drive's is used)."""
+
+    event: Described
+    found: tuple[Disagreement, ...] = ()
+
+
+WireEvent = Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed
+Event = PlanEvent | WireEvent | LineState | JobDone | ValueLanded | DescriptionChecked
+
+
+class Observer(Protocol):
+    """One who follows a line's stream of events."""
+
+    def on_events(self, events: Sequence[Event]) -> None: ...
