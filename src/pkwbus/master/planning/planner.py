@@ -16,9 +16,8 @@ The policy, in order:
 - a poll that starts more than one interval after it was due is an overrun; nothing
   is sent past its deadline; a job still queued at its deadline ends.
 
-Drives wait in two heaps (ready, by the key above; and by the time they become due), so
-one exchange costs O(log n) in the number of drives; a change of a drive pushes a new
-entry with its version, and the old one is skipped when it surfaces.
+Drives wait for their turn on an :class:`~pkwbus.master.planning.agenda.Agenda` (two
+heaps), so one exchange costs O(log n) in the number of drives.
 
 A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
 :meth:`Planner.next_for` for each slave's turn, under the same priorities.
@@ -26,11 +25,11 @@ A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
 
 from __future__ import annotations
 
-import heapq
 import itertools
 from collections import deque
 from collections.abc import Sequence
 
+from pkwbus.master.planning.agenda import Agenda, Key
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.batch import BatchTransaction
 from pkwbus.master.planning.carrier import Transaction
@@ -57,9 +56,6 @@ __all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
 
 PORT_CLOSED = "the line's port is not open"
 IDLE_AT_MOST = 3600.0
-_EXPIRY = -1  # a timer entry that ends queued jobs at their deadline (not versioned)
-
-_Key = tuple[int, int, float, int, int]  # priority, lagging, order, last served, slot
 
 
 class Planner:
@@ -81,9 +77,7 @@ class Planner:
         self.events: list[Event] = []
         self.up = False  # the line's port is open
         self.stopping = False
-        self._ready: list[tuple[_Key, int, DrivePlan]] = []
-        self._timers: list[tuple[float, int, int, DrivePlan]] = []
-        self._timer_seq = itertools.count()
+        self._agenda: Agenda[DrivePlan] = Agenda(len(self.drives))
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
@@ -108,7 +102,7 @@ class Planner:
             self.events.append(Finished(d.name, job, LineFailed(PORT_CLOSED)))
             return
         (d.writes if job.priority is Priority.WRITE else d.reads).append(job)
-        heapq.heappush(self._timers, (job.deadline, next(self._timer_seq), _EXPIRY, d))
+        self._agenda.expiry(d, job.deadline)
         self._index(d, now)
 
     def line_up(self, now: float) -> None:
@@ -157,15 +151,13 @@ class Planner:
         """The line's next exchange, or how long it may stay idle."""
         if not self.up or self.stopping:
             return Idle(now + IDLE_AT_MOST)
-        ready = self._ready
+        agenda = self._agenda
         while True:
             self._fire(now)
-            while ready and ready[0][1] != ready[0][2].version:
-                heapq.heappop(ready)
-            if not ready:
-                timers = self._timers
-                return Idle(min(timers[0][0], now + IDLE_AT_MOST) if timers else now + IDLE_AT_MOST)
-            d = heapq.heappop(ready)[2]
+            d = agenda.first()
+            if d is None:
+                at = agenda.next_time()
+                return Idle(now + IDLE_AT_MOST if at is None else min(at, now + IDLE_AT_MOST))
             send = self._start(d, now)
             if send is not None:
                 return send
@@ -247,7 +239,7 @@ class Planner:
 
     # ---------------------------------------------------------- internals
 
-    def _claim(self, d: DrivePlan, now: float) -> tuple[_Key | None, float | None]:
+    def _claim(self, d: DrivePlan, now: float) -> tuple[Key | None, float | None]:
         """The drive's claim on the next exchange, else when it will have one (None: never)."""
         if d.writes:
             self._expire(d, d.writes, now)
@@ -276,24 +268,13 @@ class Planner:
         if d.busy or not self.up or self.stopping:
             return
         if key is not None:
-            heapq.heappush(self._ready, (key, d.version, d))
+            self._agenda.ready(d, key)
         elif at is not None:
-            heapq.heappush(self._timers, (at, next(self._timer_seq), d.version, d))
-        if len(self._ready) + len(self._timers) > 4 * len(self.drives) + 64:
-            self._compact()
-
-    def _compact(self) -> None:
-        self._ready = [e for e in self._ready if e[1] == e[2].version]
-        heapq.heapify(self._ready)
-        self._timers = [e for e in self._timers if e[2] in (_EXPIRY, e[3].version)]
-        heapq.heapify(self._timers)
+            self._agenda.later(d, at)
 
     def _fire(self, now: float) -> None:
-        timers = self._timers
-        while timers and timers[0][0] <= now:
-            _, _, version, d = heapq.heappop(timers)
-            if version == _EXPIRY or version == d.version:
-                self._index(d, now)
+        for d in self._agenda.due(now):
+            self._index(d, now)
 
     def _expire(self, d: DrivePlan, queue: deque[Job], now: float) -> None:
         while queue and queue[0].deadline <= now:
