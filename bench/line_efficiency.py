@@ -3,8 +3,9 @@
 The simulated drive runs in another process on a pty with wire timing: it
 answers when a real RS-485 line would deliver the last byte of its answer
 (request bytes x 11 / baud + response delay + answer bytes x 11 / baud after
-the request's first byte). The master runs ``run_job`` back to back (one
-FC parameter read after another). The theoretical exchange time is
+the request's first byte). The master runs jobs back to back on a command's
+line session (the line runner; one FC parameter read after another). The
+theoretical exchange time is
 
     request bytes x 11 / baud + start pause (3.5 characters)
     + response delay + response bytes x 11 / baud
@@ -30,9 +31,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
 from _measure import markdown_table
 
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered
-from pkwbus.master.sessions.jobs import perform, run_job
+from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 
 BAUDRATES = (9600, 19200, 115200)
@@ -41,26 +45,25 @@ GOALS = {9600: 0.98, 115200: 0.95}
 
 
 async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
-    """Completed jobs per second of ``run_job``, one after another."""
+    """Completed jobs per second, one after another."""
     line = make_line(port, "fc", baudrate, timeout=0.2)
     target = DriveTarget.create("fc", 1)
     request = pkw.read(target.dialect, 1613)
     loop = asyncio.get_running_loop()
-    await line.open()
-    try:
+    async with LineSession(
+        ExchangeWire(line), [DriveSpec("d", carrier_for(target))], retries=2
+    ) as session:
         for _ in range(3):  # warm-up
-            await run_job(line, target, request, deadline=loop.time() + 1)
+            await session.job("d", request, loop.time() + 1)
         done = bad = 0
         start = time.perf_counter()
         while time.perf_counter() - start < seconds:
-            job = await perform(line, target, request, deadline=loop.time() + 1)
+            job = await session.job("d", request, loop.time() + 1)
             if isinstance(job.outcome, Answered) and job.tally and job.tally.telegrams == 1:
                 done += 1
             else:
                 bad += 1
         elapsed = time.perf_counter() - start
-    finally:
-        await line.close()
     if bad:
         print(f"  {bad} jobs took more than one exchange at {baudrate} baud", file=sys.stderr)
     return done / elapsed

@@ -4,8 +4,8 @@ Each simulated drive (another process, pty, wire timing at 115200 baud,
 2 ms response delay) answers a PKW request only after ``lag_telegrams``
 further telegrams to it, or after a time, meanwhile with AK 0. Compared:
 the ``LineRunner`` interleaving the 4 drives (polls always due), and
-strictly sequential handling (``run_job`` one job after another, drive
-after drive).
+strictly sequential handling (a command's line session: one job after
+another, drive after drive).
 
     .venv/bin/python bench/pkw_lag.py [--seconds 5] [--repeat 3]
 """
@@ -26,9 +26,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import Counting, best_median, fc_drive, make_line, sim_process
 from _measure import markdown_table
 
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered
+from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.sessions.jobs import run_job
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
@@ -59,22 +61,20 @@ async def interleaved(port: str, seconds: float) -> float:
 async def sequential(port: str, seconds: float) -> float:
     line = make_line(port, "uss", BAUD, timeout=0.1)
     targets = [DriveTarget.create("uss", a) for a in (1, 2, 3, 4)]
+    specs = [DriveSpec(str(t.address), carrier_for(t)) for t in targets]
     loop = asyncio.get_running_loop()
-    await line.open()
     done = 0
-    try:
+    async with LineSession(ExchangeWire(line), specs, retries=2) as session:
         start = time.perf_counter()
         i = 0
         while time.perf_counter() - start < seconds:
             target = targets[i % 4]
             req = pkw.read(target.dialect, PNUS[(i // 4) % len(PNUS)])
-            outcome = await run_job(line, target, req, deadline=loop.time() + 2.0)
-            if isinstance(outcome, Answered):
+            result = await session.job(str(target.address), req, loop.time() + 2.0)
+            if isinstance(result.outcome, Answered):
                 done += 1
             i += 1
         rate = done / (time.perf_counter() - start)
-    finally:
-        await line.close()
     return rate
 
 

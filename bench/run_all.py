@@ -41,7 +41,8 @@ def plan(quick: bool) -> Plan:
         (
             "1. Line efficiency",
             "Simulator in another process with wire timing and a 2 ms response delay; "
-            "`run_job` back to back, FC parameter telegrams of 16 bytes each way. "
+            "jobs back to back on a command's line session, "
+            "FC parameter telegrams of 16 bytes each way. "
             "Theoretical rate = 1 / (16·11/baud + 3.5·11/baud + 2 ms + 16·11/baud).",
             lambda: line_efficiency.run(2.0 if q else 5.0, 2 if q else 3),
         ),
@@ -61,7 +62,7 @@ def plan(quick: bool) -> Plan:
         (
             "4. PKW lag",
             "4 USS drives at 115200 baud (wire timing, 2 ms delay) answering late; "
-            "`LineRunner` interleaving against `run_job` one job after another.",
+            "`LineRunner` interleaving against a command's line session, one job after another.",
             lambda: pkw_lag.run(2.0 if q else 5.0, 1 if q else 3),
         ),
         (

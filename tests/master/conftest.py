@@ -12,8 +12,11 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.jobs import Job, JobKind, Priority
 from pkwbus.master.planning.outcomes import Outcome
-from pkwbus.master.sessions.jobs import run_job as _run_job
+from pkwbus.master.planning.plan import DriveSpec, Finished, Send
+from pkwbus.master.planning.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
@@ -92,8 +95,26 @@ async def run_job(
     retries: int = 2,
     deadline: float = 2.0,
 ) -> Outcome:
+    """One job on an open line, by the planner alone (no runner: the line's own tests)."""
     loop = asyncio.get_running_loop()
-    return await _run_job(line, target, request, retries=retries, deadline=loop.time() + deadline)
+    until = loop.time() + deadline
+    planner = Planner(
+        [DriveSpec("drive", carrier_for(target))], poll_deadline=until, retries=retries
+    )
+    planner.line_up(loop.time())
+    kind = JobKind.WRITE if request.is_write else JobKind.READ
+    priority = Priority.WRITE if request.is_write else Priority.READ
+    planner.submit(Job("drive", request, kind, priority, until), loop.time())
+    while True:
+        for event in planner.take_events():
+            if isinstance(event, Finished) and isinstance(event.work, Job):
+                return event.outcome
+        action = planner.next_action(loop.time())
+        if isinstance(action, Send):
+            result = await line.exchange(action.address, action.telegram)
+            planner.exchanged(action, result, loop.time())
+        elif not planner.events:  # nothing to do before the job's deadline: it has ended
+            await asyncio.sleep(max(0.0, min(action.until, until) - loop.time()))
 
 
 __all__ = [

@@ -3,7 +3,7 @@
 :func:`drive_access` gives the drive's dialect, its catalog, how a request is
 checked before anything is sent, and how requests run on it one after the
 other, in one opening of the port, by the one line runner
-(:class:`pkwbus.master.sessions.jobs.JobSession`): on FC and USS over the
+(:class:`pkwbus.master.sessions.session.LineSession`): on FC and USS over the
 line's exchange wire, over PROFIBUS DP over the cycle wire, through the
 slave's start-up and its PKW slot (:func:`pkwbus.commands.profibus.context.session`). The
 commands themselves are the same for every bus.
@@ -35,7 +35,7 @@ from pkwbus.link import PortError
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec
-from pkwbus.master.sessions.jobs import JobSession
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
@@ -100,13 +100,10 @@ async def _jobs(
     args: argparse.Namespace, target: DriveTarget, requests: Sequence[pkw.PkwRequest]
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
-    drive = JobSession(
-        ExchangeWire(build_line(args)),
-        DriveSpec("drive", carrier_for(target)),
-        retries=args.retries,
-    )
+    spec = DriveSpec("drive", carrier_for(target))
+    session = LineSession(ExchangeWire(build_line(args)), [spec], retries=args.retries)
     try:
-        await drive.open()
+        await session.open()
     except PortError as exc:
         raise CommandError(str(exc), Exit.PORT) from None
     loop = asyncio.get_running_loop()
@@ -114,9 +111,9 @@ async def _jobs(
     try:
         for request in requests:
             deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
-            outcomes.append((await drive.job(request, deadline)).outcome)
+            outcomes.append((await session.job(spec.name, request, deadline)).outcome)
     finally:
-        await drive.close()
+        await session.close()
     return outcomes
 
 

@@ -14,6 +14,7 @@ from pkwbus.exits import Exit
 from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
+    Heard,
     LineFailed,
     Mismatch,
     NotSent,
@@ -38,7 +39,7 @@ class CommandFailure:
 def command_failure(outcome: Outcome) -> CommandFailure | None:
     """The exit code, kind and message for ``outcome``; None when the drive answered."""
     match outcome:
-        case Answered():
+        case Answered() | Heard():
             return None
         case Rejected(fault=fault, text=text):
             code = "" if fault is None else f"fault {fault}: "

@@ -1,7 +1,8 @@
 """`pkwbus check-config --probe`: each configured drive asked once, with the line's settings.
 
-Each FC or USS line's port is opened briefly and every drive gets one short
-telegram (the one a down drive is probed with), retried as the line says. A
+Each FC or USS line's port is opened briefly by its line runner and every
+drive gets a probe job: one short telegram (the one a down drive is probed
+with), repeated as the line's retries say. A
 drive that answers is listed (a USS drive with the PKW length its answer to a
 word read shows, against the configured one), and with ``describe: auto``
 each of its polled and writable parameters as the drive describes it (AK 4),
@@ -22,10 +23,13 @@ from pkwbus import link
 from pkwbus.catalog.precedence import disagreements
 from pkwbus.commands.common import CommandError, Exit
 from pkwbus.link import PortError
-from pkwbus.master.planning.answers import Failure, Reply
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.outcomes import Heard, LineFailed, TimedOut
+from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_description, ask_pkw_length
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.pkw.length import AUTO, shown
 from pkwbus.protocol.serial.telegram import Protocol
@@ -67,45 +71,49 @@ async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
 
 async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
     bus = line_for(line, line.port)
+    targets = {drive.name: target_for(line, drive) for drive in line.drives}
+    specs = [DriveSpec(name, carrier_for(target)) for name, target in targets.items()]
+    session = LineSession(ExchangeWire(bus), specs, retries=line.retries)
     try:
-        await bus.open()
+        await session.open()
     except PortError as exc:
         return False, [f"line {line.name}: cannot open {line.port}: {exc}"]
     out = [f"line {line.name}: {line.port} open, {line.baudrate} baud {line.parity}"]
     every = True
+    loop = asyncio.get_running_loop()
     try:
         for drive in line.drives:
-            target = target_for(line, drive)
-            result = None
-            for _ in range(line.retries + 1):
-                result = await bus.exchange(target.adr, target.probe())
-                if isinstance(result, Reply) or (
-                    isinstance(result, Failure) and result.kind.value == "port"
-                ):
-                    break
-            if isinstance(result, Reply):
-                told = await _pkw_length(bus, line, target)
+            target = targets[drive.name]
+            deadline = loop.time() + _asking_time(line)
+            outcome = (await session.probe(drive.name, deadline)).outcome
+            if isinstance(outcome, Heard):
+                told = await _pkw_length(session, line, drive.name, target)
                 out.append(f"  {drive.name} (address {drive.address}): answers{told}")
-                out += await _descriptions(bus, line, drive, target)
+                out += await _descriptions(session, line, drive, target)
             else:
                 every = False
-                why = result.detail if isinstance(result, Failure) else "no answer"
+                why = outcome.reason if isinstance(outcome, TimedOut | LineFailed) else outcome
                 out.append(f"  {drive.name} (address {drive.address}): NO ANSWER ({why})")
         if bus.echo_heard:
             out.append(
                 f"  the adapter on {line.port} echoes our requests: set echo: true for this line"
             )
     finally:
-        await bus.close()
+        await session.close()
     return every, out
 
 
-async def _pkw_length(bus: Line, line: cfg.Line, target: DriveTarget) -> str:
+def _asking_time(line: cfg.Line) -> float:
+    """Enough for every try of one job on ``line``, and a margin."""
+    return line.timeout * (line.retries + 1) + 0.5
+
+
+async def _pkw_length(session: LineSession, line: cfg.Line, name: str, target: DriveTarget) -> str:
     """A USS drive's PKW length as its answer shows it, against the configured one."""
     if line.protocol is not Protocol.USS or not target.has_pkw:
         return ""
-    deadline = asyncio.get_running_loop().time() + line.timeout * (line.retries + 1) + 0.5
-    words = await ask_pkw_length(bus, target, retries=line.retries, deadline=deadline)
+    deadline = asyncio.get_running_loop().time() + _asking_time(line)
+    words = await ask_pkw_length(session, name, target, deadline=deadline)
     if words == NO_ANSWER:
         return ", PKW length not told (no answer to a word read)"
     seen = "4 or 127" if words == "?" else shown(words)
@@ -116,7 +124,7 @@ async def _pkw_length(bus: Line, line: cfg.Line, target: DriveTarget) -> str:
 
 
 async def _descriptions(
-    bus: Line, line: cfg.Line, drive: cfg.Drive, target: DriveTarget
+    session: LineSession, line: cfg.Line, drive: cfg.Drive, target: DriveTarget
 ) -> list[str]:
     """Each polled and writable parameter as the drive describes it, against its catalog."""
     if description_form(line, drive) is None:
@@ -125,7 +133,7 @@ async def _descriptions(
     table = parameter_table(drive)
     for wanted in describe_targets(target, drive, table):
         said = await ask_description(
-            bus, target, wanted.pnu, retries=line.retries, timeout=line.timeout * 3 + 0.5
+            session, drive.name, target, wanted.pnu, timeout=_asking_time(line)
         )
         name = f"    {wanted.parameter}:"
         if said == NO_ANSWER:

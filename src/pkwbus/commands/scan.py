@@ -35,18 +35,20 @@ from pkwbus.commands.profibus import scan as dp_scan
 from pkwbus.commands.profibus.context import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
-from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
-from pkwbus.master.planning.outcomes import Answered
-from pkwbus.master.sessions.jobs import run_job
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.outcomes import Answered, Heard, LineFailed
+from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_pkw_length
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw.length import shown
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol, split_block
+from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol
 from pkwbus.protocol.values import ValueType
 
 __all__ = ["AUTO_BAUDRATES", "add_parsers", "run_scan"]
@@ -129,8 +131,11 @@ async def _scan(
         line.timeout = min(
             args.timeout + line.link.settings.wire_time(answer), durations.TELEGRAM_TIMEOUT.high
         )
+        targets = {a: build_target(at, a) for a in remaining}
+        specs = [DriveSpec(str(a), carrier_for(t)) for a, t in targets.items()]
+        session = LineSession(ExchangeWire(line), specs, retries=args.retries)
         try:
-            await line.open()
+            await session.open()
         except PortError as exc:
             raise CommandError(str(exc), Exit.PORT) from None
         where = f"{baudrate} baud {_framing(parity, args.stopbits)}"
@@ -140,7 +145,7 @@ async def _scan(
                     f"{where} ({step}/{len(settings)}): address {address}"
                     f" ({i}/{len(remaining)}), {len(found)} found"
                 )
-                entry = await _probe(args, line, build_target(at, address))
+                entry = await _probe(args, session, line, targets[address])
                 if entry is None:
                     continue
                 entry.update(
@@ -151,40 +156,38 @@ async def _scan(
                     progress.clear()
                     print(_describe_line(entry), flush=True)
         finally:
-            await line.close()
+            await session.close()
     progress.clear()
     return sorted(found.values(), key=lambda e: int(e["address"]))
 
 
+def _asking_time(args: argparse.Namespace, line: Line) -> float:
+    """Enough for every try of one job, and a margin."""
+    retries: int = args.retries
+    return line.timeout * (retries + 1) + 0.5
+
+
 async def _probe(
-    args: argparse.Namespace, line: Line, target: DriveTarget
+    args: argparse.Namespace, session: LineSession, line: Line, target: DriveTarget
 ) -> dict[str, Any] | None:
-    for _ in range(args.retries + 1):
-        result = await line.exchange(target.adr, target.probe())
-        if isinstance(result, Failure) and result.kind is ErrorKind.PORT:
-            raise CommandError(result.detail, Exit.NO_ANSWER)
-        if isinstance(result, Reply):
-            entry = _status(target, result)
-            entry["type"] = await _drive_type(line, target)
-            if target.protocol is Protocol.USS:
-                entry["pkw_words"] = await _pkw_words(args, line, target)
-            return entry
-    return None
-
-
-def _status(target: DriveTarget, reply: Reply) -> dict[str, Any]:
-    entry: dict[str, Any] = {"address": target.address, "status_word": None, "status": {}}
-    try:
-        block = split_block(reply.data, target.response_shape(len(reply.data)))
-    except RemoteProtocolError:
-        return entry
-    if block.status_word is not None:
-        entry["status_word"] = block.status_word
-        entry["status"] = status_bits(block.status_word, target.profile)
+    name = str(target.address)
+    deadline = asyncio.get_running_loop().time() + _asking_time(args, line)
+    result = await session.probe(name, deadline)
+    if isinstance(result.outcome, LineFailed):
+        raise CommandError(result.outcome.reason, Exit.NO_ANSWER)
+    if not isinstance(result.outcome, Heard):
+        return None
+    word = result.tally.status_word if result.tally is not None else None
+    entry: dict[str, Any] = {"address": target.address, "status_word": word, "status": {}}
+    if word is not None:
+        entry["status"] = status_bits(word, target.profile)
+    entry["type"] = await _drive_type(session, line, target)
+    if target.protocol is Protocol.USS:
+        entry["pkw_words"] = await _pkw_words(args, session, line, target)
     return entry
 
 
-async def _drive_type(line: Line, target: DriveTarget) -> str | None:
+async def _drive_type(session: LineSession, line: Line, target: DriveTarget) -> str | None:
     """What an FC drive says its type is (15-40), None when it does not say."""
     if target.protocol is not Protocol.FC:
         return None
@@ -195,7 +198,7 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
         return None
     loop = asyncio.get_running_loop()
     deadline = loop.time() + line.timeout + TYPE_TIMEOUT
-    outcome = await run_job(line, target, req, retries=1, deadline=deadline)
+    outcome = (await session.job(str(target.address), req, deadline)).outcome
     if not isinstance(outcome, Answered):
         return None
     try:
@@ -210,10 +213,12 @@ async def _drive_type(line: Line, target: DriveTarget) -> str | None:
     return text or None
 
 
-async def _pkw_words(args: argparse.Namespace, line: Line, target: DriveTarget) -> str | None:
+async def _pkw_words(
+    args: argparse.Namespace, session: LineSession, line: Line, target: DriveTarget
+) -> str | None:
     """A USS drive's PKW length as its answer to a word read shows it (None: no answer)."""
-    deadline = asyncio.get_running_loop().time() + line.timeout * (args.retries + 1) + 0.5
-    words = await ask_pkw_length(line, target, retries=args.retries, deadline=deadline)
+    deadline = asyncio.get_running_loop().time() + _asking_time(args, line)
+    words = await ask_pkw_length(session, str(target.address), target, deadline=deadline)
     if words == NO_ANSWER:
         return None
     return "4 or 127" if words == "?" else shown(words)

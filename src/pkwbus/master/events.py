@@ -31,6 +31,7 @@ from pkwbus.master.planning.plan import Event as PlanEvent
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol.profibus.dp.services import Diagnosis
 from pkwbus.protocol.profibus.dp.slave_model import RestartReason, SlaveState
+from pkwbus.protocol.profibus.fdl import StationType
 
 __all__ = [
     "Described",
@@ -47,6 +48,9 @@ __all__ = [
     "SlaveDiagnosed",
     "SlaveRestarted",
     "SlaveStateChanged",
+    "StationAsked",
+    "StationFound",
+    "StationsAsked",
     "StatusWord",
     "ValueLanded",
 ]
@@ -102,6 +106,8 @@ class LineState:
     line: str
     up: bool
     error: str | None = None
+    # Given up though open: the line is not to be used (another master runs it).
+    refused: bool = False
 
 
 # -------------------------------------------------------------- the recorder's
@@ -133,7 +139,34 @@ class DescriptionChecked:
     found: tuple[Disagreement, ...] = ()
 
 
-WireEvent = Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed
+@dataclass(frozen=True, slots=True)
+class StationAsked:
+    """A live list asks the station at ``address`` (the ``place``-th of ``count``)."""
+
+    address: int
+    place: int
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class StationFound:
+    """A station answered a live list's FDL status request: its type, and a slave's
+    diagnosis (None: it gave none that could be read)."""
+
+    address: int
+    station_type: StationType
+    diagnosis: Diagnosis | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StationsAsked:
+    """A live list has asked every station."""
+
+
+WireEvent = (
+    Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed
+    | StationAsked | StationFound | StationsAsked
+)  # fmt: skip
 Event = PlanEvent | WireEvent | LineState | JobDone | ValueLanded | DescriptionChecked
 
 

@@ -28,7 +28,7 @@ from pkwbus.master.events import (
     ValueLanded,
 )
 from pkwbus.master.planning.describing import ASK_AGAIN
-from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult
+from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, ProbeJob
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
@@ -205,10 +205,15 @@ class LineRecorder:
 
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
+        if isinstance(work, ProbeJob):  # it answered or not: no value, nothing to remember
+            result = JobResult(event.outcome, tally=event.tally)
+            self._out.append(JobDone(drive, work.kind, result))
+            work.resolve(result)
+            return
         response = event.outcome.response if isinstance(event.outcome, Answered) else None
         if isinstance(response, pkw.ValueResponse) and response.vtype is not None:
             self.snapshot.stated[(drive, work.request.pnu)] = response.vtype  # its own type
-        result = self._result(event)
+        result = self._result(event, work)
         reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):
             self._tell_refusal(drive, work, event.outcome)
@@ -242,8 +247,7 @@ class LineRecorder:
         elif isinstance(outcome, Answered) and self._refused.pop(key, None) is not None:
             log.info("drive %s answers the poll of %s again", drive, where, extra=ctx)
 
-    def _result(self, event: Finished) -> JobResult:
-        work = event.work
+    def _result(self, event: Finished, work: Job | PollSpec) -> JobResult:
         try:
             return job_result(event.outcome, event.tally, work.request, work.fmt)
         except RemoteProtocolError as exc:

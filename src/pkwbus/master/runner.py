@@ -37,7 +37,7 @@ from typing import Any, Protocol
 from pkwbus.link import Link, LinkState, PortError
 from pkwbus.master.events import Event, LineState, Observer
 from pkwbus.master.planning.health import HealthPolicy
-from pkwbus.master.planning.jobs import Job
+from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.recorder import LineRecorder
@@ -160,6 +160,7 @@ class LineRunner:
         self._run_over: asyncio.Future[float | None] | None = None  # one per run of exchanges
         self._request: Any = None
         self._started = 0.0
+        self._refusing = False
         self._collect()  # what the wire tells from the start (a DP slave offline)
         wire.port.link.reconnect.add_listener(self._on_port)
 
@@ -169,8 +170,8 @@ class LineRunner:
 
     # ------------------------------------------------------------ the service's
 
-    def submit(self, job: Job) -> None:
-        """Queue a write or on-demand read; its future gets the result."""
+    def submit(self, job: Job | ProbeJob) -> None:
+        """Queue a write, an on-demand read or a probe; its future gets the result."""
         self.planner.submit(job, asyncio.get_running_loop().time())
         self.flush()
         self._wake.set()
@@ -219,7 +220,11 @@ class LineRunner:
     def _refused(self, exc: LineRefused) -> None:
         log.error("line %s: %s", self.name, exc, extra={"line": self.name})
         if self.link.is_open:
-            self.link.abort(str(exc))
+            self._refusing = True  # told with the loss it causes
+            try:
+                self.link.abort(str(exc))
+            finally:
+                self._refusing = False
 
     async def _step(self, loop: asyncio.AbstractEventLoop, link: Link) -> None:
         if not link.is_open:
@@ -370,7 +375,8 @@ class LineRunner:
             log.warning("line %s: %s", self.name, error, extra=ctx)
             self.planner.port_failed()
             self.wire.lost()
-            self._unrecorded.append(([LineState(self.name, False, error)], self._wall()))
+            state_event = LineState(self.name, False, error, refused=self._refusing)
+            self._unrecorded.append(([state_event], self._wall()))
             self.flush()
         else:
             self._unrecorded.append(([LineState(self.name, False)], self._wall()))

@@ -11,6 +11,7 @@ from pkwbus.exits import Exit
 from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
+    Heard,
     JobOutcome,
     LineFailed,
     Mismatch,
@@ -27,6 +28,7 @@ ANSWERED = Answered(pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD))
 MISMATCH = Mismatch(1234, 0, pkw.ValueResponse(1, 1120, 0, 0, pkw.Width.WORD))
 EXAMPLES: list[Outcome] = [
     ANSWERED,
+    Heard(),
     Rejected(17, "not while running", "running"),
     MISMATCH,
     NotSent("the drive answers with a PKW length of 127 (variable), the configuration says 4"),
@@ -42,7 +44,7 @@ def test_the_examples_cover_the_union() -> None:
 
 @pytest.mark.parametrize("outcome", EXAMPLES, ids=lambda o: type(o).__name__)
 def test_only_an_answer_is_a_success_everywhere(outcome: Outcome) -> None:
-    answered = isinstance(outcome, Answered)
+    answered = isinstance(outcome, Answered | Heard)  # a probe's answer is its success
     assert (metric_label(outcome) is JobOutcome.OK) == answered
     assert (http_failure(outcome) is None) == answered
     assert (command_failure(outcome) is None) == answered

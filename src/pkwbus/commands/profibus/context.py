@@ -31,7 +31,7 @@ from pkwbus.master.events import Event, Exchanged, LineState, SlaveDiagnosed, Sl
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.outcomes import Outcome, TimedOut
 from pkwbus.master.planning.plan import DriveSpec
-from pkwbus.master.sessions.jobs import JobSession, SessionEnded
+from pkwbus.master.sessions.session import EndKind, LineSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.wires.profibus.cycle import SlaveLocked
 from pkwbus.master.wires.profibus.line import DpLine
@@ -272,18 +272,18 @@ async def session(
     watch = _Watch(address)
     line = dp_line(args, ctx.slot_time)
     wire = CycleWire(line, [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], name="command line")
-    drive = watch.session = JobSession(wire, spec, retries=ctx.retries, observers=[watch])
+    drive = watch.session = LineSession(wire, [spec], retries=ctx.retries, observers=[watch])
     loop = asyncio.get_running_loop()
     outcomes: list[Outcome] = []
     try:
         await drive.open()
         for request in jobs:
             deadline = loop.time() + getattr(args, "deadline", DEFAULT_DEADLINE)
-            outcomes.append((await drive.job(request, deadline, vtype)).outcome)
+            outcomes.append((await drive.job(spec.name, request, deadline, vtype)).outcome)
     except PortError as exc:
         raise CommandError(str(exc), Exit.PORT) from None
     except SessionEnded as exc:
-        if exc.kind == "timeout":  # the slave does not answer: no valid answer
+        if exc.kind is EndKind.TIMEOUT:  # the slave does not answer: no valid answer
             outcomes.append(TimedOut(str(exc)))
         else:
             raise CommandError(str(exc), Exit.NO_ANSWER, kind=exc.kind) from None
@@ -299,11 +299,11 @@ class _Watch:
 
     def __init__(self, address: int) -> None:
         self.address = address
-        self.session: JobSession | None = None
+        self.session: LineSession | None = None
         self.state = SlaveState.OFFLINE
         self.owner: int | None = None
 
-    def _end(self, kind: str, reason: str) -> None:
+    def _end(self, kind: EndKind, reason: str) -> None:
         if self.session is not None:
             self.session.end(kind, reason)
 
@@ -314,9 +314,9 @@ class _Watch:
             elif isinstance(event, SlaveStateChanged):
                 self.state = event.state
                 if event.state is SlaveState.LOCKED:
-                    self._end("locked", str(SlaveLocked(self.address, self.owner)))
+                    self._end(EndKind.LOCKED, str(SlaveLocked(self.address, self.owner)))
             elif isinstance(event, Exchanged):
                 if event.error is ErrorKind.TIMEOUT and self.state is SlaveState.OFFLINE:
-                    self._end("timeout", f"slave {self.address} does not answer (no answer)")
+                    self._end(EndKind.TIMEOUT, f"slave {self.address} does not answer (no answer)")
             elif isinstance(event, LineState) and not event.up and event.error:
-                self._end("line_error", event.error)
+                self._end(EndKind.LINE_ERROR, event.error)

@@ -5,6 +5,9 @@ address 0-125 but its own for its FDL status (EN 50170 vol. 2 part 4, "FDL
 status"): the answer says whether a station is there and whether it is a
 slave or a master. Each slave is then asked its diagnosis (Slave_Diag):
 ident number, state, and the master that owns it. Nothing is parametrised.
+The line runner does it, over the live list's wire
+(:class:`~pkwbus.master.wires.profibus.live_list.LiveListWire`); this command
+shows what the line's events tell.
 
 Raises :class:`~pkwbus.commands.common.CommandError` with the exit code for bad options,
 a port that cannot be opened or a line another master runs.
@@ -13,8 +16,10 @@ a port that cannot be opened or a line another master runs.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
 from pkwbus import link
@@ -22,12 +27,11 @@ from pkwbus.commands.common import CommandError, Exit
 from pkwbus.commands.profibus.context import DEFAULT_BAUDRATE, MAX_DP_RETRIES, dp_line
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
-from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
-from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.profibus import fdl
+from pkwbus.master.events import Event, LineState, StationAsked, StationFound, StationsAsked
+from pkwbus.master.sessions.session import LineSession
+from pkwbus.master.wires.profibus.live_list import LiveListWire
 from pkwbus.protocol.profibus.dp import services as dps
-from pkwbus.protocol.profibus.dp.slave import Answer
-from pkwbus.protocol.profibus.fdl import DataFrame, StationType
+from pkwbus.protocol.profibus.fdl import StationType
 
 __all__ = ["run_scan", "slave_state"]
 
@@ -48,37 +52,51 @@ def slave_state(diag: dps.Diagnosis) -> str:
     return "data_exchange"
 
 
-async def _ask(line: DpLine, frame: DataFrame, tries: int) -> DataFrame | None:
-    """The station's data answer to ``frame`` (repeated up to ``tries`` times), or None."""
-    for _ in range(tries):
-        answer: Answer = await line.exchange(frame)
-        if isinstance(answer, DataFrame) and answer.sa == frame.da and answer.da == line.master:
-            return answer
-    return None
-
-
-async def _station(line: DpLine, address: int, tries: int) -> dict[str, Any] | None:
-    status = DataFrame(address, line.master, fdl.request_fc(fdl.Function.FDL_STATUS))
-    answer = await _ask(line, status, tries)
-    if answer is None or answer.control.is_request:
-        return None
-    kind = answer.control.station_type or StationType.SLAVE
-    entry: dict[str, Any] = {"address": address, "station_type": STATION_TYPES[kind]}
-    if kind is not StationType.SLAVE:
+def _entry(found: StationFound) -> dict[str, Any]:
+    entry: dict[str, Any] = {
+        "address": found.address,
+        "station_type": STATION_TYPES[found.station_type],
+    }
+    if found.station_type is not StationType.SLAVE:
         return entry
     entry.update(ident=None, state=None, master=None, flags=[])
-    request = dps.request(dps.Service.SLAVE_DIAG, address, line.master, fcb=True, fcv=False)
-    diag_answer = await _ask(line, request, tries)
-    if diag_answer is None:
-        return entry
-    try:
-        diag = dps.decode_diagnosis(diag_answer.data)
-    except RemoteProtocolError:
-        return entry
-    entry.update(
-        ident=diag.ident, state=slave_state(diag), master=diag.master, flags=sorted(diag.flags)
-    )
+    diag = found.diagnosis
+    if diag is not None:
+        entry.update(
+            ident=diag.ident, state=slave_state(diag), master=diag.master, flags=sorted(diag.flags)
+        )
     return entry
+
+
+class _LiveList:
+    """What the line's events tell of the live list: progress, stations, its end."""
+
+    def __init__(self, json: bool, progress: Progress) -> None:
+        self.json = json
+        self.progress = progress
+        self.found: list[dict[str, Any]] = []
+        self.over: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self.lost: LineState | None = None  # the line given up or lost while asking
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        for event in events:
+            if isinstance(event, StationAsked):
+                self.progress.show(
+                    f"address {event.address} ({event.place}/{event.count}),"
+                    f" {len(self.found)} found"
+                )
+            elif isinstance(event, StationFound):
+                entry = _entry(event)
+                self.found.append(entry)
+                if not self.json:
+                    self.progress.clear()
+                    print(_describe(entry), flush=True)
+            elif isinstance(event, StationsAsked) and not self.over.done():
+                self.over.set_result(None)
+            elif isinstance(event, LineState) and not event.up and event.error:
+                self.lost = self.lost or event
+                if not self.over.done():
+                    self.over.set_result(None)
 
 
 def _describe(entry: dict[str, Any]) -> str:
@@ -95,31 +113,24 @@ async def _scan(
     args: argparse.Namespace, addresses: list[int], progress: Progress
 ) -> list[dict[str, Any]]:
     line = dp_line(args)
+    watch = _LiveList(args.json, progress)
+    wire = LiveListWire(line, addresses, tries=args.retries + 1)
+    session = LineSession(wire, [], retries=args.retries, observers=[watch])
+    progress.show(f"listening for other masters ({line.token_lost_time():.2f} s)")
     try:
-        await line.open()
+        await session.open()
+        await session.until(watch.over)
     except PortError as exc:
-        raise CommandError(str(exc), Exit.PORT) from None
-    found: list[dict[str, Any]] = []
-    try:
-        progress.show(f"listening for other masters ({line.token_lost_time():.2f} s)")
-        await line.listen()
-        for i, address in enumerate(addresses, 1):
-            progress.show(f"address {address} ({i}/{len(addresses)}), {len(found)} found")
-            entry = await _station(line, address, args.retries + 1)
-            if entry is None:
-                continue
-            found.append(entry)
-            if not args.json:
-                progress.clear()
-                print(_describe(entry), flush=True)
-    except ForeignMaster as exc:
-        raise CommandError(str(exc), Exit.NO_ANSWER, kind="line_error") from None
-    except PortError as exc:
-        raise CommandError(str(exc), Exit.NO_ANSWER) from None
+        if watch.lost is None:  # the port could not be opened
+            raise CommandError(str(exc), Exit.PORT) from None
     finally:
         progress.clear()
-        await line.close()
-    return found
+        await session.close()
+    lost = watch.lost
+    if lost is not None:  # another master heard (the line refused), or the port lost
+        kind = "line_error" if lost.refused else "error"
+        raise CommandError(lost.error or "the line was lost", Exit.NO_ANSWER, kind=kind)
+    return watch.found
 
 
 def summary(found: list[dict[str, Any]], addresses: int, seconds: float) -> str:

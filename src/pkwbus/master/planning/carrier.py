@@ -18,6 +18,7 @@ from typing import Protocol
 
 from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.batch import BatchTransaction
+from pkwbus.master.planning.probing import ProbeTransaction
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
@@ -26,7 +27,7 @@ from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["Carrier", "Item", "Probe", "Transaction"]
 
-Transaction = PkwTransaction | BatchTransaction
+Transaction = PkwTransaction | BatchTransaction | ProbeTransaction
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,7 +12,7 @@ from pkwbus.master.planning.carrier import Item, Transaction
 from pkwbus.master.planning.describing import DescribeStep, DriveDescriber, Settled, described_poll
 from pkwbus.master.planning.health import DriveHealth, HealthPolicy
 from pkwbus.master.planning.identity import identity_requests
-from pkwbus.master.planning.jobs import Job, Priority
+from pkwbus.master.planning.jobs import Job, Priority, ProbeJob
 from pkwbus.master.planning.outcomes import NotSent, Outcome
 from pkwbus.master.planning.plan import (
     Described,
@@ -25,6 +25,7 @@ from pkwbus.master.planning.plan import (
     Send,
     StatusWord,
 )
+from pkwbus.master.planning.probing import ProbeTransaction
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.length import PkwLength
@@ -44,7 +45,8 @@ class PollState:
         self.fresh = False
 
 
-Work = Job | PollState | DescribeStep | tuple[PollState, ...]  # a tuple: polls in one record
+# A queued job, a poll, a description's element, or polls in one record (a tuple).
+Work = Job | ProbeJob | PollState | DescribeStep | tuple[PollState, ...]
 
 
 @dataclass(eq=False, slots=True)
@@ -96,7 +98,7 @@ class DrivePlan:
         self.health = DriveHealth(policy)
         self.shown_up = True
         self.writes: deque[Job] = deque()
-        self.reads: deque[Job] = deque()
+        self.reads: deque[Job | ProbeJob] = deque()
         self.active: Active | None = None
         self.lagging = False
         self.seq = itertools.count()
@@ -135,6 +137,17 @@ class DrivePlan:
         if probe is None:
             return None
         return Send(self.name, self.carrier.address, probe.telegram, True, probe.words)
+
+    def probe_job(self, job: ProbeJob, order: float, *, retries: int) -> Active | Finished:
+        """The transaction of a probe job (:class:`Finished` when its carrier never probes)."""
+        probe = self.carrier.probe()
+        if probe is None:
+            return Finished(self.name, job, NotSent("its bus tells whether it is there"))
+        tx = ProbeTransaction(
+            probe.telegram, self.carrier.status, retries=retries, deadline=job.deadline
+        )
+        send = Send(self.name, self.carrier.address, probe.telegram, True, probe.words)
+        return Active(tx, job.priority, order, job, send)
 
     def probed(self, send: Send, result: ExchangeResult) -> PkwLengthTold | None:
         """A probe was answered: the event when it told how requests go out."""

@@ -1,4 +1,4 @@
-"""Read and write jobs: what, for which drive, how urgent, until when, and their result."""
+"""Jobs: reads, writes and probes, for which drive, how urgent, until when, and their result."""
 
 from __future__ import annotations
 
@@ -12,12 +12,13 @@ from pkwbus.master.planning.transaction import Tally
 from pkwbus.master.snapshot import Reading
 from pkwbus.protocol import pkw
 
-__all__ = ["Cancelled", "Job", "JobKind", "JobOutcome", "JobResult", "Priority"]
+__all__ = ["Cancelled", "Job", "JobKind", "JobOutcome", "JobResult", "Priority", "ProbeJob"]
 
 
 class JobKind(enum.StrEnum):
     READ = "read"
     WRITE = "write"
+    PROBE = "probe"
 
 
 class Priority(enum.IntEnum):
@@ -56,6 +57,24 @@ class Job:
     future: asyncio.Future[JobResult] | None = None
     parameter: str = ""
     index: int = 0
+
+    def resolve(self, result: JobResult) -> None:
+        if self.future is not None and not self.future.done():
+            self.future.set_result(result)
+
+
+@dataclass(eq=False)
+class ProbeJob:
+    """Whether a drive answers at all: its carrier's probe (the shortest telegram it
+    answers, the one a down drive is probed with), repeated as a read is; a scan's and a
+    configuration check's question. It ends :class:`Heard` (the answer's status word in
+    its tally) or without an answer."""
+
+    drive: str
+    deadline: float
+    future: asyncio.Future[JobResult] | None = None
+    kind: JobKind = JobKind.PROBE
+    priority: Priority = Priority.READ
 
     def resolve(self, result: JobResult) -> None:
         if self.future is not None and not self.future.done():

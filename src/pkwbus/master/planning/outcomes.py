@@ -19,6 +19,7 @@ from pkwbus.protocol import pkw
 __all__ = [
     "Answered",
     "Cancelled",
+    "Heard",
     "JobOutcome",
     "LineFailed",
     "Mismatch",
@@ -35,6 +36,12 @@ class Answered:
     """The drive answered the request: a value, a text, a description, a count."""
 
     response: pkw.PkwResponse
+
+
+@dataclass(frozen=True, slots=True)
+class Heard:
+    """The drive answered a probe (the shortest telegram it answers): it is there. Its
+    status word, where the answer has one, is in the job's tally."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,7 +92,7 @@ class Cancelled:
     reason: str
 
 
-Outcome = Answered | Rejected | Mismatch | NotSent | TimedOut | LineFailed | Cancelled
+Outcome = Answered | Heard | Rejected | Mismatch | NotSent | TimedOut | LineFailed | Cancelled
 
 
 # ------------------------------------------------------------------ metrics
@@ -104,7 +111,7 @@ class JobOutcome(enum.StrEnum):
 def metric_label(outcome: Outcome) -> JobOutcome:
     """The ``outcome`` label of ``pkwbus_jobs_total``."""
     match outcome:
-        case Answered():
+        case Answered() | Heard():
             return JobOutcome.OK
         case Rejected():
             return JobOutcome.REJECTED

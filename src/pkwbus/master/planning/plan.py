@@ -14,7 +14,7 @@ from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
 from pkwbus.master.planning.carrier import Carrier
 from pkwbus.master.planning.identity import DescriptionBook
-from pkwbus.master.planning.jobs import Job
+from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.transaction import Tally
 from pkwbus.protocol import pkw
@@ -110,7 +110,7 @@ class Finished:
     """A job or a poll is over. ``tally``: what its exchanges cost (None when none went out)."""
 
     drive: str
-    work: Job | PollSpec
+    work: Job | ProbeJob | PollSpec
     outcome: Outcome
     tally: Tally | None = None
 

@@ -36,7 +36,7 @@ from pkwbus.master.planning.carrier import Transaction
 from pkwbus.master.planning.describing import DescribeStep
 from pkwbus.master.planning.drive import Active, DrivePlan, PollState
 from pkwbus.master.planning.health import HealthPolicy
-from pkwbus.master.planning.jobs import Cancelled, Job, Priority
+from pkwbus.master.planning.jobs import Cancelled, Job, Priority, ProbeJob
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
 from pkwbus.master.planning.plan import (
     Action,
@@ -92,8 +92,9 @@ class Planner:
 
     # ------------------------------------------------------------- inputs
 
-    def submit(self, job: Job, now: float) -> None:
-        """Queue a write or an on-demand read (KeyError for a drive not on this line)."""
+    def submit(self, job: Job | ProbeJob, now: float) -> None:
+        """Queue a write, an on-demand read or a probe (KeyError for a drive not on this
+        line)."""
         d = self._by_name[job.drive]
         if self.stopping:
             self.events.append(Finished(d.name, job, Cancelled("the service is stopping")))
@@ -101,7 +102,10 @@ class Planner:
         if not self.up:
             self.events.append(Finished(d.name, job, LineFailed(PORT_CLOSED)))
             return
-        (d.writes if job.priority is Priority.WRITE else d.reads).append(job)
+        if isinstance(job, Job) and job.priority is Priority.WRITE:
+            d.writes.append(job)
+        else:
+            d.reads.append(job)
         self._agenda.expiry(d, job.deadline)
         self._index(d, now)
 
@@ -137,7 +141,7 @@ class Planner:
         self.stopping = True
         for d in self.drives:
             active, d.active = d.active, None
-            if active is not None and isinstance(active.work, Job):
+            if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
                 self.events.append(Finished(d.name, active.work, Cancelled(reason), tally))
             for queue in (d.writes, d.reads):
@@ -214,18 +218,17 @@ class Planner:
                     self._index(other, now)
             self._lagging.clear()
         self._health(d, result, now)
-        if send.probe:
-            if not isinstance(result, Failure):
-                if (status := d.status_of(result)) is not None:
-                    self.events.append(status)
-                self._tell(d.probed(send, result))
-        elif (active := d.active) is not None and active.send is send:
+        if send.probe and not isinstance(result, Failure):  # a down drive's, or a probe job's
+            if (status := d.status_of(result)) is not None:
+                self.events.append(status)
+            self._tell(d.probed(send, result))
+        if (active := d.active) is not None and active.send is send:
             tx = active.tx
             outcome = tx.feed(result, now)
             if not isinstance(result, Failure) and isinstance(tx, PkwTransaction):
                 self._tell(d.heard(tx))
             tally = tx.tally
-            if not isinstance(result, Failure) and tally.status_word is not None:
+            if not send.probe and not isinstance(result, Failure) and tally.status_word is not None:
                 self.events.append(StatusWord(d.name, tally.status_word, tally.main_actual))
             if outcome is None:
                 # A "not yet" or a failed try: the repeat yields to another drive's
@@ -276,7 +279,7 @@ class Planner:
         for d in self._agenda.due(now):
             self._index(d, now)
 
-    def _expire(self, d: DrivePlan, queue: deque[Job], now: float) -> None:
+    def _expire(self, d: DrivePlan, queue: deque[Job] | deque[Job | ProbeJob], now: float) -> None:
         while queue and queue[0].deadline <= now:
             job = queue.popleft()
             self.events.append(
@@ -302,7 +305,10 @@ class Planner:
         if queue:
             job = queue.popleft()
             order = float(next(self._job_seq))
-            first = gate_write(d, job, order, retries=self.retries)
+            if isinstance(job, ProbeJob):
+                first = d.probe_job(job, order, retries=self.retries)
+            else:
+                first = gate_write(d, job, order, retries=self.retries)
             if isinstance(first, Finished):  # not to be sent: the drive goes on
                 self.events.append(first)
                 d.busy = False

@@ -1,8 +1,8 @@
-"""Ask a drive once, on a line opened for it alone: what its PKW length is (USS: a word
-read, and the length of its answer), and how it describes a parameter (AK 4).
+"""Ask a drive on a command's line: what its PKW length is (USS: a word read, and the
+length of its answer), and how it describes a parameter (AK 4).
 
-For ``pkwbus scan`` and ``pkwbus check-config --probe``: each job by the
-planner, as on the service's lines (:func:`pkwbus.master.sessions.jobs.perform`).
+For ``pkwbus scan`` and ``pkwbus check-config --probe``: each a job of the
+session's runner (:class:`pkwbus.master.sessions.session.LineSession`).
 The read goes out with the target's PKW length (4 words while a length is learned: both a
 fixed-4 and a variable drive answer that), and the answer's length tells
 (:func:`pkwbus.protocol.pkw.length.told`). The parameter read is r0002, a
@@ -17,9 +17,8 @@ import asyncio
 from typing import Final, Literal
 
 from pkwbus.master.planning.outcomes import Answered, Rejected
-from pkwbus.master.sessions.jobs import perform, run_job
+from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import (
     DATA_TYPE,
@@ -37,14 +36,14 @@ NO_ANSWER: Final = "no answer"
 
 
 async def ask_pkw_length(
-    line: Line, target: DriveTarget, *, retries: int, deadline: float
+    session: LineSession, drive: str, target: DriveTarget, *, deadline: float
 ) -> PkwWords | Literal["?", "no answer"]:
     """The PKW length the drive's answer shows (None: variable); ``"?"`` when it fits more
     than one (a double word), :data:`NO_ANSWER` when no answer came (or there is no PKW)."""
     if not target.has_pkw:
         return NO_ANSWER
     request = pkw.read(target.dialect, LENGTH_PNU)
-    tally = (await perform(line, target, request, retries=retries, deadline=deadline)).tally
+    tally = (await session.job(drive, request, deadline)).tally
     if tally is None or tally.response is None or tally.answer_words is None:
         return NO_ANSWER
     sent = target.pkw_words_of(target.telegram(request))
@@ -52,7 +51,7 @@ async def ask_pkw_length(
 
 
 async def ask_description(
-    line: Line, target: DriveTarget, pnu: int, *, retries: int, timeout: float
+    session: LineSession, drive: str, target: DriveTarget, pnu: int, *, timeout: float
 ) -> DriveDescription | Literal["no answer"] | None:
     """How the drive describes ``pnu`` (None: it has no description of it), or
     :data:`NO_ANSWER`; None too where its dialect has no description elements."""
@@ -64,7 +63,7 @@ async def ask_description(
     for element in elements_to_read(limits=True):
         request = pkw.read_description(target.dialect, pnu, element)
         deadline = loop.time() + timeout
-        outcome = await run_job(line, target, request, retries=retries, deadline=deadline)
+        outcome = (await session.job(drive, request, deadline)).outcome
         response = outcome.response if isinstance(outcome, Answered) else None
         if isinstance(response, pkw.DescriptionResponse):
             found[element] = response

@@ -12,6 +12,7 @@ from typing import Any, assert_never
 from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,
+    Heard,
     LineFailed,
     Mismatch,
     NotSent,
@@ -39,7 +40,7 @@ class HttpFailure:
 def http_failure(outcome: Outcome) -> HttpFailure | None:
     """The API's error answer for ``outcome``; None when the drive answered."""
     match outcome:
-        case Answered():
+        case Answered() | Heard():
             return None
         case Rejected(fault=fault, text=text):
             return HttpFailure(
@@ -84,7 +85,7 @@ def audit_outcome(outcome: Outcome, sent: int) -> AuditOutcome:
     """A write's audit columns; ``sent``: how many times its request went out."""
     note = f"; the request went out {sent} times and may have been applied" if sent else ""
     match outcome:
-        case Answered():
+        case Answered() | Heard():
             return AuditOutcome("ok")
         case Rejected(fault=fault, text=text):
             return AuditOutcome("rejected", fault, text)
