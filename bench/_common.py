@@ -21,7 +21,7 @@ from _measure import BenchSetupError, stop_process
 
 from pkwbus.link import PortSettings
 from pkwbus.master.carriers import carrier_for
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol.serial.telegram import Protocol
 
 HERE = Path(__file__).resolve().parent
@@ -100,8 +100,10 @@ def sim_process(
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def make_line(port: str, protocol: str = "fc", baudrate: int = 115200, **kw: object) -> Line:
-    return Line(PortSettings(port, baudrate=baudrate), Protocol(protocol), **kw)  # type: ignore[arg-type]
+def make_port(
+    port: str, protocol: str = "fc", baudrate: int = 115200, **kw: object
+) -> TelegramPort:
+    return TelegramPort(PortSettings(port, baudrate=baudrate), Protocol(protocol), **kw)  # type: ignore[arg-type]
 
 
 def exchange_time(baudrate: int, request: int, response: int, delay: float) -> float:

@@ -4,7 +4,7 @@ The simulated drive runs in another process on a pty with zero response
 delay and no wire timing, so the line is as fast as the software on both
 ends; ``time.process_time()`` here counts the master's CPU only.
 
-(a) ``Line.exchange`` in a loop: one FC parameter read after another.
+(a) ``TelegramPort.exchange`` in a loop: one FC parameter read after another.
 (b) the service path: a ``LineRunner`` over 3 drives whose polls are
     always due, with ``LineMetrics`` turning every event into Prometheus
     counter increments and the snapshot's collector rendering each value's
@@ -31,7 +31,7 @@ from pkwbus import link
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import best_median, make_line, sim_process
+from _common import best_median, make_port, sim_process
 from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
@@ -52,7 +52,7 @@ BAUDRATE = 115200
 
 
 async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
-    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    line = make_port(port, "fc", BAUDRATE, timeout=0.5)
     target = DriveTarget.create("fc", 1)
     telegram = target.telegram(pkw.read(target.dialect, 1613))
     await line.open()
@@ -102,7 +102,7 @@ async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
             for p in ("16-13", "16-14", "16-10")
         )
         drives.append(DriveSpec(name, carrier_for(target), polls))
-    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    line = make_port(port, "fc", BAUDRATE, timeout=0.5)
     line_metrics = metrics.for_line("bench", {d.name: d.carrier.dialect for d in drives})
     counting = Counting(line_metrics)
     sched = LineRunner(
@@ -170,7 +170,7 @@ def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
     py = statistics.median(r["cpu_us_per_op"] for r in runs["pymodbus"])
     rows = []
     titles = {
-        "raw": "pkwbus (a) Line.exchange loop",
+        "raw": "pkwbus (a) TelegramPort.exchange loop",
         "service": "pkwbus (b) LineRunner + metrics",
         "pymodbus": runs["pymodbus"][0]["name"],
     }

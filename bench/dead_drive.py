@@ -24,7 +24,7 @@ from pkwbus import link
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import Counting, best_median, fc_drive, make_line, sim_process
+from _common import Counting, best_median, fc_drive, make_port, sim_process
 from _measure import markdown_table
 
 from pkwbus.master.runner import LineRunner
@@ -45,7 +45,7 @@ CASES = {
 async def polls(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, EVERY) for a in (1, 2, 3, 4)]
-    line = make_line(port, "fc", BAUD, timeout=0.1)
+    line = make_port(port, "fc", BAUD, timeout=0.1)
     sched = LineRunner("bench", ExchangeWire(line), drives, observers=[events])
     task = asyncio.create_task(sched.run())
     await asyncio.sleep(0.5)

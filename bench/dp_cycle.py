@@ -26,7 +26,7 @@ from pkwbus.master.events import Event, Exchanged
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
@@ -63,7 +63,7 @@ async def measure(baudrate: int, seconds: float) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         end = await sim.serve_pty(str(Path(tmp) / "ttyDP"))
         try:
-            line = DpLine(PortSettings(end.path, baudrate=baudrate), 2, listen=0.01)
+            line = FdlPort(PortSettings(end.path, baudrate=baudrate), 2, listen=0.01)
             prm = dps.Parameters(sim.ident, dps.watchdog_factors(2.0))
             setup = SlaveSetup(8, 2, prm, sim.ppo.cfg, retries=2)
             target = DriveTarget.create("profibus", 8, dialect_name=sim.dialect.name)

@@ -15,13 +15,13 @@ same simulated drive, in the same run:
   everything a real master needs.
 - ``bare, pause by timer``: the same, but the request waits for the rest of
   the 3.5-character pause, counted from the last byte received, by a loop
-  timer (``call_later``), as ``pkwbus.master.wires.serial.line.Line`` does.
+  timer (``call_later``), as ``pkwbus.master.wires.serial.port.Line`` does.
 - ``bare, pause in place``: the rest of the pause spun away in the callback
   (no wake-up, but the pause is spent on the CPU: shown to bound the design).
-- ``Line.start chain``: pkwbus's line, each exchange started from the
+- ``TelegramPort.start chain``: pkwbus's line, each exchange started from the
   previous one's result callback (the scheduler's way: no coroutine, no
   future per exchange).
-- ``Line.exchange loop``: the same line, awaited one exchange at a time (the
+- ``TelegramPort.exchange loop``: the same line, awaited one exchange at a time (the
   CLI's and the API's way).
 - ``one wake-up, loop timer`` and ``one wake-up, select()``: no I/O at all,
   the process only sleeps one pause and wakes, by a loop timer on the same
@@ -53,7 +53,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import make_line, sim_process
+from _common import make_port, sim_process
 from _measure import BenchSetupError, markdown_table, measure_cpu
 from cpu_per_exchange import raw_loop
 
@@ -148,7 +148,7 @@ async def bare(port: str, n: int, pause: str, warmup: int = WARMUP) -> dict[str,
 
 
 async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float]:
-    line = make_line(port, "fc", BAUDRATE, timeout=0.5)
+    line = make_port(port, "fc", BAUDRATE, timeout=0.5)
     target = DriveTarget.create("fc", 1)
     telegram = request()
 
@@ -213,8 +213,8 @@ VARIANTS: dict[str, Callable[[str, int], Any]] = {
     "bare, no pause": lambda port, n: bare(port, n, "none"),
     "bare, pause by timer": lambda port, n: bare(port, n, "timer"),
     "bare, pause in place": lambda port, n: bare(port, n, "spin"),
-    "Line.start chain": line_chain,
-    "Line.exchange loop": raw_loop,  # benchmark 2's (a)
+    "TelegramPort.start chain": line_chain,
+    "TelegramPort.exchange loop": raw_loop,  # benchmark 2's (a)
     "one wake-up, loop timer (no I/O)": wake_timer,
     "one wake-up, select() (no loop, no I/O)": wake_select,
 }

@@ -28,7 +28,7 @@ from pkwbus import link
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import FC_TELEGRAM, best_median, exchange_time, make_line, sim_process
+from _common import FC_TELEGRAM, best_median, exchange_time, make_port, sim_process
 from _measure import markdown_table
 
 from pkwbus.master.carriers import carrier_for
@@ -46,7 +46,7 @@ GOALS = {9600: 0.98, 115200: 0.95}
 
 async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
     """Completed jobs per second, one after another."""
-    line = make_line(port, "fc", baudrate, timeout=0.2)
+    line = make_port(port, "fc", baudrate, timeout=0.2)
     target = DriveTarget.create("fc", 1)
     request = pkw.read(target.dialect, 1613)
     loop = asyncio.get_running_loop()

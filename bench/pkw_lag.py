@@ -23,7 +23,7 @@ from pkwbus import link
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import Counting, best_median, fc_drive, make_line, sim_process
+from _common import Counting, best_median, fc_drive, make_port, sim_process
 from _measure import markdown_table
 
 from pkwbus.master.carriers import carrier_for
@@ -45,7 +45,7 @@ async def interleaved(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, 0.0, "uss") for a in (1, 2, 3, 4)]
     sched = LineRunner(
-        "bench", ExchangeWire(make_line(port, "uss", BAUD, timeout=0.1)), drives,
+        "bench", ExchangeWire(make_port(port, "uss", BAUD, timeout=0.1)), drives,
         observers=[events], poll_deadline=2.0,
     )  # fmt: skip
     task = asyncio.create_task(sched.run())
@@ -59,7 +59,7 @@ async def interleaved(port: str, seconds: float) -> float:
 
 
 async def sequential(port: str, seconds: float) -> float:
-    line = make_line(port, "uss", BAUD, timeout=0.1)
+    line = make_port(port, "uss", BAUD, timeout=0.1)
     targets = [DriveTarget.create("uss", a) for a in (1, 2, 3, 4)]
     specs = [DriveSpec(str(t.address), carrier_for(t)) for t in targets]
     loop = asyncio.get_running_loop()

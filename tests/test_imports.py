@@ -12,13 +12,13 @@ MODULES = {module_name(path): path for path in PATHS}
 
 # What each layer may import from the others (its own modules always).
 MAY_IMPORT = {
-    "protocol": set(),
-    "catalog": {"protocol", "problems", "yamlfile"},
-    "link": {"protocol"},
+    "protocol": {"errors"},
+    "catalog": {"protocol", "problems", "yamlfile", "errors"},
+    "link": {"protocol", "errors"},
     # master knows neither HTTP nor the command line: their exit codes and answers
     # live with the commands and the service (commands.failures, service.http.outcome_answers)
-    "master": {"protocol", "catalog", "link"},
-    "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus"},
+    "master": {"protocol", "catalog", "link", "errors"},
+    "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus", "errors"},
 }
 
 
@@ -76,7 +76,7 @@ NOT_FOR_PLANNING = (
     "pkwbus.master.target",
     "pkwbus.master.runner",
     "pkwbus.master.sessions",
-    "pkwbus.master.recorder",
+    "pkwbus.master.snapshot_writer",
     "pkwbus.link.port",
 )
 

@@ -78,3 +78,28 @@ def test_no_module_is_longer_than_the_limit() -> None:
         if (lines := len(path.read_text(encoding="utf-8").splitlines())) > MAX_LINES
     }
     assert not long, f"modules over {MAX_LINES} lines: {long}"
+
+
+# Exceptions that are not errors: control flow inside one module, never raised to a caller.
+NOT_ERRORS = {"pkwbus.service.http.api._TooLarge"}
+
+
+def test_every_exception_of_pkwbus_has_the_one_root() -> None:
+    """A caller tells pkwbus's own errors (a message for people) from a bug by one class."""
+    from pkwbus.errors import PkwbusError
+
+    found = []
+    for path in PATHS:
+        if path.name == "__main__.py":
+            continue  # runs the command line
+        module = importlib.import_module(module_name(path))
+        for name, value in vars(module).items():
+            if (
+                isinstance(value, type)
+                and issubclass(value, BaseException)
+                and value.__module__ == module.__name__
+            ):
+                found.append(value)
+                if f"{value.__module__}.{name}" not in NOT_ERRORS:
+                    assert issubclass(value, PkwbusError), f"{value.__module__}.{name}"
+    assert len(found) > 20  # the walk saw them

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from pkwbus.errors import PkwbusError
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus import gsd
 from pkwbus.protocol.profibus.dp import ppo
@@ -40,7 +41,7 @@ MAX_GSD_BYTES = 1 << 20
 Problem = tuple[str, str]
 
 
-class GsdFileError(ValueError):
+class GsdFileError(PkwbusError, ValueError):
     """A GSD file that cannot be read or used; the message names the file."""
 
 

@@ -12,10 +12,12 @@ from typing import Any
 
 import yaml
 
+from pkwbus.errors import PkwbusError
+
 __all__ = ["UniqueKeyLoader", "YamlError", "load_yaml"]
 
 
-class YamlError(ValueError):
+class YamlError(PkwbusError, ValueError):
     """Text that is not YAML pkwbus can read; the message says where and why."""
 
 

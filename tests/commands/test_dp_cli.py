@@ -20,7 +20,7 @@ from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import DpSlave, NoAnswer, SlaveSetup
 from pkwbus.sim import SimTiming
 from pkwbus.sim.profibus.line import DpSimulator
-from tests.master.wires.profibus.dp_wire import DpWire, FakeMaster, record_dp_wire
+from tests.master.wires.profibus.frame_log import FakeMaster, FrameLog, log_frames
 
 
 class Served:
@@ -28,7 +28,7 @@ class Served:
 
     def __init__(self, sim: DpSimulator, end: str) -> None:
         self.sim = sim
-        self.wire: DpWire = record_dp_wire(sim)
+        self.wire: FrameLog = log_frames(sim)
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
         self.thread.start()

@@ -18,7 +18,7 @@ from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec, Finished, Send
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim import SimFaults, SimTiming, Simulator
@@ -63,11 +63,11 @@ def make_sim(protocol: str, addresses: list[int], **kw: Any) -> Simulator:
 
 
 @asynccontextmanager
-async def open_line(
+async def open_port(
     port: str, protocol: str, *, timeout: float = 0.05, **kw: Any
-) -> AsyncIterator[tuple[Line, Trace]]:
+) -> AsyncIterator[tuple[TelegramPort, Trace]]:
     trace = Trace()
-    line = Line(
+    line = TelegramPort(
         PortSettings(port, baudrate=115200, **kw), Protocol(protocol), timeout=timeout, trace=trace
     )
     await line.open()
@@ -88,7 +88,7 @@ async def until(check: Callable[[], bool], timeout: float = 10.0, step: float = 
 
 
 async def run_job(
-    line: Line,
+    line: TelegramPort,
     target: DriveTarget,
     request: pkw.PkwRequest,
     *,
@@ -122,7 +122,7 @@ __all__ = [
     "SimFaults",
     "Trace",
     "make_sim",
-    "open_line",
+    "open_port",
     "run_job",
     "serve",
     "until",

@@ -23,7 +23,7 @@ from pkwbus.master.planning.outcomes import Answered, LineFailed
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.serial.telegram import Protocol
@@ -78,7 +78,7 @@ def runner(
     port: str, protocol: str, specs: list[DriveSpec], *, timeout: float = 0.03, **kw: Any
 ) -> tuple[LineRunner, Recorder, Trace]:
     trace = Trace()
-    line = Line(
+    line = TelegramPort(
         PortSettings(port, baudrate=115200), Protocol(protocol), timeout=timeout, trace=trace
     )
     events = Recorder()
@@ -111,7 +111,9 @@ async def test_two_lines_one_failing() -> None:
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
         good, good_events, _ = runner(port, "fc", drive_specs("fc", [1], [1613], 0.01))
-        bad_line = Line(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC)
+        bad_line = TelegramPort(
+            PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC
+        )
         bad = LineRunner("line2", ExchangeWire(bad_line), drive_specs("fc", [1], [1613], 0.01))
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
         await until(
@@ -183,7 +185,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
     port = server.url
     specs = drive_specs("uss", [1, 2], [1120], 0.05)
     trace = Trace()
-    line = Line(
+    line = TelegramPort(
         PortSettings(port, reopen_initial=0.1, reopen_cap=0.2),
         Protocol.USS,
         timeout=0.05,
@@ -247,7 +249,7 @@ async def test_a_job_is_recorded_at_once_however_long_a_batch_may_last() -> None
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.0)
-        s, events, trace = runner(port, "fc", specs, record_every=3600.0)
+        s, events, trace = runner(port, "fc", specs, batch_every=3600.0)
         task = asyncio.create_task(s.run())
         try:
             await until(lambda: len(trace.tx) >= 5)
@@ -273,7 +275,7 @@ async def test_a_batch_is_recorded_at_its_time_while_a_slow_exchange_is_out() ->
     sim = make_sim("fc", [1], timing=SimTiming(response_delay=1.0))
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.0)
-        s, _, trace = runner(port, "fc", specs, timeout=3.0, record_every=0.05)
+        s, _, trace = runner(port, "fc", specs, timeout=3.0, batch_every=0.05)
         task = asyncio.create_task(s.run())
         try:
             await until(lambda: bool(s.snapshot.readings))
@@ -288,7 +290,7 @@ async def test_a_drive_going_down_is_recorded_at_once_however_long_a_batch_may_l
     sim = make_sim("fc", [1])  # drive 2 never answers
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1, 2], [1613], 0.0)  # drive 1 always due: no idle end
-        s, events, _ = runner(port, "fc", specs, record_every=3600.0)
+        s, events, _ = runner(port, "fc", specs, batch_every=3600.0)
         task = asyncio.create_task(s.run())
         try:
             # drive 1 is always due, so the run never ends: only an at-once record shows it

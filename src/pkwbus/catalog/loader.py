@@ -20,6 +20,7 @@ from typing import Any, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, model_validator
 
+from pkwbus.errors import PkwbusError
 from pkwbus.problems import plain
 from pkwbus.protocol.values import types as value_types
 from pkwbus.protocol.values.notation import MAX_PNU, ParameterRef, parse_parameter
@@ -49,7 +50,7 @@ _DATA_DIR = "data"
 _SUFFIX = ".yaml"
 
 
-class CatalogError(Exception):
+class CatalogError(PkwbusError):
     """A catalog cannot be found, read or validated; the message names the place."""
 
 

@@ -15,10 +15,11 @@ from typing import Any
 from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.errors import PkwbusError
 from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol import buses
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
@@ -34,7 +35,7 @@ __all__ = [
     "add_drive_options",
     "add_line_options",
     "baudrate_option",
-    "build_line",
+    "build_port",
     "build_target",
     "duration_option",
     "emit_json",
@@ -43,7 +44,7 @@ __all__ = [
 ]
 
 
-class CommandError(Exception):
+class CommandError(PkwbusError):
     """A failure the user is told about in one line, with its exit code."""
 
     def __init__(
@@ -163,7 +164,7 @@ def build_target(args: argparse.Namespace, address: int | None = None) -> DriveT
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
 
-def build_line(args: argparse.Namespace) -> Line:
+def build_port(args: argparse.Namespace) -> TelegramPort:
     try:
         settings = PortSettings(
             limits.check_port_url(args.port),
@@ -175,7 +176,7 @@ def build_line(args: argparse.Namespace) -> Line:
     except ValueError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     trace = _print_trace if args.trace else None
-    return Line(settings, Protocol(args.protocol), timeout=args.timeout, trace=trace)
+    return TelegramPort(settings, Protocol(args.protocol), timeout=args.timeout, trace=trace)
 
 
 def _print_trace(direction: str, data: bytes) -> None:

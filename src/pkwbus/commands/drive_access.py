@@ -27,7 +27,7 @@ from pkwbus.commands.common import (
     PROFIBUS,
     CommandError,
     Exit,
-    build_line,
+    build_port,
     build_target,
 )
 from pkwbus.commands.profibus.context import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
@@ -101,7 +101,7 @@ async def _jobs(
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
     spec = DriveSpec("drive", carrier_for(target))
-    session = LineSession(ExchangeWire(build_line(args)), [spec], retries=args.retries)
+    session = LineSession(ExchangeWire(build_port(args)), [spec], retries=args.retries)
     try:
         await session.open()
     except PortError as exc:

@@ -37,7 +37,7 @@ from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import (
     describe_targets,
     description_form,
-    line_for,
+    port_for,
     target_for,
 )
 from pkwbus.service.assembly.parameter_table import parameter_table
@@ -70,7 +70,7 @@ async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
 
 
 async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
-    bus = line_for(line, line.port)
+    bus = port_for(line, line.port)
     targets = {drive.name: target_for(line, drive) for drive in line.drives}
     specs = [DriveSpec(name, carrier_for(target)) for name, target in targets.items()]
     session = LineSession(ExchangeWire(bus), specs, retries=line.retries)

@@ -28,7 +28,7 @@ from pkwbus.commands.common import (
     Exit,
     add_drive_options,
     add_line_options,
-    build_line,
+    build_port,
     build_target,
 )
 from pkwbus.commands.profibus import scan as dp_scan
@@ -41,7 +41,7 @@ from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_pkw_length
 from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.buses import address_range
@@ -125,7 +125,7 @@ async def _scan(
         if not remaining:
             break
         at = argparse.Namespace(**{**vars(args), "baudrate": baudrate, "parity": parity})
-        line = build_line(at)
+        line = build_port(at)
         # A slow rate needs the time an answer (as long as the probe) takes on the wire.
         answer = len(build_target(at, remaining[0]).probe())
         line.timeout = min(
@@ -161,14 +161,14 @@ async def _scan(
     return sorted(found.values(), key=lambda e: int(e["address"]))
 
 
-def _asking_time(args: argparse.Namespace, line: Line) -> float:
+def _asking_time(args: argparse.Namespace, line: TelegramPort) -> float:
     """Enough for every try of one job, and a margin."""
     retries: int = args.retries
     return line.timeout * (retries + 1) + 0.5
 
 
 async def _probe(
-    args: argparse.Namespace, session: LineSession, line: Line, target: DriveTarget
+    args: argparse.Namespace, session: LineSession, line: TelegramPort, target: DriveTarget
 ) -> dict[str, Any] | None:
     name = str(target.address)
     deadline = asyncio.get_running_loop().time() + _asking_time(args, line)
@@ -187,7 +187,7 @@ async def _probe(
     return entry
 
 
-async def _drive_type(session: LineSession, line: Line, target: DriveTarget) -> str | None:
+async def _drive_type(session: LineSession, line: TelegramPort, target: DriveTarget) -> str | None:
     """What an FC drive says its type is (15-40), None when it does not say."""
     if target.protocol is not Protocol.FC:
         return None
@@ -214,7 +214,7 @@ async def _drive_type(session: LineSession, line: Line, target: DriveTarget) -> 
 
 
 async def _pkw_words(
-    args: argparse.Namespace, session: LineSession, line: Line, target: DriveTarget
+    args: argparse.Namespace, session: LineSession, line: TelegramPort, target: DriveTarget
 ) -> str | None:
     """A USS drive's PKW length as its answer to a word read shows it (None: no answer)."""
     deadline = asyncio.get_running_loop().time() + _asking_time(args, line)

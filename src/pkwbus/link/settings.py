@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import serial
 
+from pkwbus.errors import PkwbusError
 from pkwbus.protocol.serial import timing
 
 __all__ = ["PARITIES", "PortError", "PortSettings", "Rs485Mode"]
@@ -17,7 +18,7 @@ __all__ = ["PARITIES", "PortError", "PortSettings", "Rs485Mode"]
 PARITIES = {"E": serial.PARITY_EVEN, "O": serial.PARITY_ODD, "N": serial.PARITY_NONE}
 
 
-class PortError(Exception):
+class PortError(PkwbusError):
     """The port cannot be opened or was lost."""
 
 

@@ -1,12 +1,13 @@
 """Everything that happens on a line, on one stream: what its planner decided, what its wire
-saw on the bus, what its runner saw of the port, and what its recorder made of them.
+saw on the bus, what its runner saw of the port, and what its snapshot's writer made of them.
 
 The runner publishes them in the order they happened, in batches, to the
 observers it was given at its construction (the service's metrics, the
 history, a command's watcher): each observer takes the whole stream and
-keeps what it needs (:class:`Observer`). The snapshot has one writer, the
-recorder, which reads the same stream and adds its own events to it: a job's
-result, a value that landed, a description checked against the catalog.
+keeps what it needs (:class:`Observer`). The snapshot has one writer
+(:class:`~pkwbus.master.snapshot_writer.SnapshotWriter`), which reads the
+same stream and adds its own events to it: a job's result, a value that
+landed, a description checked against the catalog.
 All are small frozen values.
 """
 
@@ -47,6 +48,7 @@ __all__ = [
     "PkwLengthTold",
     "SlaveDiagnosed",
     "SlaveRestarted",
+    "SlaveSilent",
     "SlaveStateChanged",
     "StationAsked",
     "StationFound",
@@ -110,7 +112,7 @@ class LineState:
     refused: bool = False
 
 
-# -------------------------------------------------------------- the recorder's
+# -------------------------------------------------------- the snapshot writer's
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,6 +142,15 @@ class DescriptionChecked:
 
 
 @dataclass(frozen=True, slots=True)
+class SlaveSilent:
+    """A DP slave out of data exchange left a request unanswered through every repeat: it
+    does not answer (it is asked again at back-off). ``detail``: the last try's failure."""
+
+    drive: str
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
 class StationAsked:
     """A live list asks the station at ``address`` (the ``place``-th of ``count``)."""
 
@@ -164,7 +175,7 @@ class StationsAsked:
 
 
 WireEvent = (
-    Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed
+    Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed | SlaveSilent
     | StationAsked | StationFound | StationsAsked
 )  # fmt: skip
 Event = PlanEvent | WireEvent | LineState | JobDone | ValueLanded | DescriptionChecked

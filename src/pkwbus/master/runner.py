@@ -15,8 +15,8 @@ idle until the wire's time, or until a job comes in.
 
 Everything that happens - the planner's events, the wire's, the port's state -
 is one stream of events (:mod:`pkwbus.master.events`), recorded in batches at
-most :data:`RECORD_EVERY` seconds after the first of a batch (a loop timer),
-each with the time it happened: the recorder (the snapshot's one writer) first,
+most :data:`BATCH_EVERY` seconds after the first of a batch (a loop timer),
+each with the time it happened: the snapshot's one writer first,
 then the observers given at construction. What someone waits for is recorded
 at once: a finished write or on-demand read (its caller), a drive's change of
 health (its log line); so is everything at the end of a run, when the port
@@ -40,15 +40,15 @@ from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.recorder import LineRecorder
 from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import SnapshotWriter
 
-__all__ = ["RECORD_EVERY", "Done", "LineRefused", "LineRunner", "Port", "Wire"]
+__all__ = ["BATCH_EVERY", "Done", "LineRefused", "LineRunner", "Port", "Wire"]
 
 log = logging.getLogger(__name__)
 
 # Seconds at most between two batches of recorded events during a run.
-RECORD_EVERY = 0.05
+BATCH_EVERY = 0.05
 
 Done = Callable[[Any], None]
 
@@ -139,13 +139,13 @@ class LineRunner:
         observers: Sequence[Observer] = (),
         poll_deadline: float | None = None,
         wall_clock: Callable[[], float] = time.time,
-        record_every: float = RECORD_EVERY,
+        batch_every: float = BATCH_EVERY,
     ) -> None:
         self.name = name
         self.wire = wire
         self.snapshot = snapshot if snapshot is not None else Snapshot()
         self.observers = list(observers)
-        self.recorder = LineRecorder(name, drives, self.snapshot)
+        self.writer = SnapshotWriter(name, drives, self.snapshot)
         self.planner = Planner(
             drives, poll_deadline=poll_deadline or wire.poll_deadline(retries), retries=retries,
             policy=policy,
@@ -155,7 +155,7 @@ class LineRunner:
         self._unrecorded: deque[tuple[list[Event], float]] = deque()
         self._record_timer: asyncio.TimerHandle | None = None  # the batch's deadline
         self._wall = wall_clock  # the events' time of day
-        self._record_every = record_every
+        self._record_every = batch_every
         self._loop: asyncio.AbstractEventLoop | None = None
         self._run_over: asyncio.Future[float | None] | None = None  # one per run of exchanges
         self._request: Any = None
@@ -333,8 +333,8 @@ class LineRunner:
         self._record_timer = loop.call_later(self._record_every, self._on_record_timer)
 
     def flush(self) -> None:
-        """Record everything not recorded yet, in order: the recorder first, each event
-        with its time, then every observer, the whole batch in one call. What the recorder
+        """Record everything not recorded yet, in order: the snapshot's writer first, each event
+        with its time, then every observer, the whole batch in one call. What the writer
         has not taken when it raises stays queued."""
         if self._record_timer is not None:
             self._record_timer.cancel()
@@ -344,7 +344,7 @@ class LineRunner:
         batch: list[Event] = []
         while unrecorded:
             events, at = unrecorded[0]
-            made = self.recorder.apply(events, at)
+            made = self.writer.apply(events, at)
             unrecorded.popleft()
             batch += events
             if made:

@@ -1,6 +1,6 @@
 """The latest known state of every drive, as immutable entries a scrape can copy.
 
-The line's recorder replaces entries; readers take :meth:`Snapshot.copy`, never
+The line's snapshot writer replaces entries; readers take :meth:`Snapshot.copy`, never
 touching the bus. A value is only ever one the drive actually sent.
 """
 

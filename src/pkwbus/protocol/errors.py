@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pkwbus.errors import PkwbusError
+
 __all__ = ["LocalProtocolError", "ProtocolError", "RemoteProtocolError"]
 
 
-class ProtocolError(Exception):
+class ProtocolError(PkwbusError):
     """Base of every error the protocol layer raises."""
 
 

@@ -25,7 +25,7 @@ from pkwbus.protocol.serial.telegram import BlockShape, split_block
 from pkwbus.protocol.values import ValueType
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.drives.table import USS_TABLE, ParamSpec
-from tests.master.conftest import make_sim, open_line, run_job, serve
+from tests.master.conftest import make_sim, open_port, run_job, serve
 from tests.master.planning.test_planner import FakeLine, drives
 
 # A word parameter that may change while the motor runs (the table's p0304 may not).
@@ -73,7 +73,7 @@ async def test_the_defaults_read_and_change_words_and_floats(
     drive = sim.drives[1]
     target = DriveTarget.create("uss", 1, dialect_name=dialect)  # pkw_words: auto, the default
     d = target.dialect
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         assert raw(await run_job(line, target, pkw.read(d, 2010))) == 6
         assert raw(await run_job(line, target, pkw.read(d, 1120))) == f32(10.0)
         assert raw(await run_job(line, target, pkw.read(d, 947, 0))) == drive.value(947, 0)
@@ -93,7 +93,7 @@ async def test_the_defaults_read_and_change_words_and_floats(
 async def test_a_word_change_to_a_fixed_3_drive(end: str) -> None:
     sim = sim_with(3)
     target = DriveTarget.create("uss", 1, pkw_words=3)
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, _):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, _):
         assert (
             raw(await run_job(line, target, pkw.write(target.dialect, 2010, 11, pkw.Width.WORD)))
             == 11
@@ -107,7 +107,7 @@ async def test_a_configured_length_the_drive_contradicts_sends_no_change(end: st
     sim = sim_with(VARIABLE)
     target = DriveTarget.create("uss", 1, pkw_words=4)
     d = target.dialect
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         assert raw(await run_job(line, target, pkw.read(d, 2010))) == 6
         outcome = await run_job(line, target, pkw.write(d, 2010, 9, pkw.Width.WORD))
     assert isinstance(outcome, NotSent), outcome
@@ -131,7 +131,7 @@ async def test_a_change_acknowledged_with_another_value_ends_after_one_exchange(
 
     monkeypatch.setattr(drive.params, "_write", clamped)
     target = DriveTarget.create("uss", 1)
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         outcome = await run_job(line, target, pkw.write(target.dialect, 2010, 9, pkw.Width.WORD))
     assert isinstance(outcome, Mismatch), outcome
     assert (outcome.sent, outcome.answered) == (9, 4)
@@ -163,7 +163,7 @@ async def test_arrays_eeprom_descriptions_and_texts_with_the_defaults(end: str) 
     target = DriveTarget.create("uss", 1)
     d = target.dialect
     store = pkw.Store.EEPROM
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         changed = await run_job(
             line, target, pkw.write(d, 1001, 42, pkw.Width.WORD, index=2, store=store)
         )
@@ -250,7 +250,7 @@ async def test_the_read_before_a_change_of_element_0_reads_that_element(end: str
     sim = make_sim("uss", [1], specs=(*SPECS, array), pkw_words=VARIABLE)
     target = DriveTarget.create("uss", 1)
     d = target.dialect
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         assert raw(await run_job(line, target, pkw.write(d, 1001, 7, pkw.Width.WORD, index=0))) == 7
     first = split_block(trace.tx[0][3:-1], BlockShape(None, 2)).pkw
     read = pkw.decode_request(first, d, d.default_ind_layout, VARIABLE)

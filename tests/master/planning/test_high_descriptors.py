@@ -10,7 +10,7 @@ from pkwbus.link.serialport import closer
 from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from tests.master.conftest import make_sim, open_line, run_job, serve
+from tests.master.conftest import make_sim, open_port, run_job, serve
 
 
 async def test_a_device_port_above_select_s_limit_answers() -> None:
@@ -34,7 +34,7 @@ async def test_a_device_port_above_select_s_limit_answers() -> None:
         async with serve(sim, end) as port:
             while not fillers or fillers[-1] < 1100:
                 fillers.append(os.open(os.devnull, os.O_RDONLY))
-            async with open_line(port, "fc") as (line, _):
+            async with open_port(port, "fc") as (line, _):
                 assert line.link._fd >= 1024
                 outcome = await run_job(line, target, pkw.read(target.dialect, 341))
                 assert isinstance(outcome, Answered), outcome

@@ -42,7 +42,7 @@ from pkwbus.sim.drives.faults import Answer
 from pkwbus.sim.drives.params import FaultNumbers
 from pkwbus.sim.profibus.line import DpFaults, DpSimulator
 from pkwbus.sim.serving.ends import TcpEnd
-from tests.master.wires.profibus.dp_wire import DpWire, record_dp_wire
+from tests.master.wires.profibus.frame_log import FrameLog, log_frames
 
 TOKEN = "s3cret-Write-Token-0123456789"
 ADDRESSES = (8, 9, 10)
@@ -80,7 +80,7 @@ lines:
 @dataclass
 class DpService:
     sim: DpSimulator
-    wire: DpWire
+    wire: FrameLog
     runtime: Runtime
     client: httpx.AsyncClient
     audit: AuditLog
@@ -122,7 +122,7 @@ async def dp_service(
             seed=5,
             faults=faults,
         )
-        wire = record_dp_wire(sim)
+        wire = log_frames(sim)
         if watch is not None:
             watch(sim)
         end = await sim.serve_tcp("127.0.0.1", 0)

@@ -29,7 +29,7 @@ from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming
 from pkwbus.sim.profibus.line import DpSimulator
-from tests.master.wires.profibus.dp_wire import DpWire, record_dp_wire
+from tests.master.wires.profibus.frame_log import FrameLog, log_frames
 
 TOKEN = "s3cret-Write-Token-0123456789"
 ADDRESSES = (8, 9, 10)
@@ -71,7 +71,7 @@ lines:
 @dataclass
 class Service:
     sim: DpSimulator
-    wire: DpWire
+    wire: FrameLog
     runtime: Runtime
     client: httpx.AsyncClient
     audit: AuditLog
@@ -113,7 +113,7 @@ async def service(
             ADDRESSES, dialect="profidrive", ppo_number=3, catalog="siemens-g120",
             timing=SimTiming(response_delay=0.001), seed=7, dpv1=True, not_ready=not_ready,
         )  # fmt: skip
-        wire = record_dp_wire(sim)
+        wire = log_frames(sim)
         end = await sim.serve_tcp("127.0.0.1", 0)
         stack.push_async_callback(end.close)
         config = parse_config(

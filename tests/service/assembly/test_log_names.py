@@ -16,7 +16,7 @@ LOGGERS = {
     "pkwbus.service.assembly.root": "pkwbus",
     "pkwbus.service.assembly.serve": "pkwbus.service.app",
     "pkwbus.service.audit.log": "pkwbus.service.audit",
-    "pkwbus.service.audit.recorder": "pkwbus.service.recorder",
+    "pkwbus.service.audit.writer": "pkwbus.service.recorder",
     "pkwbus.service.http.connections": "pkwbus.service.http",
     "pkwbus.service.runtime": "pkwbus.service.runtime",
 }

@@ -14,8 +14,8 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.plan import DriveSpec, HealthChanged, StatusWord
-from pkwbus.master.recorder import LineRecorder
 from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd
 from pkwbus.protocol.pkw.dialects import FC, IndLayout
@@ -40,14 +40,14 @@ def exported(registry: MetricsRegistry) -> dict[tuple[str, str], float]:
     }
 
 
-def plant(drives: list[str]) -> tuple[MetricsRegistry, LineRecorder]:
+def plant(drives: list[str]) -> tuple[MetricsRegistry, SnapshotWriter]:
     registry = MetricsRegistry()
     snapshot = Snapshot()
     specs = [
         DriveSpec(d, carrier_for(DriveTarget(Protocol.FC, i + 1, FC, IndLayout.USS, FC_PROCESS)))
         for i, d in enumerate(drives)
     ]
-    record = LineRecorder("l1", specs, snapshot)
+    record = SnapshotWriter("l1", specs, snapshot)
     infos = {d: DriveInfo("l1", Profile.FC) for d in drives}
     registry.register(SnapshotCollector(snapshot, infos, []))
     return registry, record

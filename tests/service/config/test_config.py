@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from pkwbus.catalog import ParameterSpec
 from pkwbus.link import PortSettings
-from pkwbus.master.wires.serial.line import Line as MasterLine
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
 from pkwbus.protocol.values import ParameterRef, Scaling, ValueType
@@ -207,7 +207,7 @@ def test_defaults_are_filled_in() -> None:
     assert line.bits_per_character == 11
     assert line.pause_seconds == pytest.approx(3.5 * 11 / 19200)
     # What the line's receiver really waits for a gap, not the start pause.
-    receiver = MasterLine(PortSettings("loop://", baudrate=line.baudrate), Protocol.FC)
+    receiver = TelegramPort(PortSettings("loop://", baudrate=line.baudrate), Protocol.FC)
     assert line.inter_char_seconds == receiver.inter_char_timeout
     assert line.inter_char_seconds > line.pause_seconds
     assert line.response_delay_seconds is None

@@ -80,7 +80,7 @@ class Recorder:
 @dataclass
 class Service:
     sims: dict[str, Simulator]
-    recorder: Recorder
+    audit_writer: Recorder
     config: Config
     runtime: Runtime
     audit: AuditLog | None
@@ -190,7 +190,7 @@ async def service(
     """A running service: simulators, runtime, app and client; stopped on exit."""
     fc = fc_drives() if fc is None else fc
     timing = timing or SimTiming(response_delay=0.002)
-    recorder = Recorder()
+    audit_writer = Recorder()
     async with AsyncExitStack() as stack:
         sims: dict[str, Simulator] = {}
         blocks = []
@@ -206,7 +206,7 @@ async def service(
                 seed=11,
                 model=STEADY,  # tests check "running" and the values: no random trips
             )
-            recorder.attach(sim)
+            audit_writer.attach(sim)
             end = await sim.serve_tcp("127.0.0.1", 0)
             stack.push_async_callback(end.close)
             sims[protocol] = sim
@@ -251,7 +251,7 @@ async def service(
             transport=httpx.ASGITransport(app=app), base_url="http://pkwbus.test", timeout=30.0
         )
         stack.push_async_callback(client.aclose)
-        yield Service(sims, recorder, config, runtime, log, audit_path, client, app)
+        yield Service(sims, audit_writer, config, runtime, log, audit_path, client, app)
 
 
 async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:

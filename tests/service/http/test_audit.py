@@ -35,7 +35,7 @@ async def attempts(tmp_path: Path) -> list[tuple[str, int]]:
             if address == 3 and req.is_write and req.pnu == 342:
                 drive3.set_value(342, 111)
 
-        svc.recorder.after.append(clamp)
+        svc.audit_writer.after.append(clamp)
         steps = [
             ("ok", "fan1", "3-41", {"value": 11.5}, AUTH),
             ("rejected", "fan1", "1-20", {"value": 5000}, AUTH),

@@ -83,8 +83,8 @@ async def test_a_write_whose_row_cannot_be_stored_is_not_sent(
         error = r.json()["error"]
         assert error["kind"] == "audit_unavailable"
         assert FULL in error["message"] and "nothing was sent" in error["message"]
-        assert svc.recorder.writes() == [], "the write reached the drive"
-        assert svc.recorder.for_pnu(1, 341) == []
+        assert svc.audit_writer.writes() == [], "the write reached the drive"
+        assert svc.audit_writer.for_pnu(1, 341) == []
         assert drive.value(341) == before
         assert await metric(svc, "pkwbus_audit_errors_total", stage="attempt") == 1
 
@@ -100,7 +100,7 @@ async def test_a_write_whose_row_cannot_be_stored_is_not_sent(
 
         # Room again: /readyz tries a small store (here at once) and recovers.
         conn.fail = set()
-        svc.app.state.recorder.probe_interval = 0.0
+        svc.app.state.audit_writer.probe_interval = 0.0
         ready = await svc.client.get("/readyz")
         assert ready.status_code == 200, ready.text
         assert ready.json()["writes"] is True and ready.json()["reason"] is None
@@ -147,7 +147,7 @@ async def test_an_outcome_that_cannot_be_stored_leaves_the_row_pending(
         assert r.status_code == status, r.text
         assert r.json()["audit"] == "incomplete"
         assert conn.failed == 4  # tried again, briefly
-        assert len(svc.recorder.writes(1)) == 1  # it was sent: its row was stored first
+        assert len(svc.audit_writer.writes(1)) == 1  # it was sent: its row was stored first
         assert svc.audit is not None
         (row,) = svc.audit.latest(5)
         assert row.outcome == "pending"
@@ -159,7 +159,7 @@ async def test_an_outcome_that_cannot_be_stored_leaves_the_row_pending(
 
         # When the log records again, the kept outcome is stored.
         conn.fail = set()
-        svc.app.state.recorder.probe_interval = 0.0
+        svc.app.state.audit_writer.probe_interval = 0.0
         assert (await svc.client.get("/readyz")).status_code == 200
         (row,) = svc.audit.latest(5)
         assert row.outcome == outcome
@@ -190,7 +190,7 @@ async def test_refused_and_invalid_attempts_say_when_they_are_not_audited(
         r = await svc.put("fan1", "3-41", {"value": 1, "dry_run": True})
         assert r.status_code == 200
         assert r.json()["audit"] == "incomplete"
-        assert svc.recorder.writes() == []
+        assert svc.audit_writer.writes() == []
         assert await metric(svc, "pkwbus_audit_errors_total", stage="refusals") == 20
         assert await metric(svc, "pkwbus_api_refusals_total", reason="unauthenticated") == 30
         told = [r for r in caplog.records if "audit log cannot record" in r.getMessage()]
@@ -199,7 +199,7 @@ async def test_refused_and_invalid_attempts_say_when_they_are_not_audited(
 
         # Room again: every refusal counted meanwhile is stored, none lost.
         conn.fail = set()
-        svc.app.state.recorder.probe_interval = 0.0
+        svc.app.state.audit_writer.probe_interval = 0.0
         assert (await svc.client.get("/readyz")).status_code == 200
         rows = [(e.time, e.count) for e in svc.audit.latest(5) if e.outcome == "refused"]
         assert rows == [(NOW + 60, 20), (NOW, 10)]

@@ -58,7 +58,7 @@ async def test_matrix(tmp_path: Path, configured: bool, header: str) -> None:
             assert r.status_code == expected, r.text
             if expected == 200:
                 assert drive.value(pnu) == raw
-                assert [w.value for w in svc.recorder.writes(1, pnu)] == [raw]
+                assert [w.value for w in svc.audit_writer.writes(1, pnu)] == [raw]
                 continue
             body = r.json()["error"]
             assert body["kind"] in {
@@ -69,14 +69,14 @@ async def test_matrix(tmp_path: Path, configured: bool, header: str) -> None:
             }
             assert TOKEN not in r.text
             assert drive.value(pnu) == before
-            assert svc.recorder.for_pnu(1, pnu) == []  # not even the pre-read
+            assert svc.audit_writer.for_pnu(1, pnu) == []  # not even the pre-read
             if expected == 401:
                 assert body["kind"] == "unauthenticated"
             elif not configured:
                 assert body["kind"] == "writes_disabled"
         # nothing written anywhere on the line but the one allowed write
         allowed = 1 if EXPECTED[configured, header][0] == 200 else 0
-        assert len(svc.recorder.writes()) == allowed
+        assert len(svc.audit_writer.writes()) == allowed
         assert svc.audit is not None
         rows = svc.audit.latest(10)
         # one row per attempt with the token; those without one are counted per address

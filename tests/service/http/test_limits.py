@@ -56,7 +56,7 @@ async def test_refusals_without_a_token_are_counted_not_stored_one_by_one(
         svc.audit.clock = lambda: NOW + 60
         await svc.put("fan1", "3-41", {"value": 38}, headers={})
         assert [(e.count, e.time) for e in svc.audit.latest(10)] == [(1, NOW + 60), (200, NOW)]
-        assert svc.recorder.writes() == []
+        assert svc.audit_writer.writes() == []
 
 
 def test_many_addresses_share_a_bounded_number_of_rows(tmp_path: Path) -> None:
@@ -89,7 +89,7 @@ async def test_names_longer_than_any_are_refused_and_not_stored(
         assert len(r.content) < 300
         read = await svc.client.get(f"/api/v1/drives/{drive}/parameters/{parameter}")
         assert read.status_code == 404 and len(read.content) < 300
-        assert svc.recorder.writes() == []
+        assert svc.audit_writer.writes() == []
         assert svc.audit is not None
         (row,) = svc.audit.latest(5)
         assert row.outcome == "invalid" and row.token_id is not None

@@ -32,14 +32,14 @@ async def test_an_fc_drive_has_one_name_per_parameter(tmp_path: Path) -> None:
         assert svc.audit is not None
         assert {row.parameter for row in svc.audit.latest(10)} == {"3-41"}
 
-        sent = len(svc.recorder.writes())
+        sent = len(svc.audit_writer.writes())
         for written in ("p0341", "P341", "r0341"):
             r = await svc.put("fan1", written, {"value": 1})
             assert r.status_code == 422, r.text
             error = r.json()["error"]
             assert error["kind"] == "wrong_notation"
             assert "Siemens notation" in error["message"] and "write 3-41" in error["message"]
-        assert len(svc.recorder.writes()) == sent  # nothing sent
+        assert len(svc.audit_writer.writes()) == sent  # nothing sent
 
         metrics = (await svc.client.get("/metrics")).text
         assert 'parameter="16-13"' in metrics and 'parameter="1613"' not in metrics

@@ -38,7 +38,7 @@ async def test_dry_run_shows_the_telegram_and_sends_nothing(
         assert out["dry_run"] is True
         assert out["raw"] == 1250
         assert out["telegram"] == fc_telegram(2, ak, 341, 1250)
-        assert svc.recorder.for_pnu(2, 341) == []
+        assert svc.audit_writer.for_pnu(2, 341) == []
         assert svc.sim.drives[2].value(341) == 500
         assert svc.audit is not None
         (row,) = svc.audit.latest(5)
@@ -56,7 +56,7 @@ async def test_dry_run_is_still_checked(tmp_path: Path) -> None:
         assert r.status_code == 422
         r = await svc.put("fan1", "3-41", {"value": 5, "dry_run": True}, headers={})
         assert r.status_code == 401
-        assert svc.recorder.for_pnu(1, 341) == []
+        assert svc.audit_writer.for_pnu(1, 341) == []
 
 
 async def test_store_ram_and_eeprom(tmp_path: Path) -> None:
@@ -72,7 +72,7 @@ async def test_store_ram_and_eeprom(tmp_path: Path) -> None:
         assert r.json()["store"] == "eeprom"
         assert drive.value(342) == 950
         assert drive.eeprom[342, 0] == 950
-        (write,) = svc.recorder.writes(1, 342)
+        (write,) = svc.audit_writer.writes(1, 342)
         assert write.ak == 13
 
 
@@ -84,7 +84,7 @@ async def test_verify_reads_back(tmp_path: Path) -> None:
         # 3-41 is not polled here: no old value. The change goes out after a read of
         # its parameter (the answer a lagging drive would repeat), and is read back.
         assert (out["verified"], out["value"], out["old_value"]) == (True, 7.25, None)
-        requests = [req.command.name for req in svc.recorder.for_pnu(1, 341)]
+        requests = [req.command.name for req in svc.audit_writer.for_pnu(1, 341)]
         assert requests == ["READ", "WRITE_DWORD", "READ"]
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "ok"
@@ -99,7 +99,7 @@ async def test_verify_reports_a_mismatch(tmp_path: Path) -> None:
             if address == 3 and req.is_write and req.pnu == 342:
                 drive.set_value(342, 300)
 
-        svc.recorder.after.append(clamp)
+        svc.audit_writer.after.append(clamp)
         r = await svc.put("fan3", "3-42", {"value": 4, "verify": True})
         assert r.status_code == 200, r.text
         assert r.json()["verified"] is False
@@ -116,7 +116,7 @@ async def test_verify_without_an_answer_is_not_verified(tmp_path: Path) -> None:
             if address == 1 and req.is_write:
                 svc.sim.kill(1)
 
-        svc.recorder.after.append(die)
+        svc.audit_writer.after.append(die)
         r = await svc.put("fan1", "3-41", {"value": 6, "verify": True})
         # the write was answered (the drive died after answering it); the read-back was not
         assert r.status_code == 200, r.text

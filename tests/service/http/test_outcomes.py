@@ -21,7 +21,7 @@ async def test_not_while_running_is_409_with_fault_17(tmp_path: Path) -> None:
         assert error["fault"] == 17
         assert error["text"]
         assert drive.value(120) == before
-        assert len(svc.recorder.writes(1, 120)) == 1  # sent once: a rejection is not retried
+        assert len(svc.audit_writer.writes(1, 120)) == 1  # sent once: a rejection is not retried
         assert svc.audit is not None
         (row,) = svc.audit.latest(5)
         assert (row.outcome, row.fault, row.raw_value) == ("rejected", 17, 750)
@@ -41,7 +41,7 @@ async def test_outside_the_limits_the_drive_describes_is_422_and_nothing_is_sent
         assert r.status_code == 422, r.text
         assert r.json()["error"]["kind"] == "invalid_value"
         assert f"{highest:g}" in r.json()["error"]["message"]
-        assert svc.recorder.for_pnu(1, 341) == []  # not even the read before a change
+        assert svc.audit_writer.for_pnu(1, 341) == []  # not even the read before a change
         assert drive.value(341) == 500
         r = await svc.put("fan1", "3-41", {"value": highest})  # the limit itself is allowed
         assert r.status_code == 200, r.text
@@ -55,7 +55,7 @@ async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path)
         assert r.status_code == 409, r.text
         assert r.json()["error"]["fault"] == 2
         assert svc.sim.drives[1].value(341) == 500
-        assert svc.recorder.descriptions == []
+        assert svc.audit_writer.descriptions == []
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "rejected"
 
@@ -110,7 +110,7 @@ async def test_a_parameter_not_described_yet_is_503_and_nothing_is_sent(tmp_path
         assert r.json()["error"]["kind"] == "not_described"
         assert "3-41" in r.json()["error"]["message"]
     assert after.status_code == 200, after.text
-    assert len(svc.recorder.writes(1, 341)) == 1  # only the one after it was described
+    assert len(svc.audit_writer.writes(1, 341)) == 1  # only the one after it was described
     assert outcomes == ["ok", "not_sent"]
 
 
@@ -122,8 +122,8 @@ async def test_a_change_whose_read_the_drive_refuses_is_not_sent(tmp_path: Path)
         r = await svc.put("fan2", "3-42", {"value": 10, "index": 135})
         assert r.status_code == 409, r.text
         assert r.json()["error"]["kind"] == "rejected"
-        assert svc.recorder.writes(2, 342) == []
-        (read,) = svc.recorder.for_pnu(2, 342)
+        assert svc.audit_writer.writes(2, 342) == []
+        (read,) = svc.audit_writer.for_pnu(2, 342)
         assert read.command is Command.READ and read.subindex == 135
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "rejected"

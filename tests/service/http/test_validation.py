@@ -63,10 +63,10 @@ async def test_refused_before_sending(
         error = r.json()["error"]
         assert error["kind"] == kind, error
         assert error["message"]
-        assert svc.recorder.writes() == []
+        assert svc.audit_writer.writes() == []
         # nothing but polls reached any drive (no pre-read either)
         polled = {1613, 21}
-        assert {req.pnu for _, req in svc.recorder.requests} <= polled
+        assert {req.pnu for _, req in svc.audit_writer.requests} <= polled
         assert svc.audit is not None
         rows = svc.audit.latest(10)
         assert [row.outcome for row in rows] == ["invalid"]
@@ -116,4 +116,4 @@ async def test_a_refusal_names_the_nearest_values(tmp_path: Path) -> None:
             r = await svc.put(drive, parameter, {"value": value})
             assert r.status_code == 422
             assert r.json()["error"]["message"] == message
-        assert svc.recorder.writes() == []
+        assert svc.audit_writer.writes() == []

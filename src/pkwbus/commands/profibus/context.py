@@ -27,14 +27,19 @@ from pkwbus.commands.common import CommandError, Exit, duration_option, int_opti
 from pkwbus.dp_settings import DpGiven
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.carriers import carrier_for
-from pkwbus.master.events import Event, Exchanged, LineState, SlaveDiagnosed, SlaveStateChanged
-from pkwbus.master.planning.answers import ErrorKind
+from pkwbus.master.events import (
+    Event,
+    LineState,
+    SlaveDiagnosed,
+    SlaveSilent,
+    SlaveStateChanged,
+)
 from pkwbus.master.planning.outcomes import Outcome, TimedOut
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.session import EndKind, LineSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.wires.profibus.cycle import SlaveLocked
-from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
@@ -58,7 +63,7 @@ __all__ = [
     "DpContext",
     "add_dp_options",
     "build_context",
-    "dp_line",
+    "fdl_port",
     "session",
 ]
 
@@ -241,7 +246,7 @@ def _slot_time(args: argparse.Namespace, found: Gsd | None) -> float:
     return float(args.slot_time)
 
 
-def dp_line(args: argparse.Namespace, slot_time: float | None = None) -> DpLine:
+def fdl_port(args: argparse.Namespace, slot_time: float | None = None) -> FdlPort:
     try:
         settings = PortSettings(
             limits.check_port_url(args.port),
@@ -249,7 +254,7 @@ def dp_line(args: argparse.Namespace, slot_time: float | None = None) -> DpLine:
             parity="E",
             echo=args.echo,
         )
-        return DpLine(
+        return FdlPort(
             settings,
             args.master_address,
             slot_time=slot_time if slot_time is not None else args.slot_time,
@@ -270,7 +275,7 @@ async def session(
     master listens first, parametrises the slave, and clears it at the end)."""
     spec = DriveSpec("drive", carrier_for(ctx.target(address)))
     watch = _Watch(address)
-    line = dp_line(args, ctx.slot_time)
+    line = fdl_port(args, ctx.slot_time)
     wire = CycleWire(line, [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], name="command line")
     drive = watch.session = LineSession(wire, [spec], retries=ctx.retries, observers=[watch])
     loop = asyncio.get_running_loop()
@@ -315,8 +320,7 @@ class _Watch:
                 self.state = event.state
                 if event.state is SlaveState.LOCKED:
                     self._end(EndKind.LOCKED, str(SlaveLocked(self.address, self.owner)))
-            elif isinstance(event, Exchanged):
-                if event.error is ErrorKind.TIMEOUT and self.state is SlaveState.OFFLINE:
-                    self._end(EndKind.TIMEOUT, f"slave {self.address} does not answer (no answer)")
+            elif isinstance(event, SlaveSilent):
+                self._end(EndKind.TIMEOUT, f"slave {self.address} does not answer ({event.detail})")
             elif isinstance(event, LineState) and not event.up and event.error:
                 self._end(EndKind.LINE_ERROR, event.error)

@@ -24,7 +24,7 @@ from typing import Any
 
 from pkwbus import link
 from pkwbus.commands.common import CommandError, Exit
-from pkwbus.commands.profibus.context import DEFAULT_BAUDRATE, MAX_DP_RETRIES, dp_line
+from pkwbus.commands.profibus.context import DEFAULT_BAUDRATE, MAX_DP_RETRIES, fdl_port
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
 from pkwbus.master.events import Event, LineState, StationAsked, StationFound, StationsAsked
@@ -112,7 +112,7 @@ def _describe(entry: dict[str, Any]) -> str:
 async def _scan(
     args: argparse.Namespace, addresses: list[int], progress: Progress
 ) -> list[dict[str, Any]]:
-    line = dp_line(args)
+    line = fdl_port(args)
     watch = _LiveList(args.json, progress)
     wire = LiveListWire(line, addresses, tries=args.retries + 1)
     session = LineSession(wire, [], retries=args.retries, observers=[watch])

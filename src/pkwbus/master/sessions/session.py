@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from typing import Any, TypeVar
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.errors import PkwbusError
 from pkwbus.link import PortError
 from pkwbus.master.events import Observer
 from pkwbus.master.planning.health import HealthPolicy
@@ -46,7 +47,7 @@ class EndKind(enum.StrEnum):
     LINE_ERROR = "line_error"  # the line was given up (another master heard on it)
 
 
-class SessionEnded(Exception):
+class SessionEnded(PkwbusError):
     """The session cannot go on (``kind``; the reason in words)."""
 
     def __init__(self, kind: EndKind, reason: str) -> None:

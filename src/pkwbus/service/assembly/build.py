@@ -22,9 +22,9 @@ from pkwbus.master.planning.plan import DescribeTarget, DriveSpec, PollSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget, RecordAccess
-from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import NAME, DescriptionForm, elements_to_read, form_of
@@ -59,7 +59,7 @@ __all__ = [
     "build_runtime",
     "describe_targets",
     "description_form",
-    "line_for",
+    "port_for",
     "target_for",
 ]
 
@@ -115,7 +115,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
         if dp:
             runners.append(_dp_runner(line, port, specs, snapshot, events))
             continue
-        wire = ExchangeWire(line_for(line, port))
+        wire = ExchangeWire(port_for(line, port))
         runners.append(
             LineRunner(
                 line.name,
@@ -132,7 +132,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
     return runtime
 
 
-def line_for(line: cfg.Line, port: str) -> Line:
+def port_for(line: cfg.Line, port: str) -> TelegramPort:
     """The FC/USS line a configuration describes, on ``port``."""
     settings = PortSettings(
         port,
@@ -144,7 +144,7 @@ def line_for(line: cfg.Line, port: str) -> Line:
         low_latency=line.low_latency,
         rs485=Rs485Mode(**line.rs485.model_dump()) if line.rs485 is not None else None,
     )
-    return Line(
+    return TelegramPort(
         settings,
         Protocol(line.protocol),
         timeout=line.timeout,
@@ -176,7 +176,7 @@ def _dp_runner(
     # The slot time: as configured, else one that waits for the slowest slave's GSD MaxTsdr.
     tsdr = [s.gsd.max_tsdr.get(line.baudrate, 0) for s in resolved if s.gsd is not None]
     slot = line.slot_time or dp_timing.default_slot_time(line.baudrate, max(tsdr, default=None))
-    dp = DpLine(settings, line.master_address, slot_time=slot)
+    dp = FdlPort(settings, line.master_address, slot_time=slot)
     # The watchdog: as configured, else several worst-case cycles and at least a second.
     watchdog = line.watchdog or max(1.0, 10 * dp.slot_time * (line.retries + 1) * len(specs))
     slaves = []

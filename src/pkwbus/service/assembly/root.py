@@ -18,6 +18,7 @@ import logging
 import socket
 
 from pkwbus import link
+from pkwbus.errors import PkwbusError
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile, description_path
 from pkwbus.service.assembly.logs import setup_logging
@@ -31,7 +32,7 @@ __all__ = ["StartError", "open_audit", "run_service"]
 log = logging.getLogger("pkwbus")  # the service's start-up lines, under the command's name
 
 
-class StartError(Exception):
+class StartError(PkwbusError):
     """The service cannot start: its audit log's place or its HTTP address is unusable."""
 
 
@@ -67,8 +68,8 @@ async def _serve(config: Config, sock: socket.socket, audit: AuditLog) -> None:
     runtime = await build_runtime(config, kept)
     token = config.write_token()
     app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
-    recorder = app.state.recorder
-    interrupted = await recorder.close_interrupted()
+    audit_writer = app.state.audit_writer
+    interrupted = await audit_writer.close_interrupted()
     if interrupted:
         log.warning(
             "audit log: %d write(s) had no recorded outcome (the service stopped before"
@@ -83,4 +84,4 @@ async def _serve(config: Config, sock: socket.socket, audit: AuditLog) -> None:
     try:
         await serve(runtime, app, sock, max_connections=config.api.max_connections)
     finally:
-        await asyncio.to_thread(recorder.save_late)
+        await asyncio.to_thread(audit_writer.save_late)

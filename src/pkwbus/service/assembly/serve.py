@@ -24,6 +24,7 @@ from collections.abc import Iterator
 import uvicorn
 from fastapi import FastAPI
 
+from pkwbus.errors import PkwbusError
 from pkwbus.service.config import LISTEN_ENV
 from pkwbus.service.http.connections import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
@@ -43,7 +44,7 @@ log = logging.getLogger("pkwbus.service.app")  # the name its log lines have alw
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 
-class ListenError(Exception):
+class ListenError(PkwbusError):
     """The HTTP address cannot be bound."""
 
 

@@ -44,6 +44,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
 
+from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.key import (
     KEY_BYTES,
     TOKEN_ID_HEX,
@@ -99,7 +100,7 @@ WAL_PAGES: Final = 64  # the write-ahead log is checkpointed once it holds this 
 WAL_BYTES: Final = 262144  # and cut back to this size (64 pages of 4 KiB) after a checkpoint
 
 
-class AuditError(Exception):
+class AuditError(PkwbusError):
     """The audit log cannot be opened or cannot store: the message is one line."""
 
 

@@ -14,6 +14,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from pkwbus.errors import PkwbusError
 from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS
 
 __all__ = [
@@ -45,7 +46,7 @@ MAX_CONFIG_BYTES: Final = 1024 * 1024  # a configuration file is read up to this
 MAX_HTTP_CONNECTIONS = 900
 
 
-class ConfigError(Exception):
+class ConfigError(PkwbusError):
     """The configuration cannot be used; ``problems`` has one line per problem."""
 
     def __init__(self, problems: Sequence[str]) -> None:

@@ -25,7 +25,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pkwbus import __version__
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
-from pkwbus.service.audit.recorder import AuditRecorder
+from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.models import (
     ERRORS,
@@ -146,9 +146,9 @@ def create_app(
     )
     add_docs(app)
     app.state.runtime = runtime
-    recorder = AuditRecorder(audit, api_metrics(runtime.registry))
-    app.state.recorder = recorder
-    service = ParameterService(runtime, recorder, write_token)
+    audit_writer = AuditWriter(audit, api_metrics(runtime.registry))
+    app.state.audit_writer = audit_writer
+    service = ParameterService(runtime, audit_writer, write_token)
     audit_tokens = [t.encode() for t in (write_token, read_token) if t]
 
     @app.exception_handler(ApiError)
@@ -195,7 +195,7 @@ def create_app(
             refusal = ApiError(403, "forbidden", "the token is not the write or the read token")
         else:
             return
-        refusal.audit_incomplete = not await recorder.refused(_client(request), refusal.kind)
+        refusal.audit_incomplete = not await audit_writer.refused(_client(request), refusal.kind)
         raise refusal
 
     app.add_middleware(BodyLimit, limit=MAX_BODY)
@@ -243,7 +243,7 @@ def create_app(
     @app.get("/readyz", response_model=Readiness, responses={503: {"model": Readiness}})
     async def readyz() -> Any:
         lines = dict(runtime.snapshot.lines)
-        problem = await recorder.problem()
+        problem = await audit_writer.problem()
         reason = None if problem is None else f"the audit log cannot record: {problem}"
         ready = bool(lines) and all(lines.values()) and problem is None
         body = Readiness(ready=ready, lines=lines, writes=problem is None, reason=reason)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.errors import PkwbusError
 from pkwbus.master.planning.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
@@ -42,7 +43,7 @@ MAX_PARAMETER_TEXT = 32  # "P65535[255]" is 11 characters: room for spaces, not 
 INCOMPLETE = "incomplete"  # the answer's "audit" when its row could not be (fully) stored
 
 
-class ApiError(Exception):
+class ApiError(PkwbusError):
     def __init__(self, status: int, kind: str, message: str, **extra: Any) -> None:
         super().__init__(message)
         self.status = status

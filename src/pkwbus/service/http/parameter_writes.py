@@ -28,7 +28,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterRef, encode_text
 from pkwbus.service.audit.log import AuditEntry
-from pkwbus.service.audit.recorder import AuditRecorder, AuditUnavailable
+from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
 from pkwbus.service.http.outcome_answers import audit_outcome
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
@@ -60,13 +60,13 @@ class WriteOrder:
 
 
 class Writes:
-    """The writes of a runtime, each audited through ``recorder``."""
+    """The writes of a runtime, each audited through ``audit_writer``."""
 
     def __init__(
-        self, runtime: Runtime, recorder: AuditRecorder, tokens: TokenCheck, reads: Reads
+        self, runtime: Runtime, audit_writer: AuditWriter, tokens: TokenCheck, reads: Reads
     ) -> None:
         self.runtime = runtime
-        self.recorder = recorder
+        self.audit_writer = audit_writer
         self._tokens = tokens
         self._reads = reads
         self._running: set[asyncio.Future[dict[str, Any]]] = set()
@@ -100,12 +100,12 @@ class Writes:
             if exc.kind == "not_described":  # a valid write, refused for now: not sent
                 audit.outcome = "not_sent"
             audit.detail = str(exc)
-            exc.audit_incomplete = not await self.recorder.note(audit)
+            exc.audit_incomplete = not await self.audit_writer.note(audit)
             raise
         telegram = entry.target.telegram(request, fmt.vtype).hex(" ")
         if order.dry_run:
             audit.outcome = "dry_run"
-            stored = await self.recorder.note(audit)
+            stored = await self.audit_writer.note(audit)
             body = self._write_body(entry, ref, fmt, order, request, telegram, audit, None)
             return body if stored else {**body, "audit": INCOMPLETE}
         # Once its row is stored the write runs to its end and the row is completed even
@@ -128,7 +128,7 @@ class Writes:
         """Audit a write whose body did not validate (nothing was sent); False when the
         audit log could not store it. A caller without a valid token gets its refusal."""
         identity = await self._identify(caller)
-        return await self.recorder.note(
+        return await self.audit_writer.note(
             AuditEntry(
                 client=caller.client,
                 drive=clip(drive, MAX_DRIVE_NAME),
@@ -146,7 +146,7 @@ class Writes:
         try:
             return self._tokens.identify(caller)
         except ApiError as exc:
-            exc.audit_incomplete = not await self.recorder.refused(caller.client, exc.kind)
+            exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
             raise
 
     async def _perform(
@@ -166,7 +166,7 @@ class Writes:
         old = self._latest(entry, ref)
         audit.old_value = old
         try:
-            row = await self.recorder.attempt(audit)  # committed before anything is sent
+            row = await self.audit_writer.attempt(audit)  # committed before anything is sent
         except AuditUnavailable as exc:
             raise ApiError(
                 503,
@@ -190,7 +190,7 @@ class Writes:
             else:
                 verified = False
                 outcome, detail = "unverified", "the read-back had no answer"
-        stored = await self.recorder.outcome(
+        stored = await self.audit_writer.outcome(
             row, outcome=outcome, fault=fault, detail=detail, old_value=old
         )
         try:

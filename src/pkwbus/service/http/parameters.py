@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pkwbus.service.audit.recorder import AuditRecorder
+from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
@@ -57,12 +57,12 @@ __all__ = [
 class ParameterService:
     """Reads and writes of one parameter at a time, as the HTTP API asks for them."""
 
-    def __init__(self, runtime: Runtime, recorder: AuditRecorder, token: str | None) -> None:
+    def __init__(self, runtime: Runtime, audit_writer: AuditWriter, token: str | None) -> None:
         self.runtime = runtime
-        self.recorder = recorder
-        tokens = TokenCheck(token, recorder.token_id(token) if token is not None else None)
+        self.audit_writer = audit_writer
+        tokens = TokenCheck(token, audit_writer.token_id(token) if token is not None else None)
         self._reads = Reads(runtime)
-        self._writes = Writes(runtime, recorder, tokens, self._reads)
+        self._writes = Writes(runtime, audit_writer, tokens, self._reads)
 
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
         return await self._reads.read(drive, parameter, index)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from pkwbus.errors import PkwbusError
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse, Width
 from pkwbus.protocol.pkw.descriptions import form_of
@@ -72,7 +73,7 @@ class FaultNumbers:
         return cls(no_text=106, no_description=106, channel=102, unsupported=106)
 
 
-class Refused(Exception):
+class Refused(PkwbusError):
     """A request the drive rejects, with the fault number to send."""
 
     def __init__(self, fault: int) -> None:

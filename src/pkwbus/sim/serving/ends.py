@@ -24,6 +24,7 @@ import tty
 from collections.abc import Callable
 from typing import Protocol
 
+from pkwbus.errors import PkwbusError
 from pkwbus.sim.serving.session import Answerer, Session
 
 __all__ = [
@@ -97,7 +98,7 @@ class TcpEnd:
             await self._server.wait_closed()
 
 
-class PathInUseError(Exception):
+class PathInUseError(PkwbusError):
     """The pty's link path is taken: by a live simulator, or by something not ours to replace."""
 
 

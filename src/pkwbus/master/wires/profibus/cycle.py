@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from pkwbus.errors import PkwbusError
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, SlotAnswer, SlotGarbled
 from pkwbus.protocol.profibus.dp.slave import (
     Answer,
@@ -37,7 +38,7 @@ __all__ = ["IDLE_STEP", "CycleEvent", "SlaveCycle", "SlaveLocked", "SlaveRun", "
 IDLE_STEP = 0.01  # seconds a cycle with nothing to send waits before the next
 
 
-class SlaveLocked(Exception):
+class SlaveLocked(PkwbusError):
     """The slave's diagnosis names another master: it is never parametrised."""
 
     def __init__(self, address: int, owner: int | None) -> None:

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pkwbus.master.events import Event, StationAsked, StationFound, StationsAsked
 from pkwbus.master.planning.plan import Idle
 from pkwbus.master.planning.planner import IDLE_AT_MOST, Planner
-from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import services as dps
@@ -42,7 +42,7 @@ class _Asking(enum.Enum):
 class LiveListWire:
     """The :class:`~pkwbus.master.runner.Wire` of a DP line's live list."""
 
-    def __init__(self, line: DpLine, addresses: Sequence[int], *, tries: int) -> None:
+    def __init__(self, line: FdlPort, addresses: Sequence[int], *, tries: int) -> None:
         self.line = line
         self.addresses = list(addresses)
         self.tries = tries
@@ -55,7 +55,7 @@ class LiveListWire:
         self._over = False
 
     @property
-    def port(self) -> DpLine:
+    def port(self) -> FdlPort:
         return self.line
 
     def poll_deadline(self, retries: int) -> float:

@@ -39,6 +39,7 @@ from pkwbus.master.events import (
     Exchanged,
     SlaveDiagnosed,
     SlaveRestarted,
+    SlaveSilent,
     SlaveStateChanged,
 )
 from pkwbus.master.planning.answers import ErrorKind, Failure, PkwAnswer, Reply
@@ -52,7 +53,7 @@ from pkwbus.master.wires.profibus.cycle import (
     SlaveRun,
     StartupAnswered,
 )
-from pkwbus.master.wires.profibus.line import DpLine
+from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
 from pkwbus.protocol.profibus.dp.slave import (
@@ -113,7 +114,7 @@ class SlaveSpec:
 class CycleWire:
     """The :class:`~pkwbus.master.runner.Wire` of a PROFIBUS DP line."""
 
-    def __init__(self, line: DpLine, drives: Sequence[SlaveSpec], *, name: str = "") -> None:
+    def __init__(self, line: FdlPort, drives: Sequence[SlaveSpec], *, name: str = "") -> None:
         self.line = line
         line.clear_on_close = True  # a master that leaves the line clears its slaves
         self.name = name  # the line's, for the log
@@ -126,7 +127,7 @@ class CycleWire:
         self._unreadable: set[str] = set()  # slaves whose PKW answers cannot be read
 
     @property
-    def port(self) -> DpLine:
+    def port(self) -> FdlPort:
         return self.line
 
     def poll_deadline(self, retries: int) -> float:
@@ -242,6 +243,10 @@ class CycleWire:
             events.append(Exchanged(name, None, busy, answered))
         elif isinstance(event, Failed):
             events.append(Exchanged(name, _ERROR_KINDS[event.kind], busy))
+            slave = run.slave
+            silent = event.kind is FailureKind.TIMEOUT and not slave.waiting
+            if silent and slave.state is SlaveState.OFFLINE:  # every repeat went unanswered
+                events.append(SlaveSilent(name, event.detail))
         elif isinstance(event, StateChanged):
             self._state(planner, name, event, now)
         elif isinstance(event, Restarted):

@@ -4,7 +4,7 @@ Pure calls, holding no runner (:class:`~pkwbus.master.runner.Wire`): the next
 request is the planner's next action; an answer goes to the planner as it
 came (its carrier decodes it, once), and its cost goes on the stream as an
 :class:`~pkwbus.master.events.Exchanged`. The line itself
-(:class:`~pkwbus.master.wires.serial.line.Line`) is the port the runner drives.
+(:class:`~pkwbus.master.wires.serial.port.Line`) is the port the runner drives.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pkwbus.master.events import Event, Exchanged
 from pkwbus.master.planning.answers import ExchangeResult, Failure, Reply
 from pkwbus.master.planning.plan import Action, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 
 __all__ = ["ExchangeWire"]
 
@@ -21,12 +21,12 @@ __all__ = ["ExchangeWire"]
 class ExchangeWire:
     """The :class:`~pkwbus.master.runner.Wire` of an FC or USS line."""
 
-    def __init__(self, line: Line) -> None:
+    def __init__(self, line: TelegramPort) -> None:
         self.line = line
         self._events: list[Event] = []
 
     @property
-    def port(self) -> Line:
+    def port(self) -> TelegramPort:
         return self.line
 
     def poll_deadline(self, retries: int) -> float:

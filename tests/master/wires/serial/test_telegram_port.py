@@ -13,14 +13,14 @@ from pkwbus.link import PortSettings
 from pkwbus.master.planning.answers import ErrorKind, Failure
 from pkwbus.master.planning.outcomes import Answered, LineFailed, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.serial.line import Line
+from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pzd import takes_control
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import Scaling, ValueType, encode_value
 from pkwbus.sim import SimFaults, SimTiming
-from tests.master.conftest import make_sim, open_line, run_job, serve
+from tests.master.conftest import make_sim, open_port, run_job, serve
 
 
 def value(outcome: object) -> int:
@@ -34,7 +34,7 @@ async def test_fc_read_matches_the_drive(end: str) -> None:
     sim.drives[7].set_value(341, 1234)
     sim.drives[1].set_value(341, 999)
     target = DriveTarget.create("fc", 7)
-    async with serve(sim, end) as port, open_line(port, "fc") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "fc") as (line, trace):
         raw = value(await run_job(line, target, pkw.read(target.dialect, 341)))
         assert raw == 1234
         current = value(await run_job(line, target, pkw.read(target.dialect, 1614)))
@@ -53,7 +53,7 @@ async def test_fc_writes_word_and_double_word_to_ram_and_eeprom(
     raw = encode_value(123.4, vtype, Scaling.conversion(-1))
     width = vtype.width
     assert width is not None
-    async with serve(sim, "tcp") as port, open_line(port, "fc") as (line, _):
+    async with serve(sim, "tcp") as port, open_port(port, "fc") as (line, _):
         req = pkw.write(target.dialect, pnu, raw, width, store=store)
         assert value(await run_job(line, target, req)) == raw
     assert sim.drives[3].value(pnu) == raw
@@ -64,7 +64,7 @@ async def test_a_word_write_to_a_double_word_parameter_is_rejected() -> None:
     sim = make_sim("fc", [3])
     target = DriveTarget.create("fc", 3)
     before = sim.drives[3].value(341)
-    async with serve(sim, "tcp") as port, open_line(port, "fc") as (line, _):
+    async with serve(sim, "tcp") as port, open_port(port, "fc") as (line, _):
         outcome = await run_job(line, target, pkw.write(target.dialect, 341, 7, pkw.Width.WORD))
     assert isinstance(outcome, Rejected) and outcome.fault == 5
     assert sim.drives[3].value(341) == before
@@ -74,7 +74,7 @@ async def test_a_word_write_to_a_double_word_parameter_is_rejected() -> None:
 async def test_uss_index_and_page_in_both_layouts(end: str, layout: IndLayout) -> None:
     sim = make_sim("uss", [2], ind_layout=layout)
     target = DriveTarget.create("uss", 2, ind_layout=layout)
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         raw = value(await run_job(line, target, pkw.read(target.dialect, 947, 3)))
         assert raw == sim.drives[2].value(947, 3)
         ind = int.from_bytes(trace.tx[0][5:7], "big")
@@ -91,7 +91,7 @@ async def test_uss_float_write_and_read_back() -> None:
     sim = make_sim("uss", [1])
     target = DriveTarget.create("uss", 1)
     bits = encode_value(42.5, ValueType.F32)
-    async with serve(sim, "tcp") as port, open_line(port, "uss") as (line, _):
+    async with serve(sim, "tcp") as port, open_port(port, "uss") as (line, _):
         write = pkw.write(target.dialect, 1082, bits, pkw.Width.DWORD)
         assert value(await run_job(line, target, write)) == bits
         raw = value(await run_job(line, target, pkw.read(target.dialect, 1082)))
@@ -110,7 +110,7 @@ async def test_rejection_carries_the_dialects_text(
 ) -> None:
     sim = make_sim(protocol, [1])
     target = DriveTarget.create(protocol, 1)
-    async with serve(sim, "tcp") as port, open_line(port, protocol) as (line, _):
+    async with serve(sim, "tcp") as port, open_port(port, protocol) as (line, _):
         outcome = await run_job(line, target, pkw.read(target.dialect, pnu))
     assert isinstance(outcome, Rejected)
     assert (outcome.fault, outcome.text) == (fault, text)
@@ -121,7 +121,7 @@ async def test_repeat_rule_with_lag(end: str, mode: str) -> None:
     timing = SimTiming(response_delay=0.0, lag_telegrams=3, lag_mode=mode)  # type: ignore[arg-type]
     sim = make_sim("uss", [4], timing=timing)
     target = DriveTarget.create("uss", 4)
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         await run_job(line, target, pkw.read(target.dialect, 1120))
         trace.tx.clear()
         outcome = await run_job(line, target, pkw.read(target.dialect, 1121))
@@ -136,7 +136,7 @@ async def test_a_stale_answer_to_a_write_is_not_taken(end: str) -> None:
     sim = make_sim("uss", [4], timing=timing)
     target = DriveTarget.create("uss", 4)
     new = encode_value(12.5, ValueType.F32)
-    async with serve(sim, end) as port, open_line(port, "uss") as (line, trace):
+    async with serve(sim, end) as port, open_port(port, "uss") as (line, trace):
         old = value(await run_job(line, target, pkw.read(target.dialect, 1120)))
         assert old != new
         trace.rx.clear()
@@ -149,7 +149,7 @@ async def test_a_stale_answer_to_a_write_is_not_taken(end: str) -> None:
 async def test_timeouts_are_retried_then_reported() -> None:
     sim = make_sim("fc", [1], faults=SimFaults(dead=frozenset({1})))
     target = DriveTarget.create("fc", 1)
-    async with serve(sim, "tcp") as port, open_line(port, "fc", timeout=0.02) as (line, trace):
+    async with serve(sim, "tcp") as port, open_port(port, "fc", timeout=0.02) as (line, trace):
         outcome = await run_job(line, target, pkw.read(target.dialect, 1613), retries=2)
     assert isinstance(outcome, TimedOut)
     assert len(trace.tx) == 3
@@ -161,7 +161,7 @@ async def test_bad_answers_are_recovered_from(end: str, fault: str) -> None:
     sim = make_sim("fc", [1], faults=faults)
     target = DriveTarget.create("fc", 1)
     # A timeout long enough for a loaded machine: a late answer is not a fault recovered from.
-    async with serve(sim, end) as port, open_line(port, "fc", timeout=0.2) as (line, _):
+    async with serve(sim, end) as port, open_port(port, "fc", timeout=0.2) as (line, _):
         for _ in range(10):
             outcome = await run_job(line, target, pkw.read(target.dialect, 1614), retries=10)
             assert isinstance(outcome, Answered), outcome
@@ -193,7 +193,7 @@ async def test_local_echo_is_stripped() -> None:
         server = await asyncio.start_server(relay, "127.0.0.1", 0)
         relay_port = server.sockets[0].getsockname()[1]
         url = f"socket://127.0.0.1:{relay_port}"
-        async with open_line(url, "fc", echo=True) as (line, _):
+        async with open_port(url, "fc", echo=True) as (line, _):
             raw = value(await run_job(line, target, pkw.read(target.dialect, 1613)))
         server.close()
     assert raw == sim.drives[5].value(1613)
@@ -207,7 +207,7 @@ async def test_the_port_vanishes_mid_exchange_and_comes_back(end: str, tmp_path:
     )
     port = server.url if end == "tcp" else server.path
     settings = PortSettings(port, reopen_initial=0.05, reopen_cap=0.2)
-    line = Line(settings, Protocol.FC, timeout=1.0)
+    line = TelegramPort(settings, Protocol.FC, timeout=1.0)
     await line.open()
     try:
         job = asyncio.create_task(run_job(line, target, pkw.read(target.dialect, 341)))
@@ -251,7 +251,7 @@ async def test_a_foreign_telegram_before_the_answer_is_not_taken_for_it() -> Non
         host, sim_port = port.removeprefix("socket://").split(":")
         server = await asyncio.start_server(relay, "127.0.0.1", 0)
         url = f"socket://127.0.0.1:{server.sockets[0].getsockname()[1]}"
-        async with open_line(url, "fc") as (line, trace):
+        async with open_port(url, "fc") as (line, trace):
             outcome = await run_job(line, target, pkw.read(target.dialect, 341), retries=0)
         server.close()
     assert value(outcome) == sim.drives[1].value(341)
@@ -261,7 +261,7 @@ async def test_a_foreign_telegram_before_the_answer_is_not_taken_for_it() -> Non
 async def test_only_foreign_answers_end_as_an_address_error() -> None:
     sim = make_sim("fc", [1], faults=SimFaults(wrong_address=1.0))
     target = DriveTarget.create("fc", 1)
-    async with serve(sim, "tcp") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+    async with serve(sim, "tcp") as port, open_port(port, "fc", timeout=0.05) as (line, _):
         result = await line.exchange(target.adr, target.telegram(pkw.read(target.dialect, 341)))
     assert isinstance(result, Failure) and result.kind is ErrorKind.ADDRESS
 
@@ -288,7 +288,7 @@ async def test_an_echo_is_not_taken_for_the_answer_when_echo_is_off(
         host, sim_port = port.removeprefix("socket://").split(":")
         server = await asyncio.start_server(relay, "127.0.0.1", 0)
         url = f"socket://127.0.0.1:{server.sockets[0].getsockname()[1]}"
-        async with open_line(url, "fc") as (line, _):
+        async with open_port(url, "fc") as (line, _):
             raw = value(await run_job(line, target, pkw.read(target.dialect, 341), retries=0))
         server.close()
     assert raw == 4321

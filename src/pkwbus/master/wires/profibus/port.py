@@ -27,7 +27,7 @@ from pkwbus.protocol.profibus.dp.slave import Answer, Garbled, NoAnswer
 from pkwbus.protocol.profibus.fdl import DataFrame, Frame, FramingError, ShortAck, Skipped, Token
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 
-__all__ = ["DpLine", "ForeignMaster", "TraceHook", "describe_frame"]
+__all__ = ["FdlPort", "ForeignMaster", "TraceHook", "describe_frame"]
 
 TraceHook = Callable[[str, str], None]  # direction ("tx"/"rx"), the decoded frame
 
@@ -73,7 +73,7 @@ def _foreign(event: Frame, master: int) -> str | None:
     return None
 
 
-class DpLine:
+class FdlPort:
     """A DP line: one port, one request at a time, answers within the slot time."""
 
     def __init__(

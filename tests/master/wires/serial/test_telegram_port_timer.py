@@ -8,7 +8,7 @@ from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimFaults
-from tests.master.conftest import make_sim, open_line, serve
+from tests.master.conftest import make_sim, open_port, serve
 
 
 def _telegram(target: DriveTarget) -> bytes:
@@ -18,7 +18,7 @@ def _telegram(target: DriveTarget) -> bytes:
 async def test_a_shorter_timeout_after_a_longer_one_fires_on_time() -> None:
     sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
     alive, dead = DriveTarget.create("fc", 1), DriveTarget.create("fc", 2)
-    async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+    async with serve(sim, "pty") as port, open_port(port, "fc", timeout=0.05) as (line, _):
         loop = asyncio.get_running_loop()
         assert isinstance(await line.exchange(alive.adr, _telegram(alive), timeout=2.0), Reply)
         t0 = loop.time()
@@ -31,7 +31,7 @@ async def test_a_shorter_timeout_after_a_longer_one_fires_on_time() -> None:
 async def test_a_longer_timeout_after_a_shorter_one_is_not_cut_short() -> None:
     sim = make_sim("fc", [1, 2], faults=SimFaults(dead=frozenset({2})))
     alive, dead = DriveTarget.create("fc", 1), DriveTarget.create("fc", 2)
-    async with serve(sim, "pty") as port, open_line(port, "fc", timeout=0.05) as (line, _):
+    async with serve(sim, "pty") as port, open_port(port, "fc", timeout=0.05) as (line, _):
         loop = asyncio.get_running_loop()
         # a shorter timer armed first (long enough to be answered within on a loaded machine)
         assert isinstance(await line.exchange(alive.adr, _telegram(alive), timeout=0.3), Reply)

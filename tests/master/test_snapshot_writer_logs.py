@@ -16,8 +16,8 @@ from pkwbus.master.planning.plan import (
     HealthChanged,
     PollSpec,
 )
-from pkwbus.master.recorder import REFUSAL_RETELL, LineRecorder
 from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import REFUSAL_RETELL, SnapshotWriter
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DriveDescription
@@ -27,8 +27,8 @@ POLL = PollSpec("19-99", 0, pkw.read(TARGET.dialect, 1999), 1.0)
 REFUSED = Rejected(0, "Illegal PNU", "illegal PNU")
 
 
-def record(clock: list[float]) -> LineRecorder:
-    return LineRecorder(
+def record(clock: list[float]) -> SnapshotWriter:
+    return SnapshotWriter(
         "l1", [DriveSpec("fan", carrier_for(TARGET), (POLL,))], Snapshot(), clock=lambda: clock[0]
     )
 

@@ -17,7 +17,7 @@ import pytest
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
 from pkwbus.master.wires.profibus.cycle import SlaveLocked
-from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
+from pkwbus.master.wires.profibus.port import FdlPort, ForeignMaster
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
@@ -40,8 +40,8 @@ from pkwbus.sim import SimTiming
 from pkwbus.sim.drives.faults import Answer
 from pkwbus.sim.profibus.line import DpSimulator
 from tests.master.conftest import serve
-from tests.master.wires.profibus.dp_jobs import DpMaster, run_dp_job
-from tests.master.wires.profibus.dp_wire import DpWire, fake_master, record_dp_wire
+from tests.master.wires.profibus.cycle_harness import CycleHarness, run_dp_job
+from tests.master.wires.profibus.frame_log import FrameLog, fake_master, log_frames
 
 MASTER = 2
 SLOT = 0.02
@@ -60,12 +60,12 @@ def setup_for(sim: DpSimulator, address: int, master: int = MASTER) -> SlaveSetu
 @asynccontextmanager
 async def dp_master(
     sim: DpSimulator, end: str, addresses: list[int]
-) -> AsyncIterator[tuple[DpMaster, DpWire]]:
-    wire = record_dp_wire(sim)
+) -> AsyncIterator[tuple[CycleHarness, FrameLog]]:
+    wire = log_frames(sim)
     async with serve(sim, end) as port:  # type: ignore[arg-type]
-        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        line = FdlPort(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
         slaves = [(setup_for(sim, a), ppo.PkwSlot(sim.ppo, sim.dialect)) for a in addresses]
-        master = DpMaster(line, slaves)
+        master = CycleHarness(line, slaves)
         await master.start(listen=0.02)
         try:
             yield master, wire
@@ -75,7 +75,7 @@ async def dp_master(
 
 
 async def job(
-    master: DpMaster, address: int, request: pkw.PkwRequest, within: float = 3.0
+    master: CycleHarness, address: int, request: pkw.PkwRequest, within: float = 3.0
 ) -> Outcome:
     deadline = asyncio.get_running_loop().time() + within
     return await run_dp_job(master, address, request, deadline=deadline)
@@ -176,10 +176,10 @@ async def test_a_slave_owned_by_another_master_is_never_parametrised(end: str) -
         raw = sim.handle(fdl.encode(frame))
         other.feed(NoAnswer() if raw is None else fdl.decode(raw), n * 0.01)
     assert sim.slaves[8].owner == 1
-    wire = record_dp_wire(sim)
+    wire = log_frames(sim)
     async with serve(sim, end) as port:  # type: ignore[arg-type]
-        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
-        master = DpMaster(line, [(setup_for(sim, 8), ppo.PkwSlot(sim.ppo, sim.dialect))])
+        line = FdlPort(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        master = CycleHarness(line, [(setup_for(sim, 8), ppo.PkwSlot(sim.ppo, sim.dialect))])
         await master.start(listen=0.02)
         try:
             with pytest.raises(SlaveLocked, match="owned by master 1"):
@@ -194,8 +194,8 @@ async def test_a_slave_owned_by_another_master_is_never_parametrised(end: str) -
 
 async def test_another_master_on_the_line_is_refused_before_anything_is_sent() -> None:
     async with fake_master() as fake:
-        line = DpLine(PortSettings(fake.url, baudrate=19200), MASTER, slot_time=SLOT)
-        master = DpMaster(line, [])
+        line = FdlPort(PortSettings(fake.url, baudrate=19200), MASTER, slot_time=SLOT)
+        master = CycleHarness(line, [])
         with pytest.raises(ForeignMaster, match=r"another master is active.*station 1"):
             await master.start()
         await asyncio.sleep(0.05)
@@ -204,11 +204,11 @@ async def test_another_master_on_the_line_is_refused_before_anything_is_sent() -
 
 
 def test_the_idle_times_and_the_slot_time_follow_the_baud_rate() -> None:
-    line = DpLine(PortSettings("/dev/null", baudrate=19200, parity="N"), MASTER)
+    line = FdlPort(PortSettings("/dev/null", baudrate=19200, parity="N"), MASTER)
     assert line.settings.parity == "E"
     assert line.settings.start_pause == pytest.approx(37 / 19200)
     assert line.slot_time == pytest.approx(0.030)
-    assert DpLine(PortSettings("/dev/null", baudrate=93750), MASTER).slot_time == pytest.approx(
+    assert FdlPort(PortSettings("/dev/null", baudrate=93750), MASTER).slot_time == pytest.approx(
         0.008
     )
     assert line.token_lost_time() == pytest.approx((6 + 2 * MASTER) * 0.030)
@@ -261,7 +261,7 @@ async def test_a_port_lost_while_the_request_goes_out_leaves_no_unretrieved_erro
     """The loss is raised by the request's own send; the answer's waiter, which the loss
     also ended, is not left with an error nobody reads (asyncio would log it)."""
     caplog.set_level(logging.ERROR, logger="asyncio")
-    line = DpLine(PortSettings("socket://127.0.0.1:9", baudrate=19200), MASTER, slot_time=SLOT)
+    line = FdlPort(PortSettings("socket://127.0.0.1:9", baudrate=19200), MASTER, slot_time=SLOT)
 
     async def lost_while_sending(raw: bytes) -> None:
         line._on_lost("lost socket://127.0.0.1:9: the port was closed at its other end")
@@ -292,7 +292,7 @@ async def test_an_unanswered_record_request_is_repeated_at_once_and_data_exchang
         return answer(frame, now)
 
     sim.answer = drop_the_first_record_request  # type: ignore[method-assign]
-    wire = record_dp_wire(sim)  # sees every request, the dropped one too
+    wire = log_frames(sim)  # sees every request, the dropped one too
     ended: list[TransferEnded] = []
 
     def on_event(address: int, event: object) -> None:
@@ -300,9 +300,9 @@ async def test_an_unanswered_record_request_is_repeated_at_once_and_data_exchang
             ended.append(event)
 
     async with serve(sim, end) as port:
-        line = DpLine(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
+        line = FdlPort(PortSettings(port, baudrate=19200), MASTER, slot_time=SLOT)
         setup = dataclasses.replace(setup_for(sim, 8), dpv1=Dpv1Setup(response_timeout=2.0))
-        master = DpMaster(line, [(setup, None)], on_event=on_event)
+        master = CycleHarness(line, [(setup, None)], on_event=on_event)
         await master.start(listen=0.02)
         try:
             slave = master.runs[8].slave

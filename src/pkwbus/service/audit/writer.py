@@ -10,7 +10,7 @@ The rules:
   and the answer says ``"audit": "incomplete"``; the outcome is kept in memory
   (up to :data:`MAX_UNSAVED` rows) and stored as soon as the log records again;
 - the log is *failing* from a failed store until a later store succeeds; while
-  it is failing, :meth:`AuditRecorder.problem` (asked by ``/readyz``) tries a
+  it is failing, :meth:`AuditWriter.problem` (asked by ``/readyz``) tries a
   small store at most every ``probe_interval`` seconds, so the service recovers
   once there is room again, without waiting for a write.
 
@@ -32,10 +32,11 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Final, TypeVar
 
+from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.log import AuditEntry, AuditError, AuditLog
 from pkwbus.service.metrics.instrumentation import ApiMetrics
 
-__all__ = ["MAX_UNSAVED", "PROBE_INTERVAL", "RETRY_DELAYS", "AuditRecorder", "AuditUnavailable"]
+__all__ = ["MAX_UNSAVED", "PROBE_INTERVAL", "RETRY_DELAYS", "AuditUnavailable", "AuditWriter"]
 
 log = logging.getLogger("pkwbus.service.recorder")  # the name its log lines have always carried
 
@@ -46,11 +47,11 @@ MAX_UNSAVED: Final = 256  # outcomes kept for a failing log; older ones stay pen
 T = TypeVar("T")
 
 
-class AuditUnavailable(Exception):
+class AuditUnavailable(PkwbusError):
     """The audit log cannot record a write's attempt: the write must not be sent."""
 
 
-class AuditRecorder:
+class AuditWriter:
     def __init__(
         self,
         audit: AuditLog | None,

@@ -3,17 +3,17 @@
 An exchange is one request telegram out and one answer (or an error) in.
 A PKW job is a series of exchanges (:class:`PkwTransaction`), driven by the
 planner (:mod:`pkwbus.master.planning.planner`), which may put other drives'
-exchanges between its repeats. Its port (:attr:`Line.link`) owns the
+exchanges between its repeats. Its port (:attr:`TelegramPort.link`) owns the
 port's state and back-off and tells its listeners of each change.
 
 An exchange runs as a small state machine in the line's callbacks
-(:meth:`Line.start`): the start pause is counted from the last byte
+(:meth:`TelegramPort.start`): the start pause is counted from the last byte
 received, and whatever the caller does before starting the next exchange
 uses it up; only what remains is waited, by a loop timer (a remainder of a
 few microseconds is waited in place, cheaper than a wake-up). The request
 goes out from that timer or at once, the answer is checked in the data
 callback, and the caller's callback gets the result. No coroutine, lock or
-future per exchange: :meth:`Line.exchange` wraps one exchange in a future
+future per exchange: :meth:`TelegramPort.exchange` wraps one exchange in a future
 for callers that await.
 """
 
@@ -40,7 +40,7 @@ from pkwbus.protocol.serial.telegram import (
     uss_lengths,
 )
 
-__all__ = ["WAIT_IN_PLACE", "Done", "Line", "TraceHook"]
+__all__ = ["WAIT_IN_PLACE", "Done", "TelegramPort", "TraceHook"]
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,7 @@ class _State(enum.Enum):
     ANSWER = "answer"  # the request is out, the answer is awaited
 
 
-class Line:
+class TelegramPort:
     """A line: one port, one exchange at a time."""
 
     def __init__(

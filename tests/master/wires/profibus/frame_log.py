@@ -16,7 +16,7 @@ from pkwbus.sim.profibus.line import DpSimulator
 
 
 @dataclass
-class DpWire:
+class FrameLog:
     """Every request frame that reached the simulator, decoded."""
 
     frames: list[fdl.DataFrame] = field(default_factory=list)
@@ -44,9 +44,9 @@ class DpWire:
         assert all(w == pzd.MONITORING_CTW for w in words)
 
 
-def record_dp_wire(sim: DpSimulator) -> DpWire:
+def log_frames(sim: DpSimulator) -> FrameLog:
     """Wrap ``sim.answer`` so that every request frame is kept."""
-    wire = DpWire()
+    wire = FrameLog()
     answer = sim.answer
 
     def logged(frame: object, now: float | None = None) -> Answer | None:

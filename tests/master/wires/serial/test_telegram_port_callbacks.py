@@ -7,7 +7,7 @@ import asyncio
 from pkwbus.master.planning.answers import ExchangeResult, Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from tests.master.conftest import make_sim, open_line, serve
+from tests.master.conftest import make_sim, open_port, serve
 
 
 def _telegram(target: DriveTarget) -> bytes:
@@ -17,7 +17,7 @@ def _telegram(target: DriveTarget) -> bytes:
 async def test_an_exchange_runs_in_callbacks_and_hands_its_result_over() -> None:
     sim = make_sim("fc", [1])
     target = DriveTarget.create("fc", 1)
-    async with serve(sim, "pty") as port, open_line(port, "fc") as (line, trace):
+    async with serve(sim, "pty") as port, open_port(port, "fc") as (line, trace):
         got: asyncio.Future[ExchangeResult] = asyncio.get_running_loop().create_future()
         line.send(target.adr, _telegram(target), got.set_result)
         assert line.busy
@@ -33,7 +33,7 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
     sim = make_sim("fc", [1])
     target = DriveTarget.create("fc", 1)
     telegram = _telegram(target)
-    async with serve(sim, "pty") as port, open_line(port, "fc", pause=0.004) as (line, trace):
+    async with serve(sim, "pty") as port, open_port(port, "fc", pause=0.004) as (line, trace):
         loop = asyncio.get_running_loop()
         pause = line.link.settings.start_pause
         assert isinstance(await line.exchange(target.adr, telegram), Reply)
@@ -66,7 +66,7 @@ async def test_input_is_discarded_only_when_stray_bytes_arrived() -> None:
     sim = make_sim("fc", [1, 2])
     target = DriveTarget.create("fc", 1)
     telegram = _telegram(target)
-    async with serve(sim, "pty") as port, open_line(port, "fc") as (line, _):
+    async with serve(sim, "pty") as port, open_port(port, "fc") as (line, _):
         flushes = 0
         real = line.link._discard_input
 

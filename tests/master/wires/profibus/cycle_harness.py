@@ -1,4 +1,4 @@
-"""The DP cycle over a real :class:`DpLine`, one cycle at a time, and one job through a
+"""The DP cycle over a real :class:`FdlPort`, one cycle at a time, and one job through a
 slave's start-up and PKW slot: the test harness of the cycle and the line (the command
 line and the service drive both through the line runner, :mod:`pkwbus.master.runner`)."""
 
@@ -14,7 +14,7 @@ from pkwbus.master.planning.answers import PkwAnswer
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
 from pkwbus.master.wires.profibus.cycle import IDLE_STEP, CycleEvent, SlaveCycle, SlaveLocked
-from pkwbus.master.wires.profibus.line import DpLine, ForeignMaster
+from pkwbus.master.wires.profibus.port import FdlPort, ForeignMaster
 from pkwbus.protocol import pkw
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, SlotAnswer
 from pkwbus.protocol.profibus.dp.services import global_control_clear
@@ -30,13 +30,13 @@ from pkwbus.protocol.profibus.fdl import DataFrame
 EventHook = Callable[[int, CycleEvent], None]
 
 
-class DpMaster:
-    """The pure :class:`SlaveCycle` of a few slaves, its requests sent on a :class:`DpLine`
+class CycleHarness:
+    """The pure :class:`SlaveCycle` of a few slaves, its requests sent on a :class:`FdlPort`
     and its answers fed back, one whole cycle per :meth:`cycle`; every event to ``on_event``."""
 
     def __init__(
         self,
-        line: DpLine,
+        line: FdlPort,
         slaves: Sequence[tuple[SlaveSetup, PkwSlot | None]],
         *,
         on_event: EventHook | None = None,
@@ -97,7 +97,7 @@ class DpMaster:
 
 
 async def run_dp_job(
-    master: DpMaster, address: int, request: pkw.PkwRequest, *, deadline: float
+    master: CycleHarness, address: int, request: pkw.PkwRequest, *, deadline: float
 ) -> Outcome:
     """One job through a slave's start-up and its PKW slot, on a started master.
 

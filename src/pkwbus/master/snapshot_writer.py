@@ -2,7 +2,7 @@
 
 A finished job or poll is decoded here (the value in the drive's notation,
 or why there is none), the snapshot keeps only values a drive sent, and what
-the recorder makes of the stream goes back on it as events of its own
+the writer makes of the stream goes back on it as events of its own
 (:class:`~pkwbus.master.events.JobDone`, :class:`~pkwbus.master.events.ValueLanded`,
 :class:`~pkwbus.master.events.DescriptionChecked`) for the line's observers.
 Drive health, status words, the line's port and the DP slaves' states and
@@ -45,7 +45,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.length import AUTO, shown
 
-__all__ = ["REFUSAL_RETELL", "LineRecorder", "job_result"]
+__all__ = ["REFUSAL_RETELL", "SnapshotWriter", "job_result"]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
 
@@ -67,7 +67,7 @@ def job_result(
     return JobResult(outcome, raw, value, tally)
 
 
-class LineRecorder:
+class SnapshotWriter:
     """Applies one line's events to the snapshot and the jobs' futures."""
 
     def __init__(
@@ -80,7 +80,7 @@ class LineRecorder:
     ) -> None:
         self.line = line
         self.snapshot = snapshot
-        self._out: list[Event] = []  # what this recorder makes of the events it applies
+        self._out: list[Event] = []  # what this writer makes of the events it applies
         self._clock = clock
         # A poll the drive refuses, by (drive, parameter, index): when it was last told.
         self._refused: dict[tuple[str, str, int], float] = {}
@@ -95,7 +95,7 @@ class LineRecorder:
 
     def apply(self, events: Sequence[Event], at: float | None = None) -> list[Event]:
         """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now).
-        What the recorder made of them: its own events, for the line's observers."""
+        What the writer made of them: its own events, for the line's observers."""
         if at is None:
             at = time.time()
         out: list[Event] = []
