@@ -5,16 +5,17 @@ Raises nothing itself; :class:`ConfigError` is what the loading functions raise.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Final
 
 from pydantic import (
     BaseModel,
     ConfigDict,
 )
-from pydantic_core import PydanticCustomError
+from pydantic_core import ErrorDetails, PydanticCustomError
 
 from pkwbus.errors import PkwbusError
+from pkwbus.problems import place, plain
 from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS
 
 __all__ = [
@@ -30,6 +31,7 @@ __all__ = [
     "Model",
     "Place",
     "fail",
+    "placed",
 ]
 
 
@@ -63,6 +65,20 @@ def fail(problems: Sequence[Place]) -> PydanticCustomError:
     return PydanticCustomError(
         "pkwbus_problems", "{summary}", {"summary": summary, "problems": list(problems)}
     )
+
+
+def placed(errors: Iterable[ErrorDetails], root: type[BaseModel]) -> list[Place]:
+    """A validation's problems in plain words, each with its place relative to ``root``
+    (the model validated there, whose settings an unknown key is answered with)."""
+    out: list[Place] = []
+    for error in errors:
+        where = place(error["loc"])
+        if error["type"] == "pkwbus_problems":
+            for inner, message in error.get("ctx", {}).get("problems", []):
+                out.append((f"{where}.{inner}" if where and inner else where or inner, message))
+        else:
+            out.append((where, plain(error, root)))
+    return out
 
 
 class Model(BaseModel):

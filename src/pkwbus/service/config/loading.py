@@ -11,8 +11,8 @@ from pydantic import (
     ValidationError,
 )
 
-from pkwbus.problems import kind, place, plain
-from pkwbus.service.config.base import LISTEN_ENV, MAX_CONFIG_BYTES, ConfigError
+from pkwbus.problems import kind
+from pkwbus.service.config.base import LISTEN_ENV, MAX_CONFIG_BYTES, ConfigError, placed
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.model import Config
 from pkwbus.yamlfile import YamlError, load_yaml
@@ -81,19 +81,8 @@ def _parse_yaml(text: str) -> dict[str, Any]:
 
 def _problems(exc: ValidationError, *, listen_from_env: bool) -> list[str]:
     out: list[str] = []
-    for error in exc.errors(include_url=False):
-        base = place(error["loc"])
-        if listen_from_env and base.startswith("listen"):
-            base = f"{LISTEN_ENV} (overrides listen)"
-        if error["type"] == "pkwbus_problems":
-            for where, message in error.get("ctx", {}).get("problems", []):
-                out.append(f"{_join(base, where)}: {message}")
-        else:
-            out.append(f"{base or 'config'}: {plain(error, Config)}")
+    for where, message in placed(exc.errors(include_url=False), Config):
+        if listen_from_env and where.startswith("listen"):
+            where = f"{LISTEN_ENV} (overrides listen)"
+        out.append(f"{where or 'config'}: {message}")
     return out
-
-
-def _join(base: str, place: str) -> str:
-    if not base:
-        return place or "config"
-    return f"{base}.{place}" if place else base
