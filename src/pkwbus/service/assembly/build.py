@@ -103,8 +103,10 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
     for line, specs in planned:
         port = line.port
         if line.sim is not None:
-            start = _start_dp_sim if line.protocol is Protocol.PROFIBUS else _start_sim
-            port, close = await start(line, line.sim)
+            if isinstance(line, cfg.ProfibusLine):
+                port, close = await _start_dp_sim(line, line.sim)
+            else:
+                port, close = await _start_sim(line, line.sim)
             cleanups.append(close)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
@@ -112,7 +114,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
             line.name, dialects, landed, uss=uss, dp=dp, descriptions=descriptions
         )
         counts[line.name] = events
-        if dp:
+        if isinstance(line, cfg.ProfibusLine):
             runners.append(_dp_runner(line, port, specs, snapshot, events))
             continue
         wire = ExchangeWire(port_for(line, port))
@@ -153,7 +155,7 @@ def port_for(line: cfg.Line, port: str) -> TelegramPort:
 
 
 def _dp_runner(
-    line: cfg.Line,
+    line: cfg.ProfibusLine,
     port: str,
     specs: list[DriveSpec],
     snapshot: Snapshot,
@@ -201,7 +203,7 @@ def _dp_runner(
 def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
     """Where and how a configured drive is reached."""
     record = None
-    if line.protocol == Protocol.PROFIBUS and drive.access == "ds47":
+    if isinstance(drive, cfg.ProfibusDrive) and drive.access == "ds47":
         axis = drive.axis if drive.axis is not None else AXES.get(drive.pkw_dialect.name, 0)
         settings = drive.dp.settings()[0]
         dpv1 = settings.dpv1 if settings is not None else None
@@ -213,7 +215,7 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
         drive.layout,
         drive.shape,
         line.address_format,
-        learn=drive.pkw_words == AUTO and line.protocol == Protocol.USS,
+        learn=isinstance(drive, cfg.UssDrive) and drive.pkw_words == AUTO,
         record=record,
     )
 
@@ -295,7 +297,7 @@ def describe_targets(
     # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block
     # (data record 47 carries it).
     short = (target.protocol is Protocol.PROFIBUS and target.record is None) or (
-        target.protocol is Protocol.USS and drive.pkw_words in (3, 4)
+        isinstance(drive, cfg.UssDrive) and drive.pkw_words in (3, 4)
     )
     targets = []
     for pnu, (name, limits) in wanted.items():
@@ -330,17 +332,20 @@ def _info(
     )
 
 
-async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[], Awaitable[None]]]:
+async def _start_sim(
+    line: cfg.FcLine | cfg.UssLine, sim: cfg.SimPort
+) -> tuple[str, Callable[[], Awaitable[None]]]:
     catalogs = {d.catalog for d in line.drives if d.catalog}
     first = line.drives[0]  # the config checked that the drives share one shape
+    uss = first if isinstance(first, cfg.UssDrive) else None  # FC: one telegram shape
     simulator = Simulator(
         line.protocol,
         sim.drives,
         dialect=first.pkw_dialect.name,
         ind_layout=first.layout,
         # A drive learned by its answers is simulated as Siemens drives leave the factory.
-        pkw_words=None if first.pkw_words == AUTO else first.pkw_words,
-        pzd_words=first.pzd_words,
+        pkw_words=None if uss is None or uss.pkw_words == AUTO else uss.pkw_words,
+        pzd_words=2 if uss is None else uss.pzd_words,
         timing=SimTiming(
             response_delay=sim.response_delay
             if sim.response_delay is not None
@@ -353,7 +358,7 @@ async def _start_sim(line: cfg.Line, sim: cfg.SimPort) -> tuple[str, Callable[[]
 
 
 async def _start_dp_sim(
-    line: cfg.Line, sim: cfg.SimPort
+    line: cfg.ProfibusLine, sim: cfg.SimPort
 ) -> tuple[str, Callable[[], Awaitable[None]]]:
     """Simulated slaves, each of its drive's dialect, ident and catalog (one PPO per line)."""
     each: dict[int, SlaveKind] = {}

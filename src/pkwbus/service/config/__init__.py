@@ -15,20 +15,30 @@ Environment:
   shows in a repr, a log line or an error;
 - ``PKWBUS_LISTEN`` (HOST:PORT), when set, replaces the file's ``listen``.
 
-Defaults that depend on the line are filled in once the line is valid: a
+Each line is of its bus's class, picked by its ``protocol`` (a discriminated
+union, :data:`Line`): :class:`FcLine`, :class:`UssLine` or
+:class:`ProfibusLine`, with drives of the same bus (:class:`FcDrive`,
+:class:`UssDrive`, :class:`ProfibusDrive`; :data:`Drive` is any of them). A
+setting of another bus is refused with the bus it applies to
+(``lines[0].drives[0].gsd: applies to protocol profibus only``).
+
+Defaults that depend on the bus are filled in once the line is valid: a
 drive's dialect (``fc`` on an FC line, ``uss`` on a USS line), its IND layout
 (the dialect's), its PKW/PZD lengths (USS 4 and 2; FC fixed). The fields keep
 what the file said; the resolved values are the properties
-:attr:`Drive.protocol`, :attr:`Drive.pkw_dialect`, :attr:`Drive.layout` and
-:attr:`Drive.shape`.
+:attr:`~DriveBase.pkw_dialect`, :attr:`~DriveBase.layout` and
+:attr:`~DriveBase.shape`; every line and drive has its ``protocol``.
 
 The package's modules: :mod:`.base` (the error, the base model, constants),
 :mod:`.fields` (field types), :mod:`.catalogs`, :mod:`.parameters`
-(overrides and polls), :mod:`.drive`, :mod:`.line`, :mod:`.model` (the whole
-file), :mod:`.loading`; and :mod:`.line_load`, how busy each line of a valid
-configuration would be (``pkwbus check-config``'s estimate, not re-exported
-here). Problems are worded by :mod:`pkwbus.problems`, shared
-with the catalogs; ``sim://`` ports are parsed by :mod:`pkwbus.sim.serving.url`.
+(overrides and polls), :mod:`.drive` and :mod:`.line` (what every bus's
+drives and lines have), :mod:`.serial` (FC and USS), :mod:`.profibus` (a DP
+drive and its settings), :mod:`.dp_problems` and :mod:`.profibus_line` (the DP
+line), :mod:`.model` (the whole file), :mod:`.loading`; and
+:mod:`.line_load`, how busy each line of a valid configuration would be
+(``pkwbus check-config``'s estimate, not re-exported here). Problems are
+worded by :mod:`pkwbus.problems`, shared with the catalogs; ``sim://`` ports
+are parsed by :mod:`pkwbus.sim.serving.url`.
 """
 
 from pkwbus.durations import parse_duration
@@ -44,11 +54,14 @@ from pkwbus.service.config.base import (
     ConfigError,
 )
 from pkwbus.service.config.catalogs import CatalogLike, Catalogs, builtin_catalogs
-from pkwbus.service.config.drive import Drive
-from pkwbus.service.config.line import Line, Rs485
+from pkwbus.service.config.drive import DriveBase
+from pkwbus.service.config.line import LineBase, Rs485
 from pkwbus.service.config.loading import load_config, parse_config
-from pkwbus.service.config.model import Api, Config, Listen, parse_listen
+from pkwbus.service.config.model import Api, Config, Drive, Line, Listen, parse_listen
 from pkwbus.service.config.parameters import OVERRIDE_FIELDS, ParameterOverrides, Poll
+from pkwbus.service.config.profibus import ProfibusDrive
+from pkwbus.service.config.profibus_line import ProfibusLine
+from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
 from pkwbus.sim.serving.url import SimPort, parse_sim_port
 
 __all__ = [
@@ -67,12 +80,20 @@ __all__ = [
     "Config",
     "ConfigError",
     "Drive",
+    "DriveBase",
+    "FcDrive",
+    "FcLine",
     "Line",
+    "LineBase",
     "Listen",
     "ParameterOverrides",
     "Poll",
+    "ProfibusDrive",
+    "ProfibusLine",
     "Rs485",
     "SimPort",
+    "UssDrive",
+    "UssLine",
     "builtin_catalogs",
     "load_config",
     "parse_config",

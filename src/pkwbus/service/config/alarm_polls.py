@@ -4,21 +4,21 @@ the configuration does not poll them (``alarms: auto``): slowly, and counted in
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pkwbus.catalog.alarms import CodeTable, WordTable, alarm_table
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 
 if TYPE_CHECKING:
-    from pkwbus.service.config.drive import Drive
-    from pkwbus.service.config.line import Line
+    from pkwbus.service.config.drive import DriveBase
+    from pkwbus.service.config.line import LineBase
 
 __all__ = ["ALARM_EVERY", "alarm_polls"]
 
 ALARM_EVERY = 30.0  # seconds: the alarm words polled by default, slowly
 
 
-def alarm_polls(line: Line, drive: Drive, polled: set[int]) -> list[ParameterRef]:
+def alarm_polls(line: LineBase[Any], drive: DriveBase, polled: set[int]) -> list[ParameterRef]:
     """The alarm words and current fault numbers the drive's catalog explains that the
     configuration does not poll: polled by default (``alarms: auto``), the first element
     of an array."""

@@ -17,6 +17,7 @@ from pydantic_core import ErrorDetails, PydanticCustomError
 from pkwbus.errors import PkwbusError
 from pkwbus.problems import place, plain
 from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS
+from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 
 __all__ = [
     "DEFAULT_LISTEN",
@@ -31,6 +32,7 @@ __all__ = [
     "Model",
     "Place",
     "fail",
+    "only",
     "placed",
 ]
 
@@ -79,6 +81,13 @@ def placed(errors: Iterable[ErrorDetails], root: type[BaseModel]) -> list[Place]
         else:
             out.append((where, plain(error, root)))
     return out
+
+
+def only(protocol: BusProtocol, *keys: str, why: str = "") -> dict[str, str]:
+    """What a user who gives one of ``keys``, settings of ``protocol``'s lines or drives,
+    on another bus's is told."""
+    told = f"applies to protocol {protocol} only" + (f": {why}" if why else "")
+    return dict.fromkeys(keys, told)
 
 
 class Model(BaseModel):

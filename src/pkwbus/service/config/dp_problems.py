@@ -1,6 +1,6 @@
-"""What stops a drive on a PROFIBUS DP line: its address against the master's, the fields
-the PPO sets, its parameter channel (the PPO's PKW words, or data record 47 on a DP-V1
-slave), and its GSD file against the line's rate and slot time."""
+"""What stops a drive on a PROFIBUS DP line: its address against the master's, its
+parameter channel (the PPO's PKW words, or data record 47 on a DP-V1 slave), and its GSD
+file against the line's rate and slot time."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profibus.gsd import Gsd
 from pkwbus.protocol.profidrive.parameters import AXES
 from pkwbus.service.config.base import Place
-from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.profibus import ProfibusDrive
 
 __all__ = ["DpLineSettings", "dp_drive_problems"]
 
@@ -25,19 +25,15 @@ class DpLineSettings:
     slot_time: float | None
 
 
-def dp_drive_problems(line: DpLineSettings, drive: Drive) -> list[Place]:
-    """What stops a drive on a DP line: its address, the settings the PPO makes, its
-    parameter channel (the PPO's PKW words, or data record 47 on a DP-V1 slave)."""
+def dp_drive_problems(line: DpLineSettings, drive: ProfibusDrive) -> list[Place]:
+    """What stops a drive on a DP line: its address, its parameter channel (the PPO's PKW
+    words, or data record 47 on a DP-V1 slave), its GSD file against the line. (The
+    settings the PPO makes are refused by :class:`~.profibus.ProfibusDrive` itself.)"""
     problems: list[Place] = []
     if drive.address == line.master_address:
         problems.append(
             ("address", f"{drive.address} is the master's own station (master_address)")
         )
-    problems += [
-        (key, "the PPO sets it over PROFIBUS: give ppo")
-        for key in ("pkw_words", "pzd_words", "ind_layout")
-        if key in drive.model_fields_set
-    ]
     kind = ppo.ppo_type(drive.ppo)
     settings, dp_problems = drive.dp.settings()
     dpv1 = settings is not None and settings.dpv1 is not None
@@ -112,7 +108,7 @@ def _rate_problems(line: DpLineSettings, found: Gsd) -> list[Place]:
     return []
 
 
-def _text_polls(drive: Drive) -> list[Place]:
+def _text_polls(drive: ProfibusDrive) -> list[Place]:
     """Text parameters do not travel in data record 47 here: their polls are refused."""
     problems: list[Place] = []
     for i, entry in enumerate(drive.poll):

@@ -1,15 +1,15 @@
-"""One drive (follower) on a line, with its parameters."""
+"""What every drive (follower) on a line has, whatever its bus: its name, address, dialect,
+catalog and parameters. Each bus's drive adds its own settings (:mod:`.serial`,
+:mod:`.profibus`)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
-from pathlib import Path
-from typing import Annotated, Literal, Self, TypeVar
+from abc import abstractmethod
+from collections.abc import Iterator, Mapping, Sequence
+from typing import ClassVar, Self
 
 from pydantic import (
     Field,
-    PlainValidator,
-    StrictBool,
     StrictInt,
     ValidationInfo,
     field_validator,
@@ -19,10 +19,7 @@ from pydantic import (
 from pkwbus.catalog import ParameterSpec
 from pkwbus.protocol.buses import default_dialect
 from pkwbus.protocol.pkw.dialects import Dialect, IndLayout, dialect
-from pkwbus.protocol.pkw.length import AUTO, UNKNOWN_SEND_WORDS
-from pkwbus.protocol.profibus.dp.ppo import LAYOUT as PPO_LAYOUT
-from pkwbus.protocol.profibus.dp.ppo import ppo_type
-from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape
+from pkwbus.protocol.serial.telegram import BlockShape
 from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.protocol.values import (
     ParameterRef,
@@ -31,35 +28,26 @@ from pkwbus.protocol.values import (
 )
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
-from pkwbus.service.config.fields import Alarms, Describe, Name, Notation, PkwWords
+from pkwbus.service.config.fields import Alarms, Describe, Name, Notation
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
-from pkwbus.service.config.profibus import DpDrive, hex_bytes, ident_number, resolve_gsd_path
 
-__all__ = ["Drive", "duplicates"]
-
-T = TypeVar("T")
+__all__ = ["DriveBase", "duplicates"]
 
 
-def _line_protocol(value: object) -> BusProtocol:
-    """The protocol the drive's line gives it (never a setting of the drive itself)."""
-    if isinstance(value, BusProtocol):
-        return value
-    raise ValueError("is the line's setting: give the protocol once, on the line")
+class DriveBase(Model):
+    """One drive (follower) on a line: what drives of every bus have."""
 
-
-def _optional(check: Callable[[object], T]) -> Callable[[object], T | None]:
-    return lambda value: None if value is None else check(value)
-
-
-class Drive(Model):
-    """One drive (follower) on a line."""
+    # The bus of the drive's line: each bus's drive is its own class.
+    protocol: ClassVar[BusProtocol]
+    # Keys the drive does not take, each with what a user who gives one is told (its line
+    # takes them out and tells them with its own problems: :class:`~.line.LineBase`).
+    refused_keys: ClassVar[Mapping[str, str]] = {
+        "protocol": "is the line's setting: give the protocol once, on the line"
+    }
 
     name: Name
     address: StrictInt
     dialect: str | None = Field(default=None, strict=True)
-    ind_layout: IndLayout | None = None
-    pkw_words: PkwWords = AUTO  # USS: learned from the drive's answers (protocol.pkw_length)
-    pzd_words: StrictInt = Field(default=2, ge=0, le=16)
     catalog: str | None = Field(default=None, strict=True)
     # The drive's own description elements (AK 4) over the catalog; None: the line's setting.
     describe: Describe | None = None
@@ -69,22 +57,6 @@ class Drive(Model):
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)
-    # PROFIBUS DP only: the PPO type, and the ident number or the GSD file (+ cfg, user_prm).
-    ppo: StrictInt = Field(default=1, ge=1, le=5)
-    ident: Annotated[int | None, PlainValidator(_optional(ident_number))] = None
-    gsd: str | None = Field(default=None, strict=True)
-    cfg: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
-    user_prm: Annotated[bytes | None, PlainValidator(_optional(hex_bytes))] = None
-    # DP-V1: None follows the GSD file (DPV1_Slave); parameters through the PPO's PKW words
-    # or PROFIdrive data record 47 (None: PKW where the PPO has it, else data record 47 on a
-    # DP-V1 slave); the drive object (axis) of data record 47 (None: the dialect's).
-    dpv1: StrictBool | None = None
-    parameter_access: Literal["pkw", "ds47"] | None = None
-    axis: StrictInt | None = Field(default=None, ge=0, le=255)
-    # Filled in by the Line from its own protocol before the drive is validated.
-    protocol: Annotated[BusProtocol, PlainValidator(_line_protocol)] = Field(
-        default=BusProtocol.FC, exclude=True
-    )
 
     @field_validator("dialect")
     @classmethod
@@ -92,18 +64,6 @@ class Drive(Model):
         if value is not None:
             dialect(value)
         return value
-
-    @field_validator("gsd")
-    @classmethod
-    def _gsd_path(cls, value: str | None, info: ValidationInfo) -> str | None:
-        """Relative to the configuration file's folder."""
-        if value is None:
-            return None
-        if not value.strip() or any(ord(c) < 0x20 for c in value):
-            raise ValueError("must be the path of the drive's GSD file")
-        context = info.context if isinstance(info.context, dict) else {}
-        base = context.get("base")
-        return resolve_gsd_path(value, base if isinstance(base, Path) else None)
 
     @field_validator("catalog")
     @classmethod
@@ -179,46 +139,20 @@ class Drive(Model):
         return dialect(self.dialect or default_dialect(self.protocol))
 
     @property
+    @abstractmethod
     def layout(self) -> IndLayout:
-        """The IND layout, given or the dialect's default (in a PPO always PROFIdrive's)."""
-        if self.protocol is BusProtocol.PROFIBUS:
-            return PPO_LAYOUT
-        return self.ind_layout or self.pkw_dialect.default_ind_layout
+        """The IND layout of its parameter requests."""
 
     @property
+    @abstractmethod
     def shape(self) -> BlockShape:
-        """The data block of a parameter telegram: FC fixed, USS as configured, DP the PPO's."""
-        if self.protocol is BusProtocol.FC:
-            return FC_PARAMETER
-        if self.protocol is BusProtocol.PROFIBUS:
-            kind = ppo_type(self.ppo)
-            return BlockShape(kind.pkw_words, kind.pzd_words)
-        return BlockShape(self.sent_pkw_words, self.pzd_words)
+        """The data block of a parameter telegram: its PKW and PZD words."""
 
     @property
-    def sent_pkw_words(self) -> int | None:
-        """The PKW words a request goes out with: configured, or while ``auto`` is not yet
-        learned the length both a fixed-4 and a variable drive answer."""
-        words = self.pkw_words
-        return UNKNOWN_SEND_WORDS if isinstance(words, str) else words
-
-    @property
-    def dp(self) -> DpDrive:
-        """The PROFIBUS DP fields, as given."""
-        return DpDrive(self.ppo, self.ident, self.gsd, None, self.cfg, self.user_prm, self.dpv1)
-
-    @property
-    def access(self) -> Literal["pkw", "ds47"] | None:
-        """How its parameters are reached on a DP line: as configured, else through the
-        PPO's PKW words where it has them, else data record 47 on a DP-V1 slave; None:
-        no way (a PPO without PKW on a DP-V0 slave)."""
-        if self.parameter_access is not None:
-            return self.parameter_access
-        if ppo_type(self.ppo).has_pkw:
-            return "pkw"
-        settings = self.dp.settings()[0]
-        dpv1 = settings.dpv1 if settings is not None else None
-        return "ds47" if dpv1 is not None and dpv1.read_write else None
+    @abstractmethod
+    def sim_shape(self) -> tuple[object, ...]:
+        """What one simulator answers all drives of a ``sim://`` line with: the same for
+        each of them."""
 
     def refs(self) -> Iterator[tuple[str, ParameterRef]]:
         """Every parameter the drive's config names, with its place."""

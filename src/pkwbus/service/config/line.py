@@ -1,14 +1,20 @@
-"""One RS-485 line: its port, framing and timing, and the drives on it."""
+"""What every line has, whatever its bus: its port, framing and timing, and the drives on
+it, checked against it. Each bus's line adds its own settings and checks (:mod:`.serial`,
+:mod:`.profibus_line`)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Self
+import typing
+from collections.abc import Mapping, Sequence
+from typing import Annotated, Any, ClassVar, Generic, Literal, Self, TypeVar
 
 from pydantic import (
     BeforeValidator,
     Field,
+    ModelWrapValidatorHandler,
     StrictBool,
     StrictInt,
+    ValidationError,
     ValidationInfo,
     field_validator,
     model_validator,
@@ -16,14 +22,9 @@ from pydantic import (
 
 from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
 from pkwbus.problems import short
-from pkwbus.protocol.buses import (
-    DIALECTS_BY_PROTOCOL,
-    DP_MAX_ADDRESS,
-    address_range,
-    default_dialect,
-)
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, address_range
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw.dialects import Dialect, dialect
+from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.serial import timing
 from pkwbus.protocol.serial.telegram import FcAddressFormat
 from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
@@ -31,9 +32,8 @@ from pkwbus.protocol.values import (
     ParameterRef,
     canonical,
 )
-from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail
-from pkwbus.service.config.dp_problems import DpLineSettings, dp_drive_problems
-from pkwbus.service.config.drive import Drive
+from pkwbus.service.config.base import PORT_SCHEMES, Model, Place, fail, placed
+from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.fields import (
     Alarms,
     CharTimeout,
@@ -42,16 +42,14 @@ from pkwbus.service.config.fields import (
     Name,
     Pause,
     Rs485Delay,
-    SlotTime,
     Timeout,
-    Watchdog,
     upper,
 )
 from pkwbus.sim.serving.url import SimPort, parse_sim_port
 
-__all__ = ["MAX_DP_RETRIES", "Line", "Rs485"]
+__all__ = ["LineBase", "Rs485"]
 
-MAX_DP_RETRIES = 8  # a DP slave's request is repeated at most 8 times (DpSlave, SlaveSetup)
+DriveT = TypeVar("DriveT", bound=DriveBase)
 
 
 def _check_port(value: str) -> str:
@@ -79,8 +77,11 @@ class Rs485(Model):
     delay_before_rx: Rs485Delay = 0.0
 
 
-class Line(Model):
-    """One RS-485 line: its port, framing and timing, and the drives on it."""
+class LineBase(Model, Generic[DriveT]):
+    """One RS-485 line: what lines of every bus have; its drives are its bus's."""
+
+    # Keys the line does not take, each with what a user who gives one is told.
+    refused_keys: ClassVar[Mapping[str, str]] = {}
 
     name: Name
     port: Annotated[str, Field(strict=True)]
@@ -94,17 +95,12 @@ class Line(Model):
     inter_char_timeout: CharTimeout | None = None
     response_delay: Delay | None = None
     echo: StrictBool = False
-    fc_address_format: FcAddressFormat | None = None
     low_latency: StrictBool = False  # ask the adapter's driver for 1 ms latency
     rs485: Rs485 | None = None  # kernel RS-485 mode (native UARTs)
-    # PROFIBUS DP only: pkwbus's own station, the slot time, the slaves' watchdog.
-    master_address: StrictInt = Field(default=2, ge=0, le=DP_MAX_ADDRESS)
-    slot_time: SlotTime | None = None
-    watchdog: Watchdog | None = None
     # The drives' own description elements (AK 4) over their catalogs; a drive may say otherwise.
     describe: Describe = "auto"
     alarms: Alarms = "auto"
-    drives: list[Drive] = Field(min_length=1)
+    drives: list[DriveT] = Field(min_length=1)
 
     @field_validator("port")
     @classmethod
@@ -124,71 +120,94 @@ class Line(Model):
     def _baudrate(cls, value: int) -> int:
         return check_baudrate(value)
 
-    @model_validator(mode="before")
+    @model_validator(mode="wrap")
     @classmethod
-    def _drives_on_this_protocol(cls, data: Any) -> Any:
-        """Each drive learns the line's protocol before it is validated (a drive that
-        names one itself is told it is the line's setting)."""
-        if not isinstance(data, dict) or not isinstance(data.get("drives"), list):
-            return data
-        given = data.get("protocol")
-        if not isinstance(given, str) or given not in {p.value for p in BusProtocol}:
-            return data  # the line's own error says what is wrong with it
-        protocol = BusProtocol(given)
-        drives = [{"protocol": protocol, **d} if isinstance(d, dict) else d for d in data["drives"]]
-        return {**data, "drives": drives}
-
-    @model_validator(mode="after")
-    def _drives_fit_line(self) -> Self:
-        problems = self._line_problems()
-        for i, drive in enumerate(self.drives):
-            problems += [
-                (f"drives[{i}].{p}" if p else f"drives[{i}]", m)
-                for p, m in _drive_problems(self, drive)
+    def _checked(cls, data: Any, handler: ModelWrapValidatorHandler[Self]) -> Self:
+        """The line as its fields make it, then checked whole with its drives. The keys
+        it and its drives refuse (another bus's settings) are taken out first and told
+        with the fields' problems, or else with those of the whole line."""
+        if not isinstance(data, dict):
+            return handler(data)
+        refused = [key for key in cls.refused_keys if key in data]
+        data = {k: v for k, v in data.items() if k not in cls.refused_keys}
+        drive_keys = cls.drive_class().refused_keys
+        drives_refused: dict[int, list[str]] = {}
+        if isinstance(data.get("drives"), list):
+            drives: list[object] = []
+            for i, drive in enumerate(data["drives"]):
+                if isinstance(drive, dict) and any(key in drive for key in drive_keys):
+                    drives_refused[i] = [key for key in drive_keys if key in drive]
+                    drive = {k: v for k, v in drive.items() if k not in drive_keys}
+                drives.append(drive)
+            data["drives"] = drives
+        try:
+            line = handler(data)
+        except ValidationError as exc:
+            if not refused and not drives_refused:
+                raise
+            told = [(key, cls.refused_keys[key]) for key in refused]
+            told += [
+                (f"drives[{i}].{key}", drive_keys[key])
+                for i, given in drives_refused.items()
+                for key in given
             ]
-        problems += self._address_problems()
+            raise fail([*placed(exc.errors(include_url=False), cls), *told]) from None
+        problems = line._problems(refused, drives_refused)
         if problems:
             raise fail(problems)
-        return self
+        return line
 
-    def _line_problems(self) -> list[Place]:
-        problems: list[Place] = []
-        if self.protocol is not BusProtocol.FC and self.fc_address_format is not None:
-            problems.append(("fc_address_format", "applies to protocol fc only"))
-        if self.protocol is BusProtocol.PROFIBUS:
-            problems += self._dp_line_problems()
-        else:
+    @classmethod
+    def drive_class(cls) -> type[DriveBase]:
+        """The class of the line's drives: its bus's."""
+        (found,) = typing.get_args(cls.model_fields["drives"].annotation)
+        assert isinstance(found, type) and issubclass(found, DriveBase), found
+        return found
+
+    def _problems(
+        self, refused: Sequence[str], drives_refused: Mapping[int, Sequence[str]]
+    ) -> list[Place]:
+        """What stops the line, its drives included (each refused key among them)."""
+        problems = [(key, self.refused_keys[key]) for key in refused]
+        problems += self._bus_problems()
+        problems += self._sim_problems()
+        for i, drive in enumerate(self.drives):
+            told = [(key, drive.refused_keys[key]) for key in drives_refused.get(i, ())]
             problems += [
-                (key, "applies to protocol profibus only")
-                for key in ("master_address", "slot_time", "watchdog")
-                if key in self.model_fields_set
+                (f"drives[{i}].{p}" if p else f"drives[{i}]", m)
+                for p, m in self._drive_problems(drive, told)
             ]
-        sim = self.sim
-        if sim is not None:
-            if sim.protocol is not self.protocol:
-                problems.append(
-                    ("port", f"simulates protocol {sim.protocol} but the line's is {self.protocol}")
-                )
-            missing = sorted({d.address for d in self.drives} - set(sim.drives))
-            if missing:
-                listed = ",".join(str(a) for a in missing)
-                problems.append(("port", f"simulates no drive at address {listed}"))
-            problems += self._sim_shape_problems()
+        problems += self._address_problems()
         return problems
 
-    def _dp_line_problems(self) -> list[Place]:
+    def _bus_problems(self) -> list[Place]:
+        """What stops the line on its bus (none beyond the fields' own checks here)."""
+        return []
+
+    def _bus_drive_problems(self, drive: DriveT) -> list[Place]:
+        """What stops ``drive`` on this bus (none beyond the checks of every bus here)."""
+        return []
+
+    def _sim_problems(self) -> list[Place]:
+        sim = self.sim
+        if sim is None:
+            return []
         problems: list[Place] = []
-        if self.parity != "E" or self.stopbits != 1:
-            problems.append(("parity", "PROFIBUS characters are always 8E1: parity E, stopbits 1"))
-        if self.retries > MAX_DP_RETRIES:
-            problems.append(("retries", f"at most {MAX_DP_RETRIES} over PROFIBUS"))
-        return problems
+        if sim.protocol is not self.protocol:
+            problems.append(
+                ("port", f"simulates protocol {sim.protocol} but the line's is {self.protocol}")
+            )
+        missing = sorted({d.address for d in self.drives} - set(sim.drives))
+        if missing:
+            listed = ",".join(str(a) for a in missing)
+            problems.append(("port", f"simulates no drive at address {listed}"))
+        return problems + self._sim_shape_problems()
 
     def _sim_shape_problems(self) -> list[Place]:
         """One simulator answers every drive of a ``sim://`` line with one telegram shape."""
         first = self.drives[0]
         for i, drive in enumerate(self.drives[1:], start=1):
-            if _sim_shape(self.protocol, drive) != _sim_shape(self.protocol, first):
+            if drive.sim_shape != first.sim_shape:
                 return [
                     (
                         f"drives[{i}]",
@@ -198,6 +217,31 @@ class Line(Model):
                     )
                 ]
         return []
+
+    def _drive_problems(self, drive: DriveT, told: list[Place]) -> list[Place]:
+        """What stops ``drive`` on this line: its address, its dialect, the keys it refused
+        (``told``), its bus's checks, the parameter numbers its dialect cannot encode."""
+        problems: list[Place] = []
+        low, high = self.address_range
+        if not low <= drive.address <= high:
+            where = f"protocol {self.protocol}"
+            if self.address_format is FcAddressFormat.RANGE_1_31:
+                where += " with fc_address_format 1-31"
+            problems.append(("address", f"{drive.address} is outside {low}-{high} for {where}"))
+        allowed = DIALECTS_BY_PROTOCOL[self.protocol]
+        if drive.dialect is not None and drive.dialect not in allowed:
+            problems.append(
+                (
+                    "dialect",
+                    f"{drive.dialect} is not for protocol {self.protocol}"
+                    f" (use {', '.join(allowed)})",
+                )
+            )
+            return problems
+        problems += told
+        problems += self._bus_drive_problems(drive)
+        problems += _pnu_problems(drive, drive.pkw_dialect)
+        return problems
 
     def _address_problems(self) -> list[Place]:
         problems: list[Place] = []
@@ -212,7 +256,8 @@ class Line(Model):
 
     @property
     def address_format(self) -> FcAddressFormat:
-        return self.fc_address_format or FcAddressFormat.RANGE_1_126
+        """How an FC line numbers its drives (FC's own setting; 1-126 on the others)."""
+        return FcAddressFormat.RANGE_1_126
 
     @property
     def address_range(self) -> tuple[int, int]:
@@ -254,65 +299,7 @@ class Line(Model):
         return sim.response_delay if sim is not None else None
 
 
-def _sim_shape(protocol: BusProtocol, drive: Drive) -> tuple[object, ...]:
-    """The dialect, IND layout and lengths a simulator would need for ``drive``."""
-    name = drive.dialect or default_dialect(protocol)
-    layout = drive.ind_layout or dialect(name).default_ind_layout
-    if protocol is BusProtocol.FC:
-        return (name, layout)
-    if protocol is BusProtocol.PROFIBUS:  # each simulated slave has its own dialect and ident
-        return (drive.ppo, drive.cfg)
-    return (name, layout, drive.pkw_words, drive.pzd_words)
-
-
-def _drive_problems(line: Line, drive: Drive) -> list[Place]:
-    problems: list[Place] = []
-    low, high = line.address_range
-    if not low <= drive.address <= high:
-        where = f"protocol {line.protocol}"
-        if line.fc_address_format is FcAddressFormat.RANGE_1_31:
-            where += " with fc_address_format 1-31"
-        problems.append(("address", f"{drive.address} is outside {low}-{high} for {where}"))
-    allowed = DIALECTS_BY_PROTOCOL[line.protocol]
-    if drive.dialect is not None and drive.dialect not in allowed:
-        problems.append(
-            (
-                "dialect",
-                f"{drive.dialect} is not for protocol {line.protocol} (use {', '.join(allowed)})",
-            )
-        )
-        return problems
-    if line.protocol is not BusProtocol.PROFIBUS:
-        problems += [
-            (key, "applies to protocol profibus only")
-            for key in (
-                "ppo",
-                "ident",
-                "gsd",
-                "cfg",
-                "user_prm",
-                "dpv1",
-                "parameter_access",
-                "axis",
-            )
-            if key in drive.model_fields_set
-        ]
-    if line.protocol is BusProtocol.PROFIBUS:
-        settings = DpLineSettings(line.master_address, line.baudrate, line.slot_time)
-        problems += dp_drive_problems(settings, drive)
-    elif line.protocol is BusProtocol.FC:
-        for key in ("pkw_words", "pzd_words"):
-            if key in drive.model_fields_set:
-                problems.append(
-                    (key, "applies to protocol uss only: FC telegrams have a fixed shape")
-                )
-    elif drive.pkw_words == 0 and (drive.poll or drive.writable):
-        problems.append(("pkw_words", "is 0: the drive has no parameter channel to poll or write"))
-    problems += _pnu_problems(drive, drive.pkw_dialect)
-    return problems
-
-
-def _pnu_problems(drive: Drive, pkw_dialect: Dialect) -> list[Place]:
+def _pnu_problems(drive: DriveBase, pkw_dialect: Dialect) -> list[Place]:
     """Numbers the dialect cannot encode; notation the drive does not use (r/p on a
     Danfoss drive, r0021 and p0021 both)."""
     problems: list[Place] = []

@@ -49,9 +49,11 @@ from pkwbus.protocol.serial import timing
 from pkwbus.protocol.serial.telegram import MAX_TELEGRAM, Protocol
 from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
-from pkwbus.service.config.drive import Drive
-from pkwbus.service.config.line import Line
-from pkwbus.service.config.model import Config
+from pkwbus.service.config.drive import DriveBase
+from pkwbus.service.config.model import Config, Drive, Line
+from pkwbus.service.config.profibus import ProfibusDrive
+from pkwbus.service.config.profibus_line import ProfibusLine
+from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
 
 __all__ = [
     "DEFAULT_RESPONSE_DELAY",
@@ -100,15 +102,15 @@ class LineLoad:
     access: dict[str, tuple[str, float]] = field(default_factory=dict)
 
 
-def telegram_bytes(line: Line, drive: Drive) -> int:
+def telegram_bytes(line: FcLine | UssLine, drive: FcDrive | UssDrive) -> int:
     """Bytes of one parameter telegram to or from ``drive``, STX to BCC."""
-    if line.protocol is Protocol.FC:
+    if isinstance(drive, FcDrive):
         return FC_PARAMETER_TELEGRAM
     pkw = drive.sent_pkw_words if drive.sent_pkw_words is not None else USS_VARIABLE_PKW_WORDS
     return min(2 * (pkw + drive.pzd_words) + USS_OVERHEAD, MAX_TELEGRAM)
 
 
-def exchange_seconds(line: Line, drive: Drive) -> float:
+def exchange_seconds(line: FcLine | UssLine, drive: FcDrive | UssDrive) -> float:
     """One request and its response, with the pause before and the drive's delay."""
     delay = line.response_delay_seconds
     if delay is None:
@@ -117,7 +119,7 @@ def exchange_seconds(line: Line, drive: Drive) -> float:
     return wire + line.pause_seconds + delay
 
 
-def dp_frame_bytes(drive: Drive) -> int:
+def dp_frame_bytes(drive: ProfibusDrive) -> int:
     """A Data_Exchange request (and its answer) carrying the drive's PPO, in bytes."""
     data = bytes(ppo_type(drive.ppo).length)
     frame = fdl.DataFrame(drive.address, 0, fdl.request_fc(fdl.Function.SRD_HIGH), data=data)
@@ -132,7 +134,7 @@ def poll_rates(line: Line, drive: Drive) -> list[float]:
     return rates + [1 / ALARM_EVERY] * len(implicit)
 
 
-def record_seconds(drive: Drive, count: int, baudrate: int) -> float:
+def record_seconds(drive: ProfibusDrive, count: int, baudrate: int) -> float:
     """One MSAC_C1 exchange of a record transfer of ``count`` value reads, on average: the
     write of the request and the read of its response, each in a cycle of its own."""
     request = 4 + 6 * count  # head, then an address per parameter
@@ -148,7 +150,7 @@ def record_seconds(drive: Drive, count: int, baudrate: int) -> float:
     return (write + read) / 2
 
 
-def dp_line_load(line: Line) -> LineLoad:
+def dp_line_load(line: ProfibusLine) -> LineLoad:
     """The DP cycle of a line and how often each slave's polls can really be refreshed."""
     times = {
         d.name: dp_timing.exchange_time(dp_frame_bytes(d), dp_frame_bytes(d), line.baudrate)
@@ -257,7 +259,7 @@ def catalog_notes(config: Config, catalogs: Catalogs | None = None) -> list[str]
     return notes
 
 
-def _drive_notes(place: str, drive: Drive, catalogs: Catalogs) -> Iterable[str]:
+def _drive_notes(place: str, drive: DriveBase, catalogs: Catalogs) -> Iterable[str]:
     if drive.catalog is None:
         untyped = [str(p.ref) for p in drive.poll if p.type is None]
         if untyped:

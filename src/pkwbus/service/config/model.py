@@ -1,4 +1,5 @@
-"""The whole file: where the API listens, its tokens, the audit log, the lines.
+"""The whole file: where the API listens, its tokens, the audit log, the lines (each of
+its bus's class, picked by its ``protocol``).
 
 Raises :class:`~pkwbus.service.config.base.ConfigError` for a malformed ``--listen``.
 """
@@ -9,13 +10,15 @@ import os
 import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Annotated, Literal, Self
+from typing import Annotated, Final, Literal, Self, TypeAlias
 
 from pydantic import (
     Field,
     PlainValidator,
     StrictInt,
     ValidationError,
+    ValidatorFunctionWrapHandler,
+    WrapValidator,
     field_validator,
     model_validator,
 )
@@ -23,6 +26,7 @@ from pydantic import (
 from pkwbus.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
 from pkwbus.link import same_line
 from pkwbus.problems import plain, short
+from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
     DEFAULT_TOKEN_ENV,
@@ -31,11 +35,59 @@ from pkwbus.service.config.base import (
     Model,
     Place,
     fail,
+    placed,
 )
-from pkwbus.service.config.drive import Drive
-from pkwbus.service.config.line import Line
+from pkwbus.service.config.line import LineBase
+from pkwbus.service.config.profibus import ProfibusDrive
+from pkwbus.service.config.profibus_line import ProfibusLine
+from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
 
-__all__ = ["Api", "Config", "Listen", "parse_listen"]
+__all__ = ["LINES", "Api", "Config", "Drive", "Line", "Listen", "parse_listen"]
+
+# The class of each bus's lines, as the union below picks it by the line's ``protocol``.
+LINES: Final[Mapping[BusProtocol, type[FcLine | UssLine | ProfibusLine]]] = {
+    BusProtocol.FC: FcLine,
+    BusProtocol.USS: UssLine,
+    BusProtocol.PROFIBUS: ProfibusLine,
+}
+
+
+def _bus(data: dict[object, object]) -> BusProtocol:
+    """The line's bus; its ``protocol`` told as the one place of a problem otherwise."""
+    if "protocol" not in data:
+        raise fail([("protocol", "is required")])
+    given = data["protocol"]
+    if not isinstance(given, str) or given not in {p.value for p in LINES}:
+        names = [repr(p.value) for p in LINES]
+        known = f"{', '.join(names[:-1])} or {names[-1]}"
+        raise fail([("protocol", f"must be {known}, not {short(given)}")])
+    return BusProtocol(given)
+
+
+def _bus_line(data: object, handler: ValidatorFunctionWrapHandler) -> object:
+    """A line as its bus's class makes it, its problems placed as the file has them: a
+    protocol that names no bus is told so, and no place names the union's tag."""
+    if isinstance(data, LineBase):
+        return handler(data)
+    if not isinstance(data, dict):
+        raise fail([("", f"must be a mapping (key: value), not {short(data)}")])
+    bus = _bus(data)
+    try:
+        return handler(data)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False)
+        for error in errors:
+            if error["loc"][:1] == (bus.value,):
+                error["loc"] = error["loc"][1:]
+        raise fail(placed(errors, LINES[bus])) from None
+
+
+# One line of the file: the class of its bus, picked by its ``protocol``.
+Line: TypeAlias = Annotated[
+    FcLine | UssLine | ProfibusLine, Field(discriminator="protocol"), WrapValidator(_bus_line)
+]
+# One drive of the file: the class of its line's bus.
+Drive: TypeAlias = FcDrive | UssDrive | ProfibusDrive
 
 
 class Listen(Model):
