@@ -103,3 +103,15 @@ def test_every_exception_of_pkwbus_has_the_one_root() -> None:
                 if f"{value.__module__}.{name}" not in NOT_ERRORS:
                     assert issubclass(value, PkwbusError), f"{value.__module__}.{name}"
     assert len(found) > 20  # the walk saw them
+
+
+MAX_ROOM = 16  # modules in one folder: beyond it, the folder hides rooms of its own
+
+
+def test_no_folder_holds_more_than_a_room_can() -> None:
+    rooms: dict[pathlib.Path, int] = {}
+    for path in PATHS:
+        rooms[path.parent] = rooms.get(path.parent, 0) + 1
+    crowded = {str(p.relative_to(ROOT)): n for p, n in rooms.items() if n > MAX_ROOM}
+    assert not crowded, f"folders over {MAX_ROOM} modules: {crowded}"
+    assert max(rooms.values()) > 5  # the count sees the folders
