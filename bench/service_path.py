@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -124,7 +126,9 @@ def fc(n: int) -> dict[str, float]:
         return link.run(_measure(_fc_config(port), n, None))
 
 
-def dp(seconds: float) -> dict[str, float]:
+@contextlib.contextmanager
+def dp_simulator() -> Iterator[str]:
+    """``pkwbus simulate --protocol profibus`` in another process: its pty's path."""
     folder = Path(tempfile.mkdtemp(prefix="pkwbus-bench-dp-"))
     pty = folder / "ttyDP"
     addresses = ",".join(str(a) for a in DP_ADDRESSES)
@@ -139,9 +143,14 @@ def dp(seconds: float) -> dict[str, float]:
             if time.monotonic() > end or proc.poll() is not None:
                 raise RuntimeError("the DP simulator did not start")
             time.sleep(0.05)
-        found = link.run(_measure(_dp_config(str(pty)), None, seconds))
+        yield str(pty)
     finally:
         stop_process(proc)
+
+
+def dp(seconds: float) -> dict[str, float]:
+    with dp_simulator() as pty:
+        found = link.run(_measure(_dp_config(pty), None, seconds))
     cycles = found["rate"] / len(DP_ADDRESSES)
     return {"cycles_per_s": cycles, "cpu_us_per_cycle": found["cpu_us"] * len(DP_ADDRESSES)}
 

@@ -16,10 +16,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import subprocess
 import sys
-import tempfile
-import time
 from collections import Counter
 from pathlib import Path
 from types import FrameType
@@ -29,7 +26,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import service_path
 from _common import sim_process
-from _measure import stop_process
 
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
@@ -98,23 +94,8 @@ def fc(n: int) -> dict[str, Any]:
 
 
 def dp(n: int) -> dict[str, Any]:
-    folder = Path(tempfile.mkdtemp(prefix="pkwbus-bench-dp-"))
-    pty = folder / "ttyDP"
-    addresses = ",".join(str(a) for a in service_path.DP_ADDRESSES)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "pkwbus", "simulate", "--protocol", "profibus", "--pty", str(pty),
-         "--drives", addresses, "--dialect", "danfoss-pcv", "--ppo", "1"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-    )  # fmt: skip
-    try:
-        end = time.monotonic() + 20
-        while not pty.exists():
-            if time.monotonic() > end or proc.poll() is not None:
-                raise RuntimeError("the DP simulator did not start")
-            time.sleep(0.05)
-        return link.run(_trace(service_path._dp_config(str(pty)), n))
-    finally:
-        stop_process(proc)
+    with service_path.dp_simulator() as pty:
+        return link.run(_trace(service_path._dp_config(pty), n))
 
 
 def main() -> None:

@@ -15,15 +15,13 @@ import itertools
 import struct
 from collections.abc import Sequence
 
-from pkwbus.master.planning.answers import ExchangeResult
+from pkwbus.master.carriers.slave import SlaveHealth
 from pkwbus.master.planning.batch import BatchTransaction
-from pkwbus.master.planning.carrier import Item, Probe
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
-from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Command, Dialect, Reply
-from pkwbus.protocol.pkw.length import Gate, PkwLength
 from pkwbus.protocol.profidrive import parameters as profidrive
 from pkwbus.protocol.profidrive.errors import error_text
 from pkwbus.protocol.profidrive.parameters import Format, ParameterError, ParameterRequest
@@ -41,13 +39,12 @@ _TYPES = {
 }  # fmt: skip
 
 
-class RecordCarrier:
+class RecordCarrier(SlaveHealth):
     """A DP-V1 slave's parameters through data record 47: its axis, slot and largest
     record."""
 
     texts = False
     repeats_answers = False  # a response answers its own request reference
-    tells_health = True  # the slave's state is its health
 
     def __init__(
         self,
@@ -132,22 +129,3 @@ class RecordCarrier:
         ak = pkw.response_id(dialect, reply)
         vtype = _TYPES.get(got.format)
         return Answered(pkw.ValueResponse(ak, request.pnu, request.subindex, raw, width, vtype))
-
-    # A slave's health is its state: never probed, nothing learned from its answers.
-    def probe(self) -> Probe | None:
-        return None
-
-    def status(self, result: ExchangeResult) -> tuple[int, int | None] | None:
-        return None
-
-    def probed(self, probe_words: int | None, result: ExchangeResult) -> PkwLength | None:
-        return None
-
-    def heard(self, tx: PkwTransaction) -> PkwLength | None:
-        return None
-
-    def forget(self) -> PkwLength | None:
-        return None
-
-    def gate(self, request: pkw.PkwRequest) -> tuple[Gate, str]:
-        return Gate.SEND, ""

@@ -13,24 +13,23 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from pkwbus.master.planning.answers import ExchangeResult, PkwAnswer
-from pkwbus.master.planning.carrier import Item, Probe
+from pkwbus.master.carriers.slave import SlaveHealth
+from pkwbus.master.planning.answers import PkwAnswer
+from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
-from pkwbus.protocol.pkw.length import Gate, PkwLength
 from pkwbus.protocol.profibus.dp.ppo import PpoType, decode_ppo_read
 
 __all__ = ["SlotCarrier"]
 
 
-class SlotCarrier:
+class SlotCarrier(SlaveHealth):
     """A DP slave's PKW slot: its station address, PPO type and dialect."""
 
     texts = False  # a text does not fit the 4 PKW words of a PPO
     repeats_answers = False  # the slot waits for AK 0 before a new request
-    tells_health = True  # the slave's state is its health
 
     def __init__(self, address: int, ppo: PpoType, dialect: Dialect) -> None:
         self.address = address
@@ -66,21 +65,3 @@ class SlotCarrier:
         mav = words[1] if len(words) > 1 else None
         cut = data[: 2 * self.ppo.pkw_words]
         return PkwAnswer(read.pkw, cut, status, mav, duration, cyclic=True)
-
-    def probe(self) -> Probe | None:
-        return None
-
-    def status(self, result: ExchangeResult) -> tuple[int, int | None] | None:
-        return None
-
-    def probed(self, probe_words: int | None, result: ExchangeResult) -> PkwLength | None:
-        return None
-
-    def heard(self, tx: PkwTransaction) -> PkwLength | None:
-        return None
-
-    def forget(self) -> PkwLength | None:
-        return None
-
-    def gate(self, request: pkw.PkwRequest) -> tuple[Gate, str]:
-        return Gate.SEND, ""
