@@ -66,6 +66,7 @@ class Active:
 class DrivePlan:
     __slots__ = (
         "active",
+        "background",
         "busy",
         "carrier",
         "describer",
@@ -99,6 +100,7 @@ class DrivePlan:
         self.shown_up = True
         self.writes: deque[Job] = deque()
         self.reads: deque[Job | ProbeJob] = deque()
+        self.background: deque[Job] = deque()  # after its due polls
         self.active: Active | None = None
         self.lagging = False
         self.seq = itertools.count()

@@ -22,11 +22,13 @@ class JobKind(enum.StrEnum):
 
 
 class Priority(enum.IntEnum):
-    """Lower goes first: writes, then on-demand reads, then polls."""
+    """Lower goes first: writes, then on-demand reads, then polls, then background jobs
+    (the reading of a drive's own log: never ahead of a poll that is due)."""
 
     WRITE = 0
     READ = 1
     POLL = 2
+    BACKGROUND = 3
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,7 +5,7 @@ The policy, in order:
 - a drive's transaction in flight goes on before anything new of that drive
   (its parameter channel holds one request);
 - across drives: writes, then on-demand reads, then due polls (and probes of
-  a down drive); among equals the earliest deadline or due time, then the
+  a down drive), then background jobs; among equals the earliest deadline or due time, then the
   drive served longest ago (fairness);
 - a drive whose last answer was "not yet", or missing, yields to another
   drive's exchange of the same priority before its repeat (lag interleaving);
@@ -102,8 +102,8 @@ class Planner:
         if not self.up:
             self.events.append(Finished(d.name, job, LineFailed(PORT_CLOSED)))
             return
-        if isinstance(job, Job) and job.priority is Priority.WRITE:
-            d.writes.append(job)
+        if isinstance(job, Job) and job.priority is not Priority.READ:
+            (d.writes if job.priority is Priority.WRITE else d.background).append(job)
         else:
             d.reads.append(job)
         self._agenda.expiry(d, job.deadline)
@@ -126,7 +126,7 @@ class Planner:
                 d.describer.release()  # another line's drive of its kind describes instead
             if d.active is not None:
                 self._complete(d, d.active, LineFailed(PORT_CLOSED), now)
-            for queue in (d.writes, d.reads):
+            for queue in (d.writes, d.reads, d.background):
                 while queue:
                     self.events.append(Finished(d.name, queue.popleft(), LineFailed(PORT_CLOSED)))
             d.version += 1
@@ -144,7 +144,7 @@ class Planner:
             if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
                 self.events.append(Finished(d.name, active.work, Cancelled(reason), tally))
-            for queue in (d.writes, d.reads):
+            for queue in (d.writes, d.reads, d.background):
                 while queue:
                     self.events.append(Finished(d.name, queue.popleft(), Cancelled(reason)))
             d.version += 1
@@ -190,8 +190,8 @@ class Planner:
         """End the jobs of ``drive`` past their deadline while nothing can go out to it,
         queued or in flight between its tries."""
         d = self._by_name[drive]
-        self._expire(d, d.writes, now)
-        self._expire(d, d.reads, now)
+        for queue in (d.writes, d.reads, d.background):
+            self._expire(d, queue, now)
         active = d.active
         if active is not None and not d.busy and now >= active.tx.deadline:
             self._complete(d, active, TimedOut("deadline passed"), now)
@@ -244,10 +244,9 @@ class Planner:
 
     def _claim(self, d: DrivePlan, now: float) -> tuple[Key | None, float | None]:
         """The drive's claim on the next exchange, else when it will have one (None: never)."""
-        if d.writes:
-            self._expire(d, d.writes, now)
-        if d.reads:
-            self._expire(d, d.reads, now)
+        for queue in (d.writes, d.reads, d.background):
+            if queue:
+                self._expire(d, queue, now)
         a = d.active
         if a is not None:
             return (a.priority, int(d.lagging), a.order, d.served, d.slot), None
@@ -262,6 +261,8 @@ class Planner:
         due = d.first_due()
         if due is not None and due <= now:
             return (Priority.POLL, 0, due, d.served, d.slot), None
+        if d.background:
+            return (Priority.BACKGROUND, 0, d.background[0].deadline, d.served, d.slot), None
         return None, due
 
     def _index(self, d: DrivePlan, now: float) -> None:
@@ -301,7 +302,9 @@ class Planner:
             self._index(d, now)
             return None
         d.busy = True
-        queue = d.writes or d.reads
+        due = d.first_due()
+        idle = d.health.up and (due is None or due > now)  # no probe or poll before it
+        queue = d.writes or d.reads or (d.background if idle else None)
         if queue:
             job = queue.popleft()
             order = float(next(self._job_seq))

@@ -1,0 +1,137 @@
+"""A drive's log as pkwbus reads it: the reads, the entries, the sweep of a whole log."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = [
+    "MS_PER_DAY",
+    "DriveLog",
+    "Kind",
+    "LogEntry",
+    "Opaque",
+    "Read",
+    "Runtime",
+    "Sweep",
+    "SweepResult",
+    "TimeBase",
+    "Values",
+]
+
+MS_PER_DAY = 86_400_000
+
+
+class Kind(enum.StrEnum):
+    """What a log entry is (interface.md): a Danfoss alarm-log entry is a trip, a fault."""
+
+    FAULT = "fault"
+    ALARM = "alarm"
+    WARNING = "warning"
+
+
+class TimeBase(enum.StrEnum):
+    """What a log's entry times count."""
+
+    RUNTIME = "runtime"  # the drive's runtime since power-up (SINAMICS r2114)
+    NONE = "none"  # no time a document explains: when pkwbus first read it is all there is
+
+
+@dataclass(frozen=True, slots=True)
+class Read:
+    """One value to read: a parameter number, its index (0 for a simple parameter), and
+    whether its document gives it a sign (the caller decodes the drive's raw value so)."""
+
+    pnu: int
+    index: int = 0
+    signed: bool = False
+
+
+@dataclass(frozen=True, slots=True, order=True)
+class Runtime:
+    """A time in the drive's runtime base: milliseconds since its control unit was
+    powered up (SINAMICS: days x 86,400,000 + ms)."""
+
+    ms: int
+
+    @classmethod
+    def of(cls, days: int, ms: int) -> Runtime:
+        return cls(days * MS_PER_DAY + ms)
+
+    def __str__(self) -> str:
+        days, rest = divmod(self.ms, MS_PER_DAY)
+        seconds, ms = divmod(rest, 1000)
+        return (
+            f"{days} d {seconds // 3600:02d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}.{ms:03d}"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Opaque:
+    """A drive's time of an entry that no document explains (its unit and its reference
+    are not known): part of the entry's identity, never read as a time."""
+
+    raw: int
+
+    def __str__(self) -> str:
+        return str(self.raw)
+
+
+@dataclass(frozen=True, slots=True)
+class LogEntry:
+    """One entry of a drive's log, by its content: what it is, its code (the drive's fault
+    or alarm number), its value (None where the log keeps none), and its drive time."""
+
+    kind: Kind
+    code: int
+    value: int | None
+    drive_time: Runtime | Opaque | None
+
+
+@dataclass(frozen=True, slots=True)
+class SweepResult:
+    """A whole log read: its entries, newest first, and the drive's runtime when it was
+    read (None where the log has no runtime base)."""
+
+    entries: tuple[LogEntry, ...]
+    runtime: Runtime | None
+
+
+Values = Mapping[Read, int | None]  # what a round read; None: the drive refused that one
+
+
+class Sweep(Protocol):
+    """The reading of one whole log, in rounds, each decided by what the earlier said."""
+
+    def next(self) -> tuple[Read, ...]:
+        """The reads of the next round (empty: the sweep is over)."""
+        ...
+
+    def feed(self, values: Values) -> None:
+        """What the round read."""
+        ...
+
+    def result(self) -> SweepResult | None:
+        """The log as read; None when it changed while it was read (sweep again) or
+        cannot be read (its entries refused)."""
+        ...
+
+
+class DriveLog(Protocol):
+    """One kind of log: its name, its time base, what is watched, and how it is swept."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def time_base(self) -> TimeBase: ...
+
+    def watch(self) -> tuple[Read, ...]:
+        """What is read every ``events_every``: the change counter, or the newest entry."""
+        ...
+
+    def sweep(self) -> Sweep:
+        """A new sweep of the whole log."""
+        ...
