@@ -17,7 +17,9 @@ from typing import Final
 __all__ = [
     "DP_SLOT_TIME",
     "DP_WATCHDOG",
+    "EVENTS_EVERY",
     "HINT",
+    "HISTORY_RETENTION",
     "INTER_CHAR_TIMEOUT",
     "JOB_DEADLINE",
     "PAUSE",
@@ -79,6 +81,8 @@ RS485_DELAY: Final = DurationRange("an RS-485 RTS delay", 0.0, 0.1)
 DP_SLOT_TIME: Final = DurationRange("a slot time", 0.0005, 1.0)
 # Set_Prm's watchdog counts 10 ms ticks times two factors of at most 255 (EN 50170 vol. 2).
 DP_WATCHDOG: Final = DurationRange("a watchdog", 0.01, 650.25)
+EVENTS_EVERY: Final = DurationRange("a drive log's watch interval", 1.0, 3600.0)
+HISTORY_RETENTION: Final = DurationRange("a retention", 3600.0, 87600 * 3600.0)  # 10 years
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -98,6 +102,8 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("line `rs485` `delay_before_tx`, `delay_before_rx` (whole milliseconds)", RS485_DELAY),
     ("profibus line `slot_time`, `--slot-time`", DP_SLOT_TIME),
     ("profibus line `watchdog`", DP_WATCHDOG),
+    ("line and drive `events_every`", EVENTS_EVERY),
+    ("`history_retention`", HISTORY_RETENTION),
 )
 
 

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Protocol
+from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 
@@ -33,7 +33,7 @@ from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.types import ValueType
 
-__all__ = ["Alarms", "DriveEntry", "LineCounts", "LineTask", "Runtime", "Trends"]
+__all__ = ["Alarms", "DriveEntry", "History", "LineCounts", "LineTask", "Runtime", "Trends"]
 
 log = logging.getLogger(__name__)
 
@@ -144,6 +144,14 @@ class Alarms(Protocol):
     def said(self, key: ReadingKey, value: object) -> str: ...
 
 
+class History(Protocol):
+    """The drives' own log entries as kept (service.history.store.HistoryStore)."""
+
+    def latest(
+        self, *, drive: str | None = None, since: float | None = None, limit: int = 100
+    ) -> list[Any]: ...
+
+
 class Trends(Protocol):
     """The last minutes of each polled value (service.metrics.trends.Trends)."""
 
@@ -169,7 +177,11 @@ class Runtime:
         self.job_timeout = job_timeout
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
+        self.history: History | None = None  # the drives' own log entries (None: not kept)
         self._tasks: list[asyncio.Task[None]] = []
+        # What starts once the lines run (the watch of the drives' logs), and what ends
+        # after they stopped.
+        self.starters: list[Callable[[], Awaitable[None]]] = []
         self.cleanups: list[Callable[[], object]] = []
         # What the status page shows of each line besides the snapshot (service.metrics).
         self.counts: dict[str, LineCounts] = {}
@@ -179,6 +191,8 @@ class Runtime:
             task = asyncio.create_task(runner.run(), name=f"line {runner.name}")
             task.add_done_callback(self._line_ended)
             self._tasks.append(task)
+        for start in self.starters:
+            await start()
 
     def _line_ended(self, task: asyncio.Task[None]) -> None:
         if not task.cancelled() and task.exception() is not None:

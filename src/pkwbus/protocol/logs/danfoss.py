@@ -88,6 +88,7 @@ class AlarmLog:
 
     name: str = "Danfoss alarm log"
     time_base: TimeBase = TimeBase.NONE
+    runtime: tuple[Read, ...] = ()
 
     def watch(self) -> tuple[Read, ...]:
         return NEWEST

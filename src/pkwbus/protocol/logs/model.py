@@ -128,6 +128,11 @@ class DriveLog(Protocol):
     @property
     def time_base(self) -> TimeBase: ...
 
+    @property
+    def runtime(self) -> tuple[Read, ...]:
+        """What gives the drive's runtime now (empty: its entries have no runtime base)."""
+        ...
+
     def watch(self) -> tuple[Read, ...]:
         """What is read every ``events_every``: the change counter, or the newest entry."""
         ...

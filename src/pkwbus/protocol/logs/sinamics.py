@@ -117,6 +117,7 @@ class FaultBuffer:
 
     name: str = "SINAMICS fault buffer"
     time_base: TimeBase = TimeBase.RUNTIME
+    runtime: tuple[Read, ...] = (RUNTIME_MS, RUNTIME_DAYS)
 
     def watch(self) -> tuple[Read, ...]:
         return (COUNTER,)

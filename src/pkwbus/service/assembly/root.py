@@ -1,14 +1,17 @@
 """The composition root of ``pkwbus run``: from a valid configuration to a running
 service, and back.
 
-In order: logging; the audit log, its place checked first; the HTTP address
-bound; the runtime built from the configuration (:mod:`.build`); the HTTP app
-over it (:mod:`pkwbus.service.http.api`); writes an earlier run left without an
-outcome marked interrupted; then :func:`~.serve.serve` until a stop signal. On
-the way out the outcomes kept in memory are stored and the audit log is closed.
+In order: logging; the audit log, its place checked first; the history
+database of the drives' own logs; the HTTP address bound; the runtime built
+from the configuration (:mod:`.build`) with the watch of the drives' logs
+(:mod:`.history`); the HTTP app over it (:mod:`pkwbus.service.http.api`);
+writes an earlier run left without an outcome marked interrupted; then
+:func:`~.serve.serve` until a stop signal. On the way out the outcomes kept
+in memory are stored and the audit log and the history are closed.
 
-Raises :class:`StartError` (one line) when the audit log's place or the HTTP
-address cannot be used, before any line or the HTTP server has started.
+Raises :class:`StartError` (one line) when the audit log's or the history's
+place or the HTTP address cannot be used, before any line or the HTTP server
+has started.
 """
 
 from __future__ import annotations
@@ -21,13 +24,15 @@ from pkwbus import link
 from pkwbus.errors import PkwbusError
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile, description_path
+from pkwbus.service.assembly.history import watch_logs
 from pkwbus.service.assembly.logs import setup_logging
 from pkwbus.service.assembly.serve import ListenError, bind, serve
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
 from pkwbus.service.config import Config
+from pkwbus.service.history.store import HistoryError, HistoryStore
 from pkwbus.service.http.api import create_app
 
-__all__ = ["StartError", "open_audit", "run_service"]
+__all__ = ["StartError", "open_audit", "open_history", "run_service"]
 
 log = logging.getLogger("pkwbus")  # the service's start-up lines, under the command's name
 
@@ -40,13 +45,17 @@ def run_service(config: Config, *, log_format: str, debug: bool = False) -> None
     """Run the service of ``config`` until SIGTERM, SIGINT or SIGHUP."""
     setup_logging(log_format, debug=debug)
     audit = open_audit(config)
+    history: HistoryStore | None = None
     try:
+        history = open_history(config)
         try:
             sock = bind(config.listen.host, config.listen.port)
         except ListenError as exc:
             raise StartError(str(exc)) from None
-        link.run(_serve(config, sock, audit))
+        link.run(_serve(config, sock, audit, history))
     finally:
+        if history is not None:
+            history.close()
         audit.close()
 
 
@@ -62,10 +71,26 @@ def open_audit(config: Config) -> AuditLog:
         raise StartError(f"audit_db: {exc}") from None
 
 
-async def _serve(config: Config, sock: socket.socket, audit: AuditLog) -> None:
+def open_history(config: Config) -> HistoryStore:
+    """The history database of a starting service; a place that cannot hold it is a
+    :class:`StartError`."""
+    path = config.history_path
+    problem = path_problem(path, "the history database")
+    if problem is not None:
+        raise StartError(f"history_db: {problem}")
+    try:
+        return HistoryStore(path)
+    except HistoryError as exc:
+        raise StartError(f"history_db: {exc}") from None
+
+
+async def _serve(
+    config: Config, sock: socket.socket, audit: AuditLog, history: HistoryStore
+) -> None:
     # The drives' descriptions of an earlier run, beside the audit database.
     kept = DescriptionFile(description_path(config.audit_db))
     runtime = await build_runtime(config, kept)
+    watch_logs(config, runtime, history)
     token = config.write_token()
     app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
     audit_writer = app.state.audit_writer

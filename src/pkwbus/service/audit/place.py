@@ -14,15 +14,19 @@ from pkwbus.service.audit.key import key_path
 __all__ = ["path_problem"]
 
 
-def path_problem(db: Path) -> str | None:
-    """Why ``db`` cannot be the audit database on this machine, or None.
+def path_problem(db: Path, what: str = "the audit database") -> str | None:
+    """Why ``db`` cannot be ``what`` (the audit database, with its key file; or another
+    SQLite database of the service) on this machine, or None.
 
     A file there must be a regular, writable file; otherwise the nearest existing
     directory above it must be writable (the service makes the missing ones).
     """
     if str(db) == ":memory:":
         return None
-    for path, what in ((db, "the audit database"), (key_path(db), "its key file")):
+    files = [(db, what)]
+    if what == "the audit database":
+        files.append((key_path(db), "its key file"))
+    for path, what in files:
         try:
             mode = path.stat().st_mode
         except (FileNotFoundError, NotADirectoryError):

@@ -28,7 +28,14 @@ from pkwbus.protocol.values import (
 )
 from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
-from pkwbus.service.config.fields import Alarms, Describe, Name, Notation
+from pkwbus.service.config.fields import (
+    Alarms,
+    Describe,
+    Events,
+    EventsEvery,
+    Name,
+    Notation,
+)
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
 
 __all__ = ["DriveBase", "duplicates"]
@@ -54,6 +61,9 @@ class DriveBase(Model):
     # Poll the alarm words its catalog explains even where ``poll`` does not: auto or off
     # (None: the line's setting).
     alarms: Alarms | None = None
+    # Its own fault and alarm logs, and how often they are watched (None: the line's).
+    events: Events | None = None
+    events_every: EventsEvery | None = None
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)

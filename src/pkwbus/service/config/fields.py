@@ -30,12 +30,15 @@ __all__ = [
     "CharTimeout",
     "Delay",
     "Describe",
+    "Events",
+    "EventsEvery",
     "Interval",
     "Name",
     "Notation",
     "Number",
     "Pause",
     "PkwWords",
+    "Retention",
     "Rs485Delay",
     "SlotTime",
     "Timeout",
@@ -91,6 +94,8 @@ CharTimeout = Annotated[float, _duration(durations.INTER_CHAR_TIMEOUT)]
 Delay = Annotated[float, _duration(durations.RESPONSE_DELAY)]
 SlotTime = Annotated[float, _duration(durations.DP_SLOT_TIME)]
 Watchdog = Annotated[float, _duration(durations.DP_WATCHDOG)]
+EventsEvery = Annotated[float, _duration(durations.EVENTS_EVERY)]
+Retention = Annotated[float, _duration(durations.HISTORY_RETENTION)]
 
 
 def _rs485_delay(value: object) -> float:
@@ -129,3 +134,6 @@ Describe = Annotated[str, PlainValidator(_describe)]
 # Whether the alarm words and fault numbers a drive's catalog explains are polled even
 # where the configuration does not poll them: auto, or off.
 Alarms = Annotated[str, PlainValidator(_describe)]
+# Whether the drive's own fault and alarm logs are read (where its catalog has one): auto,
+# or off.
+Events = Annotated[str, PlainValidator(_describe)]

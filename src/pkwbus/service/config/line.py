@@ -39,6 +39,8 @@ from pkwbus.service.config.fields import (
     CharTimeout,
     Delay,
     Describe,
+    Events,
+    EventsEvery,
     Name,
     Pause,
     Rs485Delay,
@@ -100,6 +102,9 @@ class LineBase(Model, Generic[DriveT]):
     # The drives' own description elements (AK 4) over their catalogs; a drive may say otherwise.
     describe: Describe = "auto"
     alarms: Alarms = "auto"
+    # The drives' own fault and alarm logs, watched every ``events_every``.
+    events: Events = "auto"
+    events_every: EventsEvery = 10.0
     drives: list[DriveT] = Field(min_length=1)
 
     @field_validator("port")

@@ -37,6 +37,7 @@ from pkwbus.service.config.base import (
     fail,
     placed,
 )
+from pkwbus.service.config.fields import Retention
 from pkwbus.service.config.line import LineBase
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
@@ -160,6 +161,9 @@ class Config(Model):
     listen: Listen = Listen.model_validate(DEFAULT_LISTEN)
     api: Api = Api()
     audit_db: Annotated[Path, PlainValidator(_audit_path)] = Path("var/audit.sqlite")
+    # The drives' own log entries, kept (None: history.sqlite beside the audit log).
+    history_db: Annotated[Path, PlainValidator(_audit_path)] | None = None
+    history_retention: Retention = 8760 * 3600.0  # a year
     log_format: Literal["text", "json"] = "text"
     lines: list[Line] = Field(min_length=1)
 
@@ -210,6 +214,12 @@ class Config(Model):
         if self.api.read_token_env is None:
             return None
         return (os.environ if environ is None else environ).get(self.api.read_token_env) or None
+
+    @property
+    def history_path(self) -> Path:
+        """Where the drives' own log entries are kept: ``history_db``, else beside the
+        audit log."""
+        return self.history_db or self.audit_db.with_name("history.sqlite")
 
     def drives(self) -> Iterator[tuple[Line, Drive]]:
         for line in self.lines:

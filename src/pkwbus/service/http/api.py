@@ -26,10 +26,12 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from pkwbus import __version__
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.writer import AuditWriter
+from pkwbus.service.history.store import HistoryError
 from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.models import (
     ERRORS,
     DriveView,
+    EventsBody,
     Health,
     LineView,
     Readiness,
@@ -37,6 +39,7 @@ from pkwbus.service.http.models import (
     WriteBody,
     WriteResult,
 )
+from pkwbus.service.http.parameter_checks import MAX_DRIVE_NAME
 from pkwbus.service.http.parameters import (
     INCOMPLETE,
     ApiError,
@@ -44,7 +47,13 @@ from pkwbus.service.http.parameters import (
     ParameterService,
     WriteOrder,
 )
-from pkwbus.service.http.views import drive_view, line_views, trend_views
+from pkwbus.service.http.views import (
+    drive_view,
+    event_views,
+    line_views,
+    parse_since,
+    trend_views,
+)
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
@@ -64,6 +73,7 @@ __all__ = [
 MAX_BODY = 4096
 MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
 MAX_AUDIT_LIMIT = 1000  # rows of one GET /api/v1/audit
+MAX_EVENTS_LIMIT = 1000  # entries of one GET /api/v1/events
 # The status page at / and its script and style: package data, nothing from elsewhere.
 STATIC = Path(__file__).parent / "static"
 
@@ -235,6 +245,26 @@ def create_app(
         except AuditError as exc:
             raise ApiError(503, "audit_unavailable", str(exc)) from None
         return [as_dict(e) for e in entries]
+
+    @app.get("/api/v1/events", response_model=EventsBody, responses=ERRORS)
+    async def events(
+        drive: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
+        since: str | None = Query(default=None, max_length=64),
+        limit: int = Query(default=100, ge=1, le=MAX_EVENTS_LIMIT),
+    ) -> EventsBody:
+        """The drives' own log entries, newest first."""
+        if drive is not None and drive not in runtime.drives:
+            raise ApiError(404, "unknown_drive", f"no drive is named {drive!r}")
+        after = parse_since(since)
+        if runtime.history is None:
+            return EventsBody(events=[])
+        try:
+            found = await asyncio.to_thread(
+                runtime.history.latest, drive=drive, since=after, limit=limit
+            )
+        except HistoryError as exc:
+            raise ApiError(503, "history_unavailable", str(exc)) from None
+        return EventsBody(events=event_views(found))
 
     @app.get("/healthz", response_model=Health)
     async def healthz() -> Health:

@@ -14,6 +14,8 @@ __all__ = [
     "AlarmView",
     "DriveView",
     "ErrorBody",
+    "EventView",
+    "EventsBody",
     "Health",
     "LineView",
     "ParameterReading",
@@ -152,6 +154,29 @@ class WriteResult(ValueBody):
     audit: Literal["complete", "incomplete"] = Field(
         default="complete", description="incomplete: the audit row could not be fully stored"
     )
+
+
+class EventView(BaseModel):
+    """One entry of a drive's own log, as the drive logged it."""
+
+    line: str
+    drive: str
+    kind: str = Field(description="fault, alarm or warning")
+    code: str = Field(description="the drive's code, as its documents show it (F07801)")
+    text: str = Field(description="the vendor's text for the code (empty: no document has one)")
+    value: int | None = Field(description="the value the drive logged with it (None: none)")
+    time: str = Field(description="ISO 8601, from the drive's own time base (time_source)")
+    time_source: Literal["drive_clock", "runtime", "seen"] = Field(
+        description="drive_clock: its real-time clock; runtime: its runtime counter, mapped"
+        " to the wall clock (exact while it stayed powered since); seen: when pkwbus first"
+        " read the entry (the log has no usable time)"
+    )
+    drive_time: str = Field(description="the entry's time as the drive gave it (empty: none)")
+    seen: str = Field(description="ISO 8601: when pkwbus first read the entry")
+
+
+class EventsBody(BaseModel):
+    events: list[EventView]
 
 
 class ErrorBody(BaseModel):

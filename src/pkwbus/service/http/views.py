@@ -4,24 +4,32 @@ the trends of the values)."""
 
 from __future__ import annotations
 
+import datetime
+
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.values import ParameterRef
+from pkwbus.service.history.store import DriveEvent
 from pkwbus.service.http.models import (
     AlarmView,
     DriveView,
+    EventView,
     LineView,
     ParameterReading,
     SlaveView,
     WritableView,
 )
+from pkwbus.service.http.parameter_checks import ApiError
 from pkwbus.service.http.readable import readable
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
     "alarm_views",
     "drive_view",
+    "event_views",
+    "iso_time",
     "line_views",
+    "parse_since",
     "slave_view",
     "trend_views",
     "writable_views",
@@ -161,3 +169,39 @@ def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float
             if points:
                 out[f"{parameter}[{index}]" if index else parameter] = points
     return out
+
+
+def iso_time(seconds: float) -> str:
+    """Wall-clock seconds as ISO 8601 in UTC, to the millisecond."""
+    moment = datetime.datetime.fromtimestamp(seconds, datetime.UTC)
+    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def parse_since(text: str | None) -> float | None:
+    """``since`` of a request: ISO 8601 (UTC where it names no offset); ApiError 422."""
+    if text is None:
+        return None
+    try:
+        moment = datetime.datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise ApiError(
+            422, "invalid_request", f"since: {text[:40]!r} is not an ISO 8601 time"
+            " such as 2026-11-27T08:00:00Z",
+        ) from None  # fmt: skip
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=datetime.UTC)
+    return moment.timestamp()
+
+
+def event_views(events: list[DriveEvent]) -> list[EventView]:
+    """The drives' log entries as the API shows them; ``time`` is the drive's where it
+    gave a usable one, else when pkwbus first read the entry."""
+    return [_event_view(e) for e in events]
+
+
+def _event_view(e: DriveEvent) -> EventView:
+    return EventView(
+        line=e.line, drive=e.drive, kind=e.kind, code=e.code, text=e.text, value=e.value,
+        time=iso_time(e.when), time_source=e.time_source,  # type: ignore[arg-type]
+        drive_time=e.drive_time, seen=iso_time(e.seen),
+    )  # fmt: skip

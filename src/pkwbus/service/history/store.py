@@ -1,0 +1,189 @@
+"""The history database: each entry of a drive's own log, once (SQLite, WAL).
+
+An entry is known by its drive and its content (kind, code, value, drive
+time), never by where it sat in the drive's log; storing what is already
+there changes nothing, so a sweep after a restart, an outage or a power
+cycle adds only what is new. Every store is one synced transaction
+(``synchronous=FULL``): a killed service or a power cut loses no entry it
+had counted. The store is bounded by a retention: entries first seen longer
+ago than it are dropped, but only once the drive's log no longer holds them
+(else they would be found again and counted twice).
+
+Thread-safe: the service calls it off the event loop. Raises
+:class:`HistoryError` (one line) when the database cannot be opened or
+written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+import threading
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+from pkwbus.errors import PkwbusError
+
+__all__ = ["SCHEMA", "DriveEvent", "HistoryError", "HistoryStore"]
+
+WAL_PAGES: Final = 64
+WAL_BYTES: Final = 262144
+
+SCHEMA: Final = """
+CREATE TABLE IF NOT EXISTS events (
+    id INTEGER PRIMARY KEY,
+    line TEXT NOT NULL,
+    drive TEXT NOT NULL,
+    key TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    code TEXT NOT NULL,
+    number INTEGER NOT NULL,
+    text TEXT NOT NULL,
+    value INTEGER,
+    time REAL,
+    time_source TEXT NOT NULL,
+    drive_time TEXT NOT NULL,
+    seen REAL NOT NULL,
+    UNIQUE (drive, key)
+);
+CREATE INDEX IF NOT EXISTS events_drive_seen ON events (drive, seen);
+"""
+
+_COLUMNS = "line, drive, key, kind, code, number, text, value, time, time_source, drive_time, seen"
+
+
+@dataclass(frozen=True, slots=True)
+class DriveEvent:
+    """One entry of a drive's log as kept: ``code`` as the drive's documents show it
+    (F07801), ``text`` from the vendor's table (empty where none explains it), ``time``
+    the wall clock from the drive's own time base (None: ``time_source`` is ``seen``),
+    ``drive_time`` as the drive gave it, ``seen`` when pkwbus first read it; ``key`` its
+    identity: its content."""
+
+    line: str
+    drive: str
+    key: str
+    kind: str
+    code: str
+    number: int
+    text: str
+    value: int | None
+    time: float | None
+    time_source: str
+    drive_time: str
+    seen: float
+
+    @property
+    def when(self) -> float:
+        """Its time where the drive gives one, else when pkwbus first read it."""
+        return self.time if self.time is not None else self.seen
+
+
+class HistoryError(PkwbusError):
+    """The history database cannot be opened or written."""
+
+
+class HistoryStore:
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._lock = threading.Lock()
+        try:
+            if str(path) != ":memory:":
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute(f"PRAGMA wal_autocheckpoint={WAL_PAGES}")
+            self._db.execute(f"PRAGMA journal_size_limit={WAL_BYTES}")
+            self._db.executescript(SCHEMA)
+        except (sqlite3.Error, OSError) as exc:
+            with contextlib.suppress(Exception):
+                self._db.close()
+            raise HistoryError(f"cannot open the history database {self.path}: {exc}") from None
+
+    def add(self, events: Sequence[DriveEvent]) -> list[DriveEvent]:
+        """Store ``events`` in one synced transaction; those that were new (each entry is
+        stored once, whatever the number of times it is offered)."""
+        if not events:
+            return []
+        new: list[DriveEvent] = []
+        with self._lock:
+            try:
+                self._db.execute("BEGIN IMMEDIATE")
+                for e in events:
+                    cur = self._db.execute(
+                        f"INSERT OR IGNORE INTO events ({_COLUMNS})"
+                        " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        (e.line, e.drive, e.key, e.kind, e.code, e.number, e.text, e.value,
+                         e.time, e.time_source, e.drive_time, e.seen),
+                    )  # fmt: skip
+                    if cur.rowcount:
+                        new.append(e)
+                self._db.execute("COMMIT")
+            except sqlite3.Error as exc:
+                with contextlib.suppress(sqlite3.Error):
+                    self._db.execute("ROLLBACK")
+                raise HistoryError(f"history database {self.path}: {exc}") from None
+        return new
+
+    def known(self, drive: str) -> set[str]:
+        """The keys of the entries kept of ``drive``."""
+        rows = self._query("SELECT key FROM events WHERE drive = ?", (drive,))
+        return {row[0] for row in rows}
+
+    def latest(
+        self, *, drive: str | None = None, since: float | None = None, limit: int = 100
+    ) -> list[DriveEvent]:
+        """The entries newest first (by their time, else when first seen)."""
+        where: list[str] = []
+        args: list[object] = []
+        if drive is not None:
+            where.append("drive = ?")
+            args.append(drive)
+        if since is not None:
+            where.append("coalesce(time, seen) >= ?")
+            args.append(since)
+        sql = f"SELECT {_COLUMNS} FROM events"
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY coalesce(time, seen) DESC, id DESC LIMIT ?"
+        rows = self._query(sql, (*args, limit))
+        return [DriveEvent(*row) for row in rows]
+
+    def counts(self) -> Counter[tuple[str, str, str, str, str]]:
+        """How many entries are kept by (line, drive, kind, code, text): what
+        ``pkwbus_drive_events_total`` starts from."""
+        rows = self._query(
+            "SELECT line, drive, kind, code, text, count(*) FROM events"
+            " GROUP BY line, drive, kind, code, text",
+            (),
+        )
+        return Counter({(r[0], r[1], r[2], r[3], r[4]): r[5] for r in rows})
+
+    def prune(self, drive: str, still_held: Iterable[str], before: float) -> int:
+        """Drop the entries of ``drive`` first seen before ``before`` that its log no longer
+        holds; how many."""
+        held = list(still_held)
+        marks = ", ".join("?" * len(held))
+        sql = "DELETE FROM events WHERE drive = ? AND seen < ?"
+        if held:
+            sql += f" AND key NOT IN ({marks})"
+        with self._lock:
+            try:
+                return self._db.execute(sql, (drive, before, *held)).rowcount
+            except sqlite3.Error as exc:
+                raise HistoryError(f"history database {self.path}: {exc}") from None
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def _query(self, sql: str, args: tuple[object, ...]) -> list[Any]:
+        with self._lock:
+            try:
+                return self._db.execute(sql, args).fetchall()
+            except sqlite3.Error as exc:
+                raise HistoryError(f"history database {self.path}: {exc}") from None

@@ -1,0 +1,285 @@
+"""The drives' own logs, watched unattended through their lines' runners.
+
+Every ``events_every`` each watched drive's log is asked what its document
+says shows a change - its change counter (SINAMICS r0944), or its newest
+entry (Danfoss 15-30..15-32) - by background jobs of its line, which never go
+ahead of a due poll (:class:`~pkwbus.master.planning.jobs.Priority`). Only
+when that changed, at start, and whenever the drive or its line comes back
+(a power cycle, an outage, a lost port) is the whole log swept
+(:mod:`pkwbus.protocol.logs`) and each entry stored once in the history
+database (:mod:`.store`): what was logged while pkwbus, its host or its line
+was down is found then. Each new entry is a log line and a step of
+``pkwbus_drive_events_total``.
+
+Time: an entry's wall-clock ``time`` comes from the drive's own time base.
+A SINAMICS entry is in the runtime base (r2114), read in the same sweep, so
+its time is when the sweep read r2114 minus the runtime since the entry;
+exact while the drive stayed powered since the entry (a power cycle restarts
+the runtime: an entry whose runtime is ahead of the runtime now was logged
+before it, and only ``seen`` is known). Where the log has no time base that
+a document explains (Danfoss 15-32), ``time_source`` is ``seen``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from prometheus_client import CollectorRegistry, Counter
+
+from pkwbus.catalog.alarms import CodeTable
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.errors import PkwbusError
+from pkwbus.master.events import Event, LineState
+from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
+from pkwbus.master.planning.outcomes import Answered, Rejected
+from pkwbus.master.planning.plan import HealthChanged
+from pkwbus.protocol import pkw
+from pkwbus.protocol.logs import DriveLog, LogEntry, Opaque, Read, Runtime
+from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.service.history.store import DriveEvent, HistoryError, HistoryStore
+from pkwbus.service.runtime import LineTask
+
+__all__ = ["EVENT_LABELS", "LogWatcher", "Watched", "entry_key"]
+
+log = logging.getLogger("pkwbus.service.history")
+
+EVENT_LABELS = ("line", "drive", "kind", "code", "text")
+SWEEP_TRIES = 3  # a log that changes while it is read is read again, this many times
+PRUNE_EVERY = 3600.0  # seconds between two prunings of a drive's old entries
+
+
+@dataclass
+class Watched:
+    """A drive whose log is watched: its line, its log, how its codes read in words."""
+
+    line: str
+    drive: str
+    dialect: Dialect
+    log: DriveLog
+    every: float
+    codes: CodeTable | None = None
+    # Sweep at the next watch: at start, and when the drive or its line comes back.
+    due_sweep: bool = True
+    last_watch: tuple[int | None, ...] | None = None
+    pruned: float = 0.0
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+
+
+class _Unanswered(PkwbusError):
+    """A read of the round got no answer (timeout, line down): the round is tried later."""
+
+
+def entry_key(entry: LogEntry) -> str:
+    """An entry's identity: its content, never its place in the log."""
+    when = entry.drive_time
+    stamp = (
+        f"runtime:{when.ms}"
+        if isinstance(when, Runtime)
+        else f"raw:{when.raw}"
+        if isinstance(when, Opaque)
+        else ""
+    )
+    value = "" if entry.value is None else str(entry.value)
+    return f"{entry.kind.value}|{entry.code}|{value}|{stamp}"
+
+
+def _as_int(read: Read, response: pkw.PkwResponse) -> int | None:
+    if not isinstance(response, pkw.ValueResponse):
+        return None
+    raw, bits = response.raw, response.width.value
+    if read.signed and raw >> (bits - 1):
+        raw -= 1 << bits
+    return raw
+
+
+class LogWatcher:
+    """Watches the logs of ``watched`` through the lines' runners; an observer of the lines'
+    events, to sweep again whatever comes back."""
+
+    def __init__(
+        self,
+        runners: dict[str, LineTask],
+        store: HistoryStore,
+        watched: Sequence[Watched],
+        registry: CollectorRegistry,
+        *,
+        retention: float,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.runners = runners
+        self.store = store
+        self.watched = list(watched)
+        self.retention = retention
+        self.clock = clock
+        self._tasks: list[asyncio.Task[None]] = []
+        self.counter = Counter(
+            "pkwbus_drive_events",
+            "Entries of the drives' own fault and alarm logs, each counted once (also those"
+            " logged while pkwbus was not running, found at start)",
+            list(EVENT_LABELS),
+            registry=registry,
+        )
+
+    # ------------------------------------------------------------ the service's
+
+    async def start(self) -> None:
+        """Count what the history already holds, then watch every drive."""
+        try:
+            counts = await asyncio.to_thread(self.store.counts)
+        except HistoryError as exc:
+            log.error("%s: the drives' logs are not watched", exc)
+            return
+        for labels, n in counts.items():
+            self.counter.labels(*labels).inc(n)
+        for w in self.watched:
+            self._tasks.append(asyncio.create_task(self._watch(w), name=f"log {w.drive}"))
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._tasks.clear()
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        """A drive back up, or its line's port open again: its log is swept at once."""
+        for event in events:
+            if isinstance(event, HealthChanged) and event.up:
+                self._again([w for w in self.watched if w.drive == event.drive])
+            elif isinstance(event, LineState) and event.up:
+                self._again([w for w in self.watched if w.line == event.line])
+
+    def _again(self, which: list[Watched]) -> None:
+        for w in which:
+            w.due_sweep = True
+            w.wake.set()
+
+    # ------------------------------------------------------------ one drive
+
+    async def _watch(self, w: Watched) -> None:
+        while True:
+            try:
+                await self._look(w)
+            except _Unanswered:
+                pass  # tried again at the next watch
+            except _Refused as exc:
+                log.warning(
+                    "drive %s: its %s is not watched: %s", w.drive, w.log.name, exc,
+                    extra={"line": w.line, "drive": w.drive},
+                )  # fmt: skip
+                return
+            except HistoryError as exc:
+                log.error("drive %s: %s", w.drive, exc, extra={"line": w.line, "drive": w.drive})
+            w.wake.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(w.wake.wait(), w.every)
+
+    async def _look(self, w: Watched) -> None:
+        reads = w.log.watch()
+        values = await self._round(w, reads)
+        if all(v is None for v in values.values()):
+            raise _Refused(f"the drive refuses {_names(reads)}")
+        now = tuple(values[r] for r in reads)
+        if now == w.last_watch and not w.due_sweep:
+            return
+        w.due_sweep = True  # until a sweep succeeds
+        for _ in range(SWEEP_TRIES):
+            if await self._sweep(w):
+                w.due_sweep = False
+                w.last_watch = now
+                return
+        log.info(
+            "drive %s: its %s changed while it was read, %d times: read again later",
+            w.drive, w.log.name, SWEEP_TRIES, extra={"line": w.line, "drive": w.drive},
+        )  # fmt: skip
+
+    async def _sweep(self, w: Watched) -> bool:
+        sweep = w.log.sweep()
+        read_at = self.clock()
+        while reads := sweep.next():
+            sweep.feed(await self._round(w, reads))
+            if any(r in w.log.runtime for r in reads):
+                read_at = self.clock()  # when the drive's runtime now was read
+        found = sweep.result()
+        if found is None:
+            return False
+        seen = self.clock()
+        events = [self._event(w, e, found.runtime, read_at, seen) for e in found.entries]
+        new = await asyncio.to_thread(self.store.add, events)
+        for e in reversed(new):  # the oldest first
+            self._tell(e)
+        if seen - w.pruned >= PRUNE_EVERY:
+            w.pruned = seen
+            held = [e.key for e in events]
+            await asyncio.to_thread(self.store.prune, w.drive, held, seen - self.retention)
+        return True
+
+    def _event(
+        self, w: Watched, entry: LogEntry, runtime: Runtime | None, read_at: float, seen: float
+    ) -> DriveEvent:
+        when, source = None, "seen"
+        stamp = entry.drive_time
+        if isinstance(stamp, Runtime) and runtime is not None and stamp <= runtime:
+            when, source = read_at - (runtime.ms - stamp.ms) / 1000, "runtime"
+        code, text = str(entry.code), ""
+        if w.codes is not None:
+            (alarm,) = w.codes.decode(entry.code) or (None,)
+            if alarm is not None:
+                code, text = alarm.code, alarm.text
+        return DriveEvent(
+            w.line, w.drive, entry_key(entry), entry.kind.value, code, entry.code, text,
+            entry.value, when, source, "" if stamp is None else str(stamp), seen,
+        )  # fmt: skip
+
+    def _tell(self, e: DriveEvent) -> None:
+        self.counter.labels(e.line, e.drive, e.kind, e.code, e.text).inc()
+        at = time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(e.when))
+        shown = f"{e.code} {e.text}".strip()
+        value = "" if e.value is None else f", value {e.value}"
+        log.warning(
+            "drive %s logged %s %s%s at %s (%s)", e.drive, e.kind, shown, value, at,
+            "by its runtime" if e.time_source == "runtime" else "when pkwbus first read it",
+            extra={"line": e.line, "drive": e.drive},
+        )  # fmt: skip
+
+    async def _round(self, w: Watched, reads: Sequence[Read]) -> dict[Read, int | None]:
+        """The values of ``reads``, by background jobs of the drive's line; None for a value
+        the drive refused. :class:`_Unanswered` when one got no answer."""
+        runner = self.runners.get(w.line)
+        if runner is None:
+            raise _Unanswered()
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + max(w.every, 30.0)
+        futures: list[asyncio.Future[JobResult]] = []
+        for r in reads:
+            future: asyncio.Future[JobResult] = loop.create_future()
+            request = pkw.read(w.dialect, r.pnu, r.index)
+            runner.submit(Job(w.drive, request, JobKind.READ, Priority.BACKGROUND, deadline,
+                              ParameterDescription(), future))  # fmt: skip
+            futures.append(future)
+        values: dict[Read, int | None] = {}
+        for r, future in zip(reads, futures, strict=True):
+            outcome = (await future).outcome
+            if isinstance(outcome, Answered):
+                values[r] = _as_int(r, outcome.response)
+            elif isinstance(outcome, Rejected):
+                values[r] = None
+            else:
+                for other in futures:
+                    other.cancel()
+                raise _Unanswered()
+        return values
+
+
+class _Refused(PkwbusError):
+    """The drive refuses what its log's watch reads: it has no such log."""
+
+
+def _names(reads: Sequence[Read]) -> str:
+    return ", ".join(f"{r.pnu}[{r.index}]" if r.index else str(r.pnu) for r in reads)
