@@ -179,8 +179,17 @@ def test_report_lines_and_warnings() -> None:
         "line l1: fc at 9600 baud, 1 drives, 22.00 polls/s, utilisation 100.5% "
         "(capacity 22 exchanges/s)"
     )
-    assert report[2].startswith("WARN line l1: polls demand 22.0 exchanges/s")
-    assert report[3:] == [
+    # The drive's alarm log (15-30..15-32, its catalog's) is watched: its newest entry's
+    # code and time every 10 s, 2 telegrams of 16 bytes each way at 9600 baud 8E1, with
+    # the pause of 3.5 characters and the drive's 5 ms: 0.91 % of the line's time.
+    exchange = (2 * 16 * 11 + 3.5 * 11) / 9600 + 0.005
+    assert report[2] == (
+        f"  the own logs of 1 drive(s) watched (events): {2 * exchange / 10:.2%} of the"
+        " line's time, after the polls"
+    )
+    assert f"{2 * exchange / 10:.2%}" == "0.91%"
+    assert report[3].startswith("WARN line l1: polls demand 22.0 exchanges/s")
+    assert report[4:] == [
         "NOTE lines[0].drives[0].poll[2]: 16-17 is not in catalog danfoss-fc: "
         "it is read and exported as its raw number",
         "NOTE lines[0].drives[0].poll[3]: 16-18 is not in catalog danfoss-fc: "

@@ -194,3 +194,38 @@ async def test_a_drive_that_comes_back_is_swept_and_no_answer_is_tried_again(
     await settle(line, mark + 3 + 64)
     assert any(j.request.pnu == 947 for j in line.jobs[mark:])
     await watch.stop()
+
+
+def newest(registry: CollectorRegistry) -> dict[tuple[str, str], float]:
+    return {
+        (s.labels["code"], s.labels["kind"]): s.value
+        for f in registry.collect()
+        for s in f.samples
+        if s.name == "pkwbus_drive_event_newest_timestamp_seconds"
+    }
+
+
+async def test_the_newest_entry_found_is_a_gauge_from_the_start_and_over_restarts(
+    tmp_path: Path,
+) -> None:
+    """What the alert PkwbusDriveFaultLogged reads: 0 until a first entry (so that it sees
+    the first one too), the newest entry's code and when pkwbus found it after."""
+    log = AlarmLog()
+    line = FakeLine(log)
+    clock = [100.0]
+    first, registry = watcher(tmp_path, line, DANFOSS_ALARM_LOG, lambda: clock[0])
+    await first.start()
+    assert newest(registry) == {("", "fault"): 0.0}
+    await settle(line)
+    clock[0] = 200.0
+    log.trip(13, 250, 7)
+    await settle(line)
+    assert newest(registry) == {("13", "fault"): 200.0}  # one series per drive and kind
+    await first.stop()
+    first.store.close()
+    clock[0] = 900.0
+    again, registry = watcher(tmp_path, FakeLine(log), DANFOSS_ALARM_LOG, lambda: clock[0])
+    await again.start()
+    await settle(again.runners["l1"])  # type: ignore[arg-type]
+    assert newest(registry) == {("13", "fault"): 200.0}  # not found again: not new
+    await again.stop()

@@ -10,7 +10,7 @@ it is kept as the entry's drive time, part of what tells entries apart, and
 never read as a time (``time_source`` is ``seen``). What an unused entry
 reads is not stated; an error code of 0 is taken as none.
 
-The log has no change counter: its newest entry is what is watched.
+The log has no change counter: its newest entry's code and time are what is watched.
 """
 
 from __future__ import annotations
@@ -37,6 +37,9 @@ def _time(i: int) -> Read:
 
 
 NEWEST = (_code(0), _value(0), _time(0))
+# What is watched: the newest entry's code and time (a new trip changes its time, whatever
+# the unit; two reads instead of three keep the watch cheap).
+WATCHED = (_code(0), _time(0))
 
 
 class _Sweep:
@@ -89,9 +92,10 @@ class AlarmLog:
     name: str = "Danfoss alarm log"
     time_base: TimeBase = TimeBase.NONE
     runtime: tuple[Read, ...] = ()
+    kinds: tuple[Kind, ...] = (Kind.FAULT,)  # a Danfoss alarm-log entry is a trip
 
     def watch(self) -> tuple[Read, ...]:
-        return NEWEST
+        return WATCHED
 
     def sweep(self) -> _Sweep:
         return _Sweep()

@@ -129,6 +129,11 @@ class DriveLog(Protocol):
     def time_base(self) -> TimeBase: ...
 
     @property
+    def kinds(self) -> tuple[Kind, ...]:
+        """The kinds of entry the log holds."""
+        ...
+
+    @property
     def runtime(self) -> tuple[Read, ...]:
         """What gives the drive's runtime now (empty: its entries have no runtime base)."""
         ...

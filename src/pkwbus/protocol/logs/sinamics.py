@@ -118,6 +118,7 @@ class FaultBuffer:
     name: str = "SINAMICS fault buffer"
     time_base: TimeBase = TimeBase.RUNTIME
     runtime: tuple[Read, ...] = (RUNTIME_MS, RUNTIME_DAYS)
+    kinds: tuple[Kind, ...] = (Kind.FAULT,)
 
     def watch(self) -> tuple[Read, ...]:
         return (COUNTER,)

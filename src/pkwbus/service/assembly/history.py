@@ -4,33 +4,26 @@ database, the watcher on the lines' streams (:mod:`pkwbus.service.history`)."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
-from types import MappingProxyType
-from typing import Final
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
+from pkwbus.catalog.logs import log_of_catalog
 from pkwbus.master.runner import LineRunner
-from pkwbus.protocol.logs import DANFOSS_ALARM_LOG, SINAMICS_FAULT_BUFFER, DriveLog
+from pkwbus.protocol.logs import DriveLog
 from pkwbus.service import config as cfg
 from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.history.watch import LogWatcher, Watched
 from pkwbus.service.runtime import Runtime
 
-__all__ = ["LOGS", "log_of", "watch_logs"]
+__all__ = ["log_of", "watch_logs"]
 
 log = logging.getLogger("pkwbus.service.history")
-
-# The log each drive family keeps, by its catalog (the documents of pkwbus.protocol.logs).
-LOGS: Final[Mapping[str, DriveLog]] = MappingProxyType(
-    {"danfoss-fc": DANFOSS_ALARM_LOG, "siemens-g120": SINAMICS_FAULT_BUFFER}
-)
 
 
 def log_of(line: cfg.Line, drive: cfg.Drive) -> DriveLog | None:
     """The log a configured drive's events are read from (None: off, or none known)."""
-    if (drive.events or line.events) == "off" or drive.catalog is None:
+    if (drive.events or line.events) == "off":
         return None
-    return LOGS.get(drive.catalog)
+    return log_of_catalog(drive.catalog)
 
 
 def _codes(catalog: str, log: DriveLog) -> CodeTable | None:

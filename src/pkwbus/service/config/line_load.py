@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final
 
+from pkwbus.catalog.logs import log_of_catalog
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
@@ -74,6 +75,7 @@ __all__ = [
     "port_warnings",
     "record_seconds",
     "telegram_bytes",
+    "watch_rate",
 ]
 
 DEFAULT_RESPONSE_DELAY: Final = 0.005  # seconds, FC and USS alike
@@ -100,6 +102,8 @@ class LineLoad:
     warnings: list[str] = field(default_factory=list)
     # PROFIBUS DP: each slave's access (pkw or ds47) and parameters per second at most.
     access: dict[str, tuple[str, float]] = field(default_factory=dict)
+    # FC and USS: the share of the line's time the watch of the drives' logs takes.
+    watching: float = 0.0
 
 
 def telegram_bytes(line: FcLine | UssLine, drive: FcDrive | UssDrive) -> int:
@@ -132,6 +136,16 @@ def poll_rates(line: Line, drive: Drive) -> list[float]:
     rates = [1 / entry.every for entry in drive.poll]
     implicit = alarm_polls(line, drive, {entry.ref.pnu for entry in drive.poll})
     return rates + [1 / ALARM_EVERY] * len(implicit)
+
+
+def watch_rate(line: Line, drive: Drive) -> float:
+    """The reads per second the watch of the drive's own log asks for (``events``): its
+    change counter or newest entry every ``events_every`` (the sweeps when it changed are
+    rare, and not counted)."""
+    log = log_of_catalog(drive.catalog)
+    if log is None or (drive.events or line.events) == "off":
+        return 0.0
+    return len(log.watch()) / (drive.events_every or line.events_every)
 
 
 def record_seconds(drive: ProfibusDrive, count: int, baudrate: int) -> float:
@@ -213,10 +227,12 @@ def line_load(line: Line) -> LineLoad:
     times = {d.name: exchange_seconds(line, d) for d in line.drives}
     rate = 0.0
     busy = 0.0
+    watching = 0.0
     for drive in line.drives:
         for every in poll_rates(line, drive):
             rate += every
             busy += times[drive.name] * every
+        watching += times[drive.name] * watch_rate(line, drive)
     mean = busy / rate if rate else sum(times.values()) / len(times)
     load = LineLoad(
         line=line.name,
@@ -227,18 +243,19 @@ def line_load(line: Line) -> LineLoad:
         utilisation=busy,
         capacity=1 / mean,
         exchange_seconds=times,
+        watching=watching,
     )
     load.warnings.extend(_warnings(load))
     return load
 
 
 def _warnings(load: LineLoad) -> Iterator[str]:
-    if load.utilisation > 1:
+    if load.utilisation + load.watching > 1:
         yield (
             f"line {load.line}: polls demand {load.exchanges_per_second:.1f} exchanges/s, "
             f"more than the {load.capacity:.1f} the line can carry: polls will run late"
         )
-    elif load.utilisation > WARN_UTILISATION:
+    elif load.utilisation + load.watching > WARN_UTILISATION:
         yield (
             f"line {load.line}: utilisation {load.utilisation:.0%} is above "
             f"{WARN_UTILISATION:.0%}: little room for writes, reads and repeats"
@@ -327,6 +344,12 @@ def check_config_report(
             f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "
             f"(capacity {load.capacity:.0f} exchanges/s)"
         )
+        watched = sum(1 for d in line.drives if watch_rate(line, d))
+        if watched:
+            report.append(
+                f"  the own logs of {watched} drive(s) watched (events): {load.watching:.2%}"
+                " of the line's time, after the polls"
+            )
         report.extend(f"WARN {w}" for w in load.warnings)
         report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
     report.extend(f"NOTE {n}" for n in catalog_notes(config, catalogs))

@@ -163,6 +163,15 @@ class HistoryStore:
         )
         return Counter({(r[0], r[1], r[2], r[3], r[4]): r[5] for r in rows})
 
+    def newest(self, drive: str, kind: str) -> DriveEvent | None:
+        """The entry of ``kind`` of ``drive`` that pkwbus found last (None: none kept)."""
+        rows = self._query(
+            f"SELECT {_COLUMNS} FROM events WHERE drive = ? AND kind = ?"
+            " ORDER BY seen DESC, id DESC LIMIT 1",
+            (drive, kind),
+        )
+        return DriveEvent(*rows[0]) if rows else None
+
     def prune(self, drive: str, still_held: Iterable[str], before: float) -> int:
         """Drop the entries of ``drive`` first seen before ``before`` that its log no longer
         holds; how many."""

@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from prometheus_client import CollectorRegistry, Counter
+from prometheus_client import CollectorRegistry, Counter, Gauge
 
 from pkwbus.catalog.alarms import CodeTable
 from pkwbus.catalog.description import ParameterDescription
@@ -124,6 +124,15 @@ class LogWatcher:
             list(EVENT_LABELS),
             registry=registry,
         )
+        self.newest = Gauge(
+            "pkwbus_drive_event_newest_timestamp_seconds",
+            "When pkwbus found the newest entry of this kind in the drive's own log, with its"
+            " code and text (0 with empty code and text: none yet); a series per watched"
+            " drive and kind from the start",
+            list(EVENT_LABELS),
+            registry=registry,
+        )
+        self._newest: dict[tuple[str, str], tuple[str, ...]] = {}  # (drive, kind) -> labels
 
     # ------------------------------------------------------------ the service's
 
@@ -136,6 +145,14 @@ class LogWatcher:
             return
         for labels, n in counts.items():
             self.counter.labels(*labels).inc(n)
+        for w in self.watched:
+            for kind in w.log.kinds:
+                newest = await asyncio.to_thread(self.store.newest, w.drive, kind.value)
+                if newest is None:
+                    self._show_newest(w.line, w.drive, kind.value, "", "", 0.0)
+                else:
+                    self._show_newest(w.line, w.drive, kind.value, newest.code, newest.text,
+                                      newest.seen)  # fmt: skip
         for w in self.watched:
             self._tasks.append(asyncio.create_task(self._watch(w), name=f"log {w.drive}"))
 
@@ -237,8 +254,20 @@ class LogWatcher:
             entry.value, when, source, "" if stamp is None else str(stamp), seen,
         )  # fmt: skip
 
+    def _show_newest(
+        self, line: str, drive: str, kind: str, code: str, text: str, seen: float
+    ) -> None:
+        labels = (line, drive, kind, code, text)
+        old = self._newest.get((drive, kind))
+        if old is not None and old != labels:
+            with contextlib.suppress(KeyError):
+                self.newest.remove(*old)
+        self._newest[(drive, kind)] = labels
+        self.newest.labels(*labels).set(seen)
+
     def _tell(self, e: DriveEvent) -> None:
         self.counter.labels(e.line, e.drive, e.kind, e.code, e.text).inc()
+        self._show_newest(e.line, e.drive, e.kind, e.code, e.text, e.seen)
         at = time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(e.when))
         shown = f"{e.code} {e.text}".strip()
         value = "" if e.value is None else f", value {e.value}"

@@ -331,6 +331,28 @@ document.getElementById("write-target").addEventListener("change", () => {
   document.getElementById("write-now").textContent = item ? describeWritable(item.w) : "";
 });
 
+// The drives' own log entries (/api/v1/events), the newest 20, fetched every 10 s.
+const EVENTS_EVERY_MS = 10000;
+let eventsAt = 0;
+const TIME_FROM = { runtime: "the drive's runtime", drive_clock: "the drive's clock",
+  seen: "when read" };
+
+function drawEvents(events) {
+  const rows = events.map((e) => el("tr", { class: e.kind === "warning" ? "" : "bad" },
+    el("td", {}, new Date(e.time).toLocaleString()), el("td", {}, e.drive),
+    el("td", {}, e.kind), el("td", {}, e.text ? `${e.code} ${e.text}` : e.code),
+    el("td", {}, e.value ?? ""), el("td", {}, TIME_FROM[e.time_source] || e.time_source)));
+  const section = document.getElementById("events");
+  section.querySelector("tbody").replaceChildren(...rows);
+  section.hidden = rows.length === 0;
+}
+
+async function refreshEvents() {
+  if (Date.now() - eventsAt < EVENTS_EVERY_MS) return;
+  eventsAt = Date.now();
+  drawEvents((await getJson("api/v1/events?limit=20")).events || []);
+}
+
 async function getJson(path) {
   const response = await fetch(path, { cache: "no-store" });
   if (!response.ok && response.status !== 503) throw new Error(`${path}: ${response.status}`);
@@ -370,6 +392,7 @@ async function refresh() {
     const [lines, drives, ready] = await Promise.all(
       [getJson("api/v1/lines"), getJson("api/v1/drives"), getJson("readyz")]);
     await refreshTrends().catch(() => {});  // the sparklines wait for the next try
+    await refreshEvents().catch(() => {});  // so do the log entries
     drawLines(lines);
     lastDrives = drives;
     refreshNow();
