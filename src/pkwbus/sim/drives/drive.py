@@ -66,7 +66,7 @@ class SimDrive:
         # (A PROFIBUS slave of the FC profile carries the PPO's 4 fixed words.)
         self.fc = protocol is Protocol.FC and shape.pkw_words is None
         self.pkw_words = 4 if self.fc else shape.pkw_words
-        log = max((s.array for s in specs if s.live == "alarm_log"), default=10)
+        log = max((s.array for s in specs if s.live == "alarm_code"), default=10)
         self.model = DriveModel(self.profile, rng, config or ModelConfig(), log_length=log)
         self.params = ParameterStore(specs, dialect, self._live, described=described)
         self.params.running = lambda: self.running

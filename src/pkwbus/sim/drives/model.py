@@ -1,7 +1,15 @@
-"""The physics of a simulated drive: ramp, current, power, energy, alarms, status word.
+"""The physics of a simulated drive: ramp, current, power, energy, alarms, status word,
+and what it remembers of its trips (:mod:`pkwbus.sim.drives.logs`).
 
 Pure: the caller passes the time (``update(now, ...)``) and the random
 generator, so tests drive it with a fake clock and a fixed seed.
+
+Times the drive counts itself, in whole milliseconds of the model's time: ``runtime_ms``
+(SINAMICS r2114, which starts when the Control Unit is powered and stops when it is
+switched off: SINAMICS CU240D-2 Operating Instructions 04/2018, section 8.2), and
+``powered_ms``, the operating time the Danfoss alarm log's 15-32 is counted in here, in
+seconds (its real unit and reference are not confirmed by a vendor document). Both
+count from the drive's creation, its only power-up so far.
 """
 
 from __future__ import annotations
@@ -12,6 +20,7 @@ from dataclasses import dataclass, field
 
 from pkwbus.protocol import pzd
 from pkwbus.protocol.pzd import Profile
+from pkwbus.sim.drives.logs import ALARM_FIELDS, FAULT_FIELDS, AlarmLog, FaultBuffer, runtime_words
 
 __all__ = [
     "ALARMS",
@@ -78,9 +87,21 @@ class DriveModel:
     bus_control: bool = False
     control_word: int = 0
     received: list[int] = field(default_factory=list)
-    alarm_log: list[int] = field(default_factory=list)
+    runtime_ms: int = 0  # since power-up (r2114)
+    powered_ms: int = 0  # operating time
+    faults: FaultBuffer = field(default_factory=FaultBuffer)  # SINAMICS r0947 and the rest
+    log: AlarmLog = field(init=False)  # Danfoss 15-30..15-32, ``log_length`` entries
+    _limits: Limits = field(default_factory=Limits)  # as at the last update
     _tripped_at: float = 0.0
     _warning_until: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.log = AlarmLog(self.log_length)
+
+    @property
+    def alarm_log(self) -> list[int]:
+        """The codes of the Danfoss alarm log, newest first."""
+        return [alarm.code for alarm in self.log.entries]
 
     # -------------------------------------------------------------- time
 
@@ -89,6 +110,10 @@ class DriveModel:
         dt = now - self.now
         if dt <= 0:
             return
+        elapsed = _ms(now) - _ms(self.now)
+        self.runtime_ms += elapsed
+        self.powered_ms += elapsed
+        self._limits = limits
         before = self._load_kw(limits)
         self._ramp(dt, limits)
         self.energy += (before + self._load_kw(limits)) / 2 * dt / 3600
@@ -127,22 +152,29 @@ class DriveModel:
 
     # ------------------------------------------------------------ events
 
-    def trip(self, code: int, bit: int = 0) -> None:
-        """Trip with alarm ``code``: the motor coasts, the alarm log gets the code."""
+    def trip(self, code: int, bit: int | None = None, value: int | None = None) -> None:
+        """Trip with fault (alarm) ``code`` now: the motor coasts; both logs get the code,
+        ``value`` (default: the output current at the trip in 0.01 A, an illustrative
+        choice) and the time. ``bit``: of the alarm word (default: the code's in
+        :data:`ALARMS`, else 0)."""
+        if bit is None:
+            bit = dict(ALARMS[self.profile]).get(code, 0)
+        if value is None:
+            value = round(self._current(self._limits) * 100)
+        self.faults.enter(code, value, self.runtime_ms)
+        self.log.enter(code, value, self.powered_ms // 1000)
         self.tripped = True
         self._tripped_at = self.now
         self.alarm_word |= 1 << bit
         self.frequency = 0.0
-        self.alarm_log = [code, *self.alarm_log][: self.log_length]
 
     def reset(self) -> None:
-        """The trip is acknowledged. A SINAMICS drive moves the acknowledged faults out of
-        its current entries (r0947 holds the current fault case first); Danfoss's alarm log
-        (15-30) keeps them."""
+        """The trip is acknowledged. The SINAMICS fault buffer moves the active fault case
+        to the acknowledged ones (r0947[0..7] are then 0); Danfoss's alarm log (15-30)
+        keeps its entries."""
         self.tripped = False
         self.alarm_word = 0
-        if self.profile is Profile.PROFIDRIVE:
-            self.alarm_log = [0] * self.log_length
+        self.faults.acknowledge(self.runtime_ms)
 
     def apply_control(self, ctw: int, ref: int | None, limits: Limits) -> None:
         """Process data from the master; acted on only with CTW bit 10 set."""
@@ -177,8 +209,7 @@ class DriveModel:
         if name == "frequency":
             return self.frequency
         if name == "current":
-            on = self.frequency > 0
-            return self._noisy(cfg.rated_current_a * (0.3 + 0.7 * share**2)) if on else 0.0
+            return self._noisy(self._current(limits))
         if name == "power":
             return self._noisy(self._load_kw(limits))
         if name == "output_voltage":
@@ -189,11 +220,24 @@ class DriveModel:
             return math.floor(self.energy * 100) / 100
         if name == "hours":
             return math.floor(self.hours)
-        if name == "alarm_log":
-            return self.alarm_log[index] if index < len(self.alarm_log) else 0
+        if name in FAULT_FIELDS:
+            return self.faults.read(name, index)
+        if name in ALARM_FIELDS:
+            return self.log.read(name, index)
+        if name == "fault_changes":
+            return self.faults.changes
+        if name == "runtime":
+            return runtime_words(self.runtime_ms)[index]
         if name == "received_pzd":
             return self.received[index] if index < len(self.received) else 0
         return float(self._words(limits)[name])
+
+    def _current(self, limits: Limits) -> float:
+        """The output current in A, without noise."""
+        if self.frequency <= 0:
+            return 0.0
+        share = self.frequency / limits.max_frequency if limits.max_frequency > 0 else 0.0
+        return self.config.rated_current_a * (0.3 + 0.7 * share**2)
 
     def _words(self, limits: Limits) -> dict[str, int]:
         return {
@@ -244,3 +288,8 @@ class DriveModel:
             return 0
         percent = max(-199.0, min(199.0, self.frequency / limits.max_frequency * 100))
         return pzd.percent_to_ref(percent)
+
+
+def _ms(seconds: float) -> int:
+    """A time of the model in whole milliseconds: differences of these add up exactly."""
+    return round(seconds * 1000)

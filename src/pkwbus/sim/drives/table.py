@@ -10,6 +10,21 @@ we chose and say so:
   frequency (MAV 0x4000 = 100 % of it). The example telegram of the Danfoss FC 300
   Design Manual writes 1000 to it (100.0 Hz).
 - FC 15-30 Alarm Log: Error Code is UInt8 on the drive; here u16.
+- FC 15-30..15-32 Alarm Log (code, value, time): 10 entries, index 0 the newest, as a
+  secondary source has it (unconfirmed by a vendor page). 15-31 Alarm Log: Value is i32
+  and holds the output current at the trip in 0.01 A (an illustrative choice; the
+  drive's value depends on the alarm). 15-32 Alarm Log: Time is u32 and counts the
+  drive's operating time in seconds at the trip: its unit and reference are not
+  confirmed by any vendor document, and pkwbus never reads it as a time. The types of
+  15-31 and 15-32 are unconfirmed.
+- USS fault buffer (SINAMICS S200 Operating Instructions, appendix A.3): r0947 Fault
+  number u16 (as listed there), r0949 Fault value i32, r0948 and r2109 Fault time
+  received / removed in ms u32, r2130 and r2136 the same in days u16: arrays of 64
+  (8 fault cases x 8 faults). Only r0947's type is confirmed; the others' are not.
+  r0944 Counter of fault buffer changes: u16 as the PROFIdrive profile's P944, not
+  confirmed for SINAMICS. r2114 System runtime: [0] ms, [1] days, u32 (unconfirmed).
+- The log parameters carry no unit here: a catalog's unit for them then needs no
+  conversion (they are counts, codes and times the model gives as they are).
 - USS p0199 stands in for a text parameter (G120's p0199 is numeric).
 - USS p2000 reference frequency scales MAV; p1082 limits the setpoint.
 
@@ -87,7 +102,9 @@ FC_TABLE: Final = (
     ParamSpec(414, "4-14", U16, -1, "Hz", 0.0, 500.0, True, initial=50.0),
     ParamSpec(1500, "15-00", U32, 0, "h", live="hours"),
     ParamSpec(1502, "15-02", U32, 0, "kWh", live="energy"),
-    ParamSpec(1530, "15-30", U16, array=10, live="alarm_log"),
+    ParamSpec(1530, "15-30", U16, array=10, live="alarm_code"),
+    ParamSpec(1531, "15-31", I32, array=10, live="alarm_value"),
+    ParamSpec(1532, "15-32", U32, array=10, live="alarm_time"),
     ParamSpec(1540, "15-40", TEXT, writable=False, initial="FC-102"),
     ParamSpec(1543, "15-43", TEXT, writable=False, initial="05.11"),  # software version
     ParamSpec(1600, "16-00", U16, live="control_word"),
@@ -111,7 +128,11 @@ USS_TABLE: Final = (
     ParamSpec(52, "r0052", U16, live="status_word"),
     ParamSpec(199, "p0199", TEXT, writable=True, initial="PUMP"),
     ParamSpec(304, "p0304", U16, 0, "V", 10.0, 2000.0, True, True, initial=400.0),
-    ParamSpec(947, "r0947", U16, array=8, live="alarm_log"),
+    # The fault buffer: 8 fault cases x 8 faults, [0..7] the active case.
+    ParamSpec(944, "r0944", U16, live="fault_changes"),
+    ParamSpec(947, "r0947", U16, array=64, live="fault_number"),
+    ParamSpec(948, "r0948", U32, array=64, live="fault_received_ms"),
+    ParamSpec(949, "r0949", I32, array=64, live="fault_value"),
     # Device identification: company (42), device type, firmware version (identity of a drive).
     ParamSpec(964, "r0964", U16, array=3, initial=(42.0, 1.0, 4710.0)),
     ParamSpec(1082, "p1082", F32, 0, "Hz", 0.0, 650.0, True, initial=50.0),
@@ -119,6 +140,10 @@ USS_TABLE: Final = (
     ParamSpec(1121, "p1121", F32, 0, "s", 0.0, 650.0, True, initial=10.0),
     ParamSpec(2000, "p2000", F32, 0, "Hz", 6.0, 650.0, True, initial=50.0),
     ParamSpec(2050, "r2050", U16, array=8, live="received_pzd"),
+    ParamSpec(2109, "r2109", U32, array=64, live="fault_removed_ms"),
+    ParamSpec(2114, "r2114", U32, array=2, live="runtime"),  # [0] ms, [1] days
+    ParamSpec(2130, "r2130", U16, array=64, live="fault_received_days"),
+    ParamSpec(2136, "r2136", U16, array=64, live="fault_removed_days"),
 )
 
 # Which parameters steer the model: maximum frequency (MAV scale), ramp times.
