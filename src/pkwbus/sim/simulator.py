@@ -127,6 +127,19 @@ class Simulator:
         own = self._drive_faults.get(address)
         return address in self._dead or (own is not None and address in own.dead)
 
+    # ------------------------------------------------------- drive events
+
+    def power_cycle(self, address: int) -> None:
+        """Drive ``address`` is switched off and on again now: its runtime (r2114) starts
+        again from 0 and it counts one more power-up (15-03); its logs are kept."""
+        self._drive(address).power_cycle(self.clock())
+
+    def _drive(self, address: int) -> SimDrive:
+        drive = self.drives.get(address)
+        if drive is None:
+            raise ValueError(f"no simulated drive at address {address}")
+        return drive
+
     # -------------------------------------------------------------- ends
 
     async def serve_tcp(self, host: str = "127.0.0.1", port: int = 0) -> TcpEnd:

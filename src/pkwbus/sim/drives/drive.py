@@ -132,6 +132,11 @@ class SimDrive:
         self._limits = self.limits()
         self.model.update(now, self._limits)
 
+    def power_cycle(self, now: float) -> None:
+        """The drive is switched off and on again at ``now`` (:meth:`DriveModel.power_cycle`)."""
+        self.tick(now)
+        self.model.power_cycle()
+
     def _live(self, name: str, index: int) -> float:
         return self.model.quantity(name, self._limits, index)
 

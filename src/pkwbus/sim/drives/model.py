@@ -5,11 +5,11 @@ Pure: the caller passes the time (``update(now, ...)``) and the random
 generator, so tests drive it with a fake clock and a fixed seed.
 
 Times the drive counts itself, in whole milliseconds of the model's time: ``runtime_ms``
-(SINAMICS r2114, which starts when the Control Unit is powered and stops when it is
-switched off: SINAMICS CU240D-2 Operating Instructions 04/2018, section 8.2), and
-``powered_ms``, the operating time the Danfoss alarm log's 15-32 is counted in here, in
-seconds (its real unit and reference are not confirmed by a vendor document). Both
-count from the drive's creation, its only power-up so far.
+since the last power-up (SINAMICS r2114, which starts when the Control Unit is powered
+and stops when it is switched off: SINAMICS CU240D-2 Operating Instructions 04/2018,
+section 8.2), and ``powered_ms`` over all power-ups (the operating time the Danfoss
+alarm log's 15-32 is counted in here, in seconds; its real unit and reference are not
+confirmed by a vendor document).
 """
 
 from __future__ import annotations
@@ -87,8 +87,9 @@ class DriveModel:
     bus_control: bool = False
     control_word: int = 0
     received: list[int] = field(default_factory=list)
-    runtime_ms: int = 0  # since power-up (r2114)
-    powered_ms: int = 0  # operating time
+    runtime_ms: int = 0  # since the last power-up (r2114)
+    powered_ms: int = 0  # over all power-ups
+    power_ups: int = 1  # Danfoss 15-03; the simulated drive's first is its creation
     faults: FaultBuffer = field(default_factory=FaultBuffer)  # SINAMICS r0947 and the rest
     log: AlarmLog = field(init=False)  # Danfoss 15-30..15-32, ``log_length`` entries
     _limits: Limits = field(default_factory=Limits)  # as at the last update
@@ -176,6 +177,17 @@ class DriveModel:
         self.alarm_word = 0
         self.faults.acknowledge(self.runtime_ms)
 
+    def power_cycle(self) -> None:
+        """The drive is switched off and on again, now (the time it was off is not
+        simulated: the model's own time just keeps going): the runtime starts again from 0,
+        one more power-up is counted, the motor has coasted to a stop. The fault buffer
+        and the alarm log are kept, and a trip still waits for its acknowledgement: whether
+        a real drive keeps its buffer over a power cycle is not confirmed by the documents
+        read."""
+        self.runtime_ms = 0
+        self.power_ups += 1
+        self.frequency = 0.0
+
     def apply_control(self, ctw: int, ref: int | None, limits: Limits) -> None:
         """Process data from the master; acted on only with CTW bit 10 set."""
         self.control_word = ctw
@@ -228,6 +240,8 @@ class DriveModel:
             return self.faults.changes
         if name == "runtime":
             return runtime_words(self.runtime_ms)[index]
+        if name == "power_ups":
+            return self.power_ups
         if name == "received_pzd":
             return self.received[index] if index < len(self.received) else 0
         return float(self._words(limits)[name])

@@ -17,6 +17,7 @@ we chose and say so:
   drive's operating time in seconds at the trip: its unit and reference are not
   confirmed by any vendor document, and pkwbus never reads it as a time. The types of
   15-31 and 15-32 are unconfirmed.
+- FC 15-03 Power Up's: u32 (unconfirmed), counting the simulated drive's power-ups.
 - USS fault buffer (SINAMICS S200 Operating Instructions, appendix A.3): r0947 Fault
   number u16 (as listed there), r0949 Fault value i32, r0948 and r2109 Fault time
   received / removed in ms u32, r2130 and r2136 the same in days u16: arrays of 64
@@ -102,6 +103,7 @@ FC_TABLE: Final = (
     ParamSpec(414, "4-14", U16, -1, "Hz", 0.0, 500.0, True, initial=50.0),
     ParamSpec(1500, "15-00", U32, 0, "h", live="hours"),
     ParamSpec(1502, "15-02", U32, 0, "kWh", live="energy"),
+    ParamSpec(1503, "15-03", U32, live="power_ups"),
     ParamSpec(1530, "15-30", U16, array=10, live="alarm_code"),
     ParamSpec(1531, "15-31", I32, array=10, live="alarm_value"),
     ParamSpec(1532, "15-32", U32, array=10, live="alarm_time"),
