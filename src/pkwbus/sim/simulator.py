@@ -129,6 +129,22 @@ class Simulator:
 
     # ------------------------------------------------------- drive events
 
+    def trip(self, address: int, code: int, *, value: int | None = None) -> None:
+        """Drive ``address`` trips now with fault (alarm) ``code`` (1-65535), as the random
+        trips do; ``value`` (a signed 32-bit number) for its log entries, by default the
+        output current at the trip in 0.01 A. The reset after ``trip_reset_seconds``
+        follows as for a random trip. ValueError for an unknown drive or a code or value
+        out of range."""
+        if not 1 <= code <= 0xFFFF:
+            raise ValueError(f"fault code {code} is outside 1-65535")
+        if value is not None and not -(1 << 31) <= value < 1 << 31:
+            raise ValueError(f"fault value {value} does not fit a signed 32-bit number")
+        self._drive(address).trip(code, self.clock(), value=value)
+
+    def acknowledge(self, address: int) -> None:
+        """The trip of drive ``address`` is acknowledged now (a local operator's reset)."""
+        self._drive(address).acknowledge(self.clock())
+
     def power_cycle(self, address: int) -> None:
         """Drive ``address`` is switched off and on again now: its runtime (r2114) starts
         again from 0 and it counts one more power-up (15-03); its logs are kept."""

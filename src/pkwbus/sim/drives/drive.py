@@ -132,6 +132,17 @@ class SimDrive:
         self._limits = self.limits()
         self.model.update(now, self._limits)
 
+    def trip(self, code: int, now: float, value: int | None = None) -> None:
+        """The drive trips at ``now`` with fault (alarm) ``code``; ``value`` for its log
+        entries (default: see :meth:`DriveModel.trip`)."""
+        self.tick(now)
+        self.model.trip(code, value=value)
+
+    def acknowledge(self, now: float) -> None:
+        """The trip is acknowledged at ``now`` (as a local operator would)."""
+        self.tick(now)
+        self.model.reset()
+
     def power_cycle(self, now: float) -> None:
         """The drive is switched off and on again at ``now`` (:meth:`DriveModel.power_cycle`)."""
         self.tick(now)
