@@ -15,7 +15,7 @@ RAMP_SECONDS = {"fan_a": 12.34, "fan_b": 5.67}
 DP_DRIVES = {"mixer": 8}
 
 
-def fdl_port(port: str) -> str:
+def dp_line_config(port: str) -> str:
     """A PROFIBUS DP line on ``port`` with one Danfoss slave (PPO 1) polling 16-13."""
     drives = "".join(
         f"""
@@ -30,7 +30,7 @@ def fdl_port(port: str) -> str:
         for name, address in DP_DRIVES.items()
     )
     return f"""
-  - name: fdl_port
+  - name: dp_line_config
     port: {port}
     protocol: profibus
     baudrate: 19200
@@ -41,7 +41,7 @@ def service_config(
     port: str, folder: Path, extra_poll: str = "", dp_port: str | None = None
 ) -> str:
     """A `pkwbus run` config: one FC line on ``port``, both drives polling 3-41 and 16-13;
-    with ``dp_port`` also a PROFIBUS DP line (:func:`fdl_port`)."""
+    with ``dp_port`` also a PROFIBUS DP line (:func:`dp_line_config`)."""
     drives = "".join(
         f"""
       - name: {name}
@@ -64,4 +64,4 @@ lines:
     parity: E
     timeout: 200ms
     retries: 2
-    drives:{drives}""" + (fdl_port(dp_port) if dp_port is not None else "")
+    drives:{drives}""" + (dp_line_config(dp_port) if dp_port is not None else "")

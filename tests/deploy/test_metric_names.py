@@ -28,7 +28,10 @@ import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.history import watch_logs
 from pkwbus.service.config import parse_config
+from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.history.watch import EVENT_LABELS
 from pkwbus.service.metrics.alarms import ALARM_LABELS
 from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
@@ -87,6 +90,8 @@ async def scrape(folder: Path) -> str:
     text = service_config(server.url, folder, extra_poll=extra, dp_port=dp_server.url)
     config = parse_config(text)
     runtime = await build_runtime(config)
+    history = HistoryStore(folder / "history.sqlite")  # the drives' own logs, as `pkwbus run`
+    assert watch_logs(config, runtime, history) is not None
     try:
         await runtime.start()
         deadline = time.monotonic() + 20
@@ -99,6 +104,7 @@ async def scrape(folder: Path) -> str:
             await asyncio.sleep(0.1)
     finally:
         await runtime.stop()
+        history.close()
         await server.close()
         await dp_server.close()
 
@@ -149,6 +155,8 @@ def declared_counters() -> Exported:
     declared[MISMATCH[0]] = set(MISMATCH_LABELS)
     # A series for each active alarm or warning: none while the drives show none.
     declared["pkwbus_drive_alarm"] = set(ALARM_LABELS)
+    # A series for each code of the drives' own logs, with its first entry.
+    declared["pkwbus_drive_events_total"] = set(EVENT_LABELS)
     return declared
 
 

@@ -47,7 +47,7 @@ SHORT = (5.0, 0.2)
 LONG = (60.0, 0.05)
 
 
-def fdl_port(name: str, url: str, addresses: list[int]) -> dict[str, Any]:
+def dp_line_config(name: str, url: str, addresses: list[int]) -> dict[str, Any]:
     return {
         "name": name,
         "port": url,
@@ -142,7 +142,7 @@ async def run_lines(folder: Path, seconds: float, faults: float) -> None:
                         every="20ms", timeout="50ms"),
                 uss_line("uss", str(folder / "uss"), LINES["uss"][1], ["r0021", "r0027"],
                          every="20ms", timeout="50ms"),
-                fdl_port("dp", str(folder / "dp"), LINES["dp"][1]),
+                dp_line_config("dp", str(folder / "dp"), LINES["dp"][1]),
             ]
         )  # fmt: skip
         runtime = await build_runtime(parse_config(text, environ={}))

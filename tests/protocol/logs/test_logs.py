@@ -203,3 +203,8 @@ def test_a_trip_while_the_danfoss_log_is_read_means_read_again() -> None:
 def test_runtime_in_days_and_milliseconds() -> None:
     assert Runtime.of(1, 5) == Runtime(MS_PER_DAY + 5)
     assert str(Runtime.of(3, 3_723_004)) == "3 d 01:02:03.004"
+
+
+def test_an_empty_danfoss_log_is_read_whole_and_has_no_entries() -> None:
+    found = sweep(DANFOSS_ALARM_LOG, AlarmLog())
+    assert found is not None and found.entries == ()

@@ -66,6 +66,8 @@ class _Sweep:
         else:
             self.known.update(values)
         self._round += 1
+        if self._round == 1 and not self._present():
+            self._round = 2  # an empty log: no values or times to read
 
     def _present(self) -> list[int]:
         return [i for i in range(ENTRIES) if self.known.get(_code(i))]

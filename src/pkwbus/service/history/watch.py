@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -68,6 +69,7 @@ class Watched:
     last_watch: tuple[int | None, ...] | None = None
     pruned: float = 0.0
     wake: asyncio.Event = field(default_factory=asyncio.Event)
+    answered: dict[Read, float] = field(default_factory=dict)  # the last round's answer times
 
 
 class _Unanswered(PkwbusError):
@@ -221,8 +223,8 @@ class LogWatcher:
         read_at = self.clock()
         while reads := sweep.next():
             sweep.feed(await self._round(w, reads))
-            if any(r in w.log.runtime for r in reads):
-                read_at = self.clock()  # when the drive's runtime now was read
+            for r in w.log.runtime[:1]:  # when the drive's runtime now was answered
+                read_at = w.answered.get(r, read_at)
         found = sweep.result()
         if found is None:
             return False
@@ -254,6 +256,9 @@ class LogWatcher:
             entry.value, when, source, "" if stamp is None else str(stamp), seen,
         )  # fmt: skip
 
+    def _answered(self, times: dict[Read, float], read: Read, _: object) -> None:
+        times.setdefault(read, self.clock())
+
     def _show_newest(
         self, line: str, drive: str, kind: str, code: str, text: str, seen: float
     ) -> None:
@@ -279,15 +284,18 @@ class LogWatcher:
 
     async def _round(self, w: Watched, reads: Sequence[Read]) -> dict[Read, int | None]:
         """The values of ``reads``, by background jobs of the drive's line; None for a value
-        the drive refused. :class:`_Unanswered` when one got no answer."""
+        the drive refused. :class:`_Unanswered` when one got no answer. When each answer
+        came is in ``w.answered``."""
         runner = self.runners.get(w.line)
         if runner is None:
             raise _Unanswered()
         loop = asyncio.get_running_loop()
         deadline = loop.time() + max(w.every, 30.0)
         futures: list[asyncio.Future[JobResult]] = []
+        answered = w.answered = {}
         for r in reads:
             future: asyncio.Future[JobResult] = loop.create_future()
+            future.add_done_callback(functools.partial(self._answered, answered, r))
             request = pkw.read(w.dialect, r.pnu, r.index)
             runner.submit(Job(w.drive, request, JobKind.READ, Priority.BACKGROUND, deadline,
                               ParameterDescription(), future))  # fmt: skip
