@@ -135,3 +135,9 @@ def test_trend_memory_smallest() -> None:
     large = load("status_page").trend_memory(1, 4, 3)
     assert (small["values"], large["values"]) == (6, 12)
     assert large["mib"] > small["mib"] > 0  # rings grow with the values
+
+
+def test_events_share_smallest() -> None:
+    found = load("events_share").run(seconds=1.0, repeat=1, settle=1.0)
+    assert found["busy_off"] > 0 and found["busy_auto"] > 0
+    assert found["polls_done_off"] > 0

@@ -5,6 +5,7 @@ a secondary source, kept so by the simulator)."""
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import pytest
@@ -296,3 +297,24 @@ def test_the_logs_are_served_with_the_default_catalogs(
     assert all(specs[pnu].live is not None for pnu in pnus)
     code, value = {"uss": (947, 949), "fc": (1530, 1531)}[protocol]
     assert (sim.drives[3].value(code, 0), sim.drives[3].value(value, 0)) == (13, 9)
+
+
+# ------------------------------------------------------------------ a drive's past
+
+
+def test_a_drive_made_with_a_past_has_its_trips_acknowledged_hours_ago() -> None:
+    """``past_trips``: the demo's drives show logs from the first minute, in the documents'
+    layout (acknowledged cases; the Danfoss log newest first) and time bases."""
+    clock = FakeClock()
+    past = dataclasses.replace(STILL, past_trips=2)
+    uss = sim_of("uss", clock, past).drives[3]
+    assert case(uss, 0) == [0] * 8  # nothing active
+    older, newer = case(uss, 2)[0], case(uss, 1)[0]
+    assert older and newer
+    hour = 3_600_000
+    assert uss.value(948, 16) == hour and uss.value(948, 8) == 7 * hour  # received, by runtime
+    assert uss.value(2109, 8) == 7 * hour + 60_000  # acknowledged a minute later
+    assert runtime(sim_of("uss", clock, past)) == (13 * hour, 0)  # the last trip 6 h ago
+    fc = sim_of("fc", clock, past).drives[3]
+    assert [fc.value(1530, i) for i in range(3)][2] == 0 and fc.value(1530, 1)
+    assert fc.value(1532, 0) == 7 * 3600 and fc.value(1532, 1) == 3600  # newest first, seconds

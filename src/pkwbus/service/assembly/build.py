@@ -7,9 +7,7 @@ adapter, so the demo takes the production path.
 
 from __future__ import annotations
 
-import tempfile
-from collections.abc import Awaitable, Callable
-from pathlib import Path
+from collections.abc import Callable
 
 import prometheus_client
 
@@ -44,6 +42,7 @@ from pkwbus.service.assembly.parameter_table import (
     layers_of,
     parameter_table,
 )
+from pkwbus.service.assembly.simulated import start_dp_sim, start_sim
 from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
@@ -51,19 +50,14 @@ from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
 from pkwbus.service.metrics.trends import Trends
 from pkwbus.service.runtime import DriveEntry, Runtime
-from pkwbus.sim import SimTiming, Simulator
-from pkwbus.sim.profibus.line import DpSimulator, SlaveKind
 
 __all__ = [
-    "DEFAULT_SIM_DELAY",
     "build_runtime",
     "describe_targets",
     "description_form",
     "port_for",
     "target_for",
 ]
-
-DEFAULT_SIM_DELAY = 0.003
 
 
 async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None) -> Runtime:
@@ -104,9 +98,9 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
         port = line.port
         if line.sim is not None:
             if isinstance(line, cfg.ProfibusLine):
-                port, close = await _start_dp_sim(line, line.sim)
+                port, close = await start_dp_sim(line, line.sim)
             else:
-                port, close = await _start_sim(line, line.sim)
+                port, close = await start_sim(line, line.sim)
             cleanups.append(close)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
@@ -330,69 +324,3 @@ def _info(
         fmt.vtype.value if fmt.vtype else "raw",
         source,
     )
-
-
-async def _start_sim(
-    line: cfg.FcLine | cfg.UssLine, sim: cfg.SimPort
-) -> tuple[str, Callable[[], Awaitable[None]]]:
-    catalogs = {d.catalog for d in line.drives if d.catalog}
-    first = line.drives[0]  # the config checked that the drives share one shape
-    uss = first if isinstance(first, cfg.UssDrive) else None  # FC: one telegram shape
-    simulator = Simulator(
-        line.protocol,
-        sim.drives,
-        dialect=first.pkw_dialect.name,
-        ind_layout=first.layout,
-        # A drive learned by its answers is simulated as Siemens drives leave the factory.
-        pkw_words=None if uss is None or uss.pkw_words == AUTO else uss.pkw_words,
-        pzd_words=2 if uss is None else uss.pzd_words,
-        timing=SimTiming(
-            response_delay=sim.response_delay
-            if sim.response_delay is not None
-            else DEFAULT_SIM_DELAY
-        ),
-        catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
-        refuse_descriptions=sim.refuse_descriptions,
-    )
-    return await _serve_on_pty(simulator, line.name)
-
-
-async def _start_dp_sim(
-    line: cfg.ProfibusLine, sim: cfg.SimPort
-) -> tuple[str, Callable[[], Awaitable[None]]]:
-    """Simulated slaves, each of its drive's dialect, ident and catalog (one PPO per line)."""
-    each: dict[int, SlaveKind] = {}
-    for drive in line.drives:
-        found, _ = drive.dp.settings()
-        each[drive.address] = SlaveKind(
-            drive.pkw_dialect.name,
-            found.ident if found is not None else None,
-            drive.catalog or "default",
-        )
-    simulator = DpSimulator(
-        sim.drives,
-        ppo_number=line.drives[0].ppo,  # the config checked that the slaves share one PPO
-        timing=SimTiming(
-            response_delay=sim.response_delay if sim.response_delay is not None else 0.0
-        ),
-        each=each,
-        refuse_descriptions=sim.refuse_descriptions,
-        # DP-V1 slaves when parametrised so; each record's response ready at the second read.
-        dpv1=True,
-        not_ready=1,
-    )
-    return await _serve_on_pty(simulator, line.name)
-
-
-async def _serve_on_pty(
-    simulator: Simulator | DpSimulator, line: str
-) -> tuple[str, Callable[[], Awaitable[None]]]:
-    """The simulator on a pty of a temporary folder: its path, and what closes both."""
-    folder = Path(tempfile.mkdtemp(prefix="pkwbus-sim-"))
-    end = await simulator.serve_pty(str(folder / f"tty-{line}"))
-
-    async def close() -> None:
-        await end.close()
-        folder.rmdir()
-
-    return end.path, close

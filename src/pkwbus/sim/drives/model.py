@@ -36,6 +36,7 @@ __all__ = [
 SQRT3 = math.sqrt(3.0)
 WARNINGS_PER_HOUR = 12.0  # the defaults of `pkwbus simulate --warnings-per-hour`
 TRIPS_PER_HOUR = 1.0  # and of --trips-per-hour
+PAST_TRIP_HOURS = 6  # hours between two trips of a drive's past (ModelConfig.past_trips)
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +51,10 @@ class ModelConfig:
     warning_seconds: float = 20.0
     trip_rate: float = TRIPS_PER_HOUR / 3600
     trip_reset_seconds: float = 30.0  # a local operator resets the trip; 0 = never
+    # Trips already in the drive's own logs when it is made, from before it was simulated:
+    # each acknowledged a minute after it came, PAST_TRIP_HOURS apart (the first an hour
+    # into the drive's runtime, the last PAST_TRIP_HOURS before it is made).
+    past_trips: int = 0
 
 
 # (code shown in the alarm log, bit in the alarm word). FC: the bits of over current (6) and
@@ -98,6 +103,21 @@ class DriveModel:
 
     def __post_init__(self) -> None:
         self.log = AlarmLog(self.log_length)
+        self._past(self.config.past_trips)
+
+    def _past(self, trips: int) -> None:
+        """``trips`` trips in the logs, from before now (the drive has run for a while)."""
+        if trips <= 0:
+            return
+        hour = 3_600_000
+        self.runtime_ms = self.powered_ms = (trips * PAST_TRIP_HOURS + 1) * hour
+        for k in range(trips):
+            at = (k * PAST_TRIP_HOURS + 1) * hour
+            code, _ = self.rng.choice(ALARMS[self.profile])
+            value = self.rng.randrange(1500, 3000)  # an output current in 0.01 A
+            self.faults.enter(code, value, at)
+            self.faults.acknowledge(at + 60_000)
+            self.log.enter(code, value, at // 1000)
 
     @property
     def alarm_log(self) -> list[int]:

@@ -1,0 +1,143 @@
+"""The watch of the drives' own logs: its share of a loaded line's time, and whether the polls
+keep their intervals while it runs (goal: at most 2 % of the line).
+
+The service as `pkwbus run` builds it (configuration, runtime, the watch of the drives'
+logs), on an FC line at 19200 baud to three simulated drives in another process with
+wire timing and a 2 ms response delay, each polling three parameters every 300 ms (the
+line about two thirds busy). The same line runs twice, in turn, with ``events: off``
+and ``events: auto`` (each drive's Danfoss alarm log watched every 10 s, its newest
+entry's code and time; swept once at start). Printed per run: the line's busy share
+(``pkwbus_line_busy_seconds_total`` over the window after the start), the polls done
+against those due, and the overruns; the watch's share is the difference of the busy
+shares. The drives trip at random (the simulator's default rate), so a sweep now and
+then is in the figure too.
+
+    .venv/bin/python bench/events_share.py [--seconds 60] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import sim_process
+from prometheus_client import CollectorRegistry
+
+from pkwbus import link
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.config import parse_config
+from pkwbus.service.history.store import HistoryStore
+
+BAUDRATE = 19200
+POLLS = ("16-13", "16-14", "16-10")
+EVERY = 0.3
+DRIVES = (1, 2, 3)
+SETTLE = 5.0  # seconds after the start before the window: the start-up sweep is over
+
+
+def _config(port: str, events: str, folder: str) -> str:
+    polls = ", ".join(f'{{parameter: "{p}", every: {EVERY * 1000:.0f}ms}}' for p in POLLS)
+    drives = "\n".join(
+        f"      - {{name: d{a}, address: {a}, catalog: danfoss-fc, describe: off, poll: [{polls}]}}"
+        for a in DRIVES
+    )
+    return f"""
+listen: 127.0.0.1:0
+audit_db: {folder}/audit.sqlite
+lines:
+  - name: bench
+    port: {port}
+    protocol: fc
+    baudrate: {BAUDRATE}
+    timeout: 200ms
+    alarms: off
+    events: {events}
+    drives:
+{drives}
+"""
+
+
+def _sample(registry: CollectorRegistry, name: str) -> float:
+    return sum(s.value for f in registry.collect() for s in f.samples if s.name == name)
+
+
+async def _run(port: str, events: str, seconds: float, settle: float) -> dict[str, float]:
+    folder = tempfile.mkdtemp(prefix="pkwbus-bench-events-")
+    config = parse_config(_config(port, events, folder), environ={})
+    runtime = await build_runtime(config)
+    store = HistoryStore(Path(folder) / "history.sqlite")
+    watch_logs(config, runtime, store)
+    await runtime.start()
+    registry = runtime.registry
+    try:
+        await asyncio.sleep(settle)
+        busy0 = _sample(registry, "pkwbus_line_busy_seconds_total")
+        jobs0 = _sample(registry, "pkwbus_jobs_total")
+        over0 = _sample(registry, "pkwbus_poll_overruns_total")
+        t0 = time.perf_counter()
+        await asyncio.sleep(seconds)
+        elapsed = time.perf_counter() - t0
+        busy = _sample(registry, "pkwbus_line_busy_seconds_total") - busy0
+        jobs = _sample(registry, "pkwbus_jobs_total") - jobs0
+        overruns = _sample(registry, "pkwbus_poll_overruns_total") - over0
+    finally:
+        await runtime.stop()
+        store.close()
+    due = len(DRIVES) * len(POLLS) * elapsed / EVERY
+    return {"busy": busy / elapsed, "polls_done": jobs / due, "overruns": overruns}
+
+
+def measure(events: str, seconds: float, settle: float = SETTLE) -> dict[str, float]:
+    with sim_process(
+        "fc", "1-3", response_delay=0.002, baudrate=BAUDRATE, wire_timing=True
+    ) as port:
+        return link.run(_run(port, events, seconds, settle))
+
+
+def run(seconds: float = 60.0, repeat: int = 3, settle: float = SETTLE) -> dict[str, Any]:
+    rows: dict[str, list[dict[str, float]]] = {"off": [], "auto": []}
+    for _ in range(repeat):
+        for events in ("off", "auto"):  # interleaved
+            rows[events].append(measure(events, seconds, settle))
+    off = statistics.median(r["busy"] for r in rows["off"])
+    on = statistics.median(r["busy"] for r in rows["auto"])
+    return {
+        "busy_off": off,
+        "busy_auto": on,
+        "watch_share": on - off,
+        "polls_done_off": min(r["polls_done"] for r in rows["off"]),
+        "polls_done_auto": min(r["polls_done"] for r in rows["auto"]),
+        "overruns_auto": max(r["overruns"] for r in rows["auto"]),
+        "runs": rows,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    found = run(args.seconds, args.repeat)
+    print(
+        f"line busy, events off: {found['busy_off']:.2%}; events auto: {found['busy_auto']:.2%};"
+        f" the watch's share: {found['watch_share']:.2%} of the line (goal: at most 2 %)"
+    )
+    print(
+        f"reads done per poll due (the lowest run; with the watch its reads too): off"
+        f" {found['polls_done_off']:.3f}, auto {found['polls_done_auto']:.3f}; overruns with"
+        f" the watch: "
+        f"{found['overruns_auto']:.0f}"
+    )
+
+
+if __name__ == "__main__":
+    main()
