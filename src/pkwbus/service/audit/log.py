@@ -72,6 +72,7 @@ from pkwbus.service.audit.rows import (
     entry_of_row,
     stored_value,
 )
+from pkwbus.service.audit.synced import WAL_BYTES, WAL_PAGES, connect_synced
 
 __all__ = [
     "COLUMNS",
@@ -96,8 +97,6 @@ __all__ = [
 log = logging.getLogger("pkwbus.service.audit")  # the name its log lines have always carried
 
 FLUSH_DELAY: Final = 1.0  # seconds after a minute's end before its refusal counts are written
-WAL_PAGES: Final = 64  # the write-ahead log is checkpointed once it holds this many pages
-WAL_BYTES: Final = 262144  # and cut back to this size (64 pages of 4 KiB) after a checkpoint
 
 
 class AuditError(PkwbusError):
@@ -133,14 +132,7 @@ class AuditLog:
                 self._has_count = "count" in self._columns()
                 return
             memory = str(path) == ":memory:"
-            if not memory:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.execute(f"PRAGMA wal_autocheckpoint={WAL_PAGES}")
-            self._db.execute(f"PRAGMA journal_size_limit={WAL_BYTES}")
-            self._db.executescript(SCHEMA)
+            self._db = connect_synced(path, SCHEMA)
             if "count" not in self._columns():  # a database of an earlier version
                 self._db.execute("ALTER TABLE writes ADD COLUMN count INTEGER")
             self._has_count = True

@@ -4,8 +4,8 @@ An entry is known by its drive and its content (kind, code, value, drive
 time), never by where it sat in the drive's log; storing what is already
 there changes nothing, so a sweep after a restart, an outage or a power
 cycle adds only what is new. Every store is one synced transaction
-(``synchronous=FULL``): a killed service or a power cut loses no entry it
-had counted. The store is bounded by a retention: entries first seen longer
+(:mod:`pkwbus.service.audit.synced`): a killed service or a power cut loses
+no entry it had counted. The store is bounded by a retention: entries first seen longer
 ago than it are dropped, but only once the drive's log no longer holds them
 (else they would be found again and counted twice).
 
@@ -26,11 +26,9 @@ from pathlib import Path
 from typing import Any, Final
 
 from pkwbus.errors import PkwbusError
+from pkwbus.service.audit.synced import connect_synced
 
 __all__ = ["SCHEMA", "DriveEvent", "HistoryError", "HistoryStore"]
-
-WAL_PAGES: Final = 64
-WAL_BYTES: Final = 262144
 
 SCHEMA: Final = """
 CREATE TABLE IF NOT EXISTS events (
@@ -91,17 +89,8 @@ class HistoryStore:
         self.path = Path(path)
         self._lock = threading.Lock()
         try:
-            if str(path) != ":memory:":
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(str(path), check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.execute(f"PRAGMA wal_autocheckpoint={WAL_PAGES}")
-            self._db.execute(f"PRAGMA journal_size_limit={WAL_BYTES}")
-            self._db.executescript(SCHEMA)
+            self._db = connect_synced(path, SCHEMA)
         except (sqlite3.Error, OSError) as exc:
-            with contextlib.suppress(Exception):
-                self._db.close()
             raise HistoryError(f"cannot open the history database {self.path}: {exc}") from None
 
     def add(self, events: Sequence[DriveEvent]) -> list[DriveEvent]:
