@@ -74,6 +74,9 @@ class ParameterSpec(BaseModel):
     max: float | None = None
     writable: bool = False
     array: int | None = Field(default=None, ge=1)
+    # A counter the drive keeps of its own life (operating hours, energy, power-ups):
+    # polled by default, slowly (``counters: auto``), each element of an array.
+    counter: bool = False
     verified: bool = True
     note: str = ""
     source: str = ""

@@ -153,11 +153,17 @@ class SnapshotWriter:
                             drive, event.why, ASK_AGAIN // 60, extra=ctx)  # fmt: skip
             elif event.unanswered:
                 pass
-            elif event.first:
+            elif event.first and not event.withheld:
                 log.info("drive %s: %s: %s; the catalog's description is used", drive,
                          target.parameter, event.why, extra=ctx)  # fmt: skip
         else:
             self._silent.discard(drive)
+        if event.withheld and event.first:
+            log.info(
+                "drive %s: %s is not polled: no vendor document types it, and the drive did"
+                " not describe its type (%s)", drive, target.parameter,
+                event.why or "no type in its description", extra=ctx,
+            )  # fmt: skip
         if found is not None and found.read_only and target.writable and event.first:
             log.warning(
                 "drive %s describes %s as read-only, but the configuration lists it as"

@@ -313,3 +313,45 @@ def test_a_drive_of_a_described_kind_reads_only_its_own_limits() -> None:
     assert second.conversion == first.conversion
     assert second.high_raw is not None and first.high_raw is not None
     assert second.high_raw * 2 == first.high_raw  # each drive's own limit
+
+
+POWER_UPS = 1503  # 15-03: no vendor document types it (the catalog's type is recalled)
+
+
+def counter_spec(*, refuses: bool) -> tuple[DriveSpec, Simulator]:
+    """Drive 1 polled for 15-03 by default: its poll needs the drive's description."""
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.0), catalog="danfoss-fc")
+    if refuses:
+        params = sim.drives[1].params
+        params.specs[POWER_UPS] = replace(params.specs[POWER_UPS], described=False)
+    target = DriveTarget.create("fc", 1)
+    catalog = ParameterDescription.from_spec(load_catalog("danfoss-fc").get(POWER_UPS))
+    request = pkw.read(target.dialect, POWER_UPS)
+    poll = PollSpec("15-03", 0, request, 0.1, catalog, Layers(catalog, catalog=catalog),
+                    described_only=True)  # fmt: skip
+    wanted = DescribeTarget(POWER_UPS, "15-03", elements_to_read(limits=False), catalog)
+    spec = DriveSpec("d1", carrier_for(target), (poll,), (wanted,), DescriptionForm.DANFOSS_FC)
+    return spec, sim
+
+
+def test_a_poll_no_document_types_goes_out_once_the_drive_describes_its_type() -> None:
+    spec, sim = counter_spec(refuses=False)
+    fake = FakeLine(Planner([spec], poll_deadline=0.5), sim)
+    fake.run(1.0)
+    (described,) = [e for e in fake.events if isinstance(e, Described)]
+    assert described.description is not None and described.description.vtype is not None
+    assert described.polls and not described.withheld
+    polls = [p for p in polls_of(fake, "d1") if isinstance(p.outcome, Answered)]
+    assert polls, "15-03 is polled by the type the drive described"
+
+
+def test_a_poll_no_document_types_is_withheld_when_the_drive_does_not_describe_it() -> None:
+    spec, sim = counter_spec(refuses=True)
+    fake = FakeLine(Planner([spec], poll_deadline=0.5), sim)
+    fake.run(5.0)
+    (described,) = [e for e in fake.events if isinstance(e, Described)]
+    assert described.description is None and not described.polls
+    assert [p.parameter for p in described.withheld] == ["15-03"]
+    assert not polls_of(fake, "d1"), "no value read by a type nobody stated"
+    reads = [s for s in fake.sent if s.telegram[3] >> 4 == 1]  # AK 1: a value read
+    assert reads == []

@@ -66,6 +66,7 @@ lines:
     timeout: 50ms
     retries: 1
     alarms: off  # the tests count the values that land
+    counters: off
     drives:
 {drives}"""
 
@@ -277,6 +278,7 @@ lines:
     slot_time: 20ms
     watchdog: 2s
     alarms: off  # the test counts the values that land
+    counters: off
     drives:
 {drives}"""
     try:

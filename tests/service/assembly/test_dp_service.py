@@ -72,6 +72,7 @@ lines:
     slot_time: {slot_time}
     watchdog: 2s
     alarms: off  # the tests count the PKW jobs of the polls they configure
+    counters: off
     drives:
 {drives}
 """

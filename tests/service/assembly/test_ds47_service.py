@@ -63,6 +63,7 @@ lines:
     slot_time: 20ms
     watchdog: 2s
     alarms: off  # the tests count the parameters of each request
+    counters: off
     drives:
 {drives}
 """

@@ -34,13 +34,14 @@ lines:
         address: 1
         catalog: danfoss-fc
         alarms: off  # the figures below are of the polls given
+        counters: off
         poll: {polls}
 """
     )
 
 
 def test_the_alarm_words_polled_by_default_count_in_the_estimate() -> None:
-    from pkwbus.service.config.alarm_polls import ALARM_EVERY
+    from pkwbus.service.config.default_polls import ALARM_EVERY
 
     polls = '[{parameter: "16-13", every: 1s}, {parameter: "16-90", every: 500ms}]'
     given = line_load(fc_line(polls).lines[0])

@@ -44,7 +44,8 @@ async def test_an_fc_drive_has_one_name_per_parameter(tmp_path: Path) -> None:
         metrics = (await svc.client.get("/metrics")).text
         assert 'parameter="16-13"' in metrics and 'parameter="1613"' not in metrics
         drives = (await svc.client.get("/api/v1/drives")).json()
-        assert {v["parameter"] for d in drives for v in d["values"]} == {"16-13"}
+        names = {v["parameter"] for d in drives for v in d["values"]}
+        assert "16-13" in names and "1613" not in names
 
 
 async def test_a_siemens_drive_names_parameters_as_its_catalog(tmp_path: Path) -> None:

@@ -55,9 +55,8 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
                     ready = (await client.get("/readyz")).status_code == 200
                     drives = (await client.get("/api/v1/drives")).json() if ready else []
                     # ready, and fan2's 3-41 polled once: it is the write's old value
-                    if any(d["name"] == "fan2" and d["values"] for d in drives) and all(
-                        len(d["values"]) == 2 for d in drives
-                    ):
+                    polled = [{v["parameter"] for v in d["values"]} for d in drives]
+                    if drives and all({"16-13", "3-41"} <= p for p in polled):
                         break
                 except httpx.TransportError:
                     pass

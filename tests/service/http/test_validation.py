@@ -65,7 +65,8 @@ async def test_refused_before_sending(
         assert error["message"]
         assert svc.audit_writer.writes() == []
         # nothing but polls reached any drive (no pre-read either)
-        polled = {1613, 21}
+        polled = {p.request.pnu for d in svc.runtime.drives.values() for p in d.polls}
+        assert {1613, 21} <= polled
         assert {req.pnu for _, req in svc.audit_writer.requests} <= polled
         assert svc.audit is not None
         rows = svc.audit.latest(10)

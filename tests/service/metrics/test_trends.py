@@ -63,6 +63,7 @@ async def test_the_api_gives_each_drives_trends() -> None:
         address: 1
         catalog: danfoss-fc
         alarms: off
+        counters: off
         poll: [{parameter: "16-13", every: 50ms}]
 """
     try:

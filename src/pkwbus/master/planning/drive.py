@@ -297,14 +297,22 @@ class DrivePlan:
                     polls.append(active)
             for poll in polls:
                 poll.spec = described_poll(poll.spec, done, self.carrier.dialect)
+            untyped = done.description is None or done.description.vtype is None
+            withheld = []
             for poll in polls:
-                if id(poll) in waiting:
-                    poll.due, poll.fresh = now, True
-                    self.push_poll(poll)
-            specs = tuple(p.spec for p in polls)
+                if id(poll) not in waiting:
+                    continue
+                if untyped and poll.spec.described_only:  # no type: it goes on waiting
+                    self.held.setdefault(done.pnu, []).append(poll)
+                    withheld.append(poll)
+                    continue
+                poll.due, poll.fresh = now, True
+                self.push_poll(poll)
+            specs = tuple(p.spec for p in polls if p not in withheld)
             events.append(
                 Described(self.name, targets[done.pnu], done.description, specs, done.why,
-                          done.first, done.identity, done.from_book, done.unanswered)
+                          done.first, done.identity, done.from_book, done.unanswered,
+                          withheld=tuple(p.spec for p in withheld))
             )  # fmt: skip
         if any(e.polls for e in events):
             heapq.heapify(self.polls)

@@ -50,6 +50,9 @@ class PollSpec:
     # What the configuration and the catalog say of it, for the drive's description to
     # be put in between (None: the drive is not asked to describe it).
     layers: Layers | None = None
+    # Its type is known only from the drive's description (no vendor document types it):
+    # it waits until the drive describes a type, and without one it is not polled.
+    described_only: bool = False
 
 
 @dataclass(frozen=True)
@@ -166,6 +169,8 @@ class Described:
     # The drive is another one now (its identity changed): described afresh, its values
     # waiting for it (``description`` is None).
     forgotten: bool = False
+    # Polls that wait for a type the drive did not describe (``PollSpec.described_only``).
+    withheld: tuple[PollSpec, ...] = ()
 
 
 Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

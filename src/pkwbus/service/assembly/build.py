@@ -7,7 +7,7 @@ adapter, so the demo takes the production path.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import prometheus_client
 
@@ -43,7 +43,13 @@ from pkwbus.service.assembly.parameter_table import (
     parameter_table,
 )
 from pkwbus.service.assembly.simulated import start_dp_sim, start_sim
-from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
+from pkwbus.service.config.default_polls import (
+    ALARM_EVERY,
+    COUNTER_EVERY,
+    alarm_polls,
+    counter_polls,
+)
+from pkwbus.service.config.parameters import ref_key
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
@@ -251,7 +257,23 @@ def _drive(
         info = _info(line, drive, ref, fmt, layers_of(drive, table, ref).catalog)
         infos.append(info)
         sources[ref.name] = info.source
-    describe = describe_targets(target, drive, table) if form is not None else ()
+    counters = []
+    for ref, typed in counter_polls(line, drive, {ref_key(p_.ref) for p_ in drive.poll}):
+        if not typed and form is None:
+            continue  # no document types it, and the drive is not asked to
+        ref = table.canonical(ref)
+        fmt = table.describe(ref)
+        found = layers_of(drive, table, ref)
+        polls.append(
+            PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), COUNTER_EVERY, fmt,
+                     found if form is not None else None, described_only=not typed)
+        )  # fmt: skip
+        counters.append(ref)
+        units[ref.name] = fmt.unit
+        info = _info(line, drive, ref, fmt, found.catalog)
+        infos.append(info)
+        sources[ref.name] = info.source
+    describe = describe_targets(target, drive, table, counters) if form is not None else ()
     entries.append(
         DriveEntry(
             drive.name,
@@ -276,14 +298,18 @@ def description_form(line: cfg.Line, drive: cfg.Drive) -> DescriptionForm | None
 
 
 def describe_targets(
-    target: DriveTarget, drive: cfg.Drive, table: ParameterTable
+    target: DriveTarget,
+    drive: cfg.Drive,
+    table: ParameterTable,
+    polled: Sequence[ParameterRef] = (),
 ) -> tuple[DescribeTarget, ...]:
-    """The polled and writable parameters, each once: polled ones for their type, scaling,
-    unit, size and name; writable ones also for their limits. The name is not asked
-    where it does not fit the PKW block: a PPO's four words, a fixed USS length."""
+    """The polled (``drive.poll`` and ``polled``) and writable parameters, each once: polled
+    ones for their type, scaling, unit, size and name; writable ones also for their
+    limits. The name is not asked where it does not fit the PKW block: a PPO's four
+    words, a fixed USS length."""
     wanted: dict[int, tuple[str, bool]] = {}
-    for entry in drive.poll:
-        ref = table.canonical(entry.ref)
+    for ref in [*(entry.ref for entry in drive.poll), *polled]:
+        ref = table.canonical(ref)
         wanted.setdefault(ref.pnu, (ref.name, False))
     for ref in drive.writable:
         ref = table.canonical(ref)

@@ -30,6 +30,7 @@ from pkwbus.service.config.base import Model, Place, fail
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs, catalogs_of
 from pkwbus.service.config.fields import (
     Alarms,
+    Counters,
     Describe,
     Events,
     EventsEvery,
@@ -61,6 +62,9 @@ class DriveBase(Model):
     # Poll the alarm words its catalog explains even where ``poll`` does not: auto or off
     # (None: the line's setting).
     alarms: Alarms | None = None
+    # Poll the counters its catalog marks (operating hours, energy, power-ups) even where
+    # ``poll`` does not: auto or off (None: the line's setting).
+    counters: Counters | None = None
     # Its own fault and alarm logs, and how often they are watched (None: the line's).
     events: Events | None = None
     events_every: EventsEvery | None = None

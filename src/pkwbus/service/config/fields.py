@@ -28,6 +28,7 @@ from pkwbus.protocol.values import (
 __all__ = [
     "Alarms",
     "CharTimeout",
+    "Counters",
     "Delay",
     "Describe",
     "Events",
@@ -137,3 +138,7 @@ Alarms = Annotated[str, PlainValidator(_describe)]
 # Whether the drive's own fault and alarm logs are read (where its catalog has one): auto,
 # or off.
 Events = Annotated[str, PlainValidator(_describe)]
+# Whether the counters a drive keeps of its own life (operating hours, energy, power-ups)
+# that its catalog marks are polled even where the configuration does not poll them: auto,
+# or off.
+Counters = Annotated[str, PlainValidator(_describe)]

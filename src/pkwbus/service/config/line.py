@@ -37,6 +37,7 @@ from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.fields import (
     Alarms,
     CharTimeout,
+    Counters,
     Delay,
     Describe,
     Events,
@@ -102,6 +103,7 @@ class LineBase(Model, Generic[DriveT]):
     # The drives' own description elements (AK 4) over their catalogs; a drive may say otherwise.
     describe: Describe = "auto"
     alarms: Alarms = "auto"
+    counters: Counters = "auto"
     # The drives' own fault and alarm logs, watched every ``events_every``.
     events: Events = "auto"
     events_every: EventsEvery = 10.0

@@ -48,10 +48,16 @@ from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profidrive.parameters import MAX_PARAMETERS
 from pkwbus.protocol.serial import timing
 from pkwbus.protocol.serial.telegram import MAX_TELEGRAM, Protocol
-from pkwbus.service.config.alarm_polls import ALARM_EVERY, alarm_polls
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
+from pkwbus.service.config.default_polls import (
+    ALARM_EVERY,
+    COUNTER_EVERY,
+    alarm_polls,
+    counter_polls,
+)
 from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.model import Config, Drive, Line
+from pkwbus.service.config.parameters import ref_key
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
@@ -131,11 +137,12 @@ def dp_frame_bytes(drive: ProfibusDrive) -> int:
 
 
 def poll_rates(line: Line, drive: Drive) -> list[float]:
-    """The reads per second each of the drive's polls asks for: the configured ones, and
-    the alarm words polled by default (``alarms: auto``)."""
+    """The reads per second each of the drive's polls asks for: the configured ones, the
+    alarm words (``alarms: auto``) and the counters (``counters: auto``) polled by default."""
     rates = [1 / entry.every for entry in drive.poll]
     implicit = alarm_polls(line, drive, {entry.ref.pnu for entry in drive.poll})
-    return rates + [1 / ALARM_EVERY] * len(implicit)
+    counters = counter_polls(line, drive, {ref_key(entry.ref) for entry in drive.poll})
+    return rates + [1 / ALARM_EVERY] * len(implicit) + [1 / COUNTER_EVERY] * len(counters)
 
 
 def watch_rate(line: Line, drive: Drive) -> float:

@@ -248,10 +248,12 @@ class DriveModel:
             return cfg.dc_link_v / SQRT3 * 1.2 * min(share, 1.0)
         if name == "dc_link":
             return cfg.dc_link_v + self.rng.uniform(-2.0, 2.0)
-        if name == "energy":
-            return math.floor(self.energy * 100) / 100
-        if name == "hours":
+        if name == "energy":  # USS r0039[2], energy fed back: never by the model
+            return 0.0 if index == 2 else math.floor(self.energy * 100) / 100
+        if name == "hours":  # while running
             return math.floor(self.hours)
+        if name == "operating_hours":  # while powered
+            return self.powered_ms // 3_600_000
         if name in FAULT_FIELDS:
             return self.faults.read(name, index)
         if name in ALARM_FIELDS:

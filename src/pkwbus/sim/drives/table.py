@@ -17,7 +17,12 @@ we chose and say so:
   drive's operating time in seconds at the trip: its unit and reference are not
   confirmed by any vendor document, and pkwbus never reads it as a time. The types of
   15-31 and 15-32 are unconfirmed.
-- FC 15-03 Power Up's: u32 (unconfirmed), counting the simulated drive's power-ups.
+- FC 15-00 Operating hours counts the hours the drive was powered, 15-01 Running Hours
+  those it ran; 15-03 Power Up's: u32 (unconfirmed), counting the simulated drive's
+  power-ups; 15-04 Over Temp's and 15-05 Over Volt's: u16 (unconfirmed), 0 (no fault
+  injected here counts as either).
+- USS r0039 Energy display: [0] balance and [1] drawn both the energy the model drew,
+  [2] fed back 0 (the model never feeds back).
 - USS fault buffer (SINAMICS S200 Operating Instructions, appendix A.3): r0947 Fault
   number u16 (as listed there), r0949 Fault value i32, r0948 and r2109 Fault time
   received / removed in ms u32, r2130 and r2136 the same in days u16: arrays of 64
@@ -101,9 +106,12 @@ FC_TABLE: Final = (
     ParamSpec(341, "3-41", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
     ParamSpec(342, "3-42", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
     ParamSpec(414, "4-14", U16, -1, "Hz", 0.0, 500.0, True, initial=50.0),
-    ParamSpec(1500, "15-00", U32, 0, "h", live="hours"),
+    ParamSpec(1500, "15-00", U32, 0, "h", live="operating_hours"),
+    ParamSpec(1501, "15-01", U32, 0, "h", live="hours"),
     ParamSpec(1502, "15-02", U32, 0, "kWh", live="energy"),
     ParamSpec(1503, "15-03", U32, live="power_ups"),
+    ParamSpec(1504, "15-04", U16),
+    ParamSpec(1505, "15-05", U16),
     ParamSpec(1530, "15-30", U16, array=10, live="alarm_code"),
     ParamSpec(1531, "15-31", I32, array=10, live="alarm_value"),
     ParamSpec(1532, "15-32", U32, array=10, live="alarm_time"),
@@ -126,7 +134,7 @@ USS_TABLE: Final = (
     ParamSpec(26, "r0026", F32, 0, "V", live="dc_link"),
     ParamSpec(27, "r0027", F32, 0, "A", live="current"),
     ParamSpec(32, "r0032", F32, 0, "kW", live="power"),
-    ParamSpec(39, "r0039", F32, 0, "kWh", live="energy"),
+    ParamSpec(39, "r0039", F32, 0, "kWh", array=3, live="energy"),
     ParamSpec(52, "r0052", U16, live="status_word"),
     ParamSpec(199, "p0199", TEXT, writable=True, initial="PUMP"),
     ParamSpec(304, "p0304", U16, 0, "V", 10.0, 2000.0, True, True, initial=400.0),

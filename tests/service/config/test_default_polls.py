@@ -1,0 +1,91 @@
+"""The counters a drive keeps of its own life, polled by default where its catalog marks
+them (``counters: auto``): each element of an array, never one the configuration polls,
+and one that no vendor document types only where the drive is asked to describe it."""
+
+from __future__ import annotations
+
+import pytest
+
+from pkwbus.catalog import load_catalog
+from pkwbus.service.config.default_polls import COUNTER_EVERY, counter_polls
+from pkwbus.service.config.line_load import line_load
+from tests.service.config.test_config import parse
+
+
+def config(catalog: str, protocol: str, drive_extra: str = "", polls: str = "[]") -> str:
+    return f"""
+lines:
+  - name: l1
+    port: /dev/ttyS1
+    protocol: {protocol}
+    baudrate: 19200
+    drives:
+      - name: d
+        address: 1
+        catalog: {catalog}
+        alarms: off
+        poll: {polls}
+{drive_extra}"""
+
+
+def counters(text: str) -> list[tuple[str, bool]]:
+    cfg = parse(text)
+    line = cfg.lines[0]
+    drive = line.drives[0]
+    polled = {(p.ref.pnu, p.ref.index) for p in drive.poll}
+    return [(str(ref), typed) for ref, typed in counter_polls(line, drive, polled)]
+
+
+def marked(catalog: str) -> list[tuple[int, int | None]]:
+    """What the catalog file marks as counters, each element of an array."""
+    found: list[tuple[int, int | None]] = []
+    for spec in load_catalog(catalog).parameters.values():
+        if spec.counter:
+            found += (
+                [(spec.pnu, i) for i in range(spec.array)] if spec.array else [(spec.pnu, None)]
+            )
+    return found
+
+
+@pytest.mark.parametrize(("catalog", "protocol"), [("danfoss-fc", "fc"), ("siemens-g120", "uss")])
+def test_every_counter_the_catalog_marks_is_polled_by_default(catalog: str, protocol: str) -> None:
+    found = counters(config(catalog, protocol))
+    expected = [(f"{pnu}" if i is None else f"{pnu}[{i}]") for pnu, i in marked(catalog)]
+    assert [name for name, _ in found] == expected
+    assert expected, "the catalog marks the drive's counters"
+
+
+def test_the_danfoss_counters_are_operating_and_running_hours_energy_and_events() -> None:
+    assert {pnu for pnu, _ in marked("danfoss-fc")} == {1500, 1501, 1502, 1503, 1504, 1505}
+    assert {pnu for pnu, _ in marked("siemens-g120")} == {39, 2114}
+
+
+def test_a_counter_the_configuration_polls_is_not_polled_twice() -> None:
+    fc_polls = '[{parameter: "15-03", every: 5s}]'
+    fc = [name for name, _ in counters(config("danfoss-fc", "fc", polls=fc_polls))]
+    assert "1503" not in fc and "1500" in fc
+    uss_polls = "[{parameter: r0039, index: 1, every: 5s}]"
+    uss = [name for name, _ in counters(config("siemens-g120", "uss", polls=uss_polls))]
+    assert "39[1]" not in uss and "39[0]" in uss and "39[2]" in uss
+
+
+def test_counters_off_polls_none() -> None:
+    assert counters(config("danfoss-fc", "fc", "        counters: off")) == []
+
+
+def test_a_counter_no_document_types_needs_the_drives_own_description() -> None:
+    untyped = [name for name, typed in counters(config("danfoss-fc", "fc")) if not typed]
+    assert untyped, "the Danfoss counters' types are recalled, not sourced"
+    without = counters(config("danfoss-fc", "fc", "        describe: off"))
+    assert [name for name, _ in without] == [
+        name for name, typed in counters(config("danfoss-fc", "fc")) if typed
+    ]
+
+
+def test_the_counters_polled_by_default_count_in_the_estimate() -> None:
+    on = parse(config("danfoss-fc", "fc"))
+    off = parse(config("danfoss-fc", "fc", "        counters: off"))
+    added = (
+        line_load(on.lines[0]).exchanges_per_second - line_load(off.lines[0]).exchanges_per_second
+    )
+    assert added == pytest.approx(len(marked("danfoss-fc")) / COUNTER_EVERY)

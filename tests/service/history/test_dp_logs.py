@@ -1,0 +1,104 @@
+"""The drives' own logs on a PROFIBUS DP line: the SINAMICS fault buffer (whose r0944 and
+r0947-r0949 are the PROFIdrive fault buffer's P944 and P947-P949) read through the PPO's
+PKW words of one slave and through data record 47 (DP-V1, PPO 3) of another, as on a
+serial line: a trip logged before pkwbus started is found with the drive's runtime time."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+import pytest
+
+from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.config import parse_config
+from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.history.watch import LogWatcher
+from pkwbus.sim import ModelConfig, SimTiming
+from pkwbus.sim.profibus.line import DpSimulator
+from tests.service.history.test_service_logs import counted, kept, until
+
+STEADY = ModelConfig(warning_rate=0.0, trip_rate=0.0)  # only the trips the test makes
+
+
+def config_text(ppo_url: str, record_url: str, folder: Path) -> str:
+    return f"""
+audit_db: {folder}/audit.sqlite
+lines:
+  - name: dp1
+    port: "{ppo_url}"
+    protocol: profibus
+    baudrate: 93750
+    slot_time: 20ms
+    watchdog: 2s
+    events_every: 1s
+    drives:
+      - name: mixer
+        address: 8
+        dialect: profidrive
+        ppo: 1
+        ident: 0x80B5
+        catalog: siemens-g120
+        poll: [{{parameter: r0021, every: 200ms}}]
+  - name: dp2
+    port: "{record_url}"
+    protocol: profibus
+    baudrate: 93750
+    slot_time: 20ms
+    watchdog: 2s
+    events_every: 1s
+    drives:
+      - name: pump
+        address: 9
+        dialect: profidrive
+        ppo: 3
+        ident: 0x80B5
+        dpv1: true
+        catalog: siemens-g120
+        poll: [{{parameter: r0021, every: 200ms}}]
+"""
+
+
+@asynccontextmanager
+async def service(ppo_url: str, record_url: str, folder: Path) -> AsyncIterator[LogWatcher]:
+    config = parse_config(config_text(ppo_url, record_url, folder), environ={})
+    store = HistoryStore(config.history_path)
+    runtime = await build_runtime(config)
+    watcher = watch_logs(config, runtime, store)
+    assert watcher is not None and len(watcher.watched) == 2
+    await runtime.start()
+    try:
+        yield watcher
+    finally:
+        await runtime.stop()
+        store.close()
+
+
+async def test_a_trip_before_the_start_is_found_through_the_ppo_and_data_record_47(
+    tmp_path: Path,
+) -> None:
+    timing = SimTiming(response_delay=0.001)
+    ppo = DpSimulator([8], timing=timing, model=STEADY)
+    record = DpSimulator([9], timing=timing, model=STEADY, ppo_number=3, dpv1=True)
+    ppo_end = await ppo.serve_tcp("127.0.0.1", 0)
+    record_end = await record.serve_tcp("127.0.0.1", 0)
+    try:
+        tripped_at = time.time()
+        ppo.drives[8].trip(7801, ppo.clock(), value=-12)
+        record.drives[9].trip(30001, record.clock(), value=5)
+        async with service(ppo_end.url, record_end.url, tmp_path) as w:
+            await until(lambda: bool(kept(w, "mixer")) and bool(kept(w, "pump")), timeout=60)
+            (mixer,) = kept(w, "mixer")
+            (pump,) = kept(w, "pump")
+            assert (mixer.code, mixer.number, mixer.value) == ("F07801", 7801, -12)
+            assert (pump.code, pump.number, pump.value) == ("F30001", 30001, 5)
+            for entry in (mixer, pump):
+                assert entry.time_source == "runtime" and entry.time is not None
+                assert entry.time == pytest.approx(tripped_at, abs=1.0)
+            assert counted(w) == 2
+    finally:
+        await ppo_end.close()
+        await record_end.close()

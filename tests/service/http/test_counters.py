@@ -1,0 +1,41 @@
+"""The counters the drives keep of their own life, polled by default (``counters: auto``):
+exported as parameter values and shown in the drive's view, with the types the drives
+described; they advance as the drive's do."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pkwbus.catalog import load_catalog
+from tests.service.http.conftest import USS_DRIVES, fc_drives, service
+
+
+def values(drive: dict[str, Any]) -> dict[tuple[str, int], dict[str, Any]]:
+    return {(v["parameter"], v.get("index") or 0): v for v in drive["values"]}
+
+
+async def test_the_drives_counters_are_polled_by_default_and_shown(tmp_path: Path) -> None:
+    fc = fc_drives(polls=[("16-13", "50ms")])[:1]
+    async with service(tmp_path, fc=fc, uss=USS_DRIVES) as svc:
+        drives = {d["name"]: d for d in (await svc.client.get("/api/v1/drives")).json()}
+        fan, pump = values(drives["fan1"]), values(drives["pump1"])
+        for name in ("15-00", "15-01", "15-02", "15-03", "15-04", "15-05"):
+            assert (name, 0) in fan, f"{name} in the drive's view"
+        # As the drive counts: 15-03 Power Up's is the simulated drive's power-ups.
+        sim_fan = svc.sims["fc"].drives[1]
+        assert fan["15-03", 0]["value"] == sim_fan.model.power_ups
+        for index in (0, 1, 2):
+            assert ("r0039", index) in pump
+        assert ("r2114", 0) in pump and ("r2114", 1) in pump
+        # r2114 as the drive counts its runtime: days x 86,400,000 + ms, never ahead of it.
+        shown = pump["r2114", 1]["value"] * 86_400_000 + pump["r2114", 0]["value"]
+        assert 0 < shown <= svc.sims["uss"].drives[1].model.runtime_ms
+        metrics = (await svc.client.get("/metrics")).text
+        assert 'parameter="r2114"' in metrics and 'parameter="15-03"' in metrics
+
+
+def test_the_catalogs_name_the_counters_they_mark() -> None:
+    for catalog in ("danfoss-fc", "siemens-g120"):
+        marked = [s for s in load_catalog(catalog).parameters.values() if s.counter]
+        assert marked and all(s.name and (s.verified or s.note) for s in marked)
