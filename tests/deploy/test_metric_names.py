@@ -98,7 +98,10 @@ async def scrape(folder: Path) -> str:
         while True:
             text = prometheus_client.generate_latest(runtime.registry).decode()
             if complete(text) and "pkwbus_dp_diagnostics_total{" in text:
-                return text
+                # A drive in maintenance: the series of pkwbus_drive_maintenance.
+                line, drive = next((d.line, d.name) for d in runtime.drives.values())
+                runtime.runners[line].maintenance(drive, True, "a test")
+                return prometheus_client.generate_latest(runtime.registry).decode()
             if time.monotonic() > deadline:
                 pytest.fail(f"no values and faults from both drives after 20 s:\n{text}")
             await asyncio.sleep(0.1)

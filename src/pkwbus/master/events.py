@@ -43,6 +43,7 @@ __all__ = [
     "HealthChanged",
     "JobDone",
     "LineState",
+    "MaintenanceChanged",
     "Observer",
     "Overrun",
     "PkwLengthTold",
@@ -112,6 +113,16 @@ class LineState:
     refused: bool = False
 
 
+@dataclass(frozen=True, slots=True)
+class MaintenanceChanged:
+    """A drive was put in maintenance (``on``: nothing goes out to it, it is neither up nor
+    down) or taken out of it; ``reason`` as given."""
+
+    drive: str
+    on: bool
+    reason: str = ""
+
+
 # -------------------------------------------------------- the snapshot writer's
 
 
@@ -178,7 +189,10 @@ WireEvent = (
     Exchanged | StatusWord | SlaveStateChanged | SlaveRestarted | SlaveDiagnosed | SlaveSilent
     | StationAsked | StationFound | StationsAsked
 )  # fmt: skip
-Event = PlanEvent | WireEvent | LineState | JobDone | ValueLanded | DescriptionChecked
+Event = (
+    PlanEvent | WireEvent | LineState | MaintenanceChanged | JobDone | ValueLanded
+    | DescriptionChecked
+)  # fmt: skip
 
 
 class Observer(Protocol):

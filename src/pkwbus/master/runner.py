@@ -35,7 +35,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 from pkwbus.link import Link, LinkState, PortError
-from pkwbus.master.events import Event, LineState, Observer
+from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
@@ -110,6 +110,12 @@ class Wire(Protocol):
         """The port is gone: what was under way starts afresh."""
         ...
 
+    def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
+        """Send ``drive`` nothing (``out``: a drive in maintenance, already so in the
+        planner: an exchange of it that will get no answer now ends there), or take it
+        back."""
+        ...
+
     def take_events(self) -> list[Event]: ...
 
 
@@ -173,6 +179,18 @@ class LineRunner:
     def submit(self, job: Job | ProbeJob) -> None:
         """Queue a write, an on-demand read or a probe; its future gets the result."""
         self.planner.submit(job, asyncio.get_running_loop().time())
+        self.flush()
+        self._wake.set()
+
+    def maintenance(self, drive: str, on: bool, reason: str = "") -> None:
+        """Put ``drive`` in maintenance (nothing goes out to it, not even a probe or a DP
+        Data_Exchange) or take it out (a drive that came back). KeyError for a drive not
+        on this line."""
+        self.planner.drive(drive)  # KeyError first: nothing changes for an unknown drive
+        now = asyncio.get_running_loop().time()
+        self.planner.maintenance(drive, on, now)
+        self.wire.leave_out(self.planner, drive, on, now)
+        self.tell([MaintenanceChanged(drive, on, reason)])
         self.flush()
         self._wake.set()
 

@@ -12,7 +12,15 @@ from pkwbus.catalog.description import Value
 from pkwbus.protocol.profibus.dp.slave_model import SlaveState
 from pkwbus.protocol.values.types import ValueType
 
-__all__ = ["DriveState", "LiveSlave", "Reading", "ReadingKey", "Snapshot", "ValueKey"]
+__all__ = [
+    "DriveState",
+    "LiveSlave",
+    "Maintained",
+    "Reading",
+    "ReadingKey",
+    "Snapshot",
+    "ValueKey",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,6 +39,14 @@ class DriveState:
     status_word: int | None = None
     status_timestamp: float | None = None
     main_actual: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Maintained:
+    """A drive in maintenance: why, and since when (wall clock, seconds)."""
+
+    reason: str
+    since: float
 
 
 ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index
@@ -52,11 +68,13 @@ class Snapshot:
     stated: dict[tuple[str, int], ValueType] = field(default_factory=dict)
     # The PROFIBUS DP slaves as the live list shows them, by drive.
     slaves: dict[str, LiveSlave] = field(default_factory=dict)
+    # The drives in maintenance: nothing goes out to them.
+    maintenance: dict[str, Maintained] = field(default_factory=dict)
 
     def copy(self) -> Snapshot:
         return Snapshot(
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
-            dict(self.stated), dict(self.slaves),
+            dict(self.stated), dict(self.slaves), dict(self.maintenance),
         )  # fmt: skip
 
 

@@ -23,6 +23,7 @@ from pkwbus.master.events import (
     Event,
     JobDone,
     LineState,
+    MaintenanceChanged,
     SlaveDiagnosed,
     SlaveStateChanged,
     ValueLanded,
@@ -40,7 +41,14 @@ from pkwbus.master.planning.plan import (
     StatusWord,
 )
 from pkwbus.master.planning.transaction import Tally
-from pkwbus.master.snapshot import DriveState, LiveSlave, Reading, ReadingKey, Snapshot
+from pkwbus.master.snapshot import (
+    DriveState,
+    LiveSlave,
+    Maintained,
+    Reading,
+    ReadingKey,
+    Snapshot,
+)
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.length import AUTO, shown
@@ -115,6 +123,8 @@ class SnapshotWriter:
                 self._described(event)
             elif isinstance(event, LineState):
                 snapshot.lines[event.line] = event.up
+            elif isinstance(event, MaintenanceChanged):
+                self._maintenance(event, at)
             elif isinstance(event, SlaveStateChanged):
                 old_slave = snapshot.slaves.get(event.drive, LiveSlave(self.line))
                 snapshot.slaves[event.drive] = replace(old_slave, state=event.state)
@@ -179,6 +189,16 @@ class SnapshotWriter:
                     extra=ctx,
                 )  # fmt: skip
         self._out.append(DescriptionChecked(event, tuple(contradicts)))
+
+    def _maintenance(self, event: MaintenanceChanged, at: float) -> None:
+        """A drive in maintenance, or out of it: one log line each."""
+        drive, ctx = event.drive, {"line": self.line, "drive": event.drive}
+        if event.on:
+            self.snapshot.maintenance[drive] = Maintained(event.reason, at)
+            log.warning("drive %s is in maintenance (%s): nothing goes out to it", drive,
+                        event.reason or "no reason given", extra=ctx)  # fmt: skip
+        elif self.snapshot.maintenance.pop(drive, None) is not None:
+            log.warning("drive %s is out of maintenance: it is polled again", drive, extra=ctx)
 
     def _pkw_length(self, event: PkwLengthTold) -> None:
         """One log line per change of what a drive's PKW length is known to be."""

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import httpx
 
+from pkwbus.protocol.serial.telegram import decode_adr
 from pkwbus.sim import SimTiming, Simulator
 from tests.reliability.service import start_run
 from tests.service.http.conftest import TOKEN, line_yaml
@@ -111,3 +112,64 @@ async def test_pkwbus_run_writes_and_audits(tmp_path: Path) -> None:
     ]
     assert rows[1]["old_value"] == 5
     assert rows[1]["token_id"].startswith("hmac:")
+
+
+async def test_pkwbus_run_puts_a_drive_in_maintenance_and_takes_it_back(tmp_path: Path) -> None:
+    """Through the real process: no telegram reaches the drive at the simulator while it is
+    in maintenance, the other goes on; out of it, it is polled again."""
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), catalog="danfoss-fc")
+    heard: list[int] = []
+    answer = sim.answer
+
+    def hear(telegram: object, now: float | None = None) -> object:
+        heard.append(decode_adr(sim.protocol, telegram.adr).address)  # type: ignore[attr-defined]
+        return answer(telegram, now)  # type: ignore[arg-type]
+
+    sim.answer = hear  # type: ignore[method-assign,assignment]
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    drives = [
+        {"name": f"fan{a}", "address": a, "catalog": "danfoss-fc", "poll": [("16-13", "50ms")]}
+        for a in (1, 2)
+    ]
+    config = tmp_path / "pkwbus.yaml"
+    config.write_text(
+        "\n".join(["audit_db: audit.sqlite", "lines:", line_yaml("line1", end.url, "fc", drives)])
+    )
+    env = {**os.environ, "PKWBUS_WRITE_TOKEN": TOKEN}
+    env.pop("PKWBUS_LISTEN", None)
+    proc, port = await start_run(["run", "--config", str(config)], tmp_path / "stderr.log",
+                                 env=env, cwd=tmp_path)  # fmt: skip
+    auth = {"Authorization": f"Bearer {TOKEN}"}
+    loop = asyncio.get_running_loop()
+
+    async def until(check: object, seconds: float = 30) -> None:
+        deadline = loop.time() + seconds
+        while not check():  # type: ignore[operator]
+            assert loop.time() < deadline, "not within the time"
+            await asyncio.sleep(0.05)
+
+    try:
+        async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}", timeout=30) as client:
+            await until(lambda: heard.count(1) >= 3 and heard.count(2) >= 3)
+            url = "/api/v1/drives/fan1/maintenance"
+            r = await client.put(url, json={"on": True, "reason": "motor swap"}, headers=auth)
+            assert r.status_code == 200, r.text
+            since = len(heard)
+            await until(lambda: heard[since:].count(2) >= 20)
+            assert 1 not in heard[since:]
+            metrics = (await client.get("/metrics")).text
+            assert (
+                'pkwbus_drive_maintenance{drive="fan1",line="line1",reason="motor swap"} 1.0'
+                in (metrics)
+            )
+            r = await client.put(url, json={"on": False}, headers=auth)
+            assert r.status_code == 200, r.text
+            back = len(heard)
+            await until(lambda: heard[back:].count(1) >= 3)
+            assert "pkwbus_drive_maintenance{" not in (await client.get("/metrics")).text
+    finally:
+        if proc.returncode is None:
+            proc.send_signal(signal.SIGTERM)
+        await asyncio.wait_for(proc.wait(), 60)
+        await end.close()
+    assert proc.returncode == 0

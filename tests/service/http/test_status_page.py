@@ -117,6 +117,15 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             sync_api.expect(fan2.locator("table")).to_be_hidden()
             fan2.locator("button.fold").click()
             sync_api.expect(fan2.locator("table")).to_be_visible()
+            # A drive in maintenance: shown so, with its reason, neither up nor down.
+            url = served.url + "/api/v1/drives/fan2/maintenance"
+            held = httpx.put(url, json={"on": True, "reason": "bearing change"}, headers=AUTH)
+            assert held.status_code == 200, held.text
+            sync_api.expect(fan2.locator(".state")).to_have_text("maintenance", timeout=20_000)
+            sync_api.expect(fan2.locator("p.maintenance")).to_contain_text("bearing change")
+            assert httpx.put(url, json={"on": False}, headers=AUTH).status_code == 200
+            sync_api.expect(fan2.locator(".state")).to_have_text("up", timeout=20_000)
+            sync_api.expect(fan2.locator("p.maintenance")).to_have_count(0)
 
             # The last write attempts show once the page is given a token.
             audit = page.locator("#audit")

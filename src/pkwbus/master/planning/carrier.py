@@ -18,8 +18,7 @@ from typing import Protocol
 
 from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.batch import BatchTransaction
-from pkwbus.master.planning.probing import ProbeTransaction
-from pkwbus.master.planning.transaction import PkwTransaction
+from pkwbus.master.planning.transaction import PkwTransaction, ProbeTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.pkw.length import Gate, PkwLength

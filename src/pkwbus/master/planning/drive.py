@@ -25,8 +25,7 @@ from pkwbus.master.planning.plan import (
     Send,
     StatusWord,
 )
-from pkwbus.master.planning.probing import ProbeTransaction
-from pkwbus.master.planning.transaction import PkwTransaction
+from pkwbus.master.planning.transaction import PkwTransaction, ProbeTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.length import PkwLength
 
@@ -74,6 +73,7 @@ class DrivePlan:
         "held",
         "lagging",
         "last_answer",
+        "maintenance",
         "name",
         "polls",
         "reads",
@@ -98,6 +98,7 @@ class DrivePlan:
             policy = replace(policy, from_answers=False)
         self.health = DriveHealth(policy)
         self.shown_up = True
+        self.maintenance = False  # in maintenance: nothing goes out to it
         self.writes: deque[Job] = deque()
         self.reads: deque[Job | ProbeJob] = deque()
         self.background: deque[Job] = deque()  # after its due polls

@@ -31,6 +31,12 @@ class DriveHealth:
         self.next_probe = 0.0
         self._backoff = Backoff(policy.probe_initial, policy.probe_cap)
 
+    def reset(self) -> None:
+        """As at the start: up until its answers say otherwise (out of maintenance)."""
+        self.up = True
+        self.failures = 0
+        self._backoff.reset()
+
     def answered(self) -> bool:
         """A valid answer; True when this brings the drive back up."""
         self.failures = 0

@@ -14,7 +14,9 @@ The policy, in order:
   exponential back-off until it answers; then all its polls are due at once
   (none counts as an overrun);
 - a poll that starts more than one interval after it was due is an overrun; nothing
-  is sent past its deadline; a job still queued at its deadline ends.
+  is sent past its deadline; a job still queued at its deadline ends;
+- a drive in maintenance gets nothing (no poll, job or probe) and is neither up nor
+  down; out of it, it is a drive that came back (identified again, its polls due).
 
 Drives wait for their turn on an :class:`~pkwbus.master.planning.agenda.Agenda` (two
 heaps), so one exchange costs O(log n) in the number of drives.
@@ -31,9 +33,8 @@ from collections.abc import Sequence
 
 from pkwbus.master.planning.agenda import Agenda, Key
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
-from pkwbus.master.planning.batch import BatchTransaction
 from pkwbus.master.planning.carrier import Transaction
-from pkwbus.master.planning.describing import DescribeStep
+from pkwbus.master.planning.completion import complete, drain
 from pkwbus.master.planning.drive import Active, DrivePlan, PollState
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, Priority, ProbeJob
@@ -50,11 +51,12 @@ from pkwbus.master.planning.plan import (
     StatusWord,
 )
 from pkwbus.master.planning.transaction import PkwTransaction
-from pkwbus.master.planning.write_gate import after_read, gate_write
+from pkwbus.master.planning.write_gate import gate_write
 
-__all__ = ["IDLE_AT_MOST", "PORT_CLOSED", "Planner"]
+__all__ = ["IDLE_AT_MOST", "IN_MAINTENANCE", "PORT_CLOSED", "Planner"]
 
 PORT_CLOSED = "the line's port is not open"
+IN_MAINTENANCE = "the drive is in maintenance"
 IDLE_AT_MOST = 3600.0
 
 
@@ -102,6 +104,9 @@ class Planner:
         if not self.up:
             self.events.append(Finished(d.name, job, LineFailed(PORT_CLOSED)))
             return
+        if d.maintenance:
+            self.events.append(Finished(d.name, job, Cancelled(IN_MAINTENANCE)))
+            return
         if isinstance(job, Job) and job.priority is not Priority.READ:
             (d.writes if job.priority is Priority.WRITE else d.background).append(job)
         else:
@@ -126,10 +131,29 @@ class Planner:
                 d.describer.release()  # another line's drive of its kind describes instead
             if d.active is not None:
                 self._complete(d, d.active, LineFailed(PORT_CLOSED), now)
-            for queue in (d.writes, d.reads, d.background):
-                while queue:
-                    self.events.append(Finished(d.name, queue.popleft(), LineFailed(PORT_CLOSED)))
+            self.events += drain(d, LineFailed(PORT_CLOSED))
             d.version += 1
+
+    def maintenance(self, drive: str, on: bool, now: float) -> None:
+        """Put ``drive`` in maintenance (nothing goes out to it: its queued jobs end, its
+        transaction ends once no exchange of it is out) or take it out (a drive that came
+        back: identified again, its polls due now, up at its first answer). KeyError for a
+        drive not on this line."""
+        d = self._by_name[drive]
+        if d.maintenance == on:
+            return
+        d.maintenance = on
+        if on:
+            self.events += drain(d, Cancelled(IN_MAINTENANCE))
+            if d.active is not None and not d.busy:
+                self._complete(d, d.active, Cancelled(IN_MAINTENANCE), now)
+            d.lagging = False
+            self._tell(d.went_down())  # it may come back as another drive
+        else:
+            d.health.reset()
+            d.shown_up = False  # up again at its first answer
+            self.events.extend(d.back(now))
+        self._index(d, now)
 
     def port_failed(self) -> None:
         """The port failed: nobody can tell whether the drives answer."""
@@ -144,9 +168,7 @@ class Planner:
             if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
                 self.events.append(Finished(d.name, active.work, Cancelled(reason), tally))
-            for queue in (d.writes, d.reads, d.background):
-                while queue:
-                    self.events.append(Finished(d.name, queue.popleft(), Cancelled(reason)))
+            self.events += drain(d, Cancelled(reason))
             d.version += 1
 
     # ------------------------------------------------------------ choices
@@ -201,6 +223,8 @@ class Planner:
         """The wire tells ``drive``'s health (a DP slave in data exchange, or out of it); back
         up, its polls are due now, none counted as an overrun."""
         d = self._by_name[drive]
+        if d.maintenance:  # neither up nor down: it is sent nothing
+            return
         self._show(d, up, reason)
         if up:
             self.events.extend(d.back(now))
@@ -217,6 +241,11 @@ class Planner:
                     other.lagging = False
                     self._index(other, now)
             self._lagging.clear()
+        if d.maintenance:  # out before the drive went in maintenance: nothing follows it
+            if (active := d.active) is not None:
+                self._complete(d, active, Cancelled(IN_MAINTENANCE), now)
+            self._index(d, now)
+            return
         self._health(d, result, now)
         if send.probe and not isinstance(result, Failure):  # a down drive's, or a probe job's
             if (status := d.status_of(result)) is not None:
@@ -244,6 +273,8 @@ class Planner:
 
     def _claim(self, d: DrivePlan, now: float) -> tuple[Key | None, float | None]:
         """The drive's claim on the next exchange, else when it will have one (None: never)."""
+        if d.maintenance:
+            return None, None
         for queue in (d.writes, d.reads, d.background):
             if queue:
                 self._expire(d, queue, now)
@@ -338,35 +369,7 @@ class Planner:
             self.events.append(event)
 
     def _complete(self, d: DrivePlan, active: Active, outcome: Outcome, now: float) -> None:
-        d.active = None
-        d.lagging = False
-        work = active.work
-        if active.read_first and isinstance(work, Job):  # the read before a change
-            after = after_read(d, active, work, outcome, retries=self.retries)
-            if isinstance(after, Finished):
-                self.events.append(after)
-            else:
-                d.active = after
-            return
-        if isinstance(work, DescribeStep):
-            self.events.extend(d.described(work, outcome, now))
-        elif isinstance(work, tuple):  # polls in one record: each with its own outcome
-            tx, each = active.tx, [outcome] * len(work)
-            if isinstance(tx, BatchTransaction) and tx.outcome is outcome:
-                each = list(tx.outcomes)
-            for i, (poll, result) in enumerate(zip(work, each, strict=True)):
-                # The request's cost counted once; due again from the request's first due,
-                # so that polls of one interval go out together (none later than due).
-                tally = tx.tally if i == 0 else None
-                self.events.append(Finished(d.name, poll.spec, result, tally))
-                poll.due = max(active.order + poll.spec.every, now)
-                d.push_poll(poll)
-        elif isinstance(work, PollState):
-            self.events.append(Finished(d.name, work.spec, outcome, active.tx.tally))
-            work.due = max(work.due + work.spec.every, now)
-            d.push_poll(work)
-        else:
-            self.events.append(Finished(d.name, work, outcome, active.tx.tally))
+        self.events.extend(complete(d, active, outcome, now, retries=self.retries))
 
     def _health(self, d: DrivePlan, result: ExchangeResult, now: float) -> None:
         if not isinstance(result, Failure):

@@ -54,6 +54,7 @@ from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
+from pkwbus.service.metrics.maintenance import MaintenanceCollector
 from pkwbus.service.metrics.trends import Trends
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -91,6 +92,7 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
     }
     collector = SnapshotCollector(snapshot, drives, infos)
     registry.register(collector)
+    registry.register(MaintenanceCollector(snapshot, {n: d.line for n, d in drives.items()}))
     board = AlarmBoard(alarm_parameters(config, entries), registry)
     trends = Trends()
 
@@ -128,6 +130,10 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
                 observers=[events],
             )
         )
+    by_line = {r.name: r for r in runners}
+    for line, drive in config.drives():
+        if drive.maintenance:  # in maintenance from the start: nothing goes out to it
+            by_line[line.name].maintenance(drive.name, True, "configuration")
     runtime = Runtime(runners, entries, snapshot, registry, alarms=board, trends=trends)
     runtime.cleanups.extend(cleanups)
     runtime.counts.update(counts)

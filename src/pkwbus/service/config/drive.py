@@ -10,6 +10,7 @@ from typing import ClassVar, Self
 
 from pydantic import (
     Field,
+    StrictBool,
     StrictInt,
     ValidationInfo,
     field_validator,
@@ -68,6 +69,8 @@ class DriveBase(Model):
     # Its own fault and alarm logs, and how often they are watched (None: the line's).
     events: Events | None = None
     events_every: EventsEvery | None = None
+    # In maintenance from the start: nothing goes out to it until the API takes it out.
+    maintenance: StrictBool = False
     poll: list[Poll] = Field(default_factory=list)
     writable: list[Notation] = Field(default_factory=list)
     parameters: dict[Notation, ParameterOverrides] = Field(default_factory=dict)

@@ -28,12 +28,15 @@ from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.history.store import HistoryError
 from pkwbus.service.http.docs_pages import SERVERS, add_docs
+from pkwbus.service.http.maintenance import Maintenance
 from pkwbus.service.http.models import (
     ERRORS,
     DriveView,
     EventsBody,
     Health,
     LineView,
+    MaintenanceBody,
+    MaintenanceResult,
     Readiness,
     ValueBody,
     WriteBody,
@@ -159,6 +162,7 @@ def create_app(
     audit_writer = AuditWriter(audit, api_metrics(runtime.registry))
     app.state.audit_writer = audit_writer
     service = ParameterService(runtime, audit_writer, write_token)
+    switches = Maintenance(runtime, audit_writer, service.tokens)
     audit_tokens = [t.encode() for t in (write_token, read_token) if t]
 
     @app.exception_handler(ApiError)
@@ -232,6 +236,19 @@ def create_app(
         order = WriteOrder(body.value, body.index, body.store, body.verify, body.dry_run)
         caller = Caller(_client(request), request.headers.get("authorization"))
         return await service.write(drive, parameter, order, caller)
+
+    @app.put(
+        "/api/v1/drives/{drive}/maintenance",
+        response_model=MaintenanceResult,
+        responses=ERRORS,
+        dependencies=[Security(BEARER)],
+    )
+    async def maintenance(drive: str, body: MaintenanceBody, request: Request) -> dict[str, Any]:
+        """``on``: nothing goes out to the drive (not even a probe; a DP slave is left out of
+        the cycle) and it is neither up nor down, until ``on`` is false: then it is a drive
+        that came back. Audited."""
+        caller = Caller(_client(request), request.headers.get("authorization"))
+        return await switches.switch(drive, body.on, body.reason, caller)
 
     @app.get("/api/v1/audit", responses=ERRORS, dependencies=[Security(BEARER)])
     async def audit_log(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, StrictStr
 
 from pkwbus import __version__
 from pkwbus.protocol import pkw
@@ -18,6 +18,9 @@ __all__ = [
     "EventsBody",
     "Health",
     "LineView",
+    "MaintenanceBody",
+    "MaintenanceResult",
+    "MaintenanceView",
     "ParameterReading",
     "Readiness",
     "SlaveView",
@@ -78,6 +81,27 @@ class SlaveView(BaseModel):
     diagnosed: float | None  # wall clock of that diagnosis
 
 
+class MaintenanceView(BaseModel):
+    """A drive in maintenance: nothing goes out to it."""
+
+    reason: str
+    since: float  # wall clock, seconds
+
+
+class MaintenanceBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    on: StrictBool = Field(description="true: nothing goes out to the drive until false")
+    reason: StrictStr = Field(default="", max_length=200, description="shown with it")
+
+
+class MaintenanceResult(BaseModel):
+    drive: str
+    on: bool
+    reason: str
+    since: float | None  # wall clock, seconds (None: not in maintenance)
+
+
 class DriveView(BaseModel):
     name: str
     line: str
@@ -93,6 +117,7 @@ class DriveView(BaseModel):
     alarms: list[AlarmView] = []  # active alarms first, then warnings, oldest first
     writable: list[WritableView] = []  # what the write form offers
     dp: SlaveView | None = None  # a PROFIBUS DP slave: its place in the live list
+    maintenance: MaintenanceView | None = None  # in maintenance: nothing goes out to it
 
 
 class LineView(BaseModel):

@@ -120,6 +120,11 @@ def locate(
     entry = runtime.drives.get(drive)
     if entry is None:
         raise ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+    if (held := runtime.snapshot.maintenance.get(drive)) is not None:
+        why = f" ({held.reason})" if held.reason else ""
+        raise ApiError(
+            409, "in_maintenance", f"{drive} is in maintenance{why}: nothing goes out to it"
+        )
     try:
         ref = parse_parameter(parameter)
         entry.target.dialect.check_pnu(ref.pnu)

@@ -61,6 +61,7 @@ class ParameterService:
         self.runtime = runtime
         self.audit_writer = audit_writer
         tokens = TokenCheck(token, audit_writer.token_id(token) if token is not None else None)
+        self.tokens = tokens
         self._reads = Reads(runtime)
         self._writes = Writes(runtime, audit_writer, tokens, self._reads)
 

@@ -15,6 +15,7 @@ from pkwbus.service.http.models import (
     DriveView,
     EventView,
     LineView,
+    MaintenanceView,
     ParameterReading,
     SlaveView,
     WritableView,
@@ -153,7 +154,13 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         alarms=alarm_views(runtime, name),
         writable=writable_views(runtime, name),
         dp=slave_view(runtime, name),
+        maintenance=maintenance_view(runtime, name),
     )
+
+
+def maintenance_view(runtime: Runtime, name: str) -> MaintenanceView | None:
+    held = runtime.snapshot.maintenance.get(name)
+    return MaintenanceView(reason=held.reason, since=held.since) if held is not None else None
 
 
 def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float | None]]:

@@ -84,6 +84,7 @@ class SlaveCycle:
         self._out: SlaveRun | None = None  # the slave whose request is out
         self._acyclic_out = False
         self._pending: DataFrame | None = None  # an acyclic request that follows at once
+        self._left_out: set[int] = set()  # slaves sent nothing (a drive in maintenance)
 
     def transmit(self, now: float, before: Before) -> DataFrame | None:
         """The next request of the cycle (None: a cycle went by with nothing to send)."""
@@ -94,8 +95,11 @@ class SlaveCycle:
             return pending
         while True:
             while self._next < len(self._order):
-                run = self.runs[self._order[self._next]]
+                address = self._order[self._next]
                 self._next += 1
+                if address in self._left_out:
+                    continue
+                run = self.runs[address]
                 before(run, now)
                 slave, slot = run.slave, run.slot
                 exchanging = slave.state is SlaveState.DATA_EXCHANGE and not slave.waiting
@@ -137,6 +141,16 @@ class SlaveCycle:
     def take_events(self) -> list[tuple[SlaveRun, CycleEvent]]:
         events, self.events = self.events, []
         return events
+
+    def leave_out(self, setup: SlaveSetup, slot: PkwSlot | None, out: bool) -> None:
+        """Send the slave nothing from now on (its watchdog, where it has one, expires and
+        it leaves data exchange by itself), or take it back, started afresh: diagnosis,
+        parameters and configuration, then data exchange."""
+        if out:
+            self._left_out.add(setup.address)
+        elif setup.address in self._left_out:
+            self._left_out.discard(setup.address)
+            self.runs[setup.address] = SlaveRun(DpSlave(setup), slot)
 
     def restart(self, runs: Sequence[tuple[SlaveSetup, PkwSlot | None]]) -> None:
         """Every slave afresh (the port was lost): the cycle begins again."""

@@ -110,6 +110,10 @@ class LiveListWire:
         """The port was lost: the station asked is asked again from the start."""
         self._asking, self._tried = _Asking.STATUS, 0
 
+    def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
+        """Nothing to do: the planner gives a drive in maintenance no exchange (one that
+        is out ends at its answer or timeout, as every exchange)."""
+
     def take_events(self) -> list[Event]:
         events, self._events = self._events, []
         return events

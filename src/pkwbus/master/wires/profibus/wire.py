@@ -153,6 +153,18 @@ class CycleWire:
                 self._events.append(SlaveStateChanged(self._names[address], SlaveState.OFFLINE))
         self.cycle.restart([(d.setup, d.slot()) for d in self.drives])
 
+    def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
+        """A drive in maintenance: its slave is sent nothing, not even a Data_Exchange, and
+        the job its PKW slot or record transfer carried ends (no answer can come); out of
+        maintenance it is parametrised afresh."""
+        spec = next((d for d in self.drives if d.name == drive), None)
+        if spec is None:
+            return
+        self.cycle.leave_out(spec.setup, spec.slot(), out)
+        send = planner.sending(drive)
+        if out and send is not None and planner.drive(drive).busy:
+            planner.exchanged(send, Failure(ErrorKind.TIMEOUT, "left out: in maintenance"), now)
+
     def take_events(self) -> list[Event]:
         events, self._events = self._events, []
         return events

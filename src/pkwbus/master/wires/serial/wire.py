@@ -50,6 +50,10 @@ class ExchangeWire:
     def lost(self) -> None:
         """The exchange in flight ends in the line's own loss callback."""
 
+    def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
+        """Nothing to do: the planner gives a drive in maintenance no exchange (one that
+        is out ends at its answer or timeout, as every exchange)."""
+
     def take_events(self) -> list[Event]:
         events, self._events = self._events, []
         return events

@@ -144,7 +144,8 @@ function fillRow(r, drive, v, now) {
 // the section anew.
 function shapeOf(drive) {
   return JSON.stringify([drive.up, drive.line, drive.address, drive.protocol, drive.status_word,
-    drive.status, drive.alarms, drive.values.map((v) => [v.parameter, v.index])]);
+    drive.status, drive.alarms, drive.maintenance,
+    drive.values.map((v) => [v.parameter, v.index])]);
 }
 
 function fillCounts(section, drive) {
@@ -168,11 +169,17 @@ function drawDrive(drive) {
     : `status word 0x${drive.status_word.toString(16).padStart(4, "0")}`;
   const fold = el("button", { class: "fold", type: "button", title: "fold or unfold" },
     folded.has(drive.name) ? "+" : "\u2212");
-  const cls = `drive ${drive.up ? "up" : "down"}${folded.has(drive.name) ? " folded" : ""}`;
+  const held = drive.maintenance;  // nothing goes out to it: neither up nor down
+  const state = held ? "maintenance" : (drive.up ? "up" : "down");
+  const cls = `drive ${state}${folded.has(drive.name) ? " folded" : ""}`;
   const faults = el("span", {}), errors = el("span", {});
+  const heldNote = held ? el("p", { class: "maintenance" },
+    `in maintenance since ${new Date(held.since * 1000).toLocaleString()}`,
+    held.reason ? `: ${held.reason}` : "", " - nothing goes out to it") : "";
   const node = el("div", { class: cls, "data-drive": drive.name },
-    el("h3", {}, fold, ` ${drive.name} `, el("span", { class: "state" }, drive.up ? "up" : "down"),
+    el("h3", {}, fold, ` ${drive.name} `, el("span", { class: "state" }, state),
       ` - line ${drive.line}, address ${drive.address}, ${drive.protocol}, ${word}`),
+    heldNote,
     el("div", { class: "counts" }, faults, errors, " since the service started"),
     el("div", { class: "bits" }, ...bits),
     alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
@@ -192,6 +199,7 @@ function drawDrive(drive) {
 const folded = new Set();
 
 function urgency(drive) {
+  if (drive.maintenance) return 3;  // nothing is asked of it: not urgent
   if (!drive.up) return 0;
   if ((drive.alarms || []).some((a) => a.kind === "alarm")) return 1;
   if ((drive.alarms || []).length) return 2;

@@ -1,0 +1,76 @@
+"""A drive put in maintenance from the API, and taken out of it, audited.
+
+``PUT /api/v1/drives/{drive}/maintenance`` with the write token: ``{"on": true,
+"reason": "bearing change"}`` and nothing goes out to the drive (its line's
+planner gives it nothing, a DP slave is left out of the cycle) until ``{"on":
+false}``, which brings it back as a drive that came back. Each switch is a row
+of the audit log (parameter ``maintenance``, the new state as its value, the
+reason as its detail), stored before the switch: an audit log that cannot
+store it leaves the drive as it was (503).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pkwbus.service.audit.log import AuditEntry
+from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
+from pkwbus.service.http.parameter_checks import (
+    INCOMPLETE,
+    MAX_DRIVE_NAME,
+    ApiError,
+    Caller,
+    TokenCheck,
+    clip,
+)
+from pkwbus.service.runtime import Runtime
+
+__all__ = ["MAINTENANCE", "Maintenance"]
+
+MAINTENANCE = "maintenance"  # the audit row's parameter
+
+
+class Maintenance:
+    """Switches drives in and out of maintenance for the API, each switch audited."""
+
+    def __init__(self, runtime: Runtime, audit_writer: AuditWriter, tokens: TokenCheck) -> None:
+        self.runtime = runtime
+        self.audit_writer = audit_writer
+        self._tokens = tokens
+
+    async def switch(self, drive: str, on: bool, reason: str, caller: Caller) -> dict[str, Any]:
+        try:
+            identity = self._tokens.identify(caller)
+        except ApiError as exc:
+            exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
+            raise
+        audit = AuditEntry(
+            client=caller.client, drive=clip(drive, MAX_DRIVE_NAME), parameter=MAINTENANCE,
+            index=0, outcome="pending", token_id=identity, new_value=on, detail=reason or None,
+        )  # fmt: skip
+        entry = self.runtime.drives.get(drive)
+        runner = self.runtime.runners.get(entry.line) if entry is not None else None
+        if entry is None or runner is None:
+            audit.outcome = "invalid"
+            refusal = ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+            refusal.audit_incomplete = not await self.audit_writer.note(audit)
+            raise refusal
+        try:
+            row = await self.audit_writer.attempt(audit)
+        except AuditUnavailable as exc:
+            raise ApiError(
+                503, "audit_unavailable",
+                f"the audit log cannot record it ({exc}): the drive stays as it was",
+            ) from None  # fmt: skip
+        runner.maintenance(drive, on, reason)
+        held = self.runtime.snapshot.maintenance.get(drive)
+        stored = await self.audit_writer.outcome(row, outcome="ok")
+        body: dict[str, Any] = {
+            "drive": drive,
+            "on": held is not None,
+            "reason": held.reason if held is not None else "",
+            "since": held.since if held is not None else None,
+        }
+        if not stored:
+            body["audit"] = INCOMPLETE
+        return body

@@ -1,0 +1,136 @@
+"""A drive put in maintenance through the API and taken out of it: no telegram reaches it
+at the simulator (an FC drive; a DP slave is left out of the cycle) while the others go
+on, writes to it answer 409 in_maintenance, it is shown and exported with its reason,
+each switch is audited, and out of maintenance it is polled again (a DP slave
+parametrised afresh)."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from prometheus_client import generate_latest
+
+from pkwbus.protocol.profibus.dp.services import Service as DpService
+from pkwbus.protocol.serial.telegram import decode_adr
+from pkwbus.sim import Simulator
+from tests.service.assembly.test_ds47_service import TOKEN as DP_TOKEN
+from tests.service.assembly.test_ds47_service import service as dp_service
+from tests.service.http.conftest import AUTH, fc_drives, service
+
+
+def heard(sim: Simulator) -> list[int]:
+    """The address of every telegram that reaches the simulated line, from now on."""
+    seen: list[int] = []
+    original = sim.answer
+
+    def answer(telegram: Any, now: float | None = None) -> Any:
+        seen.append(decode_adr(sim.protocol, telegram.adr).address)
+        return original(telegram, now)
+
+    sim.answer = answer  # type: ignore[method-assign]
+    return seen
+
+
+async def until(check: Callable[[], bool], timeout: float = 20.0) -> None:
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not check():
+        assert loop.time() < end, "not within the time"
+        await asyncio.sleep(0.01)
+
+
+def maintenance_series(registry: Any) -> list[str]:
+    text = generate_latest(registry).decode()
+    return [line for line in text.splitlines() if line.startswith("pkwbus_drive_maintenance{")]
+
+
+async def test_an_fc_drive_in_maintenance_gets_no_telegram_and_comes_back(tmp_path: Path) -> None:
+    async with service(tmp_path, fc=fc_drives()[:2]) as svc:
+        url = "/api/v1/drives/fan1/maintenance"
+        r = await svc.client.put(url, json={"on": True, "reason": "bearing change"})
+        assert r.status_code == 401, "the write token is needed"
+        assert "fan1" not in svc.runtime.snapshot.maintenance
+        r = await svc.client.put(url, json={"on": True, "reason": "bearing change"}, headers=AUTH)
+        assert r.status_code == 200, r.text
+        assert r.json()["on"] is True and r.json()["reason"] == "bearing change"
+        seen = heard(svc.sim)
+        await until(lambda: seen.count(2) >= 20)  # the other drive goes on meanwhile
+        assert 1 not in seen, "no telegram, not even a probe, to a drive in maintenance"
+        view = {d["name"]: d for d in (await svc.client.get("/api/v1/drives")).json()}
+        assert view["fan1"]["maintenance"]["reason"] == "bearing change"
+        assert view["fan2"]["maintenance"] is None
+        (series,) = maintenance_series(svc.runtime.registry)
+        assert 'drive="fan1"' in series and 'reason="bearing change"' in series
+        r = await svc.put("fan1", "3-41", {"value": 12.5}, headers=AUTH)
+        assert r.status_code == 409 and r.json()["error"]["kind"] == "in_maintenance"
+        assert svc.audit_writer.writes(address=1) == []
+        r = await svc.client.put(url, json={"on": False}, headers=AUTH)
+        assert r.status_code == 200 and r.json()["on"] is False
+        await until(lambda: seen.count(1) >= 3)  # polled again at once
+        assert maintenance_series(svc.runtime.registry) == []
+        assert svc.audit is not None
+        rows = [
+            (row.parameter, row.outcome, row.new_value, row.detail)
+            for row in svc.audit.latest(10)
+        ]  # fmt: skip
+        assert ("maintenance", "ok", True, "bearing change") in rows
+        assert ("maintenance", "ok", False, None) in rows
+        assert [r[:3] for r in rows if r[0] == "3-41"] == [("3-41", "not_sent", 12.5)]
+
+
+async def test_a_dp_slave_in_maintenance_is_left_out_of_the_cycle(tmp_path: Path) -> None:
+    async with dp_service(tmp_path) as svc:
+        auth = {"Authorization": f"Bearer {DP_TOKEN}"}
+        r = await svc.client.put(
+            "/api/v1/drives/pump/maintenance", json={"on": True, "reason": "seal"}, headers=auth
+        )
+        assert r.status_code == 200, r.text
+        since = len(svc.wire.frames)
+        await until(lambda: sum(1 for f in svc.wire.frames[since:] if f.da == 8) >= 50)
+        assert not [f for f in svc.wire.frames[since:] if f.da == 9], "pump left out"
+        assert svc.sample("pkwbus_drive_maintenance", drive="pump", reason="seal") == 1.0
+        r = await svc.client.put("/api/v1/drives/pump/maintenance", json={"on": False},
+                                 headers=auth)  # fmt: skip
+        assert r.status_code == 200
+        back = len(svc.wire.frames)
+        # Parametrised afresh, then in data exchange and polled again.
+        await until(lambda: any(
+            f.da == 9 and f.dsap == DpService.SET_PRM for f in svc.wire.frames[back:]
+        ))  # fmt: skip
+        reads = svc.reads("pump")
+        await until(lambda: svc.reads("pump") > reads)
+        assert svc.sample("pkwbus_drive_maintenance", drive="pump") is None
+
+
+async def test_maintenance_true_in_the_configuration_starts_the_drive_so(tmp_path: Path) -> None:
+    from pkwbus.service.assembly.build import build_runtime
+    from pkwbus.service.config import parse_config
+    from pkwbus.sim import SimTiming
+
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.001), catalog="danfoss-fc")
+    seen = heard(sim)
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    text = f"""
+audit_db: {tmp_path}/audit.sqlite
+lines:
+  - name: l1
+    port: {end.url}
+    protocol: fc
+    baudrate: 115200
+    drives:
+      - {{name: fan1, address: 1, catalog: danfoss-fc, maintenance: true,
+         poll: [{{parameter: "16-13", every: 50ms}}]}}
+      - {{name: fan2, address: 2, catalog: danfoss-fc, poll: [{{parameter: "16-13", every: 50ms}}]}}
+"""
+    runtime = await build_runtime(parse_config(text, environ={}))
+    await runtime.start()
+    try:
+        await until(lambda: seen.count(2) >= 20)
+        assert 1 not in seen
+        assert runtime.snapshot.maintenance["fan1"].reason == "configuration"
+    finally:
+        await runtime.stop()
+        await end.close()
