@@ -111,9 +111,8 @@ class Wire(Protocol):
         ...
 
     def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
-        """Send ``drive`` nothing (``out``: a drive in maintenance, already so in the
-        planner: an exchange of it that will get no answer now ends there), or take it
-        back."""
+        """Send ``drive`` nothing (``out``: in maintenance, already so in the planner: an
+        exchange of it that will get no answer ends there), or take it back."""
         ...
 
     def take_events(self) -> list[Event]: ...
@@ -184,9 +183,9 @@ class LineRunner:
 
     def maintenance(self, drive: str, on: bool, reason: str = "") -> None:
         """Put ``drive`` in maintenance (nothing goes out to it, not even a probe or a DP
-        Data_Exchange) or take it out (a drive that came back). KeyError for a drive not
-        on this line."""
-        self.planner.drive(drive)  # KeyError first: nothing changes for an unknown drive
+        Data_Exchange) or take it out (a drive that came back); KeyError: not here."""
+        if self.planner.drive(drive).maintenance == on:  # KeyError: an unknown drive
+            return  # as it was: its reason and since stay
         now = asyncio.get_running_loop().time()
         self.planner.maintenance(drive, on, now)
         self.wire.leave_out(self.planner, drive, on, now)

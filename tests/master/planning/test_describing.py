@@ -355,3 +355,25 @@ def test_a_poll_no_document_types_is_withheld_when_the_drive_does_not_describe_i
     assert not polls_of(fake, "d1"), "no value read by a type nobody stated"
     reads = [s for s in fake.sent if s.telegram[3] >> 4 == 1]  # AK 1: a value read
     assert reads == []
+
+
+def test_a_withheld_poll_is_asked_again_when_the_drive_comes_back() -> None:
+    """A refusal may be the drive's state (booting), not its kind: after the drive was away
+    its description is asked again, and its type now given releases the poll."""
+    spec, sim = counter_spec(refuses=True)
+    frequency = PollSpec("16-13", 0, pkw.read(spec.carrier.dialect, 1613), 0.1)
+    spec = replace(spec, polls=(*spec.polls, frequency))  # its traffic tells it is away
+    fake = FakeLine(Planner([spec], poll_deadline=0.5), sim)
+    fake.run(2.0)
+    assert not [p for p in polls_of(fake, "d1") if p.work.parameter == "15-03"]
+    params = sim.drives[1].params
+    params.specs[POWER_UPS] = replace(params.specs[POWER_UPS], described=True)
+    sim.kill(1)
+    fake.run(5.0)  # away: down, probed
+    sim.revive(1)
+    fake.run(70.0)  # back at the next probe (capped back-off), described, polled
+    polls = [
+        p for p in polls_of(fake, "d1")
+        if isinstance(p.outcome, Answered) and p.work.parameter == "15-03"
+    ]  # fmt: skip
+    assert polls, "released by the type the drive now describes"

@@ -5,7 +5,8 @@ it is a drive that came back: polled at once, shown up at its first answer."""
 from __future__ import annotations
 
 from pkwbus.master.planning.jobs import Cancelled
-from pkwbus.master.planning.plan import Finished, HealthChanged
+from pkwbus.master.planning.outcomes import Answered
+from pkwbus.master.planning.plan import Finished, HealthChanged, Send
 from pkwbus.master.planning.planner import IN_MAINTENANCE
 from pkwbus.protocol import pkw
 from tests.master.planning.test_planner import fake_line, target_of
@@ -69,3 +70,36 @@ def test_a_dead_drive_in_maintenance_is_not_probed_nor_shown_down() -> None:
     fake.events.extend(fake.planner.take_events())
     fake.run(5.0)
     assert sent_to(fake, "d1") > 0 and fake.shown("d1") is False  # taken back: found gone
+
+
+def test_an_exchange_out_when_maintenance_begins_counts_and_nothing_follows_it() -> None:
+    fake = fake_line("fc", [1, 2], [1613], every=10.0)
+    fake.run(0.5)  # both polled once: idle until their next poll
+    dialect = target_of(fake.planner, "d1").dialect
+    job = fake.submit("d1", pkw.write(dialect, 341, 777, pkw.Width.DWORD))
+    send = fake.planner.next_action(fake.now)
+    plan = fake.planner.drive("d1")
+    while plan.active is not None and plan.active.read_first:  # the read before the change
+        assert isinstance(send, Send)
+        fake.planner.exchanged(send, fake.answer(send), fake.now)
+        send = fake.planner.next_action(fake.now)
+    assert isinstance(send, Send) and send.drive == "d1"  # the write is on the wire
+    fake.planner.maintenance("d1", True, fake.now)
+    result = fake.answer(send)  # the drive took it meanwhile
+    fake.planner.exchanged(send, result, fake.now)
+    fake.events.extend(fake.planner.take_events())
+    (done,) = fake.finished(job)
+    assert isinstance(done.outcome, Answered), "acknowledged by the drive: done, not cancelled"
+    assert fake.sim.drives[1].params.value(341) == 777
+    since = len(fake.sent)
+    fake.run(30.0)
+    assert sent_to(fake, "d1", since) == 0
+
+
+def test_a_lost_port_does_not_show_a_drive_in_maintenance_down() -> None:
+    fake = fake_line("fc", [1, 2], [1613], every=0.05)
+    fake.run(0.2)
+    fake.planner.maintenance("d1", True, fake.now)
+    fake.planner.port_failed()
+    changes = [e for e in fake.planner.take_events() if isinstance(e, HealthChanged)]
+    assert [(e.drive, e.up) for e in changes] == [("d2", False)]

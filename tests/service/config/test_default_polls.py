@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from pkwbus.catalog import load_catalog
+from pkwbus.service.config import default_polls
 from pkwbus.service.config.default_polls import COUNTER_EVERY, counter_polls
 from pkwbus.service.config.line_load import line_load
 from tests.service.config.test_config import parse
@@ -73,13 +74,18 @@ def test_counters_off_polls_none() -> None:
     assert counters(config("danfoss-fc", "fc", "        counters: off")) == []
 
 
-def test_a_counter_no_document_types_needs_the_drives_own_description() -> None:
-    untyped = [name for name, typed in counters(config("danfoss-fc", "fc")) if not typed]
-    assert untyped, "the Danfoss counters' types are recalled, not sourced"
-    without = counters(config("danfoss-fc", "fc", "        describe: off"))
-    assert [name for name, _ in without] == [
-        name for name, typed in counters(config("danfoss-fc", "fc")) if typed
-    ]
+def test_a_counter_no_document_types_needs_the_drives_own_description(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    found = counters(config("danfoss-fc", "fc"))
+    assert found and not any(typed for _, typed in found), "their types are recalled"
+    assert counters(config("danfoss-fc", "fc", "        describe: off")) == []
+    # Where a document types one (the catalog's verified), it is polled without.
+    shipped = default_polls.load_catalog("danfoss-fc")
+    typed = shipped.parameters[1503].model_copy(update={"verified": True})
+    sourced = shipped.model_copy(update={"parameters": {**shipped.parameters, 1503: typed}})
+    monkeypatch.setattr(default_polls, "load_catalog", lambda name: sourced)
+    assert counters(config("danfoss-fc", "fc", "        describe: off")) == [("1503", True)]
 
 
 def test_the_counters_polled_by_default_count_in_the_estimate() -> None:

@@ -38,4 +38,6 @@ async def test_the_drives_counters_are_polled_by_default_and_shown(tmp_path: Pat
 def test_the_catalogs_name_the_counters_they_mark() -> None:
     for catalog in ("danfoss-fc", "siemens-g120"):
         marked = [s for s in load_catalog(catalog).parameters.values() if s.counter]
-        assert marked and all(s.name and (s.verified or s.note) for s in marked)
+        assert marked and all(s.name for s in marked)
+        # What a counter's entry could not source is said (then only the drive types it).
+        assert all(s.verified or "recalled" in s.note for s in marked)

@@ -134,3 +134,139 @@ lines:
     finally:
         await runtime.stop()
         await end.close()
+
+
+class Ended:
+    """The reasons of the jobs and polls that ended cancelled, as a line's observer."""
+
+    def __init__(self) -> None:
+        self.reasons: list[str] = []
+
+    def on_events(self, events: Any) -> None:
+        from pkwbus.master.planning.outcomes import Cancelled
+        from pkwbus.master.planning.plan import Finished
+
+        self.reasons += [
+            e.outcome.reason
+            for e in events
+            if isinstance(e, Finished) and isinstance(e.outcome, Cancelled)
+        ]
+
+
+async def test_a_dp_slave_whose_slot_carries_a_job_comes_back_from_maintenance(
+    tmp_path: Path,
+) -> None:
+    """Its PKW slot holds a job when it goes in maintenance (every answer lags a second):
+    the job ends there, so that out of maintenance it is polled again, not stuck."""
+    from pkwbus.master.planning.planner import IN_MAINTENANCE
+    from pkwbus.service.assembly.build import build_runtime
+    from pkwbus.service.config import parse_config
+    from pkwbus.sim import SimTiming
+    from pkwbus.sim.profibus.line import DpSimulator
+
+    sim = DpSimulator([8], timing=SimTiming(response_delay=0.001, lag_seconds=1.0))
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    text = f"""
+audit_db: {tmp_path}/audit.sqlite
+lines:
+  - name: dp
+    port: "{end.url}"
+    protocol: profibus
+    baudrate: 93750
+    slot_time: 20ms
+    watchdog: 2s
+    alarms: off
+    counters: off
+    events: off
+    describe: off
+    drives:
+      - {{name: mixer, address: 8, dialect: profidrive, ppo: 1, ident: 0x80B5,
+         catalog: siemens-g120, poll: [{{parameter: r0021, every: 100ms}}]}}
+"""
+    runtime = await build_runtime(parse_config(text, environ={}))
+    runner = runtime.runners["dp"]
+    await runtime.start()
+    try:
+        key = ("mixer", "r0021", 0)
+        await until(lambda: key in runtime.snapshot.readings)
+        planner = runner.planner  # type: ignore[attr-defined]
+        await until(lambda: planner.drive("mixer").busy)  # a poll in the slot, lagging
+        ended = Ended()
+        runner.observers.append(ended)
+        runner.maintenance("mixer", True, "test")
+        assert not planner.drive("mixer").busy and planner.drive("mixer").active is None
+        assert ended.reasons == [IN_MAINTENANCE], "the slot's job ended as in maintenance"
+        runner.maintenance("mixer", False)
+        before = runtime.snapshot.readings[key].timestamp
+        await until(lambda: runtime.snapshot.readings[key].timestamp > before, timeout=30)
+    finally:
+        await runtime.stop()
+        await end.close()
+
+
+async def test_a_record_write_under_way_never_reaches_a_slave_put_in_maintenance(
+    tmp_path: Path,
+) -> None:
+    """Maintenance begins while a data record 47 write is being carried: its next request
+    is never sent, the drive keeps its value, and the audit says it may have gone out."""
+    from pkwbus.master.planning.jobs import Job
+
+    async with dp_service(tmp_path) as svc:
+        runner: Any = svc.runtime.runners["dp"]
+        port = runner.wire.port
+        start = port.start
+        held: list[int] = []
+        before = svc.sim.drives[9].params.number(1121)
+
+        def start_then_hold(request: Any, done: Any) -> Any:
+            active = runner.planner.drive("pump").active
+            carrying = (
+                active is not None and isinstance(active.work, Job)
+                and active.work.request.is_write and not active.read_first
+            )  # fmt: skip
+            if not held and getattr(request, "da", None) == 9 and carrying:
+                held.append(len(svc.wire.frames))
+                runner.maintenance("pump", True, "seal")
+            return start(request, done)
+
+        port.start = start_then_hold
+        r = await svc.client.put(
+            "/api/v1/drives/pump/parameters/p1121",
+            json={"value": 12.15},
+            headers={"Authorization": f"Bearer {DP_TOKEN}"},
+        )
+        assert held, "maintenance began while the write was under way"
+        assert r.status_code == 503 and r.json()["error"]["kind"] == "cancelled"
+        await asyncio.sleep(0.5)
+        assert svc.sim.drives[9].params.number(1121) == before
+        (row,) = [e for e in svc.audit.latest(10) if e.parameter == "p1121"]
+        assert row.outcome == "cancelled" and "may have been applied" in (row.detail or "")
+
+
+async def test_a_slave_gone_while_in_maintenance_is_down_when_taken_back(tmp_path: Path) -> None:
+    async with dp_service(tmp_path) as svc:
+        runner: Any = svc.runtime.runners["dp"]
+        runner.maintenance("fan", True, "motor swap")
+        assert svc.runtime.snapshot.slaves["fan"].state.value == "offline"  # sent nothing
+        svc.sim.kill(10)  # the fitter took it away
+        runner.maintenance("fan", False)
+        await until(lambda: svc.sample("pkwbus_drive_up", drive="fan") == 0.0)
+        svc.sim.revive(10)  # back on the bus: in data exchange, up again
+        await until(lambda: svc.sample("pkwbus_drive_up", drive="fan") == 1.0)
+
+
+async def test_a_malformed_switch_is_refused_audited_and_changes_nothing(tmp_path: Path) -> None:
+    async with service(tmp_path, fc=fc_drives()[:1]) as svc:
+        url = "/api/v1/drives/fan1/maintenance"
+        r = await svc.client.put(url, json={"on": "yes"})
+        assert r.status_code == 401, "no token: that is the answer"
+        r = await svc.client.put(url, json={"on": "yes"}, headers=AUTH)
+        assert r.status_code == 422 and r.json()["error"]["kind"] == "invalid_request"
+        r = await svc.client.put("/api/v1/drives/nobody/maintenance", json={"on": True},
+                                 headers=AUTH)  # fmt: skip
+        assert r.status_code == 404
+        assert svc.runtime.snapshot.maintenance == {}
+        assert svc.audit is not None
+        rows = [(row.drive, row.parameter, row.outcome) for row in svc.audit.latest(10)]
+        assert ("fan1", "maintenance", "invalid") in rows
+        assert ("nobody", "maintenance", "invalid") in rows

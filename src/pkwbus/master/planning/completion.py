@@ -17,7 +17,7 @@ from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import Event, Finished
 from pkwbus.master.planning.write_gate import after_read
 
-__all__ = ["complete", "drain"]
+__all__ = ["complete", "drain", "withdraw"]
 
 
 def complete(
@@ -63,3 +63,13 @@ def drain(d: DrivePlan, outcome: Outcome) -> list[Event]:
         for queue in (d.writes, d.reads, d.background)
         for _ in range(len(queue))
     ]
+
+
+def withdraw(d: DrivePlan, outcome: Outcome, now: float, *, retries: int) -> list[Event]:
+    """End all of ``d``'s work that is not on the wire with ``outcome`` (a drive put in
+    maintenance): its queued jobs, and its transaction unless an exchange of it is out
+    (that one ends at its result), a change that would follow its read included."""
+    events = drain(d, outcome)
+    while d.active is not None and not d.busy:
+        events += complete(d, d.active, outcome, now, retries=retries)
+    return events

@@ -143,6 +143,21 @@ class DriveDescriber:
                 again.append(param.pnu)
         return again
 
+    def reask(self, pnus: Iterable[int]) -> list[int]:
+        """Ask again for the descriptions of ``pnus`` the drive refused (a refusal may be
+        its state, not its kind): polls that wait for a type it did not give. The PNUs
+        waiting again."""
+        again = []
+        for pnu in pnus:
+            param = self._params.get(pnu)
+            if param is None or not param.settled or self.described.get(pnu, 0) is not None:
+                continue
+            del self.described[pnu]
+            param.settled, param.found, param.due, param.unanswered = False, {}, 0.0, False
+            param.base = None
+            again.append(pnu)
+        return again
+
     def waiting(self, pnu: int) -> bool:
         """Whether the polls of ``pnu`` wait for its description."""
         param = self._params.get(pnu)

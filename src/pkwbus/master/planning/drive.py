@@ -332,7 +332,11 @@ class DrivePlan:
         is read again (it may have been replaced by another drive), and what it left
         undescribed while away waits for its description again."""
         self.restart_polls(now)
-        if self.describer is None or not (again := self.describer.recheck()):
+        if self.describer is None:
+            return []
+        # Polls still held after their parameter settled wait for a type it refused.
+        again = self.describer.recheck() + self.describer.reask(list(self.held))
+        if not again:
             return []
         self._hold_again()
         targets = [t for t in self.spec.describe if t.pnu in again]

@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from pkwbus.master.planning.agenda import Agenda, Key
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.carrier import Transaction
-from pkwbus.master.planning.completion import complete, drain
+from pkwbus.master.planning.completion import complete, drain, withdraw
 from pkwbus.master.planning.drive import Active, DrivePlan, PollState
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, Priority, ProbeJob
@@ -144,21 +144,22 @@ class Planner:
             return
         d.maintenance = on
         if on:
-            self.events += drain(d, Cancelled(IN_MAINTENANCE))
-            if d.active is not None and not d.busy:
-                self._complete(d, d.active, Cancelled(IN_MAINTENANCE), now)
-            d.lagging = False
+            self.events += withdraw(d, Cancelled(IN_MAINTENANCE), now, retries=self.retries)
             self._tell(d.went_down())  # it may come back as another drive
         else:
             d.health.reset()
             d.shown_up = False  # up again at its first answer
+            if d.carrier.tells_health:  # down until its wire tells it is back (a DP slave)
+                self._show(d, False, "out of maintenance, not in data exchange yet")
             self.events.extend(d.back(now))
         self._index(d, now)
 
     def port_failed(self) -> None:
-        """The port failed: nobody can tell whether the drives answer."""
+        """The port failed: nobody can tell whether the drives answer (those in maintenance
+        are neither up nor down)."""
         for d in self.drives:
-            self._show(d, False, "")
+            if not d.maintenance:
+                self._show(d, False, "")
 
     def stop(self, reason: str) -> None:
         """Take no new jobs; cancel the queued ones and the jobs in flight."""
@@ -242,8 +243,12 @@ class Planner:
                     self._index(other, now)
             self._lagging.clear()
         if d.maintenance:  # out before the drive went in maintenance: nothing follows it
-            if (active := d.active) is not None:
-                self._complete(d, active, Cancelled(IN_MAINTENANCE), now)
+            if (active := d.active) is not None and active.send is send:
+                # Its answer still counts (an acknowledged write is done; the telegram
+                # went out either way), but nothing is repeated or sent after it.
+                outcome = active.tx.feed(result, now)
+                self._complete(d, active, outcome or Cancelled(IN_MAINTENANCE), now)
+            self.events += withdraw(d, Cancelled(IN_MAINTENANCE), now, retries=self.retries)
             self._index(d, now)
             return
         self._health(d, result, now)

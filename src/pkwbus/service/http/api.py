@@ -178,12 +178,15 @@ def create_app(
         message = _cap("; ".join(problems))
         body: dict[str, Any] = {"error": {"kind": "invalid_request", "message": message}}
         params = request.path_params
-        if request.method == "PUT" and "drive" in params and "parameter" in params:
+        if request.method == "PUT" and "drive" in params:
             caller = Caller(_client(request), request.headers.get("authorization"))
             try:
-                stored = await service.refuse_malformed(
-                    params["drive"], params["parameter"], caller, message
-                )
+                if "parameter" in params:
+                    stored = await service.refuse_malformed(
+                        params["drive"], params["parameter"], caller, message
+                    )
+                else:  # a drive's maintenance
+                    stored = await switches.refuse_malformed(params["drive"], caller, message)
             except ApiError as refused:  # no valid token: that is the answer
                 return _error_response(refused)
             if not stored:

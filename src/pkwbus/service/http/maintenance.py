@@ -11,6 +11,7 @@ store it leaves the drive as it was (503).
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 from pkwbus.service.audit.log import AuditEntry
@@ -38,12 +39,31 @@ class Maintenance:
         self.audit_writer = audit_writer
         self._tokens = tokens
 
-    async def switch(self, drive: str, on: bool, reason: str, caller: Caller) -> dict[str, Any]:
+    async def _identify(self, caller: Caller) -> str | None:
         try:
-            identity = self._tokens.identify(caller)
+            return self._tokens.identify(caller)
         except ApiError as exc:
             exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
             raise
+
+    async def refuse_malformed(self, drive: str, caller: Caller, problem: str) -> bool:
+        """Audit a switch whose body did not validate (nothing changed); False when the
+        audit log could not store it. A caller without a valid token gets its refusal."""
+        identity = await self._identify(caller)
+        return await self.audit_writer.note(
+            AuditEntry(
+                client=caller.client,
+                drive=clip(drive, MAX_DRIVE_NAME),
+                parameter=MAINTENANCE,
+                index=0,
+                outcome="invalid",
+                token_id=identity,
+                detail=problem,
+            )
+        )
+
+    async def switch(self, drive: str, on: bool, reason: str, caller: Caller) -> dict[str, Any]:
+        identity = await self._identify(caller)
         audit = AuditEntry(
             client=caller.client, drive=clip(drive, MAX_DRIVE_NAME), parameter=MAINTENANCE,
             index=0, outcome="pending", token_id=identity, new_value=on, detail=reason or None,
@@ -64,7 +84,8 @@ class Maintenance:
             ) from None  # fmt: skip
         runner.maintenance(drive, on, reason)
         held = self.runtime.snapshot.maintenance.get(drive)
-        stored = await self.audit_writer.outcome(row, outcome="ok")
+        # Done: its row is completed even when the client goes away meanwhile.
+        stored = await asyncio.shield(self.audit_writer.outcome(row, outcome="ok"))
         body: dict[str, Any] = {
             "drive": drive,
             "on": held is not None,

@@ -136,6 +136,9 @@ class SlaveCycle:
         if not told:
             self.events.append((run, StartupAnswered()))
         slave = run.slave
+        if run.address in self._left_out:  # in maintenance meanwhile: nothing more to it
+            self._pending = None
+            return
         self._pending = slave.repeat_acyclic() if self._acyclic_out else slave.poll_acyclic()
 
     def take_events(self) -> list[tuple[SlaveRun, CycleEvent]]:
@@ -148,6 +151,9 @@ class SlaveCycle:
         parameters and configuration, then data exchange."""
         if out:
             self._left_out.add(setup.address)
+            out_now = self._out
+            if out_now is not None and out_now.address == setup.address:
+                self._pending = None  # its record transfer's next request: never sent
         elif setup.address in self._left_out:
             self._left_out.discard(setup.address)
             self.runs[setup.address] = SlaveRun(DpSlave(setup), slot)

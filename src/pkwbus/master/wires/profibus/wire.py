@@ -160,6 +160,9 @@ class CycleWire:
         spec = next((d for d in self.drives if d.name == drive), None)
         if spec is None:
             return
+        run = self.cycle.runs.get(spec.setup.address)
+        if out and run is not None and run.slave.state is not SlaveState.OFFLINE:
+            self._events.append(SlaveStateChanged(drive, SlaveState.OFFLINE))  # sent nothing
         self.cycle.leave_out(spec.setup, spec.slot(), out)
         send = planner.sending(drive)
         if out and send is not None and planner.drive(drive).busy:
