@@ -6,75 +6,41 @@ serial line: a trip logged before pkwbus started is found with the drive's runti
 from __future__ import annotations
 
 import time
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
 from pathlib import Path
 
 import pytest
 
-from pkwbus.service.assembly.build import build_runtime
-from pkwbus.service.assembly.history import watch_logs
-from pkwbus.service.config import parse_config
-from pkwbus.service.history.store import HistoryStore
-from pkwbus.service.history.watch import LogWatcher
 from pkwbus.sim import ModelConfig, SimTiming
 from pkwbus.sim.profibus.line import DpSimulator
-from tests.service.history.test_service_logs import counted, kept, until
+from tests.service.history.test_service_logs import counted, kept, until, watching
 
 STEADY = ModelConfig(warning_rate=0.0, trip_rate=0.0)  # only the trips the test makes
 
 
-def config_text(ppo_url: str, record_url: str, folder: Path) -> str:
+def dp_line(name: str, url: str, drive: str, address: int, access: str) -> str:
+    """A DP line of one SINAMICS slave (``access``: its PPO and DP-V1 keys)."""
     return f"""
-audit_db: {folder}/audit.sqlite
-lines:
-  - name: dp1
-    port: "{ppo_url}"
+  - name: {name}
+    port: "{url}"
     protocol: profibus
     baudrate: 93750
     slot_time: 20ms
     watchdog: 2s
     events_every: 1s
     drives:
-      - name: mixer
-        address: 8
-        dialect: profidrive
-        ppo: 1
-        ident: 0x80B5
-        catalog: siemens-g120
-        poll: [{{parameter: r0021, every: 200ms}}]
-  - name: dp2
-    port: "{record_url}"
-    protocol: profibus
-    baudrate: 93750
-    slot_time: 20ms
-    watchdog: 2s
-    events_every: 1s
-    drives:
-      - name: pump
-        address: 9
-        dialect: profidrive
-        ppo: 3
-        ident: 0x80B5
-        dpv1: true
-        catalog: siemens-g120
-        poll: [{{parameter: r0021, every: 200ms}}]
-"""
+      - {{name: {drive}, address: {address}, dialect: profidrive, ident: 0x80B5, {access},
+         catalog: siemens-g120, poll: [{{parameter: r0021, every: 200ms}}]}}"""
 
 
-@asynccontextmanager
-async def service(ppo_url: str, record_url: str, folder: Path) -> AsyncIterator[LogWatcher]:
-    config = parse_config(config_text(ppo_url, record_url, folder), environ={})
-    store = HistoryStore(config.history_path)
-    runtime = await build_runtime(config)
-    watcher = watch_logs(config, runtime, store)
-    assert watcher is not None and len(watcher.watched) == 2
-    await runtime.start()
-    try:
-        yield watcher
-    finally:
-        await runtime.stop()
-        store.close()
+def config_text(ppo_url: str, record_url: str, folder: Path) -> str:
+    """The mixer's parameters through its PPO's PKW words, the pump's through data
+    record 47 (PPO 3 has none)."""
+    return (
+        f"audit_db: {folder}/audit.sqlite\nlines:"
+        + dp_line("dp1", ppo_url, "mixer", 8, "ppo: 1")
+        + dp_line("dp2", record_url, "pump", 9, "ppo: 3, dpv1: true")
+        + "\n"
+    )
 
 
 async def test_a_trip_before_the_start_is_found_through_the_ppo_and_data_record_47(
@@ -89,7 +55,8 @@ async def test_a_trip_before_the_start_is_found_through_the_ppo_and_data_record_
         tripped_at = time.time()
         ppo.drives[8].trip(7801, ppo.clock(), value=-12)
         record.drives[9].trip(30001, record.clock(), value=5)
-        async with service(ppo_end.url, record_end.url, tmp_path) as w:
+        async with watching(config_text(ppo_end.url, record_end.url, tmp_path)) as w:
+            assert len(w.watched) == 2
             await until(lambda: bool(kept(w, "mixer")) and bool(kept(w, "pump")), timeout=60)
             (mixer,) = kept(w, "mixer")
             (pump,) = kept(w, "pump")

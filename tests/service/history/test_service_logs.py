@@ -68,7 +68,14 @@ lines:
 @asynccontextmanager
 async def service(p: Plant, folder: Path) -> AsyncIterator[LogWatcher]:
     """pkwbus run's runtime with its watch of the drives' logs, until the block ends."""
-    config = parse_config(config_text(p, folder), environ={})
+    async with watching(config_text(p, folder)) as watcher:
+        yield watcher
+
+
+@asynccontextmanager
+async def watching(text: str) -> AsyncIterator[LogWatcher]:
+    """The runtime of configuration ``text`` with its watch of the drives' logs."""
+    config = parse_config(text, environ={})
     store = HistoryStore(config.history_path)
     runtime = await build_runtime(config)
     watcher = watch_logs(config, runtime, store)

@@ -16,6 +16,7 @@ from prometheus_client import generate_latest
 from pkwbus.protocol.profibus.dp.services import Service as DpService
 from pkwbus.protocol.serial.telegram import decode_adr
 from pkwbus.sim import Simulator
+from tests.master.conftest import until as until_within
 from tests.service.assembly.test_ds47_service import TOKEN as DP_TOKEN
 from tests.service.assembly.test_ds47_service import service as dp_service
 from tests.service.http.conftest import AUTH, fc_drives, service
@@ -34,12 +35,8 @@ def heard(sim: Simulator) -> list[int]:
     return seen
 
 
-async def until(check: Callable[[], bool], timeout: float = 20.0) -> None:
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not check():
-        assert loop.time() < end, "not within the time"
-        await asyncio.sleep(0.01)
+async def until(check: Callable[[], bool], timeout: float = 30.0) -> None:
+    await until_within(check, timeout)  # generous: a loaded machine, a DP slave's start-up
 
 
 def maintenance_series(registry: Any) -> list[str]:

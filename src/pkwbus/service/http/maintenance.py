@@ -23,6 +23,7 @@ from pkwbus.service.http.parameter_checks import (
     Caller,
     TokenCheck,
     clip,
+    malformed,
 )
 from pkwbus.service.runtime import Runtime
 
@@ -51,15 +52,7 @@ class Maintenance:
         audit log could not store it. A caller without a valid token gets its refusal."""
         identity = await self._identify(caller)
         return await self.audit_writer.note(
-            AuditEntry(
-                client=caller.client,
-                drive=clip(drive, MAX_DRIVE_NAME),
-                parameter=MAINTENANCE,
-                index=0,
-                outcome="invalid",
-                token_id=identity,
-                detail=problem,
-            )
+            malformed(caller, identity, drive, MAINTENANCE, problem)
         )
 
     async def switch(self, drive: str, on: bool, reason: str, caller: Caller) -> dict[str, Any]:

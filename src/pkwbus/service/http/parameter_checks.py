@@ -20,6 +20,7 @@ from pkwbus.errors import PkwbusError
 from pkwbus.master.planning.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
+from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.http.outcome_answers import http_failure
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -35,6 +36,7 @@ __all__ = [
     "described_format",
     "fit_index",
     "locate",
+    "malformed",
     "raise_for",
 ]
 
@@ -111,6 +113,21 @@ class TokenCheck:
         if not hmac.compare_digest(given.strip().encode(), self._token.encode()):
             raise ApiError(403, "forbidden", "the token is not the write token")
         return self._token_id
+
+
+def malformed(
+    caller: Caller, identity: str | None, drive: str, parameter: str, problem: str
+) -> AuditEntry:
+    """The audit row of a request whose body did not validate: nothing was sent."""
+    return AuditEntry(
+        client=caller.client,
+        drive=clip(drive, MAX_DRIVE_NAME),
+        parameter=clip(parameter, MAX_PARAMETER_TEXT),
+        index=0,
+        outcome="invalid",
+        token_id=identity,
+        detail=problem,
+    )
 
 
 def locate(

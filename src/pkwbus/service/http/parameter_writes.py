@@ -42,6 +42,7 @@ from pkwbus.service.http.parameter_checks import (
     described_format,
     fit_index,
     locate,
+    malformed,
     raise_for,
 )
 from pkwbus.service.http.parameter_reads import Reads
@@ -128,17 +129,7 @@ class Writes:
         """Audit a write whose body did not validate (nothing was sent); False when the
         audit log could not store it. A caller without a valid token gets its refusal."""
         identity = await self._identify(caller)
-        return await self.audit_writer.note(
-            AuditEntry(
-                client=caller.client,
-                drive=clip(drive, MAX_DRIVE_NAME),
-                parameter=clip(parameter, MAX_PARAMETER_TEXT),
-                index=0,
-                outcome="invalid",
-                token_id=identity,
-                detail=problem,
-            )
-        )
+        return await self.audit_writer.note(malformed(caller, identity, drive, parameter, problem))
 
     async def _identify(self, caller: Caller) -> str | None:
         """The caller's token id; a refusal (counted, audited per address and minute)
