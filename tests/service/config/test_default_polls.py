@@ -95,3 +95,15 @@ def test_the_counters_polled_by_default_count_in_the_estimate() -> None:
         line_load(on.lines[0]).exchanges_per_second - line_load(off.lines[0]).exchanges_per_second
     )
     assert added == pytest.approx(len(marked("danfoss-fc")) / COUNTER_EVERY)
+
+
+def test_check_config_tells_the_counters_share_of_the_line() -> None:
+    from pkwbus.service.config.line_load import check_config_report
+
+    on = parse(config("danfoss-fc", "fc"))
+    off = parse(config("danfoss-fc", "fc", "        counters: off"))
+    (told,) = [r for r in check_config_report(on) if "polled by default (counters)" in r]
+    assert told.lstrip().startswith(f"{len(marked('danfoss-fc'))} counter(s) of 1 drive(s)")
+    share = line_load(on.lines[0]).utilisation - line_load(off.lines[0]).utilisation
+    assert f"{share:.2%} of the line's time" in told
+    assert not [r for r in check_config_report(off) if "(counters)" in r]

@@ -351,6 +351,15 @@ def check_config_report(
             f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "
             f"(capacity {load.capacity:.0f} exchanges/s)"
         )
+        counters = {d.name: len(counter_polls(line, d, {ref_key(e.ref) for e in d.poll}))
+                    for d in line.drives}  # fmt: skip
+        if sum(counters.values()):
+            share = sum(load.exchange_seconds[n] * c / COUNTER_EVERY for n, c in counters.items())
+            report.append(
+                f"  {sum(counters.values())} counter(s) of {sum(1 for c in counters.values() if c)}"
+                f" drive(s) polled by default (counters), every {COUNTER_EVERY:.0f} s:"
+                f" {share:.2%} of the line's time (in the utilisation)"
+            )
         watched = sum(1 for d in line.drives if watch_rate(line, d))
         if watched:
             report.append(
