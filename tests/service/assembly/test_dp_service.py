@@ -246,6 +246,34 @@ async def test_a_dead_slave_goes_offline_while_the_others_keep_their_poll_rate(
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
 
 
+async def test_a_slave_dead_from_the_start_is_shown_down_until_it_answers(
+    tmp_path: Path,
+) -> None:
+    """A slave that never reached data exchange and answers none of a request's repeats is
+    down (pkwbus_drive_up 0: PkwbusDriveDown), not up by default; the others are up."""
+    sim = DpSimulator(ADDRESSES, dialect="danfoss-pcv", timing=SimTiming(response_delay=0.001),
+                      seed=5, faults=DpFaults(dead=frozenset({10})))  # fmt: skip
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    text = config_text(end.url, tmp_path / "audit.sqlite", "20ms")
+    runtime = await build_runtime(parse_config(text, environ={"TEST_TOKEN": TOKEN}))
+    await runtime.start()
+
+    def up(name: str) -> bool | None:
+        state = runtime.snapshot.drives.get(name)
+        return None if state is None else state.up
+
+    try:
+        await until(lambda: up("fan") is False)
+        await until(lambda: all(runtime.snapshot.readings.get((n, "16-13", 0)) for n in
+                                ("mixer", "pump")))  # fmt: skip
+        assert up("mixer") is not False and up("pump") is not False
+        sim.revive(10)
+        await until(lambda: up("fan") is True)
+    finally:
+        await runtime.stop()
+        await end.close()
+
+
 @dataclass
 class Window:
     """What went on the wire over some master cycles."""

@@ -18,7 +18,8 @@ out as a record transfer, carried by the cycle between Data_Exchanges, and
 its response (or why none came) goes to the planner as the exchange's result.
 
 A slave's health is its state, told to the planner (a slave is up while it
-is in data exchange), not counted from missing PKW answers. The PZD of every
+is in data exchange, down when it leaves it or, offline, answers none of a
+request's repeats), not counted from missing PKW answers. The PZD of every
 Data_Exchange answer gives the drive's status word, without any PKW traffic.
 A slave that answers RS, asks for parameters, lost its watchdog or was
 power-cycled is parametrised again by its state machine; a job in flight goes
@@ -262,6 +263,8 @@ class CycleWire:
             silent = event.kind is FailureKind.TIMEOUT and not slave.waiting
             if silent and slave.state is SlaveState.OFFLINE:  # every repeat went unanswered
                 events.append(SlaveSilent(name, event.detail))
+                if planner.drive(name).shown_up:  # a slave that never answered is down too
+                    planner.told_health(name, False, "does not answer", now)
         elif isinstance(event, StateChanged):
             self._state(planner, name, event, now)
         elif isinstance(event, Restarted):
