@@ -33,8 +33,7 @@ def counters(text: str) -> list[tuple[str, bool]]:
     cfg = parse(text)
     line = cfg.lines[0]
     drive = line.drives[0]
-    polled = {(p.ref.pnu, p.ref.index) for p in drive.poll}
-    return [(str(ref), typed) for ref, typed in counter_polls(line, drive, polled)]
+    return [(str(ref), typed) for ref, typed in counter_polls(line, drive)]
 
 
 def marked(catalog: str) -> list[tuple[int, int | None]]:

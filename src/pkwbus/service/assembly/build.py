@@ -49,7 +49,6 @@ from pkwbus.service.config.default_polls import (
     alarm_polls,
     counter_polls,
 )
-from pkwbus.service.config.parameters import ref_key
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
@@ -236,49 +235,37 @@ def _drive(
     target = target_for(line, drive)
     table = parameter_table(drive)
     form = description_form(line, drive)
-    polls = []
+    polls: list[PollSpec] = []
     units: dict[str, str] = {}
     sources: dict[str, str] = {}
+
+    def add(ref: ParameterRef, every: float, *, layered: bool, only_described: bool = False
+            ) -> ParameterRef:  # fmt: skip
+        """One poll: labelled by the drive's one name for its parameter ("1613" polls
+        16-13), described by the configuration and the catalog (and the drive's own
+        description, where it is asked: ``layered``)."""
+        ref = table.canonical(ref)
+        fmt = table.describe(ref)
+        found = layers_of(drive, table, ref)
+        polls.append(
+            PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), every, fmt,
+                     found if layered else None, described_only=only_described)
+        )  # fmt: skip
+        units[ref.name] = fmt.unit
+        info = _info(line, drive, ref, fmt, found.catalog)
+        infos.append(info)
+        sources[ref.name] = info.source
+        return ref
+
     for entry in drive.poll:
-        ref = entry.ref
-        index = entry.index if entry.index is not None else ref.index
-        # Labels are the drive's one name for the parameter: "1613" polls 16-13.
-        ref = table.canonical(ParameterRef(ref.pnu, index, ref.name))
-        fmt = table.describe(ref)
-        found = layers_of(drive, table, ref)
-        polls.append(
-            PollSpec(ref.name, index or 0, _read(target, ref, fmt), entry.every, fmt,
-                     found if form is not None else None)
-        )  # fmt: skip
-        units[ref.name] = fmt.unit
-        info = _info(line, drive, ref, fmt, found.catalog)
-        infos.append(info)
-        sources[ref.name] = info.source
-    polled = {p.request.pnu for p in polls}
-    for ref in alarm_polls(line, drive, polled):
-        ref = table.canonical(ref)
-        fmt = table.describe(ref)
-        polls.append(PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), ALARM_EVERY, fmt))
-        units[ref.name] = fmt.unit
-        info = _info(line, drive, ref, fmt, layers_of(drive, table, ref).catalog)
-        infos.append(info)
-        sources[ref.name] = info.source
-    counters = []
-    for ref, typed in counter_polls(line, drive, {ref_key(p_.ref) for p_ in drive.poll}):
-        if not typed and form is None:
-            continue  # no document types it, and the drive is not asked to
-        ref = table.canonical(ref)
-        fmt = table.describe(ref)
-        found = layers_of(drive, table, ref)
-        polls.append(
-            PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), COUNTER_EVERY, fmt,
-                     found if form is not None else None, described_only=not typed)
-        )  # fmt: skip
-        counters.append(ref)
-        units[ref.name] = fmt.unit
-        info = _info(line, drive, ref, fmt, found.catalog)
-        infos.append(info)
-        sources[ref.name] = info.source
+        add(entry.ref, entry.every, layered=form is not None)
+    for ref in alarm_polls(line, drive, {p.request.pnu for p in polls}):
+        add(ref, ALARM_EVERY, layered=False)
+    counters = [
+        add(ref, COUNTER_EVERY, layered=form is not None, only_described=not typed)
+        for ref, typed in counter_polls(line, drive)
+        if typed or form is not None  # one no document types needs the drive's description
+    ]
     describe = describe_targets(target, drive, table, counters) if form is not None else ()
     entries.append(
         DriveEntry(

@@ -42,10 +42,8 @@ def alarm_polls(line: LineBase[Any], drive: DriveBase, polled: set[int]) -> list
     return wanted
 
 
-def counter_polls(
-    line: LineBase[Any], drive: DriveBase, polled: set[tuple[int, int | None]]
-) -> list[tuple[ParameterRef, bool]]:
-    """The counters the drive's catalog marks (``counter: true``) that the configuration
+def counter_polls(line: LineBase[Any], drive: DriveBase) -> list[tuple[ParameterRef, bool]]:
+    """The counters the drive's catalog marks (``counter: true``) that its ``poll`` list
     does not poll, each element of an array: polled by default (``counters: auto``), with
     whether a vendor document types them (the catalog's ``verified``). One that no document
     types needs the drive's own description (``describe: auto``): without it, it is left
@@ -53,6 +51,7 @@ def counter_polls(
     if (drive.counters or line.counters) == "off" or drive.catalog is None:
         return []
     describes = (drive.describe or line.describe) != "off"
+    polled = {(entry.ref.pnu, entry.ref.index) for entry in drive.poll}
     wanted: list[tuple[ParameterRef, bool]] = []
     for spec in load_catalog(drive.catalog).parameters.values():
         if not spec.counter or (not spec.verified and not describes):

@@ -57,7 +57,6 @@ from pkwbus.service.config.default_polls import (
 )
 from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.model import Config, Drive, Line
-from pkwbus.service.config.parameters import ref_key
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
@@ -141,7 +140,7 @@ def poll_rates(line: Line, drive: Drive) -> list[float]:
     alarm words (``alarms: auto``) and the counters (``counters: auto``) polled by default."""
     rates = [1 / entry.every for entry in drive.poll]
     implicit = alarm_polls(line, drive, {entry.ref.pnu for entry in drive.poll})
-    counters = counter_polls(line, drive, {ref_key(entry.ref) for entry in drive.poll})
+    counters = counter_polls(line, drive)
     return rates + [1 / ALARM_EVERY] * len(implicit) + [1 / COUNTER_EVERY] * len(counters)
 
 
@@ -351,7 +350,7 @@ def check_config_report(
             f"{load.exchanges_per_second:.2f} polls/s, utilisation {load.utilisation:.1%} "
             f"(capacity {load.capacity:.0f} exchanges/s)"
         )
-        counters = {d.name: len(counter_polls(line, d, {ref_key(e.ref) for e in d.poll}))
+        counters = {d.name: len(counter_polls(line, d))
                     for d in line.drives}  # fmt: skip
         if sum(counters.values()):
             share = sum(load.exchange_seconds[n] * c / COUNTER_EVERY for n, c in counters.items())
