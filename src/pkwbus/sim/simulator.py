@@ -1,4 +1,6 @@
-"""The simulated line: many drives behind one end, addressing, broadcasts, mirrors, faults."""
+"""The simulated line: many drives behind one end, addressing, broadcasts, mirrors, faults,
+and values set at the drives' keypads (:meth:`Simulator.keypad`; at random with
+``keypad_every``, :mod:`pkwbus.sim.drives.keypad`)."""
 
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drives import faults as inject
 from pkwbus.sim.drives.drive import SimDrive
 from pkwbus.sim.drives.faults import Answer
+from pkwbus.sim.drives.keypad import RandomKeypad
 from pkwbus.sim.drives.model import ModelConfig
 from pkwbus.sim.drives.table import TABLES, ParamSpec
 from pkwbus.sim.serving import ends
@@ -35,6 +38,7 @@ __all__ = [
     "Clock",
     "Simulator",
     "check_refusing",
+    "random_keypad",
 ]
 
 Clock = Callable[[], float]
@@ -45,8 +49,12 @@ class Simulator:
 
     ``refuse_descriptions``: addresses of drives that answer every description
     request (AK 4) with the dialect's "description not available" fault.
-    Raises ValueError for an address outside the protocol's range, or one in
-    ``refuse_descriptions`` that is not among ``addresses``.
+    ``keypad_every``: on average once per that many seconds (of the clock, checked at
+    each request) one drive that is not dead gets a setting changed at its keypad
+    (:mod:`pkwbus.sim.drives.keypad`); None: never.
+    Raises ValueError for an address outside the protocol's range, one in
+    ``refuse_descriptions`` that is not among ``addresses``, or a ``keypad_every`` that
+    is not above 0.
     """
 
     def __init__(
@@ -66,6 +74,7 @@ class Simulator:
         model: ModelConfig | None = None,
         specs: tuple[ParamSpec, ...] | None = None,
         refuse_descriptions: Collection[int] = (),
+        keypad_every: float | None = None,
     ) -> None:
         self.protocol = Protocol(protocol)
         self.dialect = get_dialect(dialect or default_dialect(self.protocol))
@@ -96,6 +105,7 @@ class Simulator:
                 described=address not in refusing,
             )  # fmt: skip
             self.drives[address].model.now = clock()
+        self.random_keypad = random_keypad(keypad_every, seed, clock())
 
     def _check_address(self, address: int) -> None:
         low, top = address_range(self.protocol)
@@ -150,6 +160,24 @@ class Simulator:
         again from 0 and it counts one more power-up (15-03); its logs are kept."""
         self._drive(address).power_cycle(self.clock())
 
+    def keypad(self, address: int, pnu: int, raw: int, index: int = 0) -> None:
+        """A person at the keypad (LCP) of drive ``address`` sets element ``index`` of
+        ``pnu`` to ``raw`` (the number as on the wire, a float's bits) now: in RAM and
+        EEPROM, with no telegram; logged. ValueError with a plain message for an unknown
+        drive or parameter, one the keypad cannot set (read-only, a live value, a text),
+        an index or raw number the parameter does not have, a value outside its limits,
+        and, while the motor runs, a parameter that cannot change while it runs (FC
+        motor data, p0304)."""
+        drive = self._drive(address)
+        drive.tick(self.clock())
+        drive.keypad(pnu, raw, index)
+
+    def _keypad_at_random(self, now: float) -> None:
+        chance = self.random_keypad
+        if chance is not None and chance.due(now):
+            alive = [d for a, d in self.drives.items() if not self.is_dead(a)]
+            chance.change(now, alive)
+
     def _drive(self, address: int) -> SimDrive:
         drive = self.drives.get(address)
         if drive is None:
@@ -192,6 +220,7 @@ class Simulator:
     def answer(self, telegram: Telegram, now: float | None = None) -> Answer | None:
         """What the line answers to a deframed request, faults applied."""
         now = self.clock() if now is None else now
+        self._keypad_at_random(now)
         stats = self.stats
         stats.count("requests")
         adr = decode_adr(self.protocol, telegram.adr)
@@ -264,6 +293,14 @@ def check_refusing(refusing: Collection[int], drives: Collection[int]) -> None:
     if strangers:
         names = ", ".join(str(a) for a in strangers)
         raise ValueError(f"refuse descriptions: no simulated drive at address {names}")
+
+
+def random_keypad(every: float | None, seed: int | None, now: float) -> RandomKeypad | None:
+    """The random keypad changes of a line (None: none), with a generator of their own
+    (so that they leave the line's fault draws as they are), seeded from ``seed``."""
+    if every is None:
+        return None
+    return RandomKeypad(every, random.Random(None if seed is None else f"keypad {seed}"), now)
 
 
 def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:

@@ -11,8 +11,11 @@ import pytest
 
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import (
+    Characteristics,
     DescriptionForm,
     DriveDescription,
+    changed_from_factory,
+    factory_raw,
     form_of,
     read_elements,
 )
@@ -242,3 +245,72 @@ def test_no_text_limits() -> None:
 )
 def test_form_of(dialect: Dialect, form: DescriptionForm | None) -> None:
     assert form_of(dialect) is form
+
+
+# ------------------ FC 300 Design Guide, "Default value (index 20)" and "Additional
+# characteristics (index 21)"; FC 300 PROFIBUS manual MG.33.C2.02, "Identifier ID"
+
+
+@pytest.mark.parametrize(
+    ("bits", "no_bus", "read_only", "not_running", "power_unit"),
+    [
+        (0, False, False, False, False),
+        (1 << 9, True, False, False, False),  # "Bit 9 indicates No bus Access"
+        (1 << 10, False, True, False, False),  # 10 Std Bus Read Only
+        (1 << 11, False, True, False, False),  # 11 Profibus Read Only
+        (1 << 13, False, False, True, False),  # "cannot be changed while running"
+        (1 << 15, False, False, False, True),  # PowerUnitDependency
+        (0b001, False, False, False, True),  # bits 0-2: "power unit-depending values"
+        (0b100, False, False, False, True),
+        (0b11 << 7, False, False, False, False),  # bits 7-8: LCP access, not the bus's
+    ],
+)
+def test_fc_additional_characteristics_bits_as_the_guide_lists_them(
+    bits: int, no_bus: bool, read_only: bool, not_running: bool, power_unit: bool
+) -> None:
+    found = Characteristics.of(element(21, bits, dialect=FC))
+    assert found.no_bus_access is no_bus
+    assert found.bus_read_only is read_only
+    assert found.not_while_running is not_running
+    assert found.power_unit_dependent is power_unit
+
+
+def test_fc_characteristics_are_read_from_pwe_low() -> None:
+    """ "The Additional characteristics returns an answer in PWE low": a high word is not
+    part of it."""
+    assert Characteristics.of(element(21, 0xFFFF0000, DWORD, FC)).raw == 0
+
+
+@pytest.mark.parametrize(
+    ("vtype", "raw", "width", "factory"),
+    [
+        (ValueType.U16, 0x01F4, WORD, 500),  # "the same data type as the parameter itself"
+        (ValueType.I16, 0xFF9C, WORD, -100),
+        (ValueType.I32, 0xFFFFFF9C, DWORD, -100),
+        (ValueType.U32, 0x00030D40, DWORD, 200000),
+        (ValueType.U16, 0x7777_01F4, DWORD, 500),  # a word type in the low word
+        (ValueType.TEXT, 0x41424344, DWORD, None),
+        (None, 5, WORD, None),
+    ],
+)
+def test_fc_default_value_is_a_number_of_the_parameters_type(
+    vtype: ValueType | None, raw: int, width: pkw.Width, factory: int | None
+) -> None:
+    assert factory_raw(element(20, raw, width, FC), vtype) == factory
+
+
+@pytest.mark.parametrize(
+    ("identifier", "changed"),
+    [
+        (0x0006, False),  # U16, nothing else
+        (0x1006, True),  # bit 12: "Parameter has been changed from factory setting"
+        (0x5207, True),  # with bit 14 (array) and bit 9 (read-only)
+        (0x2006, False),  # bit 13: "can be reset only", another bit
+    ],
+)
+def test_profidrive_identifier_bit_12_tells_a_change_from_the_factory_setting(
+    identifier: int, changed: bool
+) -> None:
+    assert changed_from_factory(element(1, identifier)) is changed
+    # The rest of the identifier reads as before: the type and read-only bits.
+    assert read(PROFIDRIVE_FORM, e1=element(1, identifier)).type_code == identifier & 0xFF

@@ -11,10 +11,23 @@ Two forms of the same element numbers:
   Danfoss VLT PROFIBUS manual MG.33.C4.02, section 5 "Parameter description",
   and VLT FCD 302 PROFIBUS manual, tables 5.10 and 5.11): 1 identifier (bits
   0-7 data type, bit 8 "standardisation factor and variable attribute not
-  relevant", bit 9 read-only, bit 14 array), 2 number of array elements (or
+  relevant", bit 9 read-only, bit 12 "parameter has been changed from factory
+  setting" (FC 300 PROFIBUS manual MG.33.C2.02, "Identifier ID"), bit 14
+  array), 2 number of array elements (or
   string length), 4 variable attribute (first byte the variable index, the
   physical unit; second byte the conversion index), 6 name (16 characters),
   7 lower and 8 upper limit (32 bit signed).
+
+What a drive says of its settings (FC 300 Design Guide MG.33.B3.22, "Default
+value (index 20)" and "Additional characteristics (index 21)"): FC element 20
+is the parameter's default value, "which is the factory setting", of the
+parameter's own data type; element 21 answers bits in PWE low: 0-2 special
+default, upper and lower limit (power-unit dependent values), 7-8 LCP access,
+9 no bus access, 10 and 11 "can only be read over the bus", 13 "cannot be
+changed while running", 15 depends on the power unit. A PROFIdrive drive says
+instead, in its identifier's bit 12, whether the value differs from the
+factory setting; it has no default-value element (MG.33.C2.02 lists elements
+1-12).
 
 The unit of a scaled value is the base unit of its size (variable) index, the
 row of conversion index 0 in the size attribute table of MG.33.C4.02, section
@@ -51,15 +64,20 @@ from pkwbus.protocol.values.types import (
 
 __all__ = [
     "BASE_UNITS",
+    "CHARACTERISTICS",
     "DATA_TYPE",
+    "FACTORY",
     "FC_BASE_UNITS",
     "LIMITS",
     "NAME",
     "SCALING",
     "SIZE",
+    "Characteristics",
     "DescriptionForm",
     "DriveDescription",
+    "changed_from_factory",
     "elements_to_read",
+    "factory_raw",
     "form_of",
     "read_elements",
 ]
@@ -69,6 +87,8 @@ SIZE: Final = 2  # number of array elements (PROFIdrive: or string length)
 SCALING: Final = 4  # FC: conversion and unit index; PROFIdrive: variable attribute
 NAME: Final = 6
 LIMITS: Final = (7, 8)
+FACTORY: Final = 20  # FC: the default value, "which is the factory setting"
+CHARACTERISTICS: Final = 21  # FC: additional characteristics, bits in PWE low
 
 #: Size (variable) index -> the base unit of a scaled value (Danfoss VLT PROFIBUS
 #: manual MG.33.C4.02, 6.4.3 "Size attribute", the rows of conversion index 0).
@@ -94,6 +114,7 @@ _FC_CELSIUS: Final = 100  # conversion index that makes size 17 degrees Celsius 
 # PROFIdrive identifier bits (MG.33.C4.02 section 5; VLT FCD 302 PROFIBUS manual, table 5.11).
 _ID_NOT_SCALED = 1 << 8
 _ID_READ_ONLY = 1 << 9
+_ID_CHANGED = 1 << 12  # "parameter has been changed from factory setting" (MG.33.C2.02)
 _ID_ARRAY = 1 << 14
 
 
@@ -247,3 +268,47 @@ def _limit(
         raw -= 1 << bits
     low, high = vtype.bounds
     return raw if low <= raw <= high else None
+
+
+@dataclass(frozen=True, slots=True)
+class Characteristics:
+    """FC description element 21, "Additional characteristics" (FC 300 Design Guide
+    MG.33.B3.22): what a master may do with a parameter over the bus."""
+
+    raw: int
+
+    @property
+    def no_bus_access(self) -> bool:
+        return bool(self.raw >> 9 & 1)
+
+    @property
+    def bus_read_only(self) -> bool:
+        """Bits 10 (standard bus) and 11 (PROFIBUS): "can only be read over the bus"."""
+        return bool(self.raw >> 10 & 0b11)
+
+    @property
+    def not_while_running(self) -> bool:
+        """Bit 13: "the parameter cannot be changed while running"."""
+        return bool(self.raw >> 13 & 1)
+
+    @property
+    def power_unit_dependent(self) -> bool:
+        """Bit 15, or a special default or limit (bits 0-2): the values depend on the
+        power unit."""
+        return bool(self.raw >> 15 & 1 or self.raw & 0b111)
+
+    @classmethod
+    def of(cls, element: pkw.DescriptionResponse) -> Characteristics:
+        return cls(element.raw & 0xFFFF)
+
+
+def changed_from_factory(identifier: pkw.DescriptionResponse) -> bool:
+    """PROFIdrive description element 1, bit 12: the value differs from the factory setting."""
+    return bool(identifier.raw & _ID_CHANGED)
+
+
+def factory_raw(element: pkw.DescriptionResponse, vtype: ValueType | None) -> int | float | None:
+    """FC element 20, the factory setting, as a number of the parameter's type (the low
+    word of a word type, as for the limits); None for a text, an unknown type or a number
+    outside the type."""
+    return _limit(element, vtype, DescriptionForm.DANFOSS_FC)

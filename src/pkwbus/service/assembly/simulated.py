@@ -44,6 +44,7 @@ async def start_sim(
         ),
         catalog=next(iter(catalogs)) if len(catalogs) == 1 else None,
         refuse_descriptions=sim.refuse_descriptions,
+        keypad_every=sim.keypad_every,
         model=ModelConfig(past_trips=PAST_TRIPS),
     )
     return await _serve_on_pty(simulator, line.name)
@@ -69,6 +70,7 @@ async def start_dp_sim(
         ),
         each=each,
         refuse_descriptions=sim.refuse_descriptions,
+        keypad_every=sim.keypad_every,
         # DP-V1 slaves when parametrised so; each record's response ready at the second read.
         dpv1=True,
         not_ready=1,

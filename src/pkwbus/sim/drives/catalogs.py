@@ -7,7 +7,10 @@ model's units are converted to the catalog's where they differ: a live
 reading (r0021 in rpm, not the model's Hz) and a stored setting's initial
 value and limits alike (p1082 in rpm, 1-20 in W). A setting whose units have
 no known conversion keeps its number (it is only a starting value); a live
-reading without one is an error.
+reading without one is an error. A parameter only the catalog knows starts at a value
+within its limits (its factory setting); one of the FC motor data
+(:data:`~pkwbus.sim.drives.table.FC_MOTOR_DATA`) changes only while the motor stands
+and depends on the power unit, as the table's 1-20.
 
 Raises :class:`~pkwbus.catalog.CatalogError` for a live reading whose unit has no known
 conversion.
@@ -20,7 +23,7 @@ import dataclasses
 from pkwbus.catalog import Catalog, CatalogError, ParameterSpec, load_catalog
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ValueType
-from pkwbus.sim.drives.table import TABLES, ParamSpec
+from pkwbus.sim.drives.table import FC_MOTOR_DATA, TABLES, ParamSpec
 
 # (model unit, catalog unit) -> factor. The simulated motor has two pole pairs.
 UNIT_FACTORS = {
@@ -42,7 +45,7 @@ def specs_from_catalog(protocol: Protocol, name: str) -> tuple[ParamSpec, ...]:
     merged = {spec.pnu: spec for spec in TABLES[protocol]}
     for entry in catalog.parameters.values():
         known = merged.get(entry.pnu)
-        merged[entry.pnu] = _merge(known, entry) if known is not None else _spec(entry)
+        merged[entry.pnu] = _merge(known, entry) if known is not None else _spec(entry, protocol)
     return tuple(merged.values())
 
 
@@ -100,7 +103,8 @@ def _initial_number(entry: ParameterSpec, number: float) -> float:
     return number
 
 
-def _spec(entry: ParameterSpec) -> ParamSpec:
+def _spec(entry: ParameterSpec, protocol: Protocol) -> ParamSpec:
+    motor_data = protocol is Protocol.FC and entry.pnu in FC_MOTOR_DATA
     vtype = ValueType(entry.type) if entry.type else ValueType.U16
     low, high = entry.min, entry.max
     initial: float | str = 0.0
@@ -122,4 +126,6 @@ def _spec(entry: ParameterSpec) -> ParamSpec:
         writable=entry.writable,
         array=entry.array or 0,
         initial=initial,
+        stopped_only=motor_data,
+        power_unit=motor_data,
     )

@@ -5,7 +5,19 @@ request AK 4), in the form of the drive's dialect (:mod:`pkwbus.protocol.pkw.des
   data type; 2 the number of array elements (0 when not an array); 4 the conversion
   index in the high byte (signed) and the unit index in the low byte; 6 the name, a
   text as long as it is (the guide's example answers "LANGUAGE" in 8 bytes); 7 and 8
-  the limits as raw values of the parameter's type.
+  the limits as raw values of the parameter's type; 20 the default (factory) value:
+  "The data type of Default value is the same as for the parameter itself" (FC 300
+  Design Guide MG.33.B3.22, "Default value (index 20)"); here the spec's initial value
+  (an array's first element) in the encoding and width of the limits, so neither for a
+  text nor for a float; 21 "Additional characteristics" (same guide, "Additional characteristics
+  (index 21)"), a word in PWE low: bits 7-8 LCP access (read/write, bit 8, for a
+  parameter the drive lets the bus write; read-only, bit 7, for the others, which say
+  too "Std Bus Read Only" and "Profibus Read Only", bits 10 and 11), bit 13
+  ChangeRunning ("the parameter cannot be changed while running": the spec's
+  ``stopped_only``, refused then with fault 17) and bit 15 PowerUnitDependency (the
+  spec's ``power_unit``). Bits 0-2 (special default value and limits) and 9 (no bus
+  access) are never set: a simulated parameter's default and limits are its spec's,
+  and every parameter is on the bus.
 - **PROFIdrive** (Danfoss VLT PROFIBUS manual MG.33.C4.02, section 5 "Parameter
   description"; VLT FCD 302 PROFIBUS manual, tables 5.10 and 5.11): 1 the identifier
   (data type, bit 8 "standardisation factor and variable attribute not relevant",
@@ -13,7 +25,11 @@ request AK 4), in the form of the drive's dialect (:mod:`pkwbus.protocol.pkw.des
   0; 4 the variable attribute (first byte the size index, second the conversion
   index); 6 the name in 16 characters; 7 and 8 the limits, "32 bit signed" (a float
   parameter's as the float's bits; a UInt32 limit above 2**31 - 1, which that cannot
-  carry, is not available).
+  carry, is not available). Identifier bit 12, "Parameter has been changed from factory
+  setting" (Danfoss FC 300 PROFIBUS manual MG.33.C2.02, "Identifier ID"): set while a
+  stored value (any element of an array, a text) differs from its factory setting, the
+  spec's initial value; never for a live value. There is no default-value element:
+  20 and 21 are refused as any element the form does not have.
 
 The unit index (size index) is the one of the spec's unit in
 :data:`~pkwbus.protocol.pkw.descriptions.BASE_UNITS`: a simulated value scaled by its
@@ -40,7 +56,16 @@ from pkwbus.protocol.pkw.descriptions import BASE_UNITS, DescriptionForm
 from pkwbus.protocol.values import ValueType, encode_value
 from pkwbus.sim.drives.table import ParamSpec
 
-__all__ = ["NAME_LENGTH", "SIZE_INDEXES", "TYPE_CODES", "Element", "element", "size_index"]
+__all__ = [
+    "NAME_LENGTH",
+    "SIZE_INDEXES",
+    "TYPE_CODES",
+    "Element",
+    "characteristics",
+    "element",
+    "factory_raw",
+    "size_index",
+]
 
 # Danfoss data type numbers (FC 202 Design Manual, PKW and data types) for description
 # element 1; PROFIdrive's identifier carries the same numbers in bits 0-7.
@@ -61,7 +86,16 @@ NAME_LENGTH: Final = 16  # PROFIdrive: the name is a visible string of 16 charac
 # PROFIdrive identifier bits (MG.33.C4.02 section 5; VLT FCD 302 PROFIBUS manual, table 5.11).
 _NOT_SCALED = 1 << 8
 _READ_ONLY = 1 << 9
+_CHANGED = 1 << 12  # "parameter has been changed from factory setting" (MG.33.C2.02)
 _ARRAY = 1 << 14
+
+# FC element 21, "Additional characteristics" (FC 300 Design Guide MG.33.B3.22).
+_LCP_READ_ONLY = 0b01 << 7  # bits 8, 7: 01 read-only
+_LCP_READ_WRITE = 0b10 << 7  # 10 read/write
+_STD_BUS_READ_ONLY = 1 << 10
+_PROFIBUS_READ_ONLY = 1 << 11
+_CHANGE_RUNNING = 1 << 13  # "cannot be changed while running"
+_POWER_UNIT = 1 << 15  # PowerUnitDependency
 
 _I32_LOW, _I32_HIGH = ValueType.I32.bounds
 
@@ -90,15 +124,43 @@ def _fc_unit_index(spec: ParamSpec) -> int:
 
 
 def element(
-    spec: ParamSpec, number: int, form: DescriptionForm, *, text_length: int = 0
+    spec: ParamSpec,
+    number: int,
+    form: DescriptionForm,
+    *,
+    text_length: int = 0,
+    changed: bool = False,
 ) -> Element | None:
     """Element ``number`` of ``spec`` in ``form``; None when the drive has no such element.
 
-    ``text_length``: the length of a text parameter's text now (PROFIdrive element 2).
+    ``text_length``: the length of a text parameter's text now (PROFIdrive element 2);
+    ``changed``: whether its value now differs from the factory setting (PROFIdrive
+    element 1, bit 12).
     """
     if form is DescriptionForm.DANFOSS_FC:
         return _fc(spec, number)
-    return _profidrive(spec, number, text_length)
+    return _profidrive(spec, number, text_length, changed)
+
+
+def factory_raw(spec: ParamSpec, index: int = 0) -> int | bytes:
+    """The factory setting of element ``index``: its initial value as the raw number on
+    the wire (a float's bits), a text's bytes."""
+    initial = spec.initial
+    if spec.vtype is ValueType.TEXT:
+        return str(initial).encode("latin-1")
+    number = initial[index] if isinstance(initial, tuple) else initial
+    return encode_value(float(number), spec.vtype, spec.scaling)
+
+
+def characteristics(spec: ParamSpec) -> int:
+    """FC element 21, "Additional characteristics", of ``spec``."""
+    if not spec.writable or spec.live is not None:
+        word = _LCP_READ_ONLY | _STD_BUS_READ_ONLY | _PROFIBUS_READ_ONLY
+    else:
+        word = _LCP_READ_WRITE
+    word |= _CHANGE_RUNNING if spec.stopped_only else 0
+    word |= _POWER_UNIT if spec.power_unit else 0
+    return word
 
 
 def _fc(spec: ParamSpec, number: int) -> Element | None:
@@ -119,16 +181,23 @@ def _fc(spec: ParamSpec, number: int) -> Element | None:
             return None
         raw = encode_value(limit, spec.vtype, spec.scaling)
         return Element(raw, width=spec.vtype.width or Width.DWORD)
+    if number == 20 and spec.vtype not in (ValueType.TEXT, ValueType.F32):
+        default = factory_raw(spec)
+        assert isinstance(default, int)  # a number: not a text
+        return Element(default, width=spec.vtype.width or Width.DWORD)
+    if number == 21:
+        return Element(characteristics(spec))
     return None
 
 
-def _profidrive(spec: ParamSpec, number: int, text_length: int) -> Element | None:
+def _profidrive(spec: ParamSpec, number: int, text_length: int, changed: bool) -> Element | None:
     text = spec.vtype is ValueType.TEXT
     if number == 1:
         ident = TYPE_CODES[spec.vtype]
         ident |= _ARRAY if spec.array else 0
         ident |= _READ_ONLY if not spec.writable or spec.live is not None else 0
         ident |= _NOT_SCALED if spec.scale is not None else 0
+        ident |= _CHANGED if changed else 0
         return Element(ident)
     if number == 2:
         return Element(spec.array or (text_length if text else 0))

@@ -1,4 +1,6 @@
-"""One simulated drive: model, parameters, process data, PKW lag.
+"""One simulated drive: model, parameters, process data, PKW lag, and the keypad (LCP) a
+person at the drive sets values with (:meth:`SimDrive.keypad`, logged on the
+``pkwbus.sim`` logger).
 
 Raises :class:`~pkwbus.protocol.errors.RemoteProtocolError` for a request whose PKW part
 has the wrong length.
@@ -6,6 +8,7 @@ has the wrong length.
 
 from __future__ import annotations
 
+import logging
 import random
 from collections import deque
 from dataclasses import dataclass, replace
@@ -16,6 +19,7 @@ from pkwbus.protocol.pkw import PkwResponse, Rejection, TextResponse, ValueRespo
 from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout, Reply
 from pkwbus.protocol.pzd import Profile, takes_control
 from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.values import decode_value
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.drives.model import DriveModel, Limits, ModelConfig
 from pkwbus.sim.drives.params import ParameterStore
@@ -24,6 +28,8 @@ from pkwbus.sim.drives.table import MODEL_PARAMS, ParamSpec
 __all__ = ["CTW_LOG", "SimDrive"]
 
 CTW_LOG = 10_000
+
+log = logging.getLogger("pkwbus.sim")
 
 
 @dataclass(slots=True)
@@ -77,6 +83,7 @@ class SimDrive:
         self.control_taken = 0
         self.ctw_log: deque[bool] = deque(maxlen=CTW_LOG)  # CTW bit 10 of each request
         self.lagged = 0  # answers sent meanwhile (AK 0 or stale) while a request lagged
+        self.keypad_changes = 0  # values set at the keypad
         self.last_answer: bytes | None = None  # the last telegram sent, for stale answers
         self._job: _Job | None = None
         self._last_pkw: bytes | None = None
@@ -147,6 +154,25 @@ class SimDrive:
         """The drive is switched off and on again at ``now`` (:meth:`DriveModel.power_cycle`)."""
         self.tick(now)
         self.model.power_cycle()
+
+    def keypad(self, pnu: int, raw: int, index: int = 0) -> None:
+        """A person at the drive's keypad (LCP) sets element ``index`` of ``pnu`` to ``raw``
+        (the number on the wire): in RAM and EEPROM, with no telegram; logged. ValueError
+        as :meth:`ParameterStore.keypad <pkwbus.sim.drives.params.ParameterStore.keypad>`
+        (call :meth:`tick` first: whether the motor runs is the model's now)."""
+        params = self.params
+        before = params.raw.get((pnu, index))
+        params.keypad(pnu, raw, index)
+        self._limits = self.limits()  # a ramp or the maximum frequency may have changed
+        self.keypad_changes += 1
+        spec = params.specs[pnu]
+        unit = f" {spec.unit}" if spec.unit else ""
+        was = "?" if before is None else f"{_number(spec, before):g}{unit}"
+        log.info(
+            "drive %d: %s%s (PNU %d) set at the keypad from %s to %g%s",
+            self.address, spec.name, f"[{index}]" if spec.array else "", pnu,
+            was, _number(spec, raw), unit,
+        )  # fmt: skip
 
     def _live(self, name: str, index: int) -> float:
         return self.model.quantity(name, self._limits, index)
@@ -234,3 +260,8 @@ class SimDrive:
         if isinstance(resp, TextResponse):
             resp = TextResponse(resp.ak, resp.pnu, resp.subindex, resp.text.ljust(room, b"\0"))
         return pkw.encode_response(resp, self.dialect, self.layout, words)
+
+
+def _number(spec: ParamSpec, raw: int) -> float:
+    """The engineering value of a stored raw number of ``spec``."""
+    return float(decode_value(raw, spec.vtype.width or Width.DWORD, spec.vtype, spec.scaling))

@@ -1,7 +1,12 @@
 """A simulated drive's parameters: the store, live readings, and PKW requests executed on them.
 
 A request the drive refuses raises :class:`Refused` (its fault number), answered as a
-PKW fault.
+PKW fault. A value set at the drive's keypad (:meth:`ParameterStore.keypad`) is checked
+as a bus write is, but refused with a ValueError.
+
+Each stored value's factory setting is its spec's initial value
+(:func:`pkwbus.sim.drives.descriptions.factory_raw`); :meth:`ParameterStore.changed`
+tells whether a parameter now differs from it.
 """
 
 from __future__ import annotations
@@ -109,10 +114,52 @@ class ParameterStore:
         if spec.vtype is ValueType.TEXT:
             self.texts[spec.pnu] = str(spec.initial).encode("latin-1")
             return
-        initial = spec.initial
-        values = initial if isinstance(initial, tuple) else (initial,) * spec.elements
-        for index, number in enumerate(values):
-            self.raw[spec.pnu, index] = encode_value(float(number), spec.vtype, spec.scaling)
+        for index in _stored(spec):
+            factory = descriptions.factory_raw(spec, index)
+            assert isinstance(factory, int)  # a number: not a text
+            self.raw[spec.pnu, index] = factory
+
+    def changed(self, pnu: int) -> bool:
+        """Whether a stored parameter (any element, a text) differs from its factory
+        setting now; a live value never does."""
+        spec = self.specs[pnu]
+        if spec.live is not None:
+            return False
+        if spec.vtype is ValueType.TEXT:
+            return self.texts[pnu] != descriptions.factory_raw(spec)
+        return any(
+            self.raw[pnu, index] != descriptions.factory_raw(spec, index) for index in _stored(spec)
+        )
+
+    def keypad(self, pnu: int, raw: int, index: int = 0) -> None:
+        """Set element ``index`` of ``pnu`` to ``raw`` (the number on the wire, a float's
+        bits) as a person at the drive's keypad (LCP) does: in RAM and EEPROM, with no
+        telegram. ValueError with a plain message for a parameter the drive does not have,
+        one the keypad cannot set (read-only, a live value, a text), an index it does not
+        have, a number its type cannot carry, a value outside its limits, or one that
+        cannot change while the motor runs."""
+        spec = self.specs.get(pnu)
+        if spec is None:
+            raise ValueError(f"the drive has no parameter {pnu}")
+        what = f"parameter {pnu} ({spec.name})"
+        if spec.live is not None or not spec.writable:
+            raise ValueError(f"{what} is read-only")
+        if spec.vtype is ValueType.TEXT:
+            raise ValueError(f"{what} is a text: the keypad sets numbers here")
+        if not 0 <= index < spec.elements:
+            raise ValueError(f"{what} has no index {index} (0-{spec.elements - 1})")
+        width = spec.vtype.width or Width.DWORD
+        if not 0 <= raw < 1 << width.value:
+            raise ValueError(f"{what}: raw {raw} does not fit {width.value} bits")
+        number = float(decode_value(raw, width, spec.vtype, spec.scaling))
+        if number != number:
+            raise ValueError(f"{what}: raw {raw:#x} is not a number")
+        if _outside(spec, number):
+            raise ValueError(f"{what}: {number:g} is outside {_limits_text(spec)}")
+        if spec.stopped_only and self.running():
+            raise ValueError(f"{what} cannot be changed while the motor runs")
+        self.raw[pnu, index] = raw
+        self.eeprom[pnu, index] = raw
 
     # ------------------------------------------------------------ values
 
@@ -186,9 +233,7 @@ class ParameterStore:
         if spec.stopped_only and self.running():
             raise Refused(self.faults.not_now)
         number = float(decode_value(req.value, req.width, spec.vtype, spec.scaling))
-        too_low = spec.minimum is not None and number < spec.minimum
-        too_high = spec.maximum is not None and number > spec.maximum
-        if too_low or too_high or number != number:  # NaN is outside every limit
+        if _outside(spec, number):
             raise Refused(self.faults.limit)
         self.raw[spec.pnu, req.subindex] = req.value
         if req.command in EEPROM_COMMANDS:
@@ -213,7 +258,9 @@ class ParameterStore:
         if form is None or not (self.described and spec.described):
             raise Refused(self.faults.no_description)
         text_length = len(self.texts.get(spec.pnu, b""))
-        found = descriptions.element(spec, req.subindex, form, text_length=text_length)
+        found = descriptions.element(
+            spec, req.subindex, form, text_length=text_length, changed=self.changed(spec.pnu)
+        )
         if found is None:
             raise Refused(self.faults.no_description)
         ak = pkw.response_id(self.dialect, Reply.DESCRIPTION)
@@ -226,6 +273,26 @@ def _value_reply(width: Width, array: bool) -> Reply:
     if width is Width.WORD:
         return Reply.ARRAY_WORD if array else Reply.WORD
     return Reply.ARRAY_DWORD if array else Reply.DWORD
+
+
+def _stored(spec: ParamSpec) -> range:
+    """The indexes a stored number has: an initial tuple's, else every element."""
+    initial = spec.initial
+    return range(len(initial) if isinstance(initial, tuple) else spec.elements)
+
+
+def _outside(spec: ParamSpec, number: float) -> bool:
+    """Whether ``number`` is outside the parameter's limits (NaN is outside every one)."""
+    too_low = spec.minimum is not None and number < spec.minimum
+    too_high = spec.maximum is not None and number > spec.maximum
+    return too_low or too_high or number != number
+
+
+def _limits_text(spec: ParamSpec) -> str:
+    low = "" if spec.minimum is None else f"{spec.minimum:g}"
+    high = "" if spec.maximum is None else f"{spec.maximum:g}"
+    unit = f" {spec.unit}" if spec.unit else ""
+    return f"its limits {low}..{high}{unit}"
 
 
 def _clamp(spec: ParamSpec, reading: float) -> float:

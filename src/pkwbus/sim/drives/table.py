@@ -33,6 +33,13 @@ we chose and say so:
   conversion (they are counts, codes and times the model gives as they are).
 - USS p0199 stands in for a text parameter (G120's p0199 is numeric).
 - USS p2000 reference frequency scales MAV; p1082 limits the setpoint.
+- Factory settings: a parameter's factory setting is its ``initial`` value; the drive
+  answers it as FC description element 20 and says in PROFIdrive element 1 (bit 12)
+  whether the value differs from it (:mod:`pkwbus.sim.drives.descriptions`).
+- FC motor data (1-20..1-25, :data:`FC_MOTOR_DATA`) cannot change while the motor runs
+  and depends on the power unit (FC 300 Design Guide MG.33.B3.22, "Additional
+  characteristics (index 21)", bits 13 and 15); the table has 1-20 of them, a catalog
+  may add the others.
 
 ``live`` names a quantity of the drive model (see ``model.py``); such a
 parameter reads the model, never the store.
@@ -47,7 +54,15 @@ from typing import Final
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import Scaling, ValueType
 
-__all__ = ["FC_TABLE", "MODEL_PARAMS", "TABLES", "USS_TABLE", "Initial", "ParamSpec"]
+__all__ = [
+    "FC_MOTOR_DATA",
+    "FC_TABLE",
+    "MODEL_PARAMS",
+    "TABLES",
+    "USS_TABLE",
+    "Initial",
+    "ParamSpec",
+]
 
 Initial = float | str | tuple[float, ...]
 
@@ -59,6 +74,8 @@ class ParamSpec:
     type, scaling, unit, limits and writability it answers with. Limits are
     engineering values. ``described``: False for a parameter whose description
     elements (AK 4) the drive refuses ("description not available").
+    ``initial`` is also the factory setting. ``power_unit``: its values depend on the
+    power unit (FC description element 21, bit 15).
 
     It describes the simulated drive, not what the master knows of a parameter
     (that is :class:`pkwbus.catalog.ParameterDescription`); a catalog's entries
@@ -80,6 +97,7 @@ class ParamSpec:
     scale: float | None = None  # instead of the conversion index
     unit_factor: float = 1.0  # model units (table.py) -> this parameter's unit
     described: bool = True  # answers description requests (AK 4)
+    power_unit: bool = False  # depends on the power unit (FC element 21, bit 15)
 
     @property
     def scaling(self) -> Scaling:
@@ -101,8 +119,11 @@ U16, I16, U32, I32, F32, TEXT = (
     ValueType.TEXT,
 )
 
+#: FC motor data, 1-20..1-25: changed only while the motor stands, power-unit dependent.
+FC_MOTOR_DATA: Final = range(120, 126)
+
 FC_TABLE: Final = (
-    ParamSpec(120, "1-20", U32, -2, "kW", 0.09, 1000.0, True, True, initial=15.0),
+    ParamSpec(120, "1-20", U32, -2, "kW", 0.09, 1000.0, True, True, initial=15.0, power_unit=True),
     ParamSpec(341, "3-41", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
     ParamSpec(342, "3-42", U32, -2, "s", 0.01, 3600.0, True, initial=5.0),
     ParamSpec(414, "4-14", U16, -1, "Hz", 0.0, 500.0, True, initial=50.0),

@@ -15,6 +15,10 @@ Faults, drawn per answer as on FC and USS lines: ``drop`` (no answer),
 answers "SAP not activated", as one that fell out of data exchange) and
 ``restart`` (the slave power-cycles: parameters and configuration lost).
 
+A person at a slave drive's keypad (LCP) may set a value with no telegram
+(:meth:`DpSimulator.keypad`), and with ``keypad_every`` one does so at random, as on
+FC and USS lines (:mod:`pkwbus.sim.drives.keypad`).
+
 Raises: :class:`ValueError` for an address outside 0-125, a dialect or PPO
 PROFIBUS does not have.
 """
@@ -43,7 +47,7 @@ from pkwbus.sim.profibus.slave import SimDpSlave
 from pkwbus.sim.serving import ends
 from pkwbus.sim.serving.ends import PtyEnd, TcpEnd
 from pkwbus.sim.serving.stats import SimStats
-from pkwbus.sim.simulator import check_refusing
+from pkwbus.sim.simulator import check_refusing, random_keypad
 
 __all__ = ["DEFAULT_IDENTS", "DP_FAULT_KINDS", "DpFaults", "DpSimulator", "SlaveKind"]
 
@@ -124,6 +128,7 @@ class DpSimulator:
         refuse_descriptions: Collection[int] = (),
         dpv1: bool = False,
         not_ready: int = 0,
+        keypad_every: float | None = None,
     ) -> None:
         """``dpv1``: the slaves whose dialect has parameter access (data record 47) run
         DP-V1 when parametrised so, answering ``not_ready`` reads of each response with
@@ -131,7 +136,9 @@ class DpSimulator:
         than the line's, by address;
         ``refuse_descriptions``: slaves whose drives answer every description request (AK 4)
         with the dialect's "description not available" fault (ValueError for an address
-        that is not a slave here)."""
+        that is not a slave here); ``keypad_every``: on average once per that many
+        seconds one slave's drive that is not dead gets a setting changed at its keypad
+        (ValueError when it is not above 0)."""
         if not_ready < 0:
             raise ValueError(f"not ready for {not_ready} reads: it cannot be negative")
         try:
@@ -182,6 +189,7 @@ class DpSimulator:
                 records=records.answer if records is not None and dpv1 else None,
                 not_ready=not_ready,
             )  # fmt: skip
+        self.random_keypad = random_keypad(keypad_every, seed, clock())
 
     # ------------------------------------------------------------ faults
 
@@ -198,6 +206,16 @@ class DpSimulator:
     def release(self, address: int) -> None:
         """The other master lets the slave go."""
         self.slaves[address].release()
+
+    def keypad(self, address: int, pnu: int, raw: int, index: int = 0) -> None:
+        """A person at the keypad (LCP) of the drive of slave ``address`` sets element
+        ``index`` of ``pnu`` to ``raw`` now, as :meth:`Simulator.keypad
+        <pkwbus.sim.simulator.Simulator.keypad>` does (ValueError alike)."""
+        drive = self.drives.get(address)
+        if drive is None:
+            raise ValueError(f"no simulated slave at address {address}")
+        drive.tick(self.clock())
+        drive.keypad(pnu, raw, index)
 
     def restart(self, address: int) -> None:
         """Power-cycle a slave: its DP parameters and configuration are lost."""
@@ -236,6 +254,10 @@ class DpSimulator:
     def answer(self, frame: object, now: float | None = None) -> Answer | None:
         """What the line answers to a deframed request frame, faults applied."""
         now = self.clock() if now is None else now
+        chance = self.random_keypad
+        if chance is not None and chance.due(now):
+            alive = [d for a, d in self.drives.items() if a not in self.faults.dead]
+            chance.change(now, alive)
         if not isinstance(frame, DataFrame) or not frame.control.is_request:
             self.stats.count("ignored")
             return None

@@ -1,5 +1,8 @@
-"""``sim://PROTOCOL?drives=1,2,3&response_delay=3ms&refuse_descriptions=3``: a port that
-starts simulated drives (``refuse_descriptions``: drives that answer no description element).
+"""``sim://PROTOCOL?drives=1,2,3&response_delay=3ms&refuse_descriptions=3&keypad_every=10m``:
+a port that starts simulated drives (``refuse_descriptions``: drives that answer no
+description element; ``keypad_every``: on average once per that time, one drive of the
+line gets a setting changed at its keypad, with no bus write: :data:`KEYPAD_EVERY` says
+the range).
 
 :func:`parse_sim_port` raises ValueError with a plain message when the URL is malformed.
 """
@@ -7,23 +10,32 @@ starts simulated drives (``refuse_descriptions``: drives that answer no descript
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Final
 from urllib.parse import parse_qsl, urlsplit
 
 from pkwbus import durations, limits
-from pkwbus.durations import parse_duration
+from pkwbus.durations import DurationRange, parse_duration
 from pkwbus.protocol.serial.telegram import Protocol
 
-__all__ = ["SimPort", "parse_sim_port"]
+__all__ = ["KEYPAD_EVERY", "SimPort", "parse_sim_port"]
+
+#: The range of ``keypad_every``: from a second (a busy demo) to a week.
+KEYPAD_EVERY: Final = DurationRange("a keypad change interval", 1.0, 7 * 86400.0)
 
 
 @dataclass(frozen=True, slots=True)
 class SimPort:
-    """A ``sim://PROTOCOL?drives=1,2,3&response_delay=3ms`` port: start simulated drives."""
+    """A ``sim://PROTOCOL?drives=1,2,3&response_delay=3ms`` port: start simulated drives.
+
+    ``keypad_every``: seconds; on average once per that time one drive of the line gets
+    a setting changed at its keypad (None: never).
+    """
 
     protocol: Protocol
     drives: tuple[int, ...]
     response_delay: float | None = None
     refuse_descriptions: tuple[int, ...] = ()
+    keypad_every: float | None = None
 
 
 def parse_sim_port(url: str) -> SimPort:
@@ -44,17 +56,23 @@ def parse_sim_port(url: str) -> SimPort:
         refusing = _address_list(url, options["refuse_descriptions"], "refuse_descriptions")
         if strangers := sorted(set(refusing) - set(drives)):
             raise ValueError(f"{url!r}: refuse_descriptions names {strangers}, not in drives")
-    delay = options.get("response_delay")
-    if delay is None:
-        return SimPort(protocol, drives, None, refusing)
+    delay = _duration(url, options, "response_delay", durations.RESPONSE_DELAY)
+    keypad = _duration(url, options, "keypad_every", KEYPAD_EVERY)
+    return SimPort(protocol, drives, delay, refusing, keypad)
+
+
+_OPTIONS = ("drives", "response_delay", "refuse_descriptions", "keypad_every")
+
+
+def _duration(url: str, options: dict[str, str], key: str, within: DurationRange) -> float | None:
+    """The duration of option ``key``, None when it is not given."""
+    text = options.get(key)
+    if text is None:
+        return None
     try:
-        seconds = parse_duration(delay, durations.RESPONSE_DELAY)
+        return parse_duration(text, within)
     except ValueError as exc:
-        raise ValueError(f"{url!r}: response_delay {exc}") from None
-    return SimPort(protocol, drives, seconds, refusing)
-
-
-_OPTIONS = ("drives", "response_delay", "refuse_descriptions")
+        raise ValueError(f"{url!r}: {key} {exc}") from None
 
 
 def _sim_options(url: str, query: str) -> dict[str, str]:
