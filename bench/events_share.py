@@ -33,7 +33,7 @@ from prometheus_client import CollectorRegistry
 
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
-from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import HistoryStore
 
@@ -61,6 +61,7 @@ lines:
     timeout: 200ms
     alarms: off
     events: {events}
+    settings: off
     drives:
 {drives}
 """
@@ -75,7 +76,7 @@ async def _run(port: str, events: str, seconds: float, settle: float) -> dict[st
     config = parse_config(_config(port, events, folder), environ={})
     runtime = await build_runtime(config)
     store = HistoryStore(Path(folder) / "history.sqlite")
-    watch_logs(config, runtime, store)
+    remember(config, runtime, store)
     await runtime.start()
     registry = runtime.registry
     try:

@@ -12,6 +12,7 @@ from typing import NoReturn
 from pkwbus import __version__
 from pkwbus.commands import access, describe, gsd, ports, scan, service
 from pkwbus.commands.common import CommandError, Exit
+from pkwbus.commands.settings import backup, restore
 from pkwbus.sim import cli as sim_cli
 
 __all__ = ["Parser", "build_parser", "main"]
@@ -37,6 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
     access.add_parsers(sub)
     scan.add_parsers(sub)
     describe.add_parsers(sub)
+    backup.add_parsers(sub)
+    restore.add_parsers(sub)
     service.add_parsers(sub)
     ports.add_parsers(sub)
     gsd.add_parsers(sub)

@@ -27,6 +27,7 @@ __all__ = [
     "RANGES",
     "RESPONSE_DELAY",
     "RS485_DELAY",
+    "SETTINGS_EVERY",
     "SIM_LAG",
     "SIM_LATE",
     "SIM_PORT_OUTAGE",
@@ -83,6 +84,7 @@ DP_SLOT_TIME: Final = DurationRange("a slot time", 0.0005, 1.0)
 DP_WATCHDOG: Final = DurationRange("a watchdog", 0.01, 650.25)
 EVENTS_EVERY: Final = DurationRange("a drive log's watch interval", 1.0, 3600.0)
 HISTORY_RETENTION: Final = DurationRange("a retention", 3600.0, 87600 * 3600.0)  # 10 years
+SETTINGS_EVERY: Final = DurationRange("a settings sweep interval", 1.0, 86400.0)
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -104,6 +106,7 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("profibus line `watchdog`", DP_WATCHDOG),
     ("line and drive `events_every`", EVENTS_EVERY),
     ("`history_retention`", HISTORY_RETENTION),
+    ("line and drive `settings` `every`", SETTINGS_EVERY),
 )
 
 

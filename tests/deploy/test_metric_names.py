@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, cast
 
 import prometheus_client
 import pytest
@@ -28,10 +28,11 @@ import yaml
 from prometheus_client.parser import text_string_to_metric_families
 
 from pkwbus.service.assembly.build import build_runtime
-from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.config import parse_config
+from pkwbus.service.history.settings import SettingsWatcher
 from pkwbus.service.history.store import HistoryStore
-from pkwbus.service.history.watch import EVENT_LABELS
+from pkwbus.service.history.stream import EVENT_LABELS
 from pkwbus.service.metrics.alarms import ALARM_LABELS
 from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
@@ -91,7 +92,8 @@ async def scrape(folder: Path) -> str:
     config = parse_config(text)
     runtime = await build_runtime(config)
     history = HistoryStore(folder / "history.sqlite")  # the drives' own logs, as `pkwbus run`
-    assert watch_logs(config, runtime, history) is not None
+    logs, settings = remember(config, runtime, history)
+    assert logs is not None and settings is not None
     try:
         await runtime.start()
         deadline = time.monotonic() + 20
@@ -160,6 +162,13 @@ def declared_counters() -> Exported:
     declared["pkwbus_drive_alarm"] = set(ALARM_LABELS)
     # A series for each code of the drives' own logs, with its first entry.
     declared["pkwbus_drive_events_total"] = set(EVENT_LABELS)
+    # A series for each setting that differs from its baseline, and for each drive once
+    # a sweep of its settings is complete: none in a scrape this short.
+    settings = SettingsWatcher(
+        {}, cast(Any, None), cast(Any, None), [], prometheus_client.CollectorRegistry()
+    )
+    for gauge in (settings.changed, settings.swept_at):
+        declared[gauge._name] = set(gauge._labelnames)
     return declared
 
 

@@ -77,6 +77,11 @@ class ParameterSpec(BaseModel):
     # A counter the drive keeps of its own life (operating hours, energy, power-ups):
     # polled by default, slowly (``counters: auto``), each element of an array.
     counter: bool = False
+    # A setting of the drive (a value people set: ramps, limits, motor data), swept,
+    # compared with its baseline, backed up and restored (``settings: {parameters:
+    # catalog}``). None: settings are the entries marked ``writable`` and, in a Siemens
+    # catalog, the settable ``p`` parameters.
+    setting: bool | None = None
     verified: bool = True
     note: str = ""
     source: str = ""
@@ -95,6 +100,13 @@ class ParameterSpec(BaseModel):
         if not self.verified and not self.note.strip():
             raise ValueError("verified: false needs a note saying what could not be sourced")
         return self
+
+    @property
+    def is_setting(self) -> bool:
+        """Whether the settings sweep reads it (``setting``, else writable or ``p``)."""
+        if self.setting is not None:
+            return self.setting
+        return self.writable or self.prefix == "p"
 
     def overridden(self, changes: Mapping[str, Any]) -> ParameterSpec:
         """A copy with `changes` (config overrides) applied and validated again.

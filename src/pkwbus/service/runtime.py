@@ -29,11 +29,20 @@ from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.pkw.descriptions import DriveDescription
+from pkwbus.protocol.pkw.descriptions import Characteristics, DriveDescription
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.types import ValueType
 
-__all__ = ["Alarms", "DriveEntry", "History", "LineCounts", "LineTask", "Runtime", "Trends"]
+__all__ = [
+    "Alarms",
+    "DriveEntry",
+    "History",
+    "LineCounts",
+    "LineTask",
+    "Runtime",
+    "Settings",
+    "Trends",
+]
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +162,21 @@ class History(Protocol):
     ) -> list[Any]: ...
 
 
+class Settings(Protocol):
+    """The drives' settings as swept (service.history.settings.SettingsWatcher)."""
+
+    @property
+    def swept(self) -> Mapping[str, Any]: ...
+
+    def view(self, drive: str) -> dict[str, Any]: ...
+
+    def characteristics(self, drive: str, pnu: int) -> Characteristics | None: ...
+
+    async def accept(self, drive: str) -> int: ...
+
+    async def written(self, drive: str, pnu: int, index: int, raw: int, value: Any) -> None: ...
+
+
 class Trends(Protocol):
     """The last minutes of each polled value (service.metrics.trends.Trends)."""
 
@@ -179,6 +203,7 @@ class Runtime:
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
         self.history: History | None = None  # the drives' own log entries (None: not kept)
+        self.settings: Settings | None = None  # the sweep of the drives' settings (None: none)
         self._tasks: list[asyncio.Task[None]] = []
         # What starts once the lines run (the watch of the drives' logs), and what ends
         # after they stopped.

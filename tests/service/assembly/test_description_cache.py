@@ -29,6 +29,7 @@ DRIVES = """
       - name: d
         address: 1
         catalog: danfoss-fc
+        settings: off  # described: only its polls
         poll: [{parameter: "16-14", every: 20ms}]"""
 
 

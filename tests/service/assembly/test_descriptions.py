@@ -100,10 +100,12 @@ async def test_fc_drive_scaling_wins_and_no_value_goes_out_with_the_catalogs_fir
       - name: described
         address: 1
         catalog: danfoss-fc
+        settings: off  # described: only its polls
         poll: [{parameter: "16-14", every: 20ms}, {parameter: "16-99", every: 20ms}]
       - name: refusing
         address: 2
         catalog: danfoss-fc
+        settings: off
         poll: [{parameter: "16-14", every: 20ms}]"""
     caplog.set_level(logging.INFO)
     try:

@@ -110,7 +110,8 @@ def test_demo_loads_with_its_defaults() -> None:
     config = load_config(DEMO, environ={}, catalogs=FAKE)
     assert [line.name for line in config.lines] == ["fc_line", "uss_line", "dp_line"]
     fc_line, uss_line, dp_line = config.lines
-    assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003, (3,))  # 3 refuses AK 4
+    # 3 refuses AK 4; a setting changed at a keypad about every five minutes
+    assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003, (3,), keypad_every=300.0)
     assert uss_line.sim == SimPort(Protocol.USS, (1, 2), 0.005)
     assert dp_line.sim == SimPort(Protocol.PROFIBUS, (8, 9, 10))
     assert [d.pkw_dialect.name for d in dp_line.drives] == [

@@ -4,6 +4,8 @@ and one that no vendor document types only where the drive is asked to describe 
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from pkwbus.catalog import load_catalog
@@ -106,3 +108,68 @@ def test_check_config_tells_the_counters_share_of_the_line() -> None:
     share = line_load(on.lines[0]).utilisation - line_load(off.lines[0]).utilisation
     assert f"{share:.2%} of the line's time" in told
     assert not [r for r in check_config_report(off) if "(counters)" in r]
+
+
+# ------------------------------------------------------------ the settings sweep
+
+
+def swept(text: str) -> tuple[float, list[str]]:
+    cfg = parse(text)
+    line = cfg.lines[0]
+    every, refs = default_polls.swept_settings(line, line.drives[0])
+    return every, [str(ref) for ref in refs]
+
+
+@pytest.mark.parametrize(("catalog", "protocol"), [("danfoss-fc", "fc"), ("siemens-g120", "uss")])
+def test_the_sweep_reads_every_setting_the_catalog_marks_each_hour(
+    catalog: str, protocol: str
+) -> None:
+    every, found = swept(config(catalog, protocol))
+    specs = load_catalog(catalog).parameters.values()
+    expected = [str(s.pnu) for s in specs if s.setting or (s.setting is None and s.writable)
+                or (s.setting is None and s.prefix == "p")]  # fmt: skip
+    assert every == 3600.0 and found == expected and found
+
+
+def test_the_danfoss_settings_are_its_motor_data_limits_ramps_and_bus_timing() -> None:
+    _, found = swept(config("danfoss-fc", "fc"))
+    assert set(found) == {
+        "1", "120", "122", "123", "124", "302", "303", "341", "342", "412", "414", "835",
+        "836", "837",
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("extra", "every", "found"),
+    [
+        ("        settings: off", 0.0, []),
+        ('        settings: {every: 10m, parameters: ["3-41", "1-20"]}', 600.0, ["3-41", "1-20"]),
+    ],
+)
+def test_a_drive_may_turn_the_sweep_off_or_list_what_it_reads(
+    extra: str, every: float, found: list[str]
+) -> None:
+    assert swept(config("danfoss-fc", "fc", extra)) == (every, found)
+
+
+@pytest.mark.parametrize(
+    ("extra", "problem"),
+    [
+        ("        settings: {every: 25h}", "settings.every"),
+        ("        settings: {every: 10m, parameters: everything}", "settings.parameters"),
+        ("        settings: sometimes", "settings"),
+        ('        settings: {parameters: ["p1120"]}', "settings.parameters[0]"),
+    ],
+)
+def test_a_bad_sweep_is_a_configuration_problem_naming_its_place(extra: str, problem: str) -> None:
+    with pytest.raises(Exception, match=rf"drives\[0\]\.{re.escape(problem)}"):
+        parse(config("danfoss-fc", "fc", extra))
+
+
+def test_check_config_counts_the_sweep_after_the_polls() -> None:
+    cfg = parse(config("danfoss-fc", "fc", "        settings: {every: 1m}"))
+    load = line_load(cfg.lines[0])
+    exchange = load.exchange_seconds["d"]
+    assert load.sweeping == pytest.approx(14 * exchange / 60)
+    off = line_load(parse(config("danfoss-fc", "fc", "        settings: off")).lines[0])
+    assert off.sweeping == 0.0 and off.utilisation == load.utilisation

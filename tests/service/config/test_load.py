@@ -184,13 +184,19 @@ def test_report_lines_and_warnings() -> None:
     # code and time every 10 s, 2 telegrams of 16 bytes each way at 9600 baud 8E1, with
     # the pause of 3.5 characters and the drive's 5 ms: 0.91 % of the line's time.
     exchange = (2 * 16 * 11 + 3.5 * 11) / 9600 + 0.005
+    assert f"{2 * exchange / 10:.2%}" == "0.91%"
+    # Its 14 settings (the danfoss-fc catalog's) swept each hour, one telegram each: the
+    # line before the watch's.
     assert report[2] == (
+        f"  14 setting(s) of 1 drive(s) swept (settings): {14 * exchange / 3600:.2%} of the"
+        " line's time, after the polls"
+    )
+    assert report[3] == (
         f"  the own logs of 1 drive(s) watched (events): {2 * exchange / 10:.2%} of the"
         " line's time, after the polls"
     )
-    assert f"{2 * exchange / 10:.2%}" == "0.91%"
-    assert report[3].startswith("WARN line l1: polls demand 22.0 exchanges/s")
-    assert report[4:] == [
+    assert report[4].startswith("WARN line l1: polls demand 22.0 exchanges/s")
+    assert report[5:] == [
         "NOTE lines[0].drives[0].poll[2]: 16-17 is not in catalog danfoss-fc: "
         "it is read and exported as its raw number",
         "NOTE lines[0].drives[0].poll[3]: 16-18 is not in catalog danfoss-fc: "

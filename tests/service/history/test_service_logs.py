@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from pkwbus.service.assembly.build import build_runtime
-from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import DriveEvent, HistoryStore
 from pkwbus.service.history.watch import LogWatcher
@@ -78,7 +78,7 @@ async def watching(text: str) -> AsyncIterator[LogWatcher]:
     config = parse_config(text, environ={})
     store = HistoryStore(config.history_path)
     runtime = await build_runtime(config)
-    watcher = watch_logs(config, runtime, store)
+    watcher, _ = remember(config, runtime, store)
     assert watcher is not None
     await runtime.start()
     try:
@@ -103,7 +103,7 @@ def kept(w: LogWatcher, drive: str) -> list[DriveEvent]:
 def counted(w: LogWatcher) -> float:
     return sum(
         s.value
-        for f in w.counter.collect()
+        for f in w.stream.counter.collect()
         for s in f.samples
         if s.name == "pkwbus_drive_events_total"
     )

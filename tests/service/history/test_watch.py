@@ -20,6 +20,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.logs import DANFOSS_ALARM_LOG, SINAMICS_FAULT_BUFFER, DriveLog, Read, Runtime
 from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.history.stream import EventStream
 from pkwbus.service.history.watch import LogWatcher, Watched
 from tests.protocol.logs.test_logs import AlarmLog, FaultBuffer
 
@@ -64,7 +65,8 @@ def watcher(
     table = codes if isinstance(codes, CodeTable) else None
     w = Watched("l1", "d1", dialect, log, EVERY, table)
     store = HistoryStore(tmp_path / "history.sqlite")
-    found = LogWatcher({"l1": line}, store, [w], registry, retention=3600.0, clock=clock)
+    stream = EventStream(store, registry)
+    found = LogWatcher({"l1": line}, stream, [w], retention=3600.0, clock=clock)
     return found, registry
 
 

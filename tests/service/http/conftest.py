@@ -24,8 +24,10 @@ from pkwbus.master.planning.identity import identity_requests
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import Config, parse_config
+from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.http.api import create_app
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
@@ -114,6 +116,7 @@ def line_yaml(
     *,
     timeout: float = 0.1,
     retries: int = 1,
+    settings: str = "off",
 ) -> str:
     lines = [
         f"  - name: {name}",
@@ -124,6 +127,8 @@ def line_yaml(
         f"    retries: {retries}",
         # The tests count the requests: no alarm words polled beyond what they poll.
         "    alarms: off",
+        # Nor settings swept, unless a test sweeps them.
+        f"    settings: {settings}",
         "    drives:",
     ]
     for d in drives:
@@ -186,6 +191,8 @@ async def service(
     retries: int = 1,
     audit: bool = True,
     read_token: str | None = None,
+    settings: str = "off",
+    keep: dict[str, Simulator] | None = None,
 ) -> AsyncIterator[Service]:
     """A running service: simulators, runtime, app and client; stopped on exit."""
     fc = fc_drives() if fc is None else fc
@@ -197,7 +204,8 @@ async def service(
         for protocol, drives, catalog in (("fc", fc, "danfoss-fc"), ("uss", uss, "siemens-g120")):
             if not drives:
                 continue
-            sim = Simulator(
+            kept = keep.get(protocol) if keep is not None else None
+            sim = kept or Simulator(
                 protocol,
                 [d["address"] for d in drives],
                 timing=timing,
@@ -206,6 +214,8 @@ async def service(
                 seed=11,
                 model=STEADY,  # tests check "running" and the values: no random trips
             )
+            if keep is not None:  # the same drives for the next service (a restart)
+                keep[protocol] = sim
             audit_writer.attach(sim)
             end = await sim.serve_tcp("127.0.0.1", 0)
             stack.push_async_callback(end.close)
@@ -218,6 +228,7 @@ async def service(
                     drives,
                     timeout=line_timeout,
                     retries=retries,
+                    settings=settings,
                 )
             )
         audit_path = tmp_path / "audit.sqlite"
@@ -237,6 +248,10 @@ async def service(
             env["TEST_PKWBUS_READ_TOKEN"] = read_token
         config = parse_config(text, environ=env)
         runtime = await build_runtime(config)
+        if settings != "off":  # swept and kept as by pkwbus run
+            history = HistoryStore(tmp_path / "history.sqlite")
+            stack.callback(history.close)
+            remember(config, runtime, history)
         await runtime.start()
         stack.push_async_callback(runtime.stop)
         await wait_ready(runtime)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -66,6 +67,8 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             ramp = fan1.locator('[data-parameter="3-41"] .value')
             sync_api.expect(ramp).to_have_text(re.compile(r"^\d+(\.\d+)? s$"), timeout=20_000)
             sync_api.expect(fan1.locator(".state")).to_have_text("up")
+            # Its settings are not swept (404 not_swept): nothing shown of them.
+            sync_api.expect(fan1.locator(".settings")).to_be_hidden()
             # to the resolution of its conversion index (-1), with the catalog's name
             frequency = fan1.locator('[data-parameter="16-13"]')
             sync_api.expect(frequency.locator(".value")).to_have_text(re.compile(r"^\d+\.\d Hz$"))
@@ -188,6 +191,124 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
     assert elsewhere == []
 
 
+# Two drives whose 3-41 and 3-42 are swept every second (the line's settings).
+SWEPT = [
+    {"name": name, "address": address, "catalog": "danfoss-fc",
+     "poll": [("16-13", "200ms")], "writable": []}
+    for name, address in (("fan1", 1), ("fan2", 2))
+]  # fmt: skip
+SETTINGS = '{every: 1s, parameters: ["3-41", "3-42"]}'
+
+
+def js_number(value: float) -> str:
+    """A number as the page's script writes it (10.0 as 10)."""
+    return f"{value:g}"
+
+
+def test_status_page_shows_the_settings_changed_from_their_baseline(tmp_path: Path) -> None:
+    sync_api = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no chromium at {CHROMIUM} (deploy/browser-setup installs it)")
+    with served_in_thread(tmp_path, TOKEN, fc=SWEPT, settings=SETTINGS) as served:
+
+        def settings(drive: str) -> dict[str, Any]:
+            r = httpx.get(f"{served.url}/api/v1/drives/{drive}/settings", timeout=30)
+            assert r.status_code == 200, r.text
+            return dict(r.json())
+
+        def ramp(drive: str) -> dict[str, Any]:
+            return next(p for p in settings(drive)["parameters"] if p["parameter"] == "3-41")
+
+        def until(check: Any, what: str) -> None:
+            deadline = time.monotonic() + 30
+            while not check():
+                assert time.monotonic() < deadline, what
+                time.sleep(0.1)
+
+        # Each drive's first complete sweep is its baseline.
+        until(lambda: all(settings(d)["swept"] for d in ("fan1", "fan2")), "no complete sweep")
+        elsewhere: list[str] = []
+        asked: list[str] = []  # the page's requests of the settings
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1100, "height": 800})
+
+                def only_here(route: Any) -> None:
+                    if route.request.url.startswith(served.url):
+                        route.continue_()
+                    else:
+                        elsewhere.append(route.request.url)
+                        route.abort()
+
+                page.route("**/*", only_here)
+                page.on("request", lambda r: asked.append(r.url) if "/settings" in r.url else None)
+                page.goto(served.url + "/")
+                fan1 = page.locator('[data-drive="fan1"]')
+                sweep = fan1.locator(".settings p.sweep")
+                sync_api.expect(sweep).to_contain_text(
+                    "none of 2 settings differs from the baseline", timeout=20_000
+                )
+                sync_api.expect(sweep).to_contain_text(
+                    re.compile(r"last complete sweep .+ \(\d+ s ago\), every 1 s")
+                )
+                sync_api.expect(fan1.locator("table.changed")).to_have_count(0)
+
+                # A change at fan2's keypad, found by its next sweep.
+                before = ramp("fan2")
+                served.keypad(2, 341, before["raw"] + 150)
+                until(lambda: ramp("fan2")["changed"], "the keypad change was not found")
+                changed = ramp("fan2")
+                # Not asked for at every 2 s redraw: a round every 30 s.
+                count = len(asked)
+                page.wait_for_timeout(4500)
+                assert len(asked) == count, asked[count:]
+                page.evaluate("settingsAt = 0")  # the next round now rather than in 30 s
+                fan2 = page.locator('[data-drive="fan2"]')
+                row = fan2.locator('table.changed tr[data-parameter="3-41"]')
+                sync_api.expect(row).to_be_visible(timeout=20_000)
+                sync_api.expect(row.locator(".title")).to_have_text(changed["name"])
+                sync_api.expect(row.locator(".value")).to_have_text(
+                    f"{js_number(changed['value'])} s"
+                )
+                sync_api.expect(row.locator(".baseline")).to_have_text(
+                    f"{js_number(before['value'])} s"
+                )
+                sync_api.expect(row.locator(".baseline-since")).to_contain_text("(sweep)")
+                sync_api.expect(row.locator(".since")).not_to_have_text("?")
+                sync_api.expect(fan2.locator(".settings p.sweep .alarm")).to_have_text(
+                    "1 of 2 settings differ from the baseline"
+                )
+                sync_api.expect(fan2.locator(".settings")).to_contain_text(
+                    "PUT api/v1/drives/fan2/settings/baseline"
+                )
+                # It stands out as an alarm does, and its drive comes first as a warning's.
+                red = row.locator(".value").evaluate("n => getComputedStyle(n).color")
+                assert red == "rgb(176, 0, 32)", red
+                first = page.locator("#drives .drive").first
+                sync_api.expect(first).to_have_attribute("data-drive", "fan2")
+                sync_api.expect(fan1.locator("table.changed")).to_have_count(0)
+                # Also an entry of the drives' logs, kind "setting".
+                page.evaluate("eventsAt = 0")
+                sync_api.expect(page.locator("#events")).to_contain_text("3-41", timeout=20_000)
+                sync_api.expect(page.locator("#events")).to_contain_text("setting")
+
+                # Accepted as the baseline: nothing differs any more.
+                url = f"{served.url}/api/v1/drives/fan2/settings/baseline"
+                accepted = httpx.put(url, headers=AUTH, timeout=30)
+                assert accepted.status_code == 200, accepted.text
+                page.evaluate("settingsAt = 0")
+                sync_api.expect(fan2.locator("table.changed")).to_have_count(0, timeout=20_000)
+                sync_api.expect(fan2.locator(".settings p.sweep")).to_contain_text(
+                    "none of 2 settings differs from the baseline"
+                )
+            finally:
+                browser.close()
+        assert elsewhere == []
+        # Relative to the page, like its other requests.
+        assert asked and all(u.startswith(served.url + "/api/v1/drives/") for u in asked), asked
+
+
 async def test_status_page_and_assets_are_served_locally(tmp_path: Path) -> None:
     async with service(tmp_path) as svc:
         page = await svc.client.get("/")
@@ -203,4 +324,5 @@ async def test_status_page_and_assets_are_served_locally(tmp_path: Path) -> None
         script = script.replace('"http://www.w3.org/2000/svg"', '"svg-namespace"')
         assert "http://" not in script and "https://" not in script
         assert '"api/v1/drives"' in script
+        assert "`api/v1/drives/${encodeURIComponent(name)}/settings`" in script
         assert not re.search(r"""["'`]/(api|readyz|metrics|docs|assets)""", script)

@@ -70,6 +70,16 @@ class ServedInThread:
         drive = self.svc.sim.drives[address]
         self.loop.call_soon_threadsafe(drive.set_value, pnu, raw)
 
+    def keypad(self, address: int, pnu: int, raw: int) -> None:
+        """A person at a simulated drive's keypad sets ``pnu`` to ``raw`` (no telegram), in
+        the service's own loop; its ValueError comes back here."""
+        assert self.loop is not None
+
+        async def set_it() -> None:
+            self.svc.sim.keypad(address, pnu, raw)
+
+        asyncio.run_coroutine_threadsafe(set_it(), self.loop).result(timeout=30)
+
     def history(self, drive: str, parameter: str, values: list[float]) -> None:
         """Give a value the trend it would have after a quarter of an hour: ``values``, one
         a trend point (15 s) apart, the last one a point before now."""

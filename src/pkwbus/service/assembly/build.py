@@ -48,6 +48,7 @@ from pkwbus.service.config.default_polls import (
     COUNTER_EVERY,
     alarm_polls,
     counter_polls,
+    swept_settings,
 )
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
@@ -266,7 +267,8 @@ def _drive(
         for ref, typed in counter_polls(line, drive)
         if typed or form is not None  # one no document types needs the drive's description
     ]
-    describe = describe_targets(target, drive, table, counters) if form is not None else ()
+    _, settings = swept_settings(line, drive)  # described with their limits, for a restore
+    describe = describe_targets(target, drive, table, counters, settings) if form else ()
     entries.append(
         DriveEntry(
             drive.name,
@@ -295,18 +297,20 @@ def describe_targets(
     drive: cfg.Drive,
     table: ParameterTable,
     polled: Sequence[ParameterRef] = (),
+    settings: Sequence[ParameterRef] = (),
 ) -> tuple[DescribeTarget, ...]:
-    """The polled (``drive.poll`` and ``polled``) and writable parameters, each once: polled
-    ones for their type, scaling, unit, size and name; writable ones also for their
-    limits. The name is not asked where it does not fit the PKW block: a PPO's four
-    words, a fixed USS length."""
+    """The polled (``drive.poll`` and ``polled``), writable and swept (``settings``)
+    parameters, each once: polled ones for their type, scaling, unit, size and name;
+    writable and swept ones also for their limits. The name is not asked where it does
+    not fit the PKW block: a PPO's four words, a fixed USS length."""
     wanted: dict[int, tuple[str, bool]] = {}
     for ref in [*(entry.ref for entry in drive.poll), *polled]:
         ref = table.canonical(ref)
         wanted.setdefault(ref.pnu, (ref.name, False))
-    for ref in drive.writable:
+    for ref in [*drive.writable, *settings]:
         ref = table.canonical(ref)
         wanted[ref.pnu] = (wanted.get(ref.pnu, (ref.name, True))[0], True)
+    writable = {table.canonical(ref).pnu for ref in drive.writable}
     # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block
     # (data record 47 carries it).
     short = (target.protocol is Protocol.PROFIBUS and target.record is None) or (
@@ -315,7 +319,8 @@ def describe_targets(
     targets = []
     for pnu, (name, limits) in wanted.items():
         elements = tuple(e for e in elements_to_read(limits=limits) if not (short and e == NAME))
-        targets.append(DescribeTarget(pnu, name, elements, table.catalog.get(pnu), limits))
+        catalog = table.catalog.get(pnu)
+        targets.append(DescribeTarget(pnu, name, elements, catalog, pnu in writable))
     return tuple(targets)
 
 

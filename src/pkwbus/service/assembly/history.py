@@ -1,5 +1,6 @@
-"""The watch of the drives' own logs, put together: which drive has which log, the history
-database, the watcher on the lines' streams (:mod:`pkwbus.service.history`)."""
+"""What the drives remember, watched, put together: which drive has which log and which
+settings, the history database, the watchers on the lines' streams
+(:mod:`pkwbus.service.history`)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,21 @@ import logging
 from pkwbus.catalog.alarms import CodeTable, alarm_table
 from pkwbus.catalog.logs import log_of_catalog
 from pkwbus.master.runner import LineRunner
+from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
+from pkwbus.protocol.values import ParameterRef
 from pkwbus.service import config as cfg
+from pkwbus.service.assembly.build import description_form
+from pkwbus.service.config.default_polls import swept_settings
+from pkwbus.service.history.setting_reads import Swept
+from pkwbus.service.history.settings import SettingsWatcher
+from pkwbus.service.history.settings_store import SettingsStore
 from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.history.stream import EventStream
 from pkwbus.service.history.watch import LogWatcher, Watched
 from pkwbus.service.runtime import Runtime
 
-__all__ = ["log_of", "watch_logs"]
+__all__ = ["log_of", "remember", "watch_logs", "watch_settings"]
 
 log = logging.getLogger("pkwbus.service.history")
 
@@ -38,7 +47,7 @@ def _codes(catalog: str, log: DriveLog) -> CodeTable | None:
     return None
 
 
-def watch_logs(config: cfg.Config, runtime: Runtime, store: HistoryStore) -> LogWatcher | None:
+def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> LogWatcher | None:
     """The watcher of every drive whose log is known, on the runtime's lines (None: none);
     it starts once the lines run and stops after them."""
     watched = []
@@ -54,13 +63,62 @@ def watch_logs(config: cfg.Config, runtime: Runtime, store: HistoryStore) -> Log
     if not watched:
         return None
     runners = dict(runtime.runners)
-    watcher = LogWatcher(runners, store, watched, runtime.registry,
-                         retention=config.history_retention)  # fmt: skip
+    watcher = LogWatcher(runners, stream, watched, retention=config.history_retention)
     for runner in runners.values():
         if isinstance(runner, LineRunner):
             runner.observers.append(watcher)  # drives and lines that come back
-    runtime.history = store
+    runtime.history = stream.store
     runtime.starters.append(watcher.start)
     runtime.cleanups.append(watcher.stop)
-    log.info("watching the logs of %d drive(s), kept in %s", len(watched), store.path)
+    log.info("watching the logs of %d drive(s), kept in %s", len(watched), stream.store.path)
     return watcher
+
+
+def watch_settings(
+    config: cfg.Config, runtime: Runtime, stream: EventStream
+) -> SettingsWatcher | None:
+    """The sweep of every drive's settings (``settings``), on the runtime's lines (None:
+    none are swept); it starts once the lines run and stops after them."""
+    swept: list[Swept] = []
+    for line in config.lines:
+        turn = 0
+        for drive in line.drives:
+            every, refs = swept_settings(line, drive)
+            entry = runtime.drives.get(drive.name)
+            if not refs or entry is None:
+                continue
+            named = []
+            for ref in refs:
+                try:
+                    canonical = entry.canonical(ref)
+                except LocalProtocolError:
+                    canonical = ref
+                named.append(ParameterRef(canonical.pnu, ref.index, canonical.name))
+            offset = turn / len(line.drives)
+            form = description_form(line, drive)
+            swept.append(Swept(line.name, entry, every, named, drive.catalog, form, offset))
+            turn += 1
+    if not swept:
+        return None
+    store = SettingsStore(stream.store.path)
+    runners = dict(runtime.runners)
+    watcher = SettingsWatcher(runners, store, stream, swept, runtime.registry)
+    for runner in runners.values():
+        if isinstance(runner, LineRunner):
+            runner.observers.append(watcher)  # drives identified as other drives
+    runtime.settings = watcher
+    runtime.starters.append(watcher.start)
+    runtime.cleanups.append(watcher.stop)
+    runtime.cleanups.append(store.close)
+    log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), store.path)
+    return watcher
+
+
+def remember(
+    config: cfg.Config, runtime: Runtime, store: HistoryStore
+) -> tuple[LogWatcher | None, SettingsWatcher | None]:
+    """What the drives remember, watched: their own logs and their settings, both kept in
+    the history database ``store`` and told on one stream of events."""
+    stream = EventStream(store, runtime.registry)
+    runtime.history = store
+    return watch_logs(config, runtime, stream), watch_settings(config, runtime, stream)

@@ -24,7 +24,7 @@ from pkwbus import link
 from pkwbus.errors import PkwbusError
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile, description_path
-from pkwbus.service.assembly.history import watch_logs
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.assembly.logs import setup_logging
 from pkwbus.service.assembly.serve import ListenError, bind, serve
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
@@ -90,7 +90,7 @@ async def _serve(
     # The drives' descriptions of an earlier run, beside the audit database.
     kept = DescriptionFile(description_path(config.audit_db))
     runtime = await build_runtime(config, kept)
-    watch_logs(config, runtime, history)
+    remember(config, runtime, history)
     token = config.write_token()
     app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
     audit_writer = app.state.audit_writer

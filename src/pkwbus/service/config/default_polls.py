@@ -1,7 +1,8 @@
 """The polls a drive gets by default, where the configuration does not poll the parameter:
 the alarm words and fault numbers its catalog explains (``alarms: auto``), and the counters
 it keeps of its own life (``counters: auto``). Slowly, and counted in ``check-config``'s
-estimate like any poll."""
+estimate like any poll. And what is read besides the polls: the drive's settings, swept
+(``settings``)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ if TYPE_CHECKING:
     from pkwbus.service.config.drive import DriveBase
     from pkwbus.service.config.line import LineBase
 
-__all__ = ["ALARM_EVERY", "COUNTER_EVERY", "alarm_polls", "counter_polls"]
+__all__ = ["ALARM_EVERY", "COUNTER_EVERY", "alarm_polls", "counter_polls", "swept_settings"]
 
 ALARM_EVERY = 30.0  # seconds: the alarm words polled by default, slowly
 COUNTER_EVERY = 60.0  # seconds: the drive's counters polled by default, more slowly still
@@ -62,3 +63,22 @@ def counter_polls(line: LineBase[Any], drive: DriveBase) -> list[tuple[Parameter
                 continue
             wanted.append((ParameterRef(spec.pnu, index, str(spec.pnu)), spec.verified))
     return wanted
+
+
+def swept_settings(line: LineBase[Any], drive: DriveBase) -> tuple[float, list[ParameterRef]]:
+    """The sweep of the drive's settings: its interval, and what it reads - the settings
+    its catalog marks (``parameters: catalog``; each element of an array) or the listed
+    parameters. No parameters when it is ``off``."""
+    chosen = drive.settings if drive.settings is not None else line.settings
+    if isinstance(chosen, str):  # off
+        return 0.0, []
+    if chosen.parameters != "catalog":
+        return chosen.every, list(chosen.parameters)
+    if drive.catalog is None:
+        return chosen.every, []
+    wanted: list[ParameterRef] = []
+    for spec in load_catalog(drive.catalog).parameters.values():
+        if spec.is_setting:
+            indexes: list[int | None] = list(range(spec.array)) if spec.array else [None]
+            wanted.extend(ParameterRef(spec.pnu, i, str(spec.pnu)) for i in indexes)
+    return chosen.every, wanted

@@ -37,6 +37,7 @@ from pkwbus.service.config.fields import (
     EventsEvery,
     Name,
     Notation,
+    SettingsField,
 )
 from pkwbus.service.config.parameters import ParameterOverrides, Poll, ref_key
 
@@ -69,6 +70,8 @@ class DriveBase(Model):
     # Its own fault and alarm logs, and how often they are watched (None: the line's).
     events: Events | None = None
     events_every: EventsEvery | None = None
+    # The sweep of its settings (None: the line's).
+    settings: SettingsField | None = None
     # In maintenance from the start: nothing goes out to it until the API takes it out.
     maintenance: StrictBool = False
     poll: list[Poll] = Field(default_factory=list)
@@ -179,6 +182,10 @@ class DriveBase(Model):
             yield f"writable[{i}]", ref
         for ref in self.parameters:
             yield f"parameters[{ref}]", ref
+        listed = None if isinstance(self.settings, str | None) else self.settings.parameters
+        if isinstance(listed, list):
+            for i, ref in enumerate(listed):
+                yield f"settings.parameters[{i}]", ref
 
     def overrides_for(self, ref: ParameterRef) -> ParameterOverrides:
         """The config's overrides for ``ref``: its poll entry's, else ``parameters``'."""

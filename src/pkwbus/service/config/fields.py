@@ -4,7 +4,7 @@ type names, PKW lengths, names. Each validator raises ValueError with a plain me
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import (
     BaseModel,
@@ -41,6 +41,9 @@ __all__ = [
     "PkwWords",
     "Retention",
     "Rs485Delay",
+    "Settings",
+    "SettingsEvery",
+    "SettingsField",
     "SlotTime",
     "Timeout",
     "TypeName",
@@ -97,6 +100,7 @@ SlotTime = Annotated[float, _duration(durations.DP_SLOT_TIME)]
 Watchdog = Annotated[float, _duration(durations.DP_WATCHDOG)]
 EventsEvery = Annotated[float, _duration(durations.EVENTS_EVERY)]
 Retention = Annotated[float, _duration(durations.HISTORY_RETENTION)]
+SettingsEvery = Annotated[float, _duration(durations.SETTINGS_EVERY)]
 
 
 def _rs485_delay(value: object) -> float:
@@ -142,3 +146,26 @@ Events = Annotated[str, PlainValidator(_describe)]
 # that its catalog marks are polled even where the configuration does not poll them: auto,
 # or off.
 Counters = Annotated[str, PlainValidator(_describe)]
+
+
+class Settings(Model):
+    """The sweep of a drive's settings: every ``every``, the parameters its catalog marks
+    as settings (``catalog``) or those listed."""
+
+    every: SettingsEvery = 3600.0
+    parameters: Literal["catalog"] | list[Notation] = "catalog"
+
+
+def _settings(value: object) -> Settings | str:
+    """``off`` (YAML's bare off is false), or ``{every, parameters}``."""
+    if value is False or value == "off":
+        return "off"
+    if isinstance(value, Settings):
+        return value
+    if not isinstance(value, dict):
+        raise ValueError(f"must be off or {{every, parameters}}, not {short(repr(value))}")
+    return Settings.model_validate(value)
+
+
+# The sweep of a drive's settings, or ``off``.
+SettingsField = Annotated[Settings | str, PlainValidator(_settings)]

@@ -45,6 +45,8 @@ from pkwbus.service.config.fields import (
     Name,
     Pause,
     Rs485Delay,
+    Settings,
+    SettingsField,
     Timeout,
     upper,
 )
@@ -107,6 +109,8 @@ class LineBase(Model, Generic[DriveT]):
     # The drives' own fault and alarm logs, watched every ``events_every``.
     events: Events = "auto"
     events_every: EventsEvery = 10.0
+    # The sweep of the drives' settings (``off``: none); a drive may say otherwise.
+    settings: SettingsField = Settings()
     drives: list[DriveT] = Field(min_length=1)
 
     @field_validator("port")

@@ -42,6 +42,7 @@ from typing import Final
 
 from pkwbus.catalog.logs import log_of_catalog
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
+from pkwbus.protocol.pkw.descriptions import DescriptionForm, form_of
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
@@ -54,6 +55,7 @@ from pkwbus.service.config.default_polls import (
     COUNTER_EVERY,
     alarm_polls,
     counter_polls,
+    swept_settings,
 )
 from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.model import Config, Drive, Line
@@ -107,8 +109,10 @@ class LineLoad:
     warnings: list[str] = field(default_factory=list)
     # PROFIBUS DP: each slave's access (pkw or ds47) and parameters per second at most.
     access: dict[str, tuple[str, float]] = field(default_factory=dict)
-    # FC and USS: the share of the line's time the watch of the drives' logs takes.
+    # FC and USS: the share of the line's time the watch of the drives' logs takes, and
+    # the sweep of their settings.
     watching: float = 0.0
+    sweeping: float = 0.0
 
 
 def telegram_bytes(line: FcLine | UssLine, drive: FcDrive | UssDrive) -> int:
@@ -152,6 +156,19 @@ def watch_rate(line: Line, drive: Drive) -> float:
     if log is None or (drive.events or line.events) == "off":
         return 0.0
     return len(log.watch()) / (drive.events_every or line.events_every)
+
+
+def sweep_rate(line: Line, drive: Drive) -> float:
+    """The reads per second the sweep of the drive's settings asks for (``settings``): each
+    setting once an interval, and a PROFIdrive drive's identifier with it (whether it
+    differs from the factory setting; a Danfoss drive's factory value is read once, and
+    not counted)."""
+    every, refs = swept_settings(line, drive)
+    if not refs:
+        return 0.0
+    described = (drive.describe or line.describe) != "off"
+    per = 2 if described and form_of(drive.pkw_dialect) is DescriptionForm.PROFIDRIVE else 1
+    return per * len(refs) / every
 
 
 def record_seconds(drive: ProfibusDrive, count: int, baudrate: int) -> float:
@@ -233,12 +250,13 @@ def line_load(line: Line) -> LineLoad:
     times = {d.name: exchange_seconds(line, d) for d in line.drives}
     rate = 0.0
     busy = 0.0
-    watching = 0.0
+    watching = sweeping = 0.0
     for drive in line.drives:
         for every in poll_rates(line, drive):
             rate += every
             busy += times[drive.name] * every
         watching += times[drive.name] * watch_rate(line, drive)
+        sweeping += times[drive.name] * sweep_rate(line, drive)
     mean = busy / rate if rate else sum(times.values()) / len(times)
     load = LineLoad(
         line=line.name,
@@ -250,18 +268,19 @@ def line_load(line: Line) -> LineLoad:
         capacity=1 / mean,
         exchange_seconds=times,
         watching=watching,
+        sweeping=sweeping,
     )
     load.warnings.extend(_warnings(load))
     return load
 
 
 def _warnings(load: LineLoad) -> Iterator[str]:
-    if load.utilisation + load.watching > 1:
+    if load.utilisation + load.watching + load.sweeping > 1:
         yield (
             f"line {load.line}: polls demand {load.exchanges_per_second:.1f} exchanges/s, "
             f"more than the {load.capacity:.1f} the line can carry: polls will run late"
         )
-    elif load.utilisation + load.watching > WARN_UTILISATION:
+    elif load.utilisation + load.watching + load.sweeping > WARN_UTILISATION:
         yield (
             f"line {load.line}: utilisation {load.utilisation:.0%} is above "
             f"{WARN_UTILISATION:.0%}: little room for writes, reads and repeats"
@@ -358,6 +377,13 @@ def check_config_report(
                 f"  {sum(counters.values())} counter(s) of {sum(1 for c in counters.values() if c)}"
                 f" drive(s) polled by default (counters), every {COUNTER_EVERY:.0f} s:"
                 f" {share:.2%} of the line's time (in the utilisation)"
+            )
+        swept = [d for d in line.drives if sweep_rate(line, d)]
+        if swept:
+            count = sum(len(swept_settings(line, d)[1]) for d in swept)
+            report.append(
+                f"  {count} setting(s) of {len(swept)} drive(s) swept (settings):"
+                f" {load.sweeping:.2%} of the line's time, after the polls"
             )
         watched = sum(1 for d in line.drives if watch_rate(line, d))
         if watched:

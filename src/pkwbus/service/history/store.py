@@ -28,7 +28,7 @@ from typing import Any, Final
 from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.synced import connect_synced
 
-__all__ = ["SCHEMA", "DriveEvent", "HistoryError", "HistoryStore"]
+__all__ = ["EVENT_COLUMNS", "SCHEMA", "DriveEvent", "HistoryError", "HistoryStore", "event_row"]
 
 SCHEMA: Final = """
 CREATE TABLE IF NOT EXISTS events (
@@ -50,7 +50,10 @@ CREATE TABLE IF NOT EXISTS events (
 CREATE INDEX IF NOT EXISTS events_drive_seen ON events (drive, seen);
 """
 
-_COLUMNS = "line, drive, key, kind, code, number, text, value, time, time_source, drive_time, seen"
+EVENT_COLUMNS = (
+    "line, drive, key, kind, code, number, text, value, time, time_source, drive_time, seen"
+)
+_COLUMNS = EVENT_COLUMNS
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +83,12 @@ class DriveEvent:
         return self.time if self.time is not None else self.seen
 
 
+def event_row(e: DriveEvent) -> tuple[object, ...]:
+    """``e`` as a row of the events table, in :data:`EVENT_COLUMNS`' order."""
+    return (e.line, e.drive, e.key, e.kind, e.code, e.number, e.text, e.value, e.time,
+            e.time_source, e.drive_time, e.seen)  # fmt: skip
+
+
 class HistoryError(PkwbusError):
     """The history database cannot be opened or written."""
 
@@ -106,9 +115,8 @@ class HistoryStore:
                     cur = self._db.execute(
                         f"INSERT OR IGNORE INTO events ({_COLUMNS})"
                         " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (e.line, e.drive, e.key, e.kind, e.code, e.number, e.text, e.value,
-                         e.time, e.time_source, e.drive_time, e.seen),
-                    )  # fmt: skip
+                        event_row(e),
+                    )
                     if cur.rowcount:
                         new.append(e)
                 self._db.execute("COMMIT")

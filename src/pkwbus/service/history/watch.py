@@ -30,8 +30,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from prometheus_client import CollectorRegistry, Counter, Gauge
-
 from pkwbus.catalog.alarms import CodeTable
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.errors import PkwbusError
@@ -42,14 +40,14 @@ from pkwbus.master.planning.plan import HealthChanged
 from pkwbus.protocol import pkw
 from pkwbus.protocol.logs import DriveLog, LogEntry, Opaque, Read, Runtime
 from pkwbus.protocol.pkw.dialects import Dialect
-from pkwbus.service.history.store import DriveEvent, HistoryError, HistoryStore
+from pkwbus.service.history.store import DriveEvent, HistoryError
+from pkwbus.service.history.stream import EVENT_LABELS, EventStream
 from pkwbus.service.runtime import LineTask
 
 __all__ = ["EVENT_LABELS", "LogWatcher", "Watched", "entry_key"]
 
 log = logging.getLogger("pkwbus.service.history")
 
-EVENT_LABELS = ("line", "drive", "kind", "code", "text")
 SWEEP_TRIES = 3  # a log that changes while it is read is read again, this many times
 PRUNE_EVERY = 3600.0  # seconds between two prunings of a drive's old entries
 
@@ -106,55 +104,27 @@ class LogWatcher:
     def __init__(
         self,
         runners: dict[str, LineTask],
-        store: HistoryStore,
+        stream: EventStream,
         watched: Sequence[Watched],
-        registry: CollectorRegistry,
         *,
         retention: float,
         clock: Callable[[], float] = time.time,
     ) -> None:
         self.runners = runners
-        self.store = store
+        self.stream = stream
+        self.store = stream.store
         self.watched = list(watched)
         self.retention = retention
         self.clock = clock
         self._tasks: list[asyncio.Task[None]] = []
-        self.counter = Counter(
-            "pkwbus_drive_events",
-            "Entries of the drives' own fault and alarm logs, each counted once (also those"
-            " logged while pkwbus was not running, found at start)",
-            list(EVENT_LABELS),
-            registry=registry,
-        )
-        self.newest = Gauge(
-            "pkwbus_drive_event_newest_timestamp_seconds",
-            "When pkwbus found the newest entry of this kind in the drive's own log, with its"
-            " code and text (0 with empty code and text: none yet); a series per watched"
-            " drive and kind from the start",
-            list(EVENT_LABELS),
-            registry=registry,
-        )
-        self._newest: dict[tuple[str, str], tuple[str, ...]] = {}  # (drive, kind) -> labels
 
     # ------------------------------------------------------------ the service's
 
     async def start(self) -> None:
         """Count what the history already holds, then watch every drive."""
-        try:
-            counts = await asyncio.to_thread(self.store.counts)
-        except HistoryError as exc:
-            log.error("%s: the drives' logs are not watched", exc)
+        kinds = [(w.line, w.drive, kind.value) for w in self.watched for kind in w.log.kinds]
+        if not await self.stream.start(kinds):
             return
-        for labels, n in counts.items():
-            self.counter.labels(*labels).inc(n)
-        for w in self.watched:
-            for kind in w.log.kinds:
-                newest = await asyncio.to_thread(self.store.newest, w.drive, kind.value)
-                if newest is None:
-                    self._show_newest(w.line, w.drive, kind.value, "", "", 0.0)
-                else:
-                    self._show_newest(w.line, w.drive, kind.value, newest.code, newest.text,
-                                      newest.seen)  # fmt: skip
         for w in self.watched:
             self._tasks.append(asyncio.create_task(self._watch(w), name=f"log {w.drive}"))
 
@@ -230,7 +200,7 @@ class LogWatcher:
             return False
         seen = self.clock()
         events = [self._event(w, e, found.runtime, read_at, seen) for e in found.entries]
-        new = await asyncio.to_thread(self.store.add, events)
+        new = await self.stream.record(events)
         for e in reversed(new):  # the oldest first
             self._tell(e)
         if seen - w.pruned >= PRUNE_EVERY:
@@ -259,20 +229,7 @@ class LogWatcher:
     def _answered(self, times: dict[Read, float], read: Read, _: object) -> None:
         times.setdefault(read, self.clock())
 
-    def _show_newest(
-        self, line: str, drive: str, kind: str, code: str, text: str, seen: float
-    ) -> None:
-        labels = (line, drive, kind, code, text)
-        old = self._newest.get((drive, kind))
-        if old is not None and old != labels:
-            with contextlib.suppress(KeyError):
-                self.newest.remove(*old)
-        self._newest[(drive, kind)] = labels
-        self.newest.labels(*labels).set(seen)
-
     def _tell(self, e: DriveEvent) -> None:
-        self.counter.labels(e.line, e.drive, e.kind, e.code, e.text).inc()
-        self._show_newest(e.line, e.drive, e.kind, e.code, e.text, e.seen)
         at = time.strftime("%Y-%m-%d %H:%M:%S %z", time.localtime(e.when))
         shown = f"{e.code} {e.text}".strip()
         value = "" if e.value is None else f", value {e.value}"

@@ -14,8 +14,9 @@ import asyncio
 import hmac
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
+import yaml
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
@@ -38,6 +39,7 @@ from pkwbus.service.http.models import (
     MaintenanceBody,
     MaintenanceResult,
     Readiness,
+    RestoreBody,
     ValueBody,
     WriteBody,
     WriteResult,
@@ -74,6 +76,7 @@ __all__ = [
 ]
 
 MAX_BODY = 4096
+MAX_BACKUP_BODY = 1 << 20  # a restore's body: a backup document of many settings
 MAX_MESSAGE = 300  # characters of an error message: enough to name the problem
 MAX_AUDIT_LIMIT = 1000  # rows of one GET /api/v1/audit
 MAX_EVENTS_LIMIT = 1000  # entries of one GET /api/v1/events
@@ -98,13 +101,17 @@ class BodyLimit:
     """ASGI middleware: a body over ``limit`` bytes gets 413, whether it announces its
     length or comes chunked; nothing beyond the limit is kept in memory."""
 
-    def __init__(self, app: ASGIApp, limit: int) -> None:
+    def __init__(self, app: ASGIApp, limit: int, large: tuple[str, int] | None = None) -> None:
         self.app = app
         self.limit = limit
+        self.large = large  # (the end of a path, its own limit)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
+            return
+        if self.large is not None and str(scope.get("path", "")).endswith(self.large[0]):
+            await BodyLimit(self.app, self.large[1])(scope, receive, send)
             return
         headers = dict(scope.get("headers") or [])
         length = headers.get(b"content-length")
@@ -163,6 +170,7 @@ def create_app(
     app.state.audit_writer = audit_writer
     service = ParameterService(runtime, audit_writer, write_token)
     switches = Maintenance(runtime, audit_writer, service.tokens)
+    settings = service.settings()
     audit_tokens = [t.encode() for t in (write_token, read_token) if t]
 
     @app.exception_handler(ApiError)
@@ -215,7 +223,7 @@ def create_app(
         refusal.audit_incomplete = not await audit_writer.refused(_client(request), refusal.kind)
         raise refusal
 
-    app.add_middleware(BodyLimit, limit=MAX_BODY)
+    app.add_middleware(BodyLimit, limit=MAX_BODY, large=("/restore", MAX_BACKUP_BODY))
 
     @app.get(
         "/api/v1/drives/{drive}/parameters/{parameter}",
@@ -252,6 +260,45 @@ def create_app(
         that came back. Audited."""
         caller = Caller(_client(request), request.headers.get("authorization"))
         return await switches.switch(drive, body.on, body.reason, caller)
+
+    @app.get("/api/v1/drives/{drive}/settings", responses=ERRORS)
+    async def drive_settings(drive: str) -> dict[str, Any]:
+        """The last sweep of the drive's settings: each with its value, its baseline,
+        whether (and since when) it differs from it, and what the drive says of its
+        factory setting (null where it says nothing)."""
+        return settings.view(drive)
+
+    @app.put(
+        "/api/v1/drives/{drive}/settings/baseline",
+        responses=ERRORS,
+        dependencies=[Security(BEARER)],
+    )
+    async def accept_baseline(drive: str, request: Request) -> dict[str, Any]:
+        """The values last read become the drive's baseline. Audited."""
+        caller = Caller(_client(request), request.headers.get("authorization"))
+        return await settings.accept(drive, caller)
+
+    @app.get("/api/v1/drives/{drive}/backup", responses=ERRORS)
+    async def backup(drive: str, format: Literal["json", "yaml"] = Query(default="json")) -> Any:
+        """A backup document of the drive's settings (``?format=yaml`` for YAML)."""
+        document = await settings.backup(drive)
+        if format == "yaml":
+            text = yaml.safe_dump(document, sort_keys=False, allow_unicode=True)
+            return Response(text, media_type="application/yaml")
+        return document
+
+    @app.post(
+        "/api/v1/drives/{drive}/restore",
+        responses=ERRORS,
+        dependencies=[Security(BEARER)],
+    )
+    async def restore(drive: str, body: RestoreBody, request: Request) -> dict[str, Any]:
+        """Plan the writes that make the drive hold the backup's values; without
+        ``dry_run`` write them through the one write path (audited, read back)."""
+        caller = Caller(_client(request), request.headers.get("authorization"))
+        return await settings.restore(
+            drive, body.backup, body.dry_run, body.store, body.force, caller
+        )
 
     @app.get("/api/v1/audit", responses=ERRORS, dependencies=[Security(BEARER)])
     async def audit_log(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, StrictStr
 
@@ -23,6 +23,7 @@ __all__ = [
     "MaintenanceView",
     "ParameterReading",
     "Readiness",
+    "RestoreBody",
     "SlaveView",
     "ValueBody",
     "WritableView",
@@ -95,6 +96,15 @@ class MaintenanceBody(BaseModel):
     reason: StrictStr = Field(default="", max_length=200, description="shown with it")
 
 
+class RestoreBody(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    backup: dict[str, Any] = Field(description="a backup document (GET .../backup)")
+    dry_run: StrictBool = Field(default=False, description="plan the writes, write nothing")
+    store: pkw.Store = Field(default=pkw.Store.EEPROM, description="ram or eeprom")
+    force: StrictBool = Field(default=False, description="restore a backup of another type")
+
+
 class MaintenanceResult(BaseModel):
     drive: str
     on: bool
@@ -118,6 +128,7 @@ class DriveView(BaseModel):
     writable: list[WritableView] = []  # what the write form offers
     dp: SlaveView | None = None  # a PROFIBUS DP slave: its place in the live list
     maintenance: MaintenanceView | None = None  # in maintenance: nothing goes out to it
+    settings: bool = False  # its settings are swept: GET .../settings answers them
 
 
 class LineView(BaseModel):

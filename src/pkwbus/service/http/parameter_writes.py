@@ -58,6 +58,8 @@ class WriteOrder:
     store: pkw.Store = pkw.Store.RAM
     verify: bool = False
     dry_run: bool = False
+    # A restore's write: any parameter of the backup, the ``writable`` list aside.
+    restoring: bool = False
 
 
 class Writes:
@@ -90,7 +92,7 @@ class Writes:
             check_names(drive, parameter)
             entry, ref = locate(self.runtime, drive, parameter, order.index)
             audit.parameter, audit.index = ref.name, ref.index or 0
-            if not entry.may_write(ref):
+            if not order.restoring and not entry.may_write(ref):
                 raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
             fmt = described_format(self.runtime, entry, ref)
             ref = fit_index(ref, fmt)
@@ -167,6 +169,11 @@ class Writes:
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )
+        settings = self.runtime.settings
+        if settings is not None and isinstance(result.outcome, Answered) and not request.text:
+            # An audited write: the setting's baseline now, before any later sweep reads it.
+            written = result.value if result.value is not None else order.value
+            await settings.written(entry.name, ref.pnu, ref.index or 0, request.value, written)
         if result.previous is not None and result.previous.value != old:
             old = audit.old_value = result.previous.value  # stored with the outcome
         audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)

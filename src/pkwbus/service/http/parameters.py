@@ -38,6 +38,7 @@ from pkwbus.service.http.parameter_checks import (
 )
 from pkwbus.service.http.parameter_reads import MAX_READS_PER_DRIVE, Reads
 from pkwbus.service.http.parameter_writes import WriteOrder, Writes
+from pkwbus.service.http.settings import DriveSettings
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
@@ -64,6 +65,11 @@ class ParameterService:
         self.tokens = tokens
         self._reads = Reads(runtime)
         self._writes = Writes(runtime, audit_writer, tokens, self._reads)
+
+    def settings(self) -> DriveSettings:
+        """The drives' settings through the same reads, writes and tokens."""
+        return DriveSettings(self.runtime, self.audit_writer, self.tokens, self._writes,
+                             self._reads)  # fmt: skip
 
     async def read(self, drive: str, parameter: str, index: int | None) -> dict[str, Any]:
         return await self._reads.read(drive, parameter, index)

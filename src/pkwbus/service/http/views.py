@@ -155,6 +155,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         writable=writable_views(runtime, name),
         dp=slave_view(runtime, name),
         maintenance=maintenance_view(runtime, name),
+        settings=runtime.settings is not None and name in runtime.settings.swept,
     )
 
 

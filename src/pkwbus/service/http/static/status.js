@@ -173,6 +173,8 @@ function drawDrive(drive) {
   const state = held ? "maintenance" : (drive.up ? "up" : "down");
   const cls = `drive ${state}${folded.has(drive.name) ? " folded" : ""}`;
   const faults = el("span", {}), errors = el("span", {});
+  const settings = el("div", { class: "settings" });  // drawSettings fills it
+  settings.hidden = true;
   const heldNote = held ? el("p", { class: "maintenance" },
     `in maintenance since ${new Date(held.since * 1000).toLocaleString()}`,
     held.reason ? `: ${held.reason}` : "", " - nothing goes out to it") : "";
@@ -183,6 +185,7 @@ function drawDrive(drive) {
     el("div", { class: "counts" }, faults, errors, " since the service started"),
     el("div", { class: "bits" }, ...bits),
     alarms.length ? el("ul", { class: "alarms" }, ...alarms) : "",
+    settings,
     el("table", {}, el("thead", {}, el("tr", {}, el("th", {}, "parameter"), el("th", {}, "name"),
       el("th", {}, "value"), el("th", {}, "15 min"), el("th", {}, "age"))),
       el("tbody", {}, ...rows.map((r) => r.row))));
@@ -192,7 +195,7 @@ function drawDrive(drive) {
     node.classList.toggle("folded", now);
     fold.textContent = now ? "+" : "\u2212";
   });
-  return { node, rows, faults, errors };
+  return { node, rows, faults, errors, settings, sweptAge: null, drawnSettings: -1 };
 }
 
 // Drives folded by the reader (kept across refreshes); drives down or in alarm come first.
@@ -202,7 +205,7 @@ function urgency(drive) {
   if (drive.maintenance) return 3;  // nothing is asked of it: not urgent
   if (!drive.up) return 0;
   if ((drive.alarms || []).some((a) => a.kind === "alarm")) return 1;
-  if ((drive.alarms || []).length) return 2;
+  if ((drive.alarms || []).length || changedSettings(drive.name).length) return 2;
   return 3;
 }
 
@@ -361,6 +364,137 @@ async function refreshEvents() {
   drawEvents((await getJson("api/v1/events?limit=20")).events || []);
 }
 
+// The settings of each drive that differ from its baseline (/api/v1/drives/{drive}/settings),
+// asked for every 30 s, a few drives at a time and beside the 2 s redraws, not in them. A
+// drive whose settings are not swept (404 not_swept) has nothing to show: asked again
+// only after 10 minutes.
+const SETTINGS_EVERY_MS = 30000;
+const NOT_SWEPT_AGAIN_MS = 600000;
+const SETTINGS_AT_ONCE = 4;
+let settingsAt = 0;  // when they were last asked for
+let settingsBusy = false;  // a round is under way
+let settingsVersion = 0;  // counts the rounds that arrived: a section draws its settings anew
+let settingsData = new Map();  // drive -> {swept, every, count, changed}
+const notSwept = new Map();  // drive -> when pkwbus said its settings are not swept
+
+function changedSettings(name) {
+  const found = settingsData.get(name);
+  return found ? found.changed : [];
+}
+
+async function settingsOf(name) {  // what to show of one drive's settings; null: nothing
+  const path = `api/v1/drives/${encodeURIComponent(name)}/settings`;
+  const response = await fetch(path, { cache: "no-store" });
+  if (response.status === 404) {
+    const body = await response.json().catch(() => ({}));
+    if ((body.error || {}).kind === "not_swept") notSwept.set(name, Date.now());
+    return null;
+  }
+  if (!response.ok) throw new Error(`${path}: ${response.status}`);
+  const view = await response.json();
+  const parameters = view.parameters || [];
+  return { swept: view.swept, every: view.every, count: parameters.length,
+    changed: parameters.filter((p) => p.changed) };
+}
+
+async function refreshSettings(names) {
+  if (settingsBusy || Date.now() - settingsAt < SETTINGS_EVERY_MS) return;
+  settingsAt = Date.now();
+  settingsBusy = true;
+  const found = new Map();
+  try {
+    const asked = names.filter((n) => {
+      const said = notSwept.get(n);
+      return said === undefined || Date.now() - said >= NOT_SWEPT_AGAIN_MS;
+    });
+    let next = 0;
+    const worker = async () => {
+      while (next < asked.length) {
+        const name = asked[next++];
+        try {
+          const view = await settingsOf(name);
+          if (view) {
+            found.set(name, view);
+            notSwept.delete(name);
+          }
+        } catch (error) {  // no answer this time: the last one stays
+          if (settingsData.has(name)) found.set(name, settingsData.get(name));
+        }
+      }
+    };
+    await Promise.all(Array.from({ length: SETTINGS_AT_ONCE }, worker));
+  } finally {
+    settingsBusy = false;
+  }
+  settingsData = found;
+  settingsVersion += 1;
+  refreshNow();  // shown now, not at the next redraw
+}
+
+function shownSetting(value, unit) {
+  if (value === null || value === undefined) return "?";
+  return unit ? `${value} ${unit}` : `${value}`;
+}
+
+function drawSettings(section, found) {
+  const box = section.settings;
+  section.sweptAge = null;
+  if (!found) {
+    box.replaceChildren();
+    box.hidden = true;
+    return;
+  }
+  const changed = found.changed;
+  const differ = changed.length
+    ? el("span", { class: "alarm" },
+      `${changed.length} of ${found.count} settings differ from the baseline`)
+    : `none of ${found.count} settings differs from the baseline`;
+  let sweep = "no complete sweep of the settings yet";
+  if (found.swept) {
+    section.sweptAge = el("span", { class: "swept-age" });
+    sweep = el("span", {}, `last complete sweep ${new Date(found.swept).toLocaleString()} (`,
+      section.sweptAge, " ago)");
+  }
+  const every = found.every ? `, every ${age(found.every)}` : "";
+  const parts = [el("p", { class: "sweep" }, differ, "; ", sweep, every)];
+  if (changed.length) {
+    const rows = changed.map((p) => {
+      const where = p.index ? `${p.parameter}[${p.index}]` : p.parameter;
+      const when = (iso) => (iso ? new Date(iso).toLocaleString() : "?");
+      const value = el("td", { class: "value" }, shownSetting(p.value, p.unit));
+      if (p.raw !== null && p.raw !== undefined) value.title = `raw ${p.raw}`;
+      return el("tr", { "data-parameter": where }, el("td", {}, where),
+        el("td", { class: "title" }, p.name || ""), value,
+        el("td", { class: "baseline" }, shownSetting(p.baseline, p.unit)),
+        el("td", { class: "baseline-since" }, when(p.baseline_since),
+          p.baseline_by ? ` (${p.baseline_by})` : ""),
+        el("td", { class: "since" }, when(p.changed_seen)));
+    });
+    parts.push(el("table", { class: "changed" },
+      el("thead", {}, el("tr", {}, el("th", {}, "setting changed"), el("th", {}, "name"),
+        el("th", {}, "value"), el("th", {}, "baseline"), el("th", {}, "baseline since"),
+        el("th", {}, "differs since"))),
+      el("tbody", {}, ...rows)));
+    parts.push(el("p", { class: "note" }, "not written through pkwbus (keypad, another ",
+      "master?): a wanted change becomes the baseline with PUT api/v1/drives/",
+      section.node.dataset.drive, "/settings/baseline (write token); a write through pkwbus ",
+      "moves the baseline itself"));
+  }
+  box.replaceChildren(...parts);
+  box.hidden = false;
+}
+
+function fillSettings(section, drive, now) {
+  const found = settingsData.get(drive.name);
+  if (section.drawnSettings !== settingsVersion) {
+    drawSettings(section, found);
+    section.drawnSettings = settingsVersion;
+  }
+  if (section.sweptAge && found && found.swept) {
+    setText(section.sweptAge, age(now - Date.parse(found.swept) / 1000));
+  }
+}
+
 async function getJson(path) {
   const response = await fetch(path, { cache: "no-store" });
   if (!response.ok && response.status !== 503) throw new Error(`${path}: ${response.status}`);
@@ -383,6 +517,7 @@ function refreshNow() {  // the drives from the last data: down or in alarm firs
       let section = sections.get(d.name);
       if (!section || section.shape !== shape) section = { shape, ...drawDrive(d) };
       fillCounts(section, d);
+      fillSettings(section, d, now);
       d.values.forEach((v, i) => fillRow(section.rows[i], d, v, now));
       kept.set(d.name, section);
       return section.node;
@@ -403,6 +538,8 @@ async function refresh() {
     await refreshEvents().catch(() => {});  // so do the log entries
     drawLines(lines);
     lastDrives = drives;
+    // Only the drives whose settings are swept (the drive's view says so): beside the redraw.
+    refreshSettings(drives.filter((d) => d.settings).map((d) => d.name)).catch(() => {});
     refreshNow();
     drawWritable(drives);
     drawLive(drives);

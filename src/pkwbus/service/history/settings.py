@@ -1,0 +1,346 @@
+"""The drives' settings, swept unattended through their lines' runners and compared with
+each drive's baseline.
+
+Every ``settings.every`` each drive's settings are read one by one, spread over the
+interval, by background jobs of its line, which never go ahead of a due poll
+(:class:`~pkwbus.master.planning.jobs.Priority`). Raw numbers are compared, so a value
+reads the same whatever scaling the drive describes.
+
+- The first value read of a setting becomes its baseline (the first complete sweep is
+  the drive's baseline), kept in the history database (:mod:`.settings_store`).
+- A write pkwbus makes (the API, a restore; each audited) moves that setting's baseline
+  (:meth:`SettingsWatcher.written`); ``PUT .../settings/baseline`` makes the present values
+  the baseline (:meth:`SettingsWatcher.accept`).
+- Any other difference is a change nobody audited (the keypad, another master, a
+  parameter copy): ``pkwbus_drive_setting_changed`` while it lasts, one log line and one
+  event in the stream of the drives' own log entries (:mod:`.stream`), kind ``setting``.
+- A drive identified as another drive (its model or software, as the planner reads them)
+  starts a new baseline, and the log and the stream say so.
+
+What the drive says of the factory setting: a Danfoss FC drive's description element 20
+(the factory value) and 21 (additional characteristics: no bus access, read-only over
+the bus, not while running), read once per run; a PROFIdrive drive's identifier bit 12
+("changed from factory setting"), read with each sweep
+(:mod:`pkwbus.protocol.pkw.descriptions`). None where the drive gives none.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from prometheus_client import CollectorRegistry, Gauge
+
+from pkwbus.catalog.description import ParameterDescription, Value
+from pkwbus.master.events import Event
+from pkwbus.master.planning.plan import Described
+from pkwbus.protocol import pkw
+from pkwbus.protocol.pkw.descriptions import (
+    Characteristics,
+)
+from pkwbus.protocol.values import ParameterRef
+from pkwbus.protocol.values.encoding import decode_value
+from pkwbus.service.history.setting_reads import SettingReads, Swept, Unanswered
+from pkwbus.service.history.settings_store import SettingRow, SettingsStore
+from pkwbus.service.history.store import DriveEvent, HistoryError
+from pkwbus.service.history.stream import EventStream
+from pkwbus.service.runtime import LineTask
+
+__all__ = ["KIND", "SettingsWatcher", "shown"]
+
+log = logging.getLogger("pkwbus.service.settings")
+
+KIND = "setting"  # the kind of a setting's change in the stream of the drives' events
+NEW_BASELINE = "baseline"  # the code of the event that says a drive starts a new baseline
+
+
+def shown(value: Value | None) -> str | None:
+    """A value as the store keeps it (JSON text)."""
+    return None if value is None else json.dumps(value)
+
+
+class SettingsWatcher:
+    """Sweeps the settings of ``swept`` through the lines' runners; an observer of the
+    lines' events, to start a new baseline for a drive that is another drive."""
+
+    def __init__(
+        self,
+        runners: dict[str, LineTask],
+        store: SettingsStore,
+        stream: EventStream,
+        swept: Sequence[Swept],
+        registry: CollectorRegistry,
+        *,
+        clock: Callable[[], float] = time.time,
+        job_timeout: float = 30.0,
+    ) -> None:
+        self.runners = runners
+        self.reads = SettingReads(runners, job_timeout)
+        self.store = store
+        self.stream = stream
+        self.swept = {s.drive: s for s in swept}
+        self.clock = clock
+        self.job_timeout = job_timeout
+        self._tasks: list[asyncio.Task[None]] = []
+        self._identifying: set[asyncio.Future[None]] = set()
+        self.changed = Gauge(
+            "pkwbus_drive_setting_changed",
+            "1 while a setting of the drive differs from its baseline and nobody audited the"
+            " change (the keypad, another master, a parameter copy); no series otherwise",
+            ["line", "drive", "parameter", "index"],
+            registry=registry,
+        )
+        self.swept_at = Gauge(
+            "pkwbus_drive_settings_swept_timestamp_seconds",
+            "End of the drive's last complete sweep of its settings",
+            ["line", "drive"],
+            registry=registry,
+        )
+
+    # ------------------------------------------------------------ the service's
+
+    async def start(self) -> None:
+        """Load what the history keeps of each drive, then sweep every drive."""
+        if not await self.stream.start():
+            return
+        try:
+            for s in self.swept.values():
+                kept = await asyncio.to_thread(self.store.load, s.drive)
+                s.identity, s.swept, s.rows = kept.identity, kept.swept, kept.rows or {}
+                s.loaded = True
+                self._show(s)
+        except HistoryError as exc:
+            log.error("%s: the drives' settings are not swept", exc)
+            return
+        for s in self.swept.values():
+            if s.told is not None:  # identified while its baseline was loaded
+                await self._identified(s, s.told)
+        for s in self.swept.values():
+            self._tasks.append(asyncio.create_task(self._sweeps(s), name=f"settings {s.drive}"))
+
+    async def stop(self) -> None:
+        for task in [*self._tasks, *self._identifying]:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._tasks.clear()
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        """A drive identified as another drive starts a new baseline."""
+        for event in events:
+            if isinstance(event, Described) and event.identity is not None:
+                s = self.swept.get(event.drive)
+                if s is None or event.identity == s.told:
+                    continue
+                s.told = event.identity
+                if s.loaded:  # else compared once its baseline is loaded
+                    task = asyncio.ensure_future(self._identified(s, event.identity))
+                    self._identifying.add(task)
+                    task.add_done_callback(self._identifying.discard)
+
+    async def _identified(self, s: Swept, identity: str) -> None:
+        if s.identity == identity:
+            return
+        before, s.identity = s.identity, identity
+        try:
+            if before is None:  # the first identity known of it: its baseline's
+                await asyncio.to_thread(self.store.swept, s.drive, identity, s.swept)
+                return
+            for row in s.rows.values():  # what the old drive held is gone at once
+                self._unflag(s, row)
+            s.rows, s.swept = {}, None
+            s.factory.clear()
+            s.characteristics.clear()
+            s.from_factory.clear()
+            with contextlib.suppress(KeyError):
+                self.swept_at.remove(s.line, s.drive)
+            await asyncio.to_thread(self.store.forget, s.drive, identity)
+            log.warning(
+                "drive %s is another drive now (%s, was %s): its settings start a new"
+                " baseline", s.drive, identity, before, extra={"line": s.line, "drive": s.drive},
+            )  # fmt: skip
+            now = self.clock()
+            await self.stream.record([DriveEvent(
+                s.line, s.drive, f"{KIND}|{NEW_BASELINE}|{identity}|{now:.3f}", KIND,
+                NEW_BASELINE, 0, "another drive: a new baseline", None, None, "seen", "", now,
+            )])  # fmt: skip
+        except HistoryError as exc:
+            log.error("drive %s: %s", s.drive, exc, extra={"line": s.line, "drive": s.drive})
+
+    # ------------------------------------------------------------ what people do
+
+    async def written(self, drive: str, pnu: int, index: int, raw: int, value: Value) -> None:
+        """pkwbus wrote ``raw`` to a setting (audited): its baseline now."""
+        s = self.swept.get(drive)
+        row = None if s is None else s.rows.get((pnu, index))
+        if s is None or row is None:
+            return
+        now = self.clock()
+        row.raw, row.value, row.seen = raw, shown(value), now
+        row.baseline_raw, row.baseline_value = raw, row.value
+        row.baseline_since, row.baseline_by = now, "write"
+        self._unflag(s, row)
+        await asyncio.to_thread(self.store.save, [row])
+
+    async def accept(self, drive: str) -> int:
+        """The values last read become ``drive``'s baseline; how many settings that was."""
+        s = self.swept[drive]
+        now, rows = self.clock(), [r for r in s.rows.values() if r.raw is not None]
+        for row in rows:
+            row.baseline_raw, row.baseline_value = row.raw, row.value
+            row.baseline_since, row.baseline_by = now, "accepted"
+            self._unflag(s, row)
+        await asyncio.to_thread(self.store.save, rows)
+        return len(rows)
+
+    def view(self, drive: str) -> dict[str, Any]:
+        """The last sweep of ``drive``, as the API shows it (times in seconds since the
+        epoch)."""
+        s = self.swept[drive]
+        parameters = []
+        for ref in s.refs:
+            row = s.rows.get((ref.pnu, ref.index or 0))
+            fmt = s.entry.format_of(ref)
+            parameters.append({
+                "parameter": ref.name,
+                "index": ref.index or 0,
+                "name": fmt.name,
+                "unit": fmt.unit,
+                "value": _value(row.value if row else None),
+                "raw": row.raw if row else None,
+                "seen": row.seen if row else None,
+                "baseline": _value(row.baseline_value if row else None),
+                "baseline_since": row.baseline_since if row else None,
+                "baseline_by": row.baseline_by if row else None,
+                "changed": bool(row and row.changed_seen is not None),
+                "changed_seen": row.changed_seen if row else None,
+                "factory": self._factory(s, ref, fmt),
+                "changed_from_factory": s.from_factory.get(ref.pnu),
+                "refused": s.refused.get((ref.pnu, ref.index or 0)),
+            })  # fmt: skip
+        return {
+            "drive": s.drive,
+            "line": s.line,
+            "identity": s.identity,
+            "catalog": s.catalog,
+            "every": s.every,
+            "swept": s.swept,
+            "parameters": parameters,
+        }
+
+    def characteristics(self, drive: str, pnu: int) -> Characteristics | None:
+        """FC element 21 of the drive's parameter, where it was read."""
+        s = self.swept.get(drive)
+        return None if s is None else s.characteristics.get(pnu)
+
+    def _factory(self, s: Swept, ref: ParameterRef, fmt: ParameterDescription) -> Value | None:
+        raw = s.factory.get(ref.pnu)
+        if raw is None or fmt.vtype is None or isinstance(raw, float):
+            return raw
+        try:
+            return decode_value(raw, fmt.vtype.width or pkw.Width.DWORD, fmt.vtype, fmt.scaling)
+        except ValueError:
+            return None
+
+    # ------------------------------------------------------------ one drive
+
+    async def _sweeps(self, s: Swept) -> None:
+        loop = asyncio.get_running_loop()
+        step = s.every / max(1, len(s.refs))
+        due = loop.time() + s.offset * step
+        while True:
+            complete = True
+            for ref in s.refs:
+                await asyncio.sleep(max(0.0, due - loop.time()))
+                due = max(due, loop.time() - step) + step  # late (no answer): no catch-up
+                try:
+                    await self._one(s, ref)
+                except Unanswered:
+                    complete = False
+                except HistoryError as exc:
+                    complete = False
+                    log.error("drive %s: %s", s.drive, exc,
+                              extra={"line": s.line, "drive": s.drive})  # fmt: skip
+            if complete and s.refs:
+                s.swept = self.clock()
+                s.completed += 1
+                self._show(s)
+                with contextlib.suppress(HistoryError):
+                    await asyncio.to_thread(self.store.swept, s.drive, s.identity, s.swept)
+            if not s.refs:
+                return
+
+    async def _one(self, s: Swept, ref: ParameterRef) -> None:
+        """Read one setting, compare it with its baseline."""
+        found = await self.reads.read(s, ref)
+        if found is not None:
+            await self._compare(s, ref, s.entry.format_of(ref), *found)
+
+    async def _compare(
+        self, s: Swept, ref: ParameterRef, fmt: ParameterDescription, raw: int, value: Value
+    ) -> None:
+        now = self.clock()
+        key = (ref.pnu, ref.index or 0)
+        row = s.rows.get(key)
+        if row is None:
+            row = s.rows[key] = SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
+        before = row.raw
+        row.raw, row.value, row.seen = raw, shown(value), now
+        events: list[DriveEvent] = []
+        if row.baseline_raw is None:
+            row.baseline_raw, row.baseline_value = raw, row.value
+            row.baseline_since, row.baseline_by = now, "sweep"
+        elif raw == row.baseline_raw:
+            if row.changed_seen is not None:
+                log.info(
+                    "drive %s: setting %s %s is back at its baseline %s", s.drive, ref.name,
+                    fmt.name, _said(value, fmt), extra={"line": s.line, "drive": s.drive},
+                )  # fmt: skip
+            self._unflag(s, row)
+        elif raw != before:  # a change nobody audited (another one, if it was changed)
+            row.changed_seen = row.changed_seen or now
+            self.changed.labels(s.line, s.drive, ref.name, str(ref.index or 0)).set(1)
+            baseline = _said(_value(row.baseline_value), fmt)
+            log.warning(
+                "drive %s: setting %s %s changed to %s (baseline %s), not by pkwbus",
+                s.drive, ref.name, fmt.name, _said(value, fmt), baseline,
+                extra={"line": s.line, "drive": s.drive},
+            )  # fmt: skip
+            events.append(DriveEvent(
+                s.line, s.drive, f"{KIND}|{ref.name}|{ref.index or 0}|{raw}|{now:.3f}", KIND,
+                ref.name, ref.pnu, fmt.name, raw, None, "seen", "", now,
+            ))  # fmt: skip
+        # The row and its event in one transaction, which a stop does not cut in two.
+        new = await asyncio.shield(asyncio.to_thread(self.store.save, [row], events))
+        self.stream.count(new)
+
+    def _unflag(self, s: Swept, row: SettingRow) -> None:
+        if row.changed_seen is not None:
+            row.changed_seen = None
+            with contextlib.suppress(KeyError):
+                self.changed.remove(s.line, s.drive, row.parameter, str(row.index))
+
+    def _show(self, s: Swept) -> None:
+        if s.swept is not None:
+            self.swept_at.labels(s.line, s.drive).set(s.swept)
+        for row in s.rows.values():
+            if row.changed_seen is not None:
+                self.changed.labels(s.line, s.drive, row.parameter, str(row.index)).set(1)
+
+
+def _value(text: str | None) -> Value | None:
+    return None if text is None else json.loads(text)
+
+
+def _said(value: Value | None, fmt: ParameterDescription) -> str:
+    if value is None:
+        return "?"
+    option = fmt.option(value)
+    unit = f" {fmt.unit}" if fmt.unit else ""
+    return f"{value}{unit}" + (f" ({option})" if option else "")

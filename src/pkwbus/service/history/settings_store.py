@@ -1,0 +1,182 @@
+"""The drives' settings as swept, and each one's baseline, in the history database (SQLite).
+
+One row per drive and setting (parameter and index): the value the last sweep read (raw
+number and value), the baseline it is compared with, since when and by what that baseline
+holds (``sweep``: the first sweep; ``write``: a write pkwbus made; ``accepted``: the API
+accepted the present values), and since when the value differs from it. One row per drive
+for the identity the baseline belongs to and the end of its last complete sweep. Every
+store is one synced transaction (:mod:`pkwbus.service.audit.synced`), so a restart
+neither forgets a baseline nor reports a change twice.
+
+Thread-safe: the service calls it off the event loop. Raises
+:class:`~pkwbus.service.history.store.HistoryError` (one line) when the database cannot
+be opened or written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+import threading
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+from pkwbus.service.audit.synced import connect_synced
+from pkwbus.service.history.store import (
+    EVENT_COLUMNS,
+    SCHEMA,
+    DriveEvent,
+    HistoryError,
+    event_row,
+)
+
+__all__ = ["SETTINGS_SCHEMA", "SettingRow", "SettingsStore", "SweptDrive"]
+
+SETTINGS_SCHEMA: Final = """
+CREATE TABLE IF NOT EXISTS settings (
+    drive TEXT NOT NULL,
+    pnu INTEGER NOT NULL,
+    idx INTEGER NOT NULL,
+    parameter TEXT NOT NULL,
+    raw INTEGER,
+    value TEXT,
+    seen REAL,
+    baseline_raw INTEGER,
+    baseline_value TEXT,
+    baseline_since REAL,
+    baseline_by TEXT,
+    changed_seen REAL,
+    PRIMARY KEY (drive, pnu, idx)
+);
+CREATE TABLE IF NOT EXISTS settings_drives (
+    drive TEXT PRIMARY KEY,
+    identity TEXT,
+    swept REAL
+);
+"""
+
+_COLUMNS: Final = (
+    "drive, pnu, idx, parameter, raw, value, seen, baseline_raw, baseline_value,"
+    " baseline_since, baseline_by, changed_seen"
+)
+
+
+@dataclass(slots=True)
+class SettingRow:
+    """One setting of a drive: the value last read and its baseline (raw numbers compare;
+    ``value`` and ``baseline_value`` are as shown, JSON text). ``changed_seen``: since
+    when the value differs from the baseline (None: it does not)."""
+
+    drive: str
+    pnu: int
+    index: int
+    parameter: str
+    raw: int | None = None
+    value: str | None = None
+    seen: float | None = None
+    baseline_raw: int | None = None
+    baseline_value: str | None = None
+    baseline_since: float | None = None
+    baseline_by: str | None = None
+    changed_seen: float | None = None
+
+    @property
+    def key(self) -> tuple[int, int]:
+        return self.pnu, self.index
+
+    def values(self) -> tuple[Any, ...]:
+        return (
+            self.drive, self.pnu, self.index, self.parameter, self.raw, self.value, self.seen,
+            self.baseline_raw, self.baseline_value, self.baseline_since, self.baseline_by,
+            self.changed_seen,
+        )  # fmt: skip
+
+
+@dataclass(slots=True)
+class SweptDrive:
+    """What is kept of a drive's settings: the identity its baseline belongs to, the end of
+    its last complete sweep, and its settings by (PNU, index)."""
+
+    identity: str | None = None
+    swept: float | None = None
+    rows: dict[tuple[int, int], SettingRow] | None = None
+
+
+class SettingsStore:
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._lock = threading.Lock()
+        try:
+            self._db = connect_synced(path, SCHEMA + SETTINGS_SCHEMA)
+        except (sqlite3.Error, OSError) as exc:
+            raise HistoryError(f"cannot open the history database {self.path}: {exc}") from None
+
+    def load(self, drive: str) -> SweptDrive:
+        """What is kept of ``drive`` (empty when nothing is)."""
+        found = SweptDrive(rows={})
+        with self._lock:
+            try:
+                head = self._db.execute(
+                    "SELECT identity, swept FROM settings_drives WHERE drive = ?", (drive,)
+                ).fetchone()
+                rows = self._db.execute(
+                    f"SELECT {_COLUMNS} FROM settings WHERE drive = ?", (drive,)
+                ).fetchall()
+            except sqlite3.Error as exc:
+                raise HistoryError(f"history database {self.path}: {exc}") from None
+        if head is not None:
+            found.identity, found.swept = head
+        found.rows = {(r[1], r[2]): SettingRow(*r) for r in rows}
+        return found
+
+    def save(
+        self, rows: Iterable[SettingRow], events: Iterable[DriveEvent] = ()
+    ) -> list[DriveEvent]:
+        """Store ``rows`` (each replacing the drive's row of its setting) and the ``events``
+        they tell, in one synced transaction: a row flagged changed is never kept without
+        its event. The events that were new."""
+        sql = f"INSERT OR REPLACE INTO settings ({_COLUMNS}) VALUES ({', '.join('?' * 12)})"
+        told = f"INSERT OR IGNORE INTO events ({EVENT_COLUMNS}) VALUES ({', '.join('?' * 12)})"
+        new: list[DriveEvent] = []
+        with self._lock:
+            try:
+                self._db.execute("BEGIN IMMEDIATE")
+                for row in rows:
+                    self._db.execute(sql, row.values())
+                for e in events:
+                    if self._db.execute(told, event_row(e)).rowcount:
+                        new.append(e)
+                self._db.execute("COMMIT")
+            except sqlite3.Error as exc:
+                with contextlib.suppress(sqlite3.Error):
+                    self._db.execute("ROLLBACK")
+                raise HistoryError(f"history database {self.path}: {exc}") from None
+        return new
+
+    def swept(self, drive: str, identity: str | None, when: float | None) -> None:
+        """The identity of ``drive``'s baseline and the end of its last complete sweep."""
+        sql = "INSERT OR REPLACE INTO settings_drives (drive, identity, swept) VALUES (?, ?, ?)"
+        self._write([(sql, (drive, identity, when))])
+
+    def forget(self, drive: str, identity: str | None) -> None:
+        """A new baseline for ``drive``, another drive now (``identity``): its rows go."""
+        head = "INSERT OR REPLACE INTO settings_drives (drive, identity, swept) VALUES (?, ?, NULL)"
+        self._write([("DELETE FROM settings WHERE drive = ?", (drive,)), (head, (drive, identity))])
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def _write(self, statements: list[tuple[str, tuple[Any, ...]]]) -> None:
+        with self._lock:
+            try:
+                self._db.execute("BEGIN IMMEDIATE")
+                for sql, args in statements:
+                    self._db.execute(sql, args)
+                self._db.execute("COMMIT")
+            except sqlite3.Error as exc:
+                with contextlib.suppress(sqlite3.Error):
+                    self._db.execute("ROLLBACK")
+                raise HistoryError(f"history database {self.path}: {exc}") from None
