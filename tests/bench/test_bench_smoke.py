@@ -141,3 +141,11 @@ def test_events_share_smallest() -> None:
     found = load("events_share").run(seconds=1.0, repeat=1, settle=1.0)
     assert found["busy_off"] > 0 and found["busy_auto"] > 0
     assert found["polls_done_off"] > 0
+
+
+def test_settings_share_smallest() -> None:
+    found = load("settings_share").run(seconds=1.0, repeat=1, every=5.0, settle=1.0, drives=4)
+    (on,) = found["runs"]["on"]
+    assert on["reads"] > 0 and on["busy"] > 0, "the sweep read settings in the window"
+    assert found["runs"]["off"][0]["reads"] == 0, "none with settings: off"
+    assert found["polls_done_off"] > 0
