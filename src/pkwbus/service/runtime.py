@@ -174,7 +174,9 @@ class Settings(Protocol):
 
     async def accept(self, drive: str) -> int: ...
 
-    async def written(self, drive: str, pnu: int, index: int, raw: int, value: Any) -> None: ...
+    async def written(
+        self, drive: str, pnu: int, index: int, raw: int, value: Any, *, answered: bool = True
+    ) -> None: ...
 
 
 class Trends(Protocol):

@@ -103,3 +103,39 @@ def test_the_type_of_a_drive_is_its_model_without_its_software() -> None:
 def test_a_document_that_is_not_a_backup_is_refused(document: dict[str, Any]) -> None:
     with pytest.raises(ValidationError):
         Backup.model_validate(document)
+
+
+@pytest.mark.parametrize(
+    ("document", "dialect", "catalog", "other"),
+    [
+        # No identity on either side (describe: off, a PPO's four words): the catalog tells.
+        ({"catalog": "siemens-g120", "dialect": "uss"}, "fc", "danfoss-fc", "another catalog"),
+        # Neither names a catalog: the dialect tells ("1120" is 11-20 on an FC drive).
+        ({"dialect": "uss"}, "fc", None, "another dialect"),
+        # The same catalog over another bus (FC protocol, then PROFIBUS): the same kind.
+        ({"catalog": "danfoss-fc", "dialect": "fc"}, "danfoss-pcv", "danfoss-fc", None),
+    ],
+)
+def test_a_backup_of_another_kind_of_drive_is_told_without_identities(
+    document: dict[str, Any], dialect: str, catalog: str | None, other: str | None
+) -> None:
+    b = Backup.model_validate(
+        {"drive": "a", "settings": [{"parameter": "1120", "value": 5.0}], **document}
+    )
+    now = {("1120", 0): present(10.0)}
+    plan, skipped = plan_restore(
+        b, now, target_identity=None, target_dialect=dialect, target_catalog=catalog
+    )
+    if other is None:
+        assert [p.new for p in plan] == [5.0] and skipped == []
+    else:
+        assert plan == [] and other in skipped[0].why
+        forced, _ = plan_restore(b, now, target_identity=None, target_dialect=dialect,
+                                 target_catalog=catalog, force=True)  # fmt: skip
+        assert [p.new for p in forced] == [5.0]
+
+
+@pytest.mark.parametrize("number", [float("nan"), float("inf"), float("-inf")])
+def test_a_value_that_is_not_a_finite_number_is_no_backup(number: float) -> None:
+    with pytest.raises(ValidationError):
+        Backup.model_validate({"drive": "a", "settings": [{"parameter": "3-41", "value": number}]})

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictFloat, StrictInt, StrictStr
 
@@ -48,7 +48,7 @@ class BackupSetting(BaseModel):
     parameter: StrictStr = Field(min_length=1, max_length=32)
     index: StrictInt = Field(default=0, ge=0, le=255)
     name: StrictStr = ""
-    value: StrictInt | StrictFloat | StrictStr | None = None
+    value: StrictInt | Annotated[StrictFloat, Field(allow_inf_nan=False)] | StrictStr | None = None
     unit: StrictStr = ""
     raw: StrictInt | None = None
     seen: StrictStr | None = None
@@ -120,16 +120,18 @@ def plan_restore(
     *,
     target_identity: str | None,
     force: bool = False,
+    target_dialect: str | None = None,
+    target_catalog: str | None = None,
 ) -> tuple[list[Planned], list[Skipped]]:
     """The writes that make the target hold ``backup``'s values, in its order, and what is
     skipped with why. ``present``: the target's answers, by (parameter, index) as the
     backup names them."""
     plan: list[Planned] = []
     skipped: list[Skipped] = []
-    theirs, ours = drive_type(backup.identity), drive_type(target_identity)
-    if theirs is not None and ours is not None and theirs != ours and not force:
-        other = f"the backup is of another drive type ({theirs}, this drive is {ours}): force it"
-        return [], [Skipped(s.parameter, s.index, other) for s in backup.settings]
+    other = _other_kind(backup, target_identity, target_dialect, target_catalog)
+    if other is not None and not force:
+        whole = f"the backup is of {other}: force it"
+        return [], [Skipped(s.parameter, s.index, whole) for s in backup.settings]
     for s in backup.settings:
         why = _unwritable(s, present.get((s.parameter, s.index)))
         if why is not None:
@@ -140,6 +142,25 @@ def plan_restore(
         if not _same(now.value, s.value):
             plan.append(Planned(s.parameter, s.index, now.value, s.value))
     return plan, skipped
+
+
+def _other_kind(
+    backup: Backup, identity: str | None, dialect: str | None, catalog: str | None
+) -> str | None:
+    """What tells the backup is of another kind of drive than the target: its model (where
+    both are identified), else its catalog (where both name one; a parameter's number
+    means another parameter in another catalog), else its dialect; None: the same kind as
+    far as can be told."""
+    theirs, ours = drive_type(backup.identity), drive_type(identity)
+    if theirs is not None and ours is not None:
+        return None if theirs == ours else f"another drive type ({theirs}, this drive is {ours})"
+    if backup.catalog and catalog:
+        if backup.catalog == catalog:
+            return None
+        return f"another catalog ({backup.catalog}, this drive's is {catalog})"
+    if backup.dialect and dialect and backup.dialect != dialect:
+        return f"another dialect ({backup.dialect}, this drive speaks {dialect})"
+    return None
 
 
 def _unwritable(s: BackupSetting, now: Present | None) -> str | None:

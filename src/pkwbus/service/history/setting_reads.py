@@ -58,6 +58,9 @@ class Swept:
     characteristics: dict[int, Characteristics | None] = field(default_factory=dict)
     from_factory: dict[int, bool | None] = field(default_factory=dict)
     refused: dict[tuple[int, int], str] = field(default_factory=dict)
+    # Writes pkwbus made whose answer was lost (or not yet stored), by setting: the raw
+    # number a sweep takes as pkwbus's.
+    expected: dict[tuple[int, int], int] = field(default_factory=dict)
 
     @property
     def drive(self) -> str:

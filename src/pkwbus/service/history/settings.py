@@ -14,8 +14,8 @@ reads the same whatever scaling the drive describes.
 - Any other difference is a change nobody audited (the keypad, another master, a
   parameter copy): ``pkwbus_drive_setting_changed`` while it lasts, one log line and one
   event in the stream of the drives' own log entries (:mod:`.stream`), kind ``setting``.
-- A drive identified as another drive (its model or software, as the planner reads them)
-  starts a new baseline, and the log and the stream say so.
+- A drive identified as another model (as the planner reads its identity) starts a new
+  baseline, and the log and the stream say so; other software on the same model keeps it.
 
 What the drive says of the factory setting: a Danfoss FC drive's description element 20
 (the factory value) and 21 (additional characteristics: no bus access, read-only over
@@ -32,12 +32,13 @@ import json
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 from prometheus_client import CollectorRegistry, Gauge
 
 from pkwbus.catalog.description import ParameterDescription, Value
-from pkwbus.master.events import Event
+from pkwbus.master.events import Event, LineState
 from pkwbus.master.planning.plan import Described
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import (
@@ -45,6 +46,7 @@ from pkwbus.protocol.pkw.descriptions import (
 )
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.encoding import decode_value
+from pkwbus.service.history.backup import drive_type
 from pkwbus.service.history.setting_reads import SettingReads, Swept, Unanswered
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import DriveEvent, HistoryError
@@ -88,6 +90,7 @@ class SettingsWatcher:
         self.job_timeout = job_timeout
         self._tasks: list[asyncio.Task[None]] = []
         self._identifying: set[asyncio.Future[None]] = set()
+        self._lines: dict[str, asyncio.Event] = {}  # each line's port open
         self.changed = Gauge(
             "pkwbus_drive_setting_changed",
             "1 while a setting of the drive differs from its baseline and nobody audited the"
@@ -131,9 +134,16 @@ class SettingsWatcher:
                 await task
         self._tasks.clear()
 
+    def _up(self, line: str) -> asyncio.Event:
+        return self._lines.setdefault(line, asyncio.Event())
+
     def on_events(self, events: Sequence[Event]) -> None:
-        """A drive identified as another drive starts a new baseline."""
+        """A drive identified as another drive starts a new baseline; a line's port open
+        or closed (the reads wait for it)."""
         for event in events:
+            if isinstance(event, LineState):
+                up = self._up(event.line)
+                up.set() if event.up else up.clear()
             if isinstance(event, Described) and event.identity is not None:
                 s = self.swept.get(event.drive)
                 if s is None or event.identity == s.told:
@@ -149,7 +159,9 @@ class SettingsWatcher:
             return
         before, s.identity = s.identity, identity
         try:
-            if before is None:  # the first identity known of it: its baseline's
+            # The first identity known of it, or the same model with other software (an
+            # update keeps what was set): its baseline's.
+            if before is None or drive_type(before) == drive_type(identity):
                 await asyncio.to_thread(self.store.swept, s.drive, identity, s.swept)
                 return
             for row in s.rows.values():  # what the old drive held is gone at once
@@ -175,28 +187,50 @@ class SettingsWatcher:
 
     # ------------------------------------------------------------ what people do
 
-    async def written(self, drive: str, pnu: int, index: int, raw: int, value: Value) -> None:
-        """pkwbus wrote ``raw`` to a setting (audited): its baseline now."""
+    async def written(
+        self, drive: str, pnu: int, index: int, raw: int, value: Value | None, *,
+        answered: bool = True,
+    ) -> None:  # fmt: skip
+        """pkwbus wrote ``raw`` to a setting (audited): its baseline now. ``answered``
+        false: the write got no answer and may have been made: a sweep that reads ``raw``
+        there takes it as pkwbus's. Never raises: the history's trouble is logged (the write
+        is done; the baseline then moves at the next sweep that reads it)."""
         s = self.swept.get(drive)
-        row = None if s is None else s.rows.get((pnu, index))
-        if s is None or row is None:
+        if s is None:
+            return
+        key = (pnu, index)
+        s.expected[key] = raw
+        row = s.rows.get(key)
+        if not answered or row is None:
             return
         now = self.clock()
-        row.raw, row.value, row.seen = raw, shown(value), now
-        row.baseline_raw, row.baseline_value = raw, row.value
-        row.baseline_since, row.baseline_by = now, "write"
-        self._unflag(s, row)
-        await asyncio.to_thread(self.store.save, [row])
+        moved = replace(row, raw=raw, value=shown(value), seen=now, baseline_raw=raw,
+                        baseline_value=shown(value), baseline_since=now, baseline_by="write",
+                        changed_seen=None)  # fmt: skip
+        s.rows[key] = moved
+        if row.changed_seen is not None:
+            with contextlib.suppress(KeyError):
+                self.changed.remove(s.line, s.drive, row.parameter, str(row.index))
+        try:
+            await asyncio.shield(asyncio.to_thread(self.store.save, [moved]))
+            s.expected.pop(key, None)
+        except HistoryError as exc:
+            log.error("drive %s: the baseline of %s is not stored: %s", drive, row.parameter,
+                      exc, extra={"line": s.line, "drive": drive})  # fmt: skip
 
     async def accept(self, drive: str) -> int:
         """The values last read become ``drive``'s baseline; how many settings that was."""
         s = self.swept[drive]
-        now, rows = self.clock(), [r for r in s.rows.values() if r.raw is not None]
+        now = self.clock()
+        rows = [
+            replace(r, baseline_raw=r.raw, baseline_value=r.value, baseline_since=now,
+                    baseline_by="accepted", changed_seen=None)
+            for r in s.rows.values() if r.raw is not None
+        ]  # fmt: skip
+        await asyncio.shield(asyncio.to_thread(self.store.save, rows))  # HistoryError
         for row in rows:
-            row.baseline_raw, row.baseline_value = row.raw, row.value
-            row.baseline_since, row.baseline_by = now, "accepted"
-            self._unflag(s, row)
-        await asyncio.to_thread(self.store.save, rows)
+            self._unflag(s, s.rows[row.key])
+            s.rows[row.key] = row
         return len(rows)
 
     def view(self, drive: str) -> dict[str, Any]:
@@ -243,8 +277,9 @@ class SettingsWatcher:
         raw = s.factory.get(ref.pnu)
         if raw is None or fmt.vtype is None or isinstance(raw, float):
             return raw
-        try:
-            return decode_value(raw, fmt.vtype.width or pkw.Width.DWORD, fmt.vtype, fmt.scaling)
+        width = fmt.vtype.width or pkw.Width.DWORD
+        try:  # factory_raw gives the number of the type, signed: as it is sent again
+            return decode_value(raw & ((1 << width.value) - 1), width, fmt.vtype, fmt.scaling)
         except ValueError:
             return None
 
@@ -258,6 +293,7 @@ class SettingsWatcher:
             complete = True
             for ref in s.refs:
                 await asyncio.sleep(max(0.0, due - loop.time()))
+                await self._up(s.line).wait()  # not into a closed port: read once it opens
                 due = max(due, loop.time() - step) + step  # late (no answer): no catch-up
                 try:
                     await self._one(s, ref)
@@ -285,40 +321,49 @@ class SettingsWatcher:
     async def _compare(
         self, s: Swept, ref: ParameterRef, fmt: ParameterDescription, raw: int, value: Value
     ) -> None:
+        """Compare a value read with its baseline. The row and its event are stored first,
+        in one transaction a stop does not cut in two; only then does the change count,
+        show and get its log line: a store that fails leaves all as it was, and the next
+        sweep tries again (HistoryError)."""
         now = self.clock()
         key = (ref.pnu, ref.index or 0)
-        row = s.rows.get(key)
-        if row is None:
-            row = s.rows[key] = SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
-        before = row.raw
-        row.raw, row.value, row.seen = raw, shown(value), now
+        kept = s.rows.get(key) or SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
+        row = replace(kept, raw=raw, value=shown(value), seen=now)
         events: list[DriveEvent] = []
-        if row.baseline_raw is None:
+        written = s.expected.get(key) == raw  # a write pkwbus made whose answer got lost
+        back = changed = False
+        if row.baseline_raw is None or written:
             row.baseline_raw, row.baseline_value = raw, row.value
-            row.baseline_since, row.baseline_by = now, "sweep"
+            row.baseline_since, row.baseline_by = now, "write" if written else "sweep"
+            back, row.changed_seen = row.changed_seen is not None, None
         elif raw == row.baseline_raw:
-            if row.changed_seen is not None:
-                log.info(
-                    "drive %s: setting %s %s is back at its baseline %s", s.drive, ref.name,
-                    fmt.name, _said(value, fmt), extra={"line": s.line, "drive": s.drive},
-                )  # fmt: skip
-            self._unflag(s, row)
-        elif raw != before:  # a change nobody audited (another one, if it was changed)
+            back, row.changed_seen = row.changed_seen is not None, None
+        elif raw != kept.raw:  # a change nobody audited (another one, if it was changed)
             row.changed_seen = row.changed_seen or now
-            self.changed.labels(s.line, s.drive, ref.name, str(ref.index or 0)).set(1)
-            baseline = _said(_value(row.baseline_value), fmt)
-            log.warning(
-                "drive %s: setting %s %s changed to %s (baseline %s), not by pkwbus",
-                s.drive, ref.name, fmt.name, _said(value, fmt), baseline,
-                extra={"line": s.line, "drive": s.drive},
-            )  # fmt: skip
+            changed = True
             events.append(DriveEvent(
                 s.line, s.drive, f"{KIND}|{ref.name}|{ref.index or 0}|{raw}|{now:.3f}", KIND,
                 ref.name, ref.pnu, fmt.name, raw, None, "seen", "", now,
             ))  # fmt: skip
-        # The row and its event in one transaction, which a stop does not cut in two.
         new = await asyncio.shield(asyncio.to_thread(self.store.save, [row], events))
+        s.rows[key] = row
+        s.expected.pop(key, None)
         self.stream.count(new)
+        labels = (s.line, s.drive, row.parameter, str(row.index))
+        ctx = {"line": s.line, "drive": s.drive}
+        if back:
+            with contextlib.suppress(KeyError):
+                self.changed.remove(*labels)
+            if not written:
+                log.info("drive %s: setting %s %s is back at its baseline %s", s.drive,
+                         ref.name, fmt.name, _said(value, fmt), extra=ctx)  # fmt: skip
+        if changed:
+            self.changed.labels(*labels).set(1)
+            log.warning(
+                "drive %s: setting %s %s changed to %s (baseline %s), not by pkwbus",
+                s.drive, ref.name, fmt.name, _said(value, fmt),
+                _said(_value(row.baseline_value), fmt), extra=ctx,
+            )  # fmt: skip
 
     def _unflag(self, s: Swept, row: SettingRow) -> None:
         if row.changed_seen is not None:
@@ -329,8 +374,9 @@ class SettingsWatcher:
     def _show(self, s: Swept) -> None:
         if s.swept is not None:
             self.swept_at.labels(s.line, s.drive).set(s.swept)
+        swept = {(ref.pnu, ref.index or 0) for ref in s.refs}  # not one no longer swept
         for row in s.rows.values():
-            if row.changed_seen is not None:
+            if row.changed_seen is not None and row.key in swept:
                 self.changed.labels(s.line, s.drive, row.parameter, str(row.index)).set(1)
 
 

@@ -279,9 +279,14 @@ def create_app(
         return await settings.accept(drive, caller)
 
     @app.get("/api/v1/drives/{drive}/backup", responses=ERRORS)
-    async def backup(drive: str, format: Literal["json", "yaml"] = Query(default="json")) -> Any:
-        """A backup document of the drive's settings (``?format=yaml`` for YAML)."""
-        document = await settings.backup(drive)
+    async def backup(
+        drive: str,
+        format: Literal["json", "yaml"] = Query(default="json"),
+        of: Literal["values", "baseline"] = Query(default="values"),
+    ) -> Any:
+        """A backup document of the drive's settings (``?format=yaml`` for YAML): the
+        values last read, or (``?of=baseline``) its baseline."""
+        document = await settings.backup(drive, of)
         if format == "yaml":
             text = yaml.safe_dump(document, sort_keys=False, allow_unicode=True)
             return Response(text, media_type="application/yaml")

@@ -23,7 +23,7 @@ from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.planning.jobs import JobKind, JobResult
-from pkwbus.master.planning.outcomes import Answered
+from pkwbus.master.planning.outcomes import Answered, LineFailed, Mismatch, TimedOut
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterRef, encode_text
@@ -169,11 +169,7 @@ class Writes:
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )
-        settings = self.runtime.settings
-        if settings is not None and isinstance(result.outcome, Answered) and not request.text:
-            # An audited write: the setting's baseline now, before any later sweep reads it.
-            written = result.value if result.value is not None else order.value
-            await settings.written(entry.name, ref.pnu, ref.index or 0, request.value, written)
+        await self._tell_settings(entry, ref, request, result, order)
         if result.previous is not None and result.previous.value != old:
             old = audit.old_value = result.previous.value  # stored with the outcome
         audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)
@@ -201,6 +197,30 @@ class Writes:
         if not stored:
             body["audit"] = INCOMPLETE
         return body
+
+    async def _tell_settings(
+        self,
+        entry: DriveEntry,
+        ref: ParameterRef,
+        request: pkw.PkwRequest,
+        result: JobResult,
+        order: WriteOrder,
+    ) -> None:
+        """An audited write is the setting's baseline now, before any later sweep reads it:
+        the value the drive answered; one it acknowledged with another number, that one;
+        one whose answer got lost, the value written if a sweep finds it there."""
+        settings = self.runtime.settings
+        if settings is None or request.text:
+            return
+        index, outcome = ref.index or 0, result.outcome
+        if isinstance(outcome, Answered):
+            value = result.value if result.value is not None else order.value
+            await settings.written(entry.name, ref.pnu, index, request.value, value)
+        elif isinstance(outcome, Mismatch):
+            await settings.written(entry.name, ref.pnu, index, outcome.answered, None)
+        elif isinstance(outcome, TimedOut | LineFailed):
+            await settings.written(entry.name, ref.pnu, index, request.value, order.value,
+                                   answered=False)  # fmt: skip
 
     def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
         reading = self.runtime.snapshot.latest.get((entry.name, ref.pnu, ref.index or 0))

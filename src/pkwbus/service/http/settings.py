@@ -28,11 +28,17 @@ from pkwbus.master.planning.jobs import JobKind
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.pkw.descriptions import DescriptionForm, form_of
+from pkwbus.protocol.pkw.descriptions import (
+    CHARACTERISTICS,
+    Characteristics,
+    DescriptionForm,
+    form_of,
+)
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
 from pkwbus.service.history.backup import Backup, Present, plan_restore
+from pkwbus.service.history.store import HistoryError
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
@@ -114,7 +120,14 @@ class DriveSettings:
                 503, "audit_unavailable",
                 f"the audit log cannot record it ({exc}): the baseline stays as it was",
             ) from None  # fmt: skip
-        count = await settings.accept(drive)
+        try:
+            count = await settings.accept(drive)
+        except HistoryError as exc:
+            await asyncio.shield(self.audit_writer.outcome(row, outcome="error", detail=str(exc)))
+            raise ApiError(
+                503, "history_unavailable",
+                f"the history database cannot store the baseline ({exc}): it stays as it was",
+            ) from None  # fmt: skip
         stored = await asyncio.shield(
             self.audit_writer.outcome(row, outcome="ok", detail=f"{count} setting(s)")
         )
@@ -123,14 +136,26 @@ class DriveSettings:
             body["audit"] = INCOMPLETE
         return body
 
-    async def backup(self, drive: str) -> dict[str, Any]:
+    async def backup(self, drive: str, of: str = "values") -> dict[str, Any]:
+        """The drive's settings as a document: the values last read (``of`` ``values``; 409
+        before a first complete sweep: no partial backup), or its baseline (``baseline``:
+        what it held when last accepted, written by pkwbus or first swept - after a
+        replacement of the same model, the failed drive's)."""
         entry, settings = self._swept(drive)
         found = settings.view(drive)
+        if of == "values" and found["swept"] is None:
+            raise ApiError(
+                409, "not_swept_yet",
+                f"no sweep of the settings of {drive} is complete yet: ask again in"
+                f" {found['every']:g} s at most (or ?of=baseline)",
+            )  # fmt: skip
+        value, raw = ("value", "raw") if of == "values" else ("baseline", "baseline_raw")
+        time_of = "seen" if of == "values" else "baseline_since"
         rows = [
-            {k: r[k] for k in ("parameter", "index", "name", "value", "unit", "raw")}
-            | {"seen": _iso(r["seen"])}
+            {k: r[k] for k in ("parameter", "index", "name", "unit")}
+            | {"value": r[value], "raw": r[raw], "seen": _iso(r[time_of])}
             for r in found["parameters"]
-            if r["raw"] is not None
+            if r[raw] is not None
         ]
         document = Backup(
             drive=drive,
@@ -161,8 +186,11 @@ class DriveSettings:
         for s in backup.settings:
             present[(s.parameter, s.index)] = await self._present(entry, settings, s.parameter,
                                                                   s.index)  # fmt: skip
-        identity = settings.view(drive)["identity"]
-        plan, skipped = plan_restore(backup, present, target_identity=identity, force=force)
+        view = settings.view(drive)
+        plan, skipped = plan_restore(
+            backup, present, target_identity=view["identity"], force=force,
+            target_dialect=entry.target.dialect.name, target_catalog=view["catalog"],
+        )  # fmt: skip
         results: list[dict[str, Any]] = []
         stopped: str | None = None
         for step in plan:
@@ -212,7 +240,7 @@ class DriveSettings:
         ref = ParameterRef(ref.pnu, index if index or ref.index is not None else None, ref.name)
         fmt = described_format(self.runtime, entry, ref)
         result = await self._reads.try_read(entry, ref, fmt)
-        characteristics = settings.characteristics(entry.name, ref.pnu)
+        characteristics = await self._characteristics(entry, ref.pnu)
         read_only = fmt.prefix == "r" or bool(
             (d := entry.described.get(ref.pnu)) is not None and d.read_only
         )
@@ -221,6 +249,19 @@ class DriveSettings:
         if not isinstance(result.outcome, Answered):
             return Present(None, fmt)
         return Present(result.value, fmt, None, characteristics, read_only)
+
+    async def _characteristics(self, entry: DriveEntry, pnu: int) -> Characteristics | None:
+        """FC element 21 of the drive's parameter, read now (a replacement's may differ
+        from what the sweep read of the drive before); None where it gives none."""
+        if form_of(entry.target.dialect) is not DescriptionForm.DANFOSS_FC:
+            return None
+        request = pkw.read_description(entry.target.dialect, pnu, CHARACTERISTICS)
+        result = await self.runtime.submit(entry.name, request, JobKind.READ,
+                                           ParameterDescription())  # fmt: skip
+        outcome = result.outcome
+        if isinstance(outcome, Answered) and isinstance(outcome.response, pkw.DescriptionResponse):
+            return Characteristics.of(outcome.response)
+        return None
 
     async def _setup(self, entry: DriveEntry) -> int | None:
         """A Danfoss drive's active set-up (0-10), None where it gives none."""
