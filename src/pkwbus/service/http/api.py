@@ -14,9 +14,8 @@ import asyncio
 import hmac
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
-import yaml
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
@@ -39,7 +38,6 @@ from pkwbus.service.http.models import (
     MaintenanceBody,
     MaintenanceResult,
     Readiness,
-    RestoreBody,
     ValueBody,
     WriteBody,
     WriteResult,
@@ -52,6 +50,7 @@ from pkwbus.service.http.parameters import (
     ParameterService,
     WriteOrder,
 )
+from pkwbus.service.http.settings_routes import add_settings_routes
 from pkwbus.service.http.views import (
     drive_view,
     event_views,
@@ -261,49 +260,7 @@ def create_app(
         caller = Caller(_client(request), request.headers.get("authorization"))
         return await switches.switch(drive, body.on, body.reason, caller)
 
-    @app.get("/api/v1/drives/{drive}/settings", responses=ERRORS)
-    async def drive_settings(drive: str) -> dict[str, Any]:
-        """The last sweep of the drive's settings: each with its value, its baseline,
-        whether (and since when) it differs from it, and what the drive says of its
-        factory setting (null where it says nothing)."""
-        return settings.view(drive)
-
-    @app.put(
-        "/api/v1/drives/{drive}/settings/baseline",
-        responses=ERRORS,
-        dependencies=[Security(BEARER)],
-    )
-    async def accept_baseline(drive: str, request: Request) -> dict[str, Any]:
-        """The values last read become the drive's baseline. Audited."""
-        caller = Caller(_client(request), request.headers.get("authorization"))
-        return await settings.accept(drive, caller)
-
-    @app.get("/api/v1/drives/{drive}/backup", responses=ERRORS)
-    async def backup(
-        drive: str,
-        format: Literal["json", "yaml"] = Query(default="json"),
-        of: Literal["values", "baseline"] = Query(default="values"),
-    ) -> Any:
-        """A backup document of the drive's settings (``?format=yaml`` for YAML): the
-        values last read, or (``?of=baseline``) its baseline."""
-        document = await settings.backup(drive, of)
-        if format == "yaml":
-            text = yaml.safe_dump(document, sort_keys=False, allow_unicode=True)
-            return Response(text, media_type="application/yaml")
-        return document
-
-    @app.post(
-        "/api/v1/drives/{drive}/restore",
-        responses=ERRORS,
-        dependencies=[Security(BEARER)],
-    )
-    async def restore(drive: str, body: RestoreBody, request: Request) -> dict[str, Any]:
-        """Plan the writes that make the drive hold the backup's values; without
-        ``dry_run`` write them through the one write path (audited, read back)."""
-        caller = Caller(_client(request), request.headers.get("authorization"))
-        return await settings.restore(
-            drive, body.backup, body.dry_run, body.store, body.force, caller
-        )
+    add_settings_routes(app, settings, ERRORS, BEARER, _client)
 
     @app.get("/api/v1/audit", responses=ERRORS, dependencies=[Security(BEARER)])
     async def audit_log(
