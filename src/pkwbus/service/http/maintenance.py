@@ -23,6 +23,7 @@ from pkwbus.service.http.parameter_checks import (
     Caller,
     TokenCheck,
     clip,
+    identified,
     malformed,
 )
 from pkwbus.service.runtime import Runtime
@@ -41,11 +42,7 @@ class Maintenance:
         self._tokens = tokens
 
     async def _identify(self, caller: Caller) -> str | None:
-        try:
-            return self._tokens.identify(caller)
-        except ApiError as exc:
-            exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
-            raise
+        return await identified(self._tokens, self.audit_writer, caller)
 
     async def refuse_malformed(self, drive: str, caller: Caller, problem: str) -> bool:
         """Audit a switch whose body did not validate (nothing changed); False when the

@@ -21,6 +21,7 @@ from pkwbus.master.planning.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
+from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.http.outcome_answers import http_failure
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -35,6 +36,7 @@ __all__ = [
     "clip",
     "described_format",
     "fit_index",
+    "identified",
     "locate",
     "malformed",
     "raise_for",
@@ -181,3 +183,13 @@ def raise_for(result: JobResult) -> None:
     failure = http_failure(result.outcome)
     if failure is not None:
         raise ApiError(failure.status, failure.kind, failure.message, **failure.extra)
+
+
+async def identified(tokens: TokenCheck, audit_writer: AuditWriter, caller: Caller) -> str | None:
+    """The caller's token id; a refusal (counted, audited per address and minute) when the
+    caller has no valid token."""
+    try:
+        return tokens.identify(caller)
+    except ApiError as exc:
+        exc.audit_incomplete = not await audit_writer.refused(caller.client, exc.kind)
+        raise

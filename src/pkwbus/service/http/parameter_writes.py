@@ -41,6 +41,7 @@ from pkwbus.service.http.parameter_checks import (
     clip,
     described_format,
     fit_index,
+    identified,
     locate,
     malformed,
     raise_for,
@@ -134,13 +135,7 @@ class Writes:
         return await self.audit_writer.note(malformed(caller, identity, drive, parameter, problem))
 
     async def _identify(self, caller: Caller) -> str | None:
-        """The caller's token id; a refusal (counted, audited per address and minute)
-        when the caller has no valid token."""
-        try:
-            return self._tokens.identify(caller)
-        except ApiError as exc:
-            exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
-            raise
+        return await identified(self._tokens, self.audit_writer, caller)
 
     async def _perform(
         self,

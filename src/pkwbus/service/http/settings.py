@@ -47,6 +47,7 @@ from pkwbus.service.http.parameter_checks import (
     TokenCheck,
     clip,
     described_format,
+    identified,
 )
 from pkwbus.service.http.parameter_reads import Reads
 from pkwbus.service.http.parameter_writes import WriteOrder, Writes
@@ -274,11 +275,7 @@ class DriveSettings:
         return result.raw if isinstance(result.outcome, Answered) else None
 
     async def _identify(self, caller: Caller) -> str | None:
-        try:
-            return self._tokens.identify(caller)
-        except ApiError as exc:
-            exc.audit_incomplete = not await self.audit_writer.refused(caller.client, exc.kind)
-            raise
+        return await identified(self._tokens, self.audit_writer, caller)
 
 
 def _iso(when: float | None) -> str | None:
