@@ -15,13 +15,14 @@ import asyncio
 from typing import Any
 
 from pkwbus.service.audit.log import AuditEntry
-from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
+from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     ApiError,
     Caller,
     TokenCheck,
+    attempted,
     clip,
     identified,
     malformed,
@@ -65,13 +66,7 @@ class Maintenance:
             refusal = ApiError(404, "unknown_drive", f"no drive named {drive!r}")
             refusal.audit_incomplete = not await self.audit_writer.note(audit)
             raise refusal
-        try:
-            row = await self.audit_writer.attempt(audit)
-        except AuditUnavailable as exc:
-            raise ApiError(
-                503, "audit_unavailable",
-                f"the audit log cannot record it ({exc}): the drive stays as it was",
-            ) from None  # fmt: skip
+        row = await attempted(self.audit_writer, audit, "the drive stays as it was")
         runner.maintenance(drive, on, reason)
         held = self.runtime.snapshot.maintenance.get(drive)
         # Done: its row is completed even when the client goes away meanwhile.

@@ -21,7 +21,7 @@ from pkwbus.master.planning.jobs import JobResult
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
-from pkwbus.service.audit.writer import AuditWriter
+from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
 from pkwbus.service.http.outcome_answers import http_failure
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -193,3 +193,14 @@ async def identified(tokens: TokenCheck, audit_writer: AuditWriter, caller: Call
     except ApiError as exc:
         exc.audit_incomplete = not await audit_writer.refused(caller.client, exc.kind)
         raise
+
+
+async def attempted(audit_writer: AuditWriter, audit: AuditEntry, unchanged: str) -> Any:
+    """Store ``audit``'s row before what it records is done: its row; 503 when the audit log
+    cannot store it (``unchanged`` says what stays as it was)."""
+    try:
+        return await audit_writer.attempt(audit)
+    except AuditUnavailable as exc:
+        raise ApiError(
+            503, "audit_unavailable", f"the audit log cannot record it ({exc}): {unchanged}"
+        ) from None

@@ -36,7 +36,7 @@ from pkwbus.protocol.pkw.descriptions import (
 )
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
-from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
+from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.history.backup import Backup, Present, plan_restore
 from pkwbus.service.history.store import HistoryError
 from pkwbus.service.http.parameter_checks import (
@@ -45,6 +45,7 @@ from pkwbus.service.http.parameter_checks import (
     ApiError,
     Caller,
     TokenCheck,
+    attempted,
     clip,
     described_format,
     identified,
@@ -114,13 +115,7 @@ class DriveSettings:
             audit.outcome = "invalid"
             exc.audit_incomplete = not await self.audit_writer.note(audit)
             raise
-        try:
-            row = await self.audit_writer.attempt(audit)
-        except AuditUnavailable as exc:
-            raise ApiError(
-                503, "audit_unavailable",
-                f"the audit log cannot record it ({exc}): the baseline stays as it was",
-            ) from None  # fmt: skip
+        row = await attempted(self.audit_writer, audit, "the baseline stays as it was")
         try:
             count = await settings.accept(drive)
         except HistoryError as exc:
