@@ -5,13 +5,14 @@ and one that no vendor document types only where the drive is asked to describe 
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import pytest
 
 from pkwbus.catalog import load_catalog
-from pkwbus.service.config import default_polls
+from pkwbus.service.config import default_polls, load_config
 from pkwbus.service.config.default_polls import COUNTER_EVERY, counter_polls
-from pkwbus.service.config.line_load import line_load
+from pkwbus.service.config.line_load import check_config_report, line_load
 from tests.service.config.test_config import parse
 
 
@@ -173,3 +174,12 @@ def test_check_config_counts_the_sweep_after_the_polls() -> None:
     assert load.sweeping == pytest.approx(14 * exchange / 60)
     off = line_load(parse(config("danfoss-fc", "fc", "        settings: off")).lines[0])
     assert off.sweeping == 0.0 and off.utilisation == load.utilisation
+
+
+def test_check_config_counts_the_sweep_on_a_profibus_line_per_slave() -> None:
+    config = load_config(Path(__file__).parents[3] / "config" / "demo.yaml")
+    (line,) = [line for line in config.lines if line.name == "dp_line"]
+    swept = [d for d in line.drives if default_polls.swept_settings(line, d)[1]]
+    count = sum(len(default_polls.swept_settings(line, d)[1]) for d in swept)
+    said = f"  {count} setting(s) of {len(swept)} slave(s) swept (settings): at most"
+    assert swept and any(row.startswith(said) for row in check_config_report(config))

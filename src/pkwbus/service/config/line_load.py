@@ -361,6 +361,14 @@ def check_config_report(
                         f" {most:.1f} parameters/s (its PKW channel, where it has one: at most"
                         f" {load.capacity:.1f}/s)"
                     )
+            swept = [d for d in line.drives if sweep_rate(line, d)]
+            if swept:
+                most = max(sweep_rate(line, d) for d in swept)
+                count = sum(len(swept_settings(line, d)[1]) for d in swept)
+                report.append(
+                    f"  {count} setting(s) of {len(swept)} slave(s) swept (settings): at most"
+                    f" {most / load.capacity:.2%} of a slave's PKW jobs, after the polls"
+                )
             report.extend(f"WARN {w}" for w in load.warnings)
             report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
             continue
