@@ -10,13 +10,21 @@ from typing import TYPE_CHECKING, Any
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.alarms import CodeTable, WordTable, alarm_table
+from pkwbus.protocol.pkw.descriptions import DescriptionForm, form_of
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 
 if TYPE_CHECKING:
     from pkwbus.service.config.drive import DriveBase
     from pkwbus.service.config.line import LineBase
 
-__all__ = ["ALARM_EVERY", "COUNTER_EVERY", "alarm_polls", "counter_polls", "swept_settings"]
+__all__ = [
+    "ALARM_EVERY",
+    "COUNTER_EVERY",
+    "alarm_polls",
+    "counter_polls",
+    "sweep_rate",
+    "swept_settings",
+]
 
 ALARM_EVERY = 30.0  # seconds: the alarm words polled by default, slowly
 COUNTER_EVERY = 60.0  # seconds: the drive's counters polled by default, more slowly still
@@ -82,3 +90,16 @@ def swept_settings(line: LineBase[Any], drive: DriveBase) -> tuple[float, list[P
             indexes: list[int | None] = list(range(spec.array)) if spec.array else [None]
             wanted.extend(ParameterRef(spec.pnu, i, str(spec.pnu)) for i in indexes)
     return chosen.every, wanted
+
+
+def sweep_rate(line: LineBase[Any], drive: DriveBase) -> float:
+    """The reads per second the sweep of the drive's settings asks for (``settings``): each
+    setting once an interval, and a PROFIdrive drive's identifier with it (whether it
+    differs from the factory setting; a Danfoss drive's factory value is read once, and
+    not counted)."""
+    every, refs = swept_settings(line, drive)
+    if not refs:
+        return 0.0
+    described = (drive.describe or line.describe) != "off"
+    per = 2 if described and form_of(drive.pkw_dialect) is DescriptionForm.PROFIDRIVE else 1
+    return per * len(refs) / every

@@ -42,7 +42,6 @@ from typing import Final
 
 from pkwbus.catalog.logs import log_of_catalog
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
-from pkwbus.protocol.pkw.descriptions import DescriptionForm, form_of
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
@@ -55,6 +54,7 @@ from pkwbus.service.config.default_polls import (
     COUNTER_EVERY,
     alarm_polls,
     counter_polls,
+    sweep_rate,
     swept_settings,
 )
 from pkwbus.service.config.drive import DriveBase
@@ -156,19 +156,6 @@ def watch_rate(line: Line, drive: Drive) -> float:
     if log is None or (drive.events or line.events) == "off":
         return 0.0
     return len(log.watch()) / (drive.events_every or line.events_every)
-
-
-def sweep_rate(line: Line, drive: Drive) -> float:
-    """The reads per second the sweep of the drive's settings asks for (``settings``): each
-    setting once an interval, and a PROFIdrive drive's identifier with it (whether it
-    differs from the factory setting; a Danfoss drive's factory value is read once, and
-    not counted)."""
-    every, refs = swept_settings(line, drive)
-    if not refs:
-        return 0.0
-    described = (drive.describe or line.describe) != "off"
-    per = 2 if described and form_of(drive.pkw_dialect) is DescriptionForm.PROFIDRIVE else 1
-    return per * len(refs) / every
 
 
 def record_seconds(drive: ProfibusDrive, count: int, baudrate: int) -> float:

@@ -32,6 +32,7 @@ __all__ = [
     "ApiError",
     "Caller",
     "TokenCheck",
+    "attempted",
     "check_names",
     "clip",
     "described_format",
