@@ -564,7 +564,13 @@ def check_demo(token: str) -> None:
         return bool(drive and parameter) and (drive[1], parameter[1]) in fast
 
     stamp = "pkwbus_parameter_last_update_timestamp_seconds"
-    first = {k: v for k, v in samples(metrics(port), stamp).items() if polled_fast(k)}
+
+    def fast_values() -> dict[str, float]:
+        return {k: v for k, v in samples(metrics(port), stamp).items() if polled_fast(k)}
+
+    # Up is not yet described: a drive's first values wait for its descriptions (of the
+    # polled parameters and of its swept settings), which the alarm words do not.
+    first = wait_until("the values the demo polls fast exported", fast_values, 30)
     time.sleep(11.0)
     second = samples(metrics(port), stamp)
     moved = [k for k in first if second.get(k, 0) > first[k]]
