@@ -6,8 +6,10 @@ from __future__ import annotations
 from pkwbus.master.planning.jobs import Job, JobKind, Priority
 from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.planning.plan import Finished, Overrun, PollSpec
+from pkwbus.master.planning.planner import Planner
 from pkwbus.protocol import pkw
-from tests.master.planning.test_planner import MS, fake_line
+from pkwbus.sim import SimTiming, Simulator
+from tests.master.planning.test_planner import EXCHANGE, MS, FakeLine, drives, fake_line
 
 
 def background(line_drive: str, request: pkw.PkwRequest, now: float) -> Job:
@@ -53,3 +55,31 @@ def test_background_jobs_end_with_the_line() -> None:
     line.planner.stop("the service is stopping")
     (done,) = [e for e in line.planner.take_events() if isinstance(e, Finished)]
     assert done.work is job
+
+
+def test_a_drive_with_background_work_of_its_own_still_polls_when_its_polls_fall_due() -> None:
+    """Polls take two thirds of the line; every drive, the polling ones too, always has a
+    background read waiting (a sweep of settings faster than the line can carry): a
+    drive's claim for its background read must give way to its own poll when that falls
+    due, or its polls wait behind the other drives' background reads."""
+    every = 9 * EXCHANGE / 0.66  # three drives poll three parameters: 66 % of the line
+    quiet = list(range(4, 24))
+    specs = drives("fc", [1, 2, 3], [1613, 1614, 1610], every) + drives("fc", quiet, [], every)
+    sim = Simulator("fc", list(range(1, 24)), timing=SimTiming(response_delay=0.0), seed=7)
+    line = FakeLine(Planner(specs, poll_deadline=0.5), sim)
+    dialect = line.planner.drive("d1").carrier.dialect
+    waiting: set[Job] = set()
+    end = line.now + 5.0
+    while line.now < end:
+        for a in range(1, 24):  # each drive: a background read waiting, always
+            if not any(job.drive == f"d{a}" for job in waiting):
+                job = background(f"d{a}", pkw.read(dialect, 341), line.now)
+                waiting.add(job)
+                line.planner.submit(job, line.now)
+        line.step(end)
+        waiting -= {e.work for e in line.events if isinstance(e, Finished)}  # type: ignore[misc]
+    polls = [e for e in line.events if isinstance(e, Finished) and isinstance(e.work, PollSpec)]
+    assert len(polls) >= 9 * 5.0 / every - 9, "every poll, at its interval"
+    assert not [e for e in line.events if isinstance(e, Overrun)], "a poll waited for them"
+    assert sum(1 for e in line.events if isinstance(e, Finished) and e.work in waiting) == 0
+    assert len([e for e in line.events if isinstance(e, Finished)]) > len(polls), "and reads"

@@ -277,7 +277,8 @@ class Planner:
     # ---------------------------------------------------------- internals
 
     def _claim(self, d: DrivePlan, now: float) -> tuple[Key | None, float | None]:
-        """The drive's claim on the next exchange, else when it will have one (None: never)."""
+        """The drive's claim on the next exchange, and when it will have a better one: a
+        background claim's next poll, or the first claim of a drive without one."""
         if d.maintenance:
             return None, None
         for queue in (d.writes, d.reads, d.background):
@@ -298,7 +299,7 @@ class Planner:
         if due is not None and due <= now:
             return (Priority.POLL, 0, due, d.served, d.slot), None
         if d.background:
-            return (Priority.BACKGROUND, 0, d.background[0].deadline, d.served, d.slot), None
+            return (Priority.BACKGROUND, 0, d.background[0].deadline, d.served, d.slot), due
         return None, due
 
     def _index(self, d: DrivePlan, now: float) -> None:
@@ -309,7 +310,7 @@ class Planner:
             return
         if key is not None:
             self._agenda.ready(d, key)
-        elif at is not None:
+        if at is not None:  # also a background claim's next poll: it takes over when due
             self._agenda.later(d, at)
 
     def _fire(self, now: float) -> None:
