@@ -100,6 +100,17 @@ def sim_process(
             shutil.rmtree(tmp, ignore_errors=True)
 
 
+def registry_sum(registry: object, name: str, **labels: str) -> float:
+    """The sum of ``name``'s samples in a prometheus_client ``registry`` whose labels
+    include ``labels``."""
+    return sum(
+        sample.value
+        for family in registry.collect()  # type: ignore[attr-defined]
+        for sample in family.samples
+        if sample.name == name and all(sample.labels.get(k) == v for k, v in labels.items())
+    )
+
+
 def make_port(
     port: str, protocol: str = "fc", baudrate: int = 115200, **kw: object
 ) -> TelegramPort:

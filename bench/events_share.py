@@ -28,8 +28,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import sim_process
-from prometheus_client import CollectorRegistry
+from _common import registry_sum, sim_process
 
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
@@ -67,10 +66,6 @@ lines:
 """
 
 
-def _sample(registry: CollectorRegistry, name: str) -> float:
-    return sum(s.value for f in registry.collect() for s in f.samples if s.name == name)
-
-
 async def _run(port: str, events: str, seconds: float, settle: float) -> dict[str, float]:
     folder = tempfile.mkdtemp(prefix="pkwbus-bench-events-")
     config = parse_config(_config(port, events, folder), environ={})
@@ -81,15 +76,15 @@ async def _run(port: str, events: str, seconds: float, settle: float) -> dict[st
     registry = runtime.registry
     try:
         await asyncio.sleep(settle)
-        busy0 = _sample(registry, "pkwbus_line_busy_seconds_total")
-        jobs0 = _sample(registry, "pkwbus_jobs_total")
-        over0 = _sample(registry, "pkwbus_poll_overruns_total")
+        busy0 = registry_sum(registry, "pkwbus_line_busy_seconds_total")
+        jobs0 = registry_sum(registry, "pkwbus_jobs_total")
+        over0 = registry_sum(registry, "pkwbus_poll_overruns_total")
         t0 = time.perf_counter()
         await asyncio.sleep(seconds)
         elapsed = time.perf_counter() - t0
-        busy = _sample(registry, "pkwbus_line_busy_seconds_total") - busy0
-        jobs = _sample(registry, "pkwbus_jobs_total") - jobs0
-        overruns = _sample(registry, "pkwbus_poll_overruns_total") - over0
+        busy = registry_sum(registry, "pkwbus_line_busy_seconds_total") - busy0
+        jobs = registry_sum(registry, "pkwbus_jobs_total") - jobs0
+        overruns = registry_sum(registry, "pkwbus_poll_overruns_total") - over0
     finally:
         await runtime.stop()
         store.close()

@@ -29,8 +29,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import sim_process
-from prometheus_client import CollectorRegistry
+from _common import registry_sum, sim_process
 
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
@@ -79,15 +78,6 @@ def _settings_reads(runtime: Any) -> int:
     return 0 if watcher is None else sum(s.reads for s in watcher.swept.values())
 
 
-def _sample(registry: CollectorRegistry, name: str, **labels: str) -> float:
-    return sum(
-        s.value
-        for f in registry.collect()
-        for s in f.samples
-        if s.name == name and all(s.labels.get(k) == v for k, v in labels.items())
-    )
-
-
 async def _run(
     port: str, every: float | None, seconds: float, settle: float, drives: int
 ) -> dict[str, float]:
@@ -101,19 +91,21 @@ async def _run(
     polled = [f"d{a}" for a in POLLED if a <= drives]
     try:
         await asyncio.sleep(settle)
-        busy0 = _sample(registry, "pkwbus_line_busy_seconds_total")
+        busy0 = registry_sum(registry, "pkwbus_line_busy_seconds_total")
         reads0 = _settings_reads(runtime)
-        lost0 = _sample(registry, "pkwbus_telegram_errors_total")
-        polls0 = sum(_sample(registry, "pkwbus_telegrams_total", drive=d) for d in polled)
-        over0 = _sample(registry, "pkwbus_poll_overruns_total")
+        lost0 = registry_sum(registry, "pkwbus_telegram_errors_total")
+        polls0 = sum(registry_sum(registry, "pkwbus_telegrams_total", drive=d) for d in polled)
+        over0 = registry_sum(registry, "pkwbus_poll_overruns_total")
         t0 = time.perf_counter()
         await asyncio.sleep(seconds)
         elapsed = time.perf_counter() - t0
-        busy = _sample(registry, "pkwbus_line_busy_seconds_total") - busy0
+        busy = registry_sum(registry, "pkwbus_line_busy_seconds_total") - busy0
         reads = _settings_reads(runtime) - reads0
-        lost = _sample(registry, "pkwbus_telegram_errors_total") - lost0
-        polls = sum(_sample(registry, "pkwbus_telegrams_total", drive=d) for d in polled) - polls0
-        overruns = _sample(registry, "pkwbus_poll_overruns_total") - over0
+        lost = registry_sum(registry, "pkwbus_telegram_errors_total") - lost0
+        polls = (
+            sum(registry_sum(registry, "pkwbus_telegrams_total", drive=d) for d in polled) - polls0
+        )
+        overruns = registry_sum(registry, "pkwbus_poll_overruns_total") - over0
     finally:
         await runtime.stop()
         store.close()
@@ -161,9 +153,7 @@ def run(
     return {
         "read_seconds": read_seconds,
         "share_default": rate * read_seconds,
-        "share_measured": statistics.median(
-            on["busy"] - off["busy"] for on, off in zip(rows["on"], rows["off"], strict=True)
-        ),
+        "share_measured": statistics.median(on["busy"] - off["busy"] for on, off in pairs),
         "every": every,
         "polls_done_off": min(r["polls_done"] for r in rows["off"]),
         "polls_done_on": min(r["polls_done"] for r in rows["on"]),

@@ -29,7 +29,7 @@ from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.pkw.descriptions import Characteristics, DriveDescription
+from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.types import ValueType
 
@@ -169,8 +169,6 @@ class Settings(Protocol):
     def swept(self) -> Mapping[str, Any]: ...
 
     def view(self, drive: str) -> dict[str, Any]: ...
-
-    def characteristics(self, drive: str, pnu: int) -> Characteristics | None: ...
 
     async def accept(self, drive: str) -> int: ...
 

@@ -348,13 +348,11 @@ def check_config_report(
                         f" {most:.1f} parameters/s (its PKW channel, where it has one: at most"
                         f" {load.capacity:.1f}/s)"
                     )
-            swept = [d for d in line.drives if sweep_rate(line, d)]
-            if swept:
-                most = max(sweep_rate(line, d) for d in swept)
-                count = sum(len(swept_settings(line, d)[1]) for d in swept)
+            if swept := _swept(line, "slave"):
+                most = max(sweep_rate(line, d) for d in line.drives)
                 report.append(
-                    f"  {count} setting(s) of {len(swept)} slave(s) swept (settings): at most"
-                    f" {most / load.capacity:.2%} of a slave's PKW jobs, after the polls"
+                    f"{swept}: at most {most / load.capacity:.2%} of a slave's PKW jobs, after"
+                    " the polls"
                 )
             report.extend(f"WARN {w}" for w in load.warnings)
             report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
@@ -373,13 +371,8 @@ def check_config_report(
                 f" drive(s) polled by default (counters), every {COUNTER_EVERY:.0f} s:"
                 f" {share:.2%} of the line's time (in the utilisation)"
             )
-        swept = [d for d in line.drives if sweep_rate(line, d)]
-        if swept:
-            count = sum(len(swept_settings(line, d)[1]) for d in swept)
-            report.append(
-                f"  {count} setting(s) of {len(swept)} drive(s) swept (settings):"
-                f" {load.sweeping:.2%} of the line's time, after the polls"
-            )
+        if swept := _swept(line, "drive"):
+            report.append(f"{swept}: {load.sweeping:.2%} of the line's time, after the polls")
         watched = sum(1 for d in line.drives if watch_rate(line, d))
         if watched:
             report.append(
@@ -390,3 +383,11 @@ def check_config_report(
         report.extend(f"WARN {w}" for w in port_warnings(line, dev=dev))
     report.extend(f"NOTE {n}" for n in catalog_notes(config, catalogs))
     return report
+
+
+def _swept(line: Line, what: str) -> str:
+    """The report's words for the settings swept on ``line`` (empty: none)."""
+    swept = [len(swept_settings(line, d)[1]) for d in line.drives if sweep_rate(line, d)]
+    if not swept:
+        return ""
+    return f"  {sum(swept)} setting(s) of {len(swept)} {what}(s) swept (settings)"

@@ -41,9 +41,6 @@ from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.events import Event, LineState
 from pkwbus.master.planning.plan import Described
 from pkwbus.protocol import pkw
-from pkwbus.protocol.pkw.descriptions import (
-    Characteristics,
-)
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.encoding import decode_value
 from pkwbus.service.history.backup import drive_type
@@ -267,11 +264,6 @@ class SettingsWatcher:
             "swept": s.swept,
             "parameters": parameters,
         }
-
-    def characteristics(self, drive: str, pnu: int) -> Characteristics | None:
-        """FC element 21 of the drive's parameter, where it was read."""
-        s = self.swept.get(drive)
-        return None if s is None else s.characteristics.get(pnu)
 
     def _factory(self, s: Swept, ref: ParameterRef, fmt: ParameterDescription) -> Value | None:
         raw = s.factory.get(ref.pnu)

@@ -15,7 +15,6 @@ be opened or written.
 
 from __future__ import annotations
 
-import contextlib
 import sqlite3
 import threading
 from collections.abc import Iterable
@@ -25,11 +24,11 @@ from typing import Any, Final
 
 from pkwbus.service.audit.synced import connect_synced
 from pkwbus.service.history.store import (
-    EVENT_COLUMNS,
     SCHEMA,
     DriveEvent,
     HistoryError,
-    event_row,
+    insert_events,
+    synced_transaction,
 )
 
 __all__ = ["SETTINGS_SCHEMA", "SettingRow", "SettingsStore", "SweptDrive"]
@@ -138,22 +137,10 @@ class SettingsStore:
         they tell, in one synced transaction: a row flagged changed is never kept without
         its event. The events that were new."""
         sql = f"INSERT OR REPLACE INTO settings ({_COLUMNS}) VALUES ({', '.join('?' * 12)})"
-        told = f"INSERT OR IGNORE INTO events ({EVENT_COLUMNS}) VALUES ({', '.join('?' * 12)})"
-        new: list[DriveEvent] = []
-        with self._lock:
-            try:
-                self._db.execute("BEGIN IMMEDIATE")
-                for row in rows:
-                    self._db.execute(sql, row.values())
-                for e in events:
-                    if self._db.execute(told, event_row(e)).rowcount:
-                        new.append(e)
-                self._db.execute("COMMIT")
-            except sqlite3.Error as exc:
-                with contextlib.suppress(sqlite3.Error):
-                    self._db.execute("ROLLBACK")
-                raise HistoryError(f"history database {self.path}: {exc}") from None
-        return new
+        with synced_transaction(self._db, self._lock, self.path):
+            for row in rows:
+                self._db.execute(sql, row.values())
+            return insert_events(self._db, events)
 
     def swept(self, drive: str, identity: str | None, when: float | None) -> None:
         """The identity of ``drive``'s baseline and the end of its last complete sweep."""
@@ -170,13 +157,6 @@ class SettingsStore:
             self._db.close()
 
     def _write(self, statements: list[tuple[str, tuple[Any, ...]]]) -> None:
-        with self._lock:
-            try:
-                self._db.execute("BEGIN IMMEDIATE")
-                for sql, args in statements:
-                    self._db.execute(sql, args)
-                self._db.execute("COMMIT")
-            except sqlite3.Error as exc:
-                with contextlib.suppress(sqlite3.Error):
-                    self._db.execute("ROLLBACK")
-                raise HistoryError(f"history database {self.path}: {exc}") from None
+        with synced_transaction(self._db, self._lock, self.path):
+            for sql, args in statements:
+                self._db.execute(sql, args)

@@ -20,7 +20,7 @@ import contextlib
 import sqlite3
 import threading
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -28,7 +28,16 @@ from typing import Any, Final
 from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.synced import connect_synced
 
-__all__ = ["EVENT_COLUMNS", "SCHEMA", "DriveEvent", "HistoryError", "HistoryStore", "event_row"]
+__all__ = [
+    "EVENT_COLUMNS",
+    "SCHEMA",
+    "DriveEvent",
+    "HistoryError",
+    "HistoryStore",
+    "event_row",
+    "insert_events",
+    "synced_transaction",
+]
 
 SCHEMA: Final = """
 CREATE TABLE IF NOT EXISTS events (
@@ -53,7 +62,6 @@ CREATE INDEX IF NOT EXISTS events_drive_seen ON events (drive, seen);
 EVENT_COLUMNS = (
     "line, drive, key, kind, code, number, text, value, time, time_source, drive_time, seen"
 )
-_COLUMNS = EVENT_COLUMNS
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +97,27 @@ def event_row(e: DriveEvent) -> tuple[object, ...]:
             e.time_source, e.drive_time, e.seen)  # fmt: skip
 
 
+def insert_events(db: sqlite3.Connection, events: Iterable[DriveEvent]) -> list[DriveEvent]:
+    """Insert ``events`` in the transaction under way; those that were new."""
+    sql = f"INSERT OR IGNORE INTO events ({EVENT_COLUMNS}) VALUES ({', '.join('?' * 12)})"
+    return [e for e in events if db.execute(sql, event_row(e)).rowcount]
+
+
+@contextlib.contextmanager
+def synced_transaction(db: sqlite3.Connection, lock: threading.Lock, path: Path) -> Iterator[None]:
+    """One transaction of ``db`` under ``lock``: committed at the end, rolled back on an
+    error, which is a :class:`HistoryError` naming ``path``."""
+    with lock:
+        try:
+            db.execute("BEGIN IMMEDIATE")
+            yield
+            db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            with contextlib.suppress(sqlite3.Error):
+                db.execute("ROLLBACK")
+            raise HistoryError(f"history database {path}: {exc}") from None
+
+
 class HistoryError(PkwbusError):
     """The history database cannot be opened or written."""
 
@@ -107,24 +136,8 @@ class HistoryStore:
         stored once, whatever the number of times it is offered)."""
         if not events:
             return []
-        new: list[DriveEvent] = []
-        with self._lock:
-            try:
-                self._db.execute("BEGIN IMMEDIATE")
-                for e in events:
-                    cur = self._db.execute(
-                        f"INSERT OR IGNORE INTO events ({_COLUMNS})"
-                        " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        event_row(e),
-                    )
-                    if cur.rowcount:
-                        new.append(e)
-                self._db.execute("COMMIT")
-            except sqlite3.Error as exc:
-                with contextlib.suppress(sqlite3.Error):
-                    self._db.execute("ROLLBACK")
-                raise HistoryError(f"history database {self.path}: {exc}") from None
-        return new
+        with synced_transaction(self._db, self._lock, self.path):
+            return insert_events(self._db, events)
 
     def known(self, drive: str) -> set[str]:
         """The keys of the entries kept of ``drive``."""
@@ -143,7 +156,7 @@ class HistoryStore:
         if since is not None:
             where.append("coalesce(time, seen) >= ?")
             args.append(since)
-        sql = f"SELECT {_COLUMNS} FROM events"
+        sql = f"SELECT {EVENT_COLUMNS} FROM events"
         if where:
             sql += " WHERE " + " AND ".join(where)
         sql += " ORDER BY coalesce(time, seen) DESC, id DESC LIMIT ?"
@@ -163,7 +176,7 @@ class HistoryStore:
     def newest(self, drive: str, kind: str) -> DriveEvent | None:
         """The entry of ``kind`` of ``drive`` that pkwbus found last (None: none kept)."""
         rows = self._query(
-            f"SELECT {_COLUMNS} FROM events WHERE drive = ? AND kind = ?"
+            f"SELECT {EVENT_COLUMNS} FROM events WHERE drive = ? AND kind = ?"
             " ORDER BY seen DESC, id DESC LIMIT 1",
             (drive, kind),
         )

@@ -180,8 +180,7 @@ class DriveSettings:
             raise ApiError(422, "invalid_backup", f"not a backup document: {problems}") from None
         present = {}
         for s in backup.settings:
-            present[(s.parameter, s.index)] = await self._present(entry, settings, s.parameter,
-                                                                  s.index)  # fmt: skip
+            present[(s.parameter, s.index)] = await self._present(entry, s.parameter, s.index)
         view = settings.view(drive)
         plan, skipped = plan_restore(
             backup, present, target_identity=view["identity"], force=force,
@@ -225,25 +224,26 @@ class DriveSettings:
         outcome = "ok" if done.get("verified") else "mismatch"
         return {**step, "outcome": outcome, "audit_id": done["audit_id"]}
 
-    async def _present(
-        self, entry: DriveEntry, settings: Settings, parameter: str, index: int
-    ) -> Present:
+    async def _present(self, entry: DriveEntry, parameter: str, index: int) -> Present:
         """What the drive says of one setting of the backup now."""
         try:
             ref = entry.canonical(parse_parameter(parameter))
         except (LocalProtocolError, ValueError) as exc:
             return Present(None, ParameterDescription(), refused=str(exc))
-        ref = ParameterRef(ref.pnu, index if index or ref.index is not None else None, ref.name)
+        if index == 0 and ref.index is None:  # not an array: no index to send
+            ref = ParameterRef(ref.pnu, None, ref.name)
+        else:
+            ref = ParameterRef(ref.pnu, index, ref.name)
         fmt = described_format(self.runtime, entry, ref)
         result = await self._reads.try_read(entry, ref, fmt)
-        characteristics = await self._characteristics(entry, ref.pnu)
-        read_only = fmt.prefix == "r" or bool(
-            (d := entry.described.get(ref.pnu)) is not None and d.read_only
-        )
         if isinstance(result.outcome, Rejected):
             return Present(None, fmt, refused=result.outcome.text)
         if not isinstance(result.outcome, Answered):
             return Present(None, fmt)
+        read_only = fmt.prefix == "r" or bool(
+            (d := entry.described.get(ref.pnu)) is not None and d.read_only
+        )
+        characteristics = await self._characteristics(entry, ref.pnu)
         return Present(result.value, fmt, None, characteristics, read_only)
 
     async def _characteristics(self, entry: DriveEntry, pnu: int) -> Characteristics | None:
