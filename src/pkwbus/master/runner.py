@@ -32,13 +32,14 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Any
 
 from pkwbus.link import Link, LinkState, PortError
+from pkwbus.master.bus import Done, LineRefused, Port, Wire
 from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
-from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
+from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle, PollSpec
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
@@ -49,73 +50,6 @@ log = logging.getLogger(__name__)
 
 # Seconds at most between two batches of recorded events during a run.
 BATCH_EVERY = 0.05
-
-Done = Callable[[Any], None]
-
-
-class LineRefused(PortError):
-    """The line cannot be used though its port is open (another master runs it): the port
-    is given up, and opened again at back-off."""
-
-
-class Port(Protocol):
-    """The I/O of one line: its link, and one request at a time."""
-
-    @property
-    def link(self) -> Link: ...
-
-    @property
-    def sent_at(self) -> float:
-        """Loop time the latest request was written."""
-        ...
-
-    async def started(self) -> None:
-        """The port just opened: what the bus asks before the first request (a DP master
-        listens for other masters); :class:`LineRefused` when the line is not to be used."""
-        ...
-
-    def start(self, request: Any, done: Done) -> None:
-        """Send ``request``; ``done`` gets its answer, or the exception that ended it."""
-        ...
-
-    async def close(self) -> None:
-        """The line stops: what the bus asks first (a DP master clears its slaves), then
-        the port closes."""
-        ...
-
-
-class Wire(Protocol):
-    """A kind of line: pure calls about what goes out and what came back; no runner."""
-
-    @property
-    def port(self) -> Port: ...
-
-    def poll_deadline(self, retries: int) -> float:
-        """How long a poll's transaction may take on this bus, its retries included."""
-        ...
-
-    def transmit(self, planner: Planner, now: float) -> Any:
-        """The next request to send, or :class:`~pkwbus.master.planning.plan.Idle`."""
-        ...
-
-    def received(
-        self, planner: Planner, request: Any, answer: Any, now: float, busy: float,
-        answered: float,
-    ) -> None:  # fmt: skip
-        """The answer to ``request`` (it held the line ``busy`` seconds, its answer took
-        ``answered`` from the request written)."""
-        ...
-
-    def lost(self) -> None:
-        """The port is gone: what was under way starts afresh."""
-        ...
-
-    def leave_out(self, planner: Planner, drive: str, out: bool, now: float) -> None:
-        """Send ``drive`` nothing (``out``: in maintenance, already so in the planner: an
-        exchange of it that will get no answer ends there), or take it back."""
-        ...
-
-    def take_events(self) -> list[Event]: ...
 
 
 def _waited_for(events: Sequence[Event]) -> bool:
@@ -190,6 +124,33 @@ class LineRunner:
         self.planner.maintenance(drive, on, now)
         self.wire.leave_out(self.planner, drive, on, now)
         self.tell([MaintenanceChanged(drive, on, reason)])
+        self.flush()
+        self._wake.set()
+
+    # A reload: the line's drives and polls change while its port stays open and its other
+    # drives go on as they were.
+
+    def add_drive(self, spec: DriveSpec) -> None:
+        """A drive added to the line: polled from now on, as a drive at the start is."""
+        self.writer.add_drive(spec)
+        self.planner.add_drive(spec, asyncio.get_running_loop().time())
+        self._changed()
+
+    def remove_drive(self, drive: str, reason: str) -> None:
+        """A drive gone from the line: its jobs end with ``reason``, nothing more goes out to
+        it (an exchange of it that is out ends at its result), nothing of it is shown."""
+        self.planner.remove_drive(drive, reason, asyncio.get_running_loop().time())
+        self.flush()  # what ended, to its callers and the observers, before it is forgotten
+        self.writer.remove_drive(drive)
+
+    def update_polls(self, drive: str, polls: Sequence[PollSpec]) -> None:
+        """The drive's polls now: a kept one goes on at its due time, a new one is due now,
+        the values of those gone leave (KeyError: not here)."""
+        now = asyncio.get_running_loop().time()
+        self.writer.update_polls(drive, self.planner.update_polls(drive, polls, now))
+        self._changed()
+
+    def _changed(self) -> None:
         self.flush()
         self._wake.set()
 

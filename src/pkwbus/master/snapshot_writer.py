@@ -93,6 +93,8 @@ class SnapshotWriter:
         # A poll the drive refuses, by (drive, parameter, index): when it was last told.
         self._refused: dict[tuple[str, str, int], float] = {}
         self._polls = {d.name: d.polls for d in drives}
+        # What lands in the snapshot's readings: the configured polls.
+        self._keys = {(d.name, p.parameter, p.index) for d in drives for p in d.polls}
         # Parameters whose description is awaited: no value of theirs lands before it.
         self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
         self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
@@ -100,6 +102,43 @@ class SnapshotWriter:
         snapshot.lines[line] = False
         for d in drives:
             snapshot.drives[d.name] = DriveState()
+
+    # ------------------------------------------------------------ a reload
+
+    def add_drive(self, spec: DriveSpec) -> None:
+        """A drive added to the line: shown up until it fails, its values to come."""
+        self._polls[spec.name] = spec.polls
+        self._keys.update((spec.name, p.parameter, p.index) for p in spec.polls)
+        self._targets[spec.name] = spec.describe
+        if spec.form is not None:
+            self._waiting.update((spec.name, t.pnu) for t in spec.describe)
+        self.snapshot.drives[spec.name] = DriveState()
+
+    def remove_drive(self, drive: str) -> None:
+        """A drive gone from the line: everything the snapshot shows of it goes; whatever of
+        it still ends (an exchange out when it went) resolves its caller, nothing more."""
+        self._polls.pop(drive, None)
+        self._keys = {k for k in self._keys if k[0] != drive}
+        self._targets.pop(drive, None)
+        self._silent.discard(drive)
+        self._waiting = {w for w in self._waiting if w[0] != drive}
+        self._refused = {k: v for k, v in self._refused.items() if k[0] != drive}
+        snap = self.snapshot
+        snap.readings = {k: v for k, v in snap.readings.items() if k[0] != drive}
+        snap.latest = {k: v for k, v in snap.latest.items() if k[0] != drive}
+        snap.stated = {k: v for k, v in snap.stated.items() if k[0] != drive}
+        snap.drives.pop(drive, None)
+        snap.slaves.pop(drive, None)
+        snap.maintenance.pop(drive, None)
+
+    def update_polls(self, drive: str, polls: Sequence[PollSpec]) -> None:
+        """The drive's polls now (as described); the values of those gone leave."""
+        self._polls[drive] = tuple(polls)
+        now = {(p.parameter, p.index) for p in polls}
+        self._keys = {k for k in self._keys if k[0] != drive} | {(drive, *k) for k in now}
+        readings = self.snapshot.readings
+        for key in [k for k in readings if k[0] == drive and k[1:] not in now]:
+            del readings[key]
 
     def apply(self, events: Sequence[Event], at: float | None = None) -> list[Event]:
         """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now).
@@ -109,9 +148,12 @@ class SnapshotWriter:
         out: list[Event] = []
         self._out = out
         snapshot = self.snapshot
+        ours = self._polls
         for event in events:
             if isinstance(event, Finished):
                 self._finished(event, at)
+            elif getattr(event, "drive", None) not in ours and not isinstance(event, LineState):
+                continue  # a drive gone from the line (a reload): nothing of it is shown
             elif isinstance(event, StatusWord):
                 old = snapshot.drives.get(event.drive, DriveState())
                 snapshot.drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)
@@ -142,6 +184,9 @@ class SnapshotWriter:
         log line when the drive gave none, one per field it contradicts the catalog on."""
         drive, target, found = event.drive, event.target, event.description
         ctx = {"line": self.line, "drive": drive}
+        if event.reloaded:  # new polls of a parameter told before: nothing to log again
+            self._out.append(DescriptionChecked(event))
+            return
         if event.forgotten:  # another drive now: no value of its parameters until described
             if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
                 log.warning("drive %s is %s: its parameters are described afresh", drive,
@@ -231,6 +276,10 @@ class SnapshotWriter:
 
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
+        if drive not in self._polls:  # gone from the line (a reload): its caller alone
+            if not isinstance(work, PollSpec):
+                work.resolve(JobResult(event.outcome, tally=event.tally))
+            return
         if isinstance(work, ProbeJob):  # it answered or not: no value, nothing to remember
             result = JobResult(event.outcome, tally=event.tally)
             self._out.append(JobDone(drive, work.kind, result))
@@ -244,8 +293,9 @@ class SnapshotWriter:
         if isinstance(work, PollSpec):
             self._tell_refusal(drive, work, event.outcome)
             self._out.append(JobDone(drive, JobKind.READ, result))
-            if reading is not None:
-                self._land((drive, work.parameter, work.index), reading)
+            key = (drive, work.parameter, work.index)
+            if reading is not None and key in self._keys:  # still polled (a reload)
+                self._land(key, reading)
             return
         if reading is not None:
             self._show_confirmed(drive, work, reading)

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkwbus.master.carriers import SerialCarrier, carrier_for
-from pkwbus.master.planning import planner as planner_module
+from pkwbus.master.planning.drive import DrivePlan
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
@@ -373,15 +373,17 @@ def test_an_exchange_costs_the_same_with_thousands_of_drives(
 ) -> None:
     """Drives wait in heaps: the planner looks at a few of them per exchange, not all."""
     looked = Counter[int]()
-    claim = Planner._claim
+    claim = DrivePlan.claim
+    size = [0]
 
-    def counting(self: Planner, d: object, now: float) -> object:
-        looked[len(self.drives)] += 1
-        return claim(self, d, now)  # type: ignore[arg-type]
+    def counting(self: DrivePlan, now: float, events: list[object]) -> object:
+        looked[size[0]] += 1
+        return claim(self, now, events)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(planner_module.Planner, "_claim", counting)
+    monkeypatch.setattr(DrivePlan, "claim", counting)
     per_exchange = {}
     for n in (10, 2000):
+        size[0] = n
         line = fake_line("fc", list(range(1, 127))[: min(n, 126)], [1613], 0.0)
         specs = drives("fc", [1] * n, [1613], 1000.0)
         specs = [DriveSpec(f"x{i}", s.carrier, s.polls) for i, s in enumerate(specs)]
@@ -452,7 +454,7 @@ def test_the_heap_chooses_what_the_policy_says(ops: list[tuple[object, ...]], ev
             planner.line_up(line.now)
         else:
             # What the policy says, drive by drive, against the one the heaps give.
-            claims = {d.name: planner._claim(d, line.now)[0] for d in planner.drives}
+            claims = {d.name: d.claim(line.now, planner.events)[0] for d in planner.drives}
             before = len(line.events)
             action = planner.next_action(line.now)
             line._collect()

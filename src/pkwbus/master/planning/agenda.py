@@ -37,6 +37,10 @@ class Agenda(Generic[D]):
         self._seq = itertools.count()
         self._limit = 4 * drives + 64  # stale entries beyond this are swept out
 
+    def grow(self, drives: int) -> None:
+        """The line has ``drives`` drives now (one was added)."""
+        self._limit = 4 * drives + 64
+
     def ready(self, d: D, key: Key) -> None:
         heapq.heappush(self._ready, (key, d.version, d))
         self._sweep()

@@ -46,11 +46,13 @@ def complete(
             tally = tx.tally if i == 0 else None
             events.append(Finished(d.name, poll.spec, result, tally))
             poll.due = max(active.order + poll.spec.every, now)
-            d.push_poll(poll)
+            if not poll.retired:
+                d.push_poll(poll)
         return events
     if isinstance(work, PollState):
         work.due = max(work.due + work.spec.every, now)
-        d.push_poll(work)
+        if not work.retired:
+            d.push_poll(work)
         return [Finished(d.name, work.spec, outcome, active.tx.tally)]
     return [Finished(d.name, work, outcome, active.tx.tally)]
 

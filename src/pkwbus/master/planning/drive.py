@@ -7,13 +7,14 @@ import itertools
 from collections import deque
 from dataclasses import dataclass, replace
 
+from pkwbus.master.planning.agenda import Key
 from pkwbus.master.planning.answers import ExchangeResult
 from pkwbus.master.planning.carrier import Item, Transaction
 from pkwbus.master.planning.describing import DescribeStep, DriveDescriber, Settled, described_poll
 from pkwbus.master.planning.health import DriveHealth, HealthPolicy
 from pkwbus.master.planning.identity import identity_requests
 from pkwbus.master.planning.jobs import Job, Priority, ProbeJob
-from pkwbus.master.planning.outcomes import NotSent, Outcome
+from pkwbus.master.planning.outcomes import NotSent, Outcome, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
     DriveSpec,
@@ -29,19 +30,20 @@ from pkwbus.master.planning.transaction import PkwTransaction, ProbeTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.length import PkwLength
 
-__all__ = ["Active", "DrivePlan", "PollState", "Work"]
+__all__ = ["Active", "DrivePlan", "PollState", "Work", "expire"]
 
 
 class PollState:
     """A poll and when it is due."""
 
-    __slots__ = ("due", "fresh", "spec")
+    __slots__ = ("due", "fresh", "retired", "spec")
 
     def __init__(self, spec: PollSpec, due: float) -> None:
         self.spec = spec
         self.due = due
         # Waited for its parameter's description: its first start is never an overrun.
         self.fresh = False
+        self.retired = False  # no longer configured (a reload): never due again
 
 
 # A queued job, a poll, a description's element, or polls in one record (a tuple).
@@ -122,6 +124,33 @@ class DrivePlan:
             else:
                 self.push_poll(PollState(p, 0.0))
         self.last_answer: bytes | None = None  # PKW bytes of its latest answer (not AK 0)
+
+    def claim(self, now: float, events: list[Event]) -> tuple[Key | None, float | None]:
+        """Its claim on the line's next exchange, and when it will have a better one: a
+        background claim's next poll, or the first claim of a drive without one. Queued
+        jobs past their deadline end first (their events into ``events``)."""
+        if self.maintenance:
+            return None, None
+        for queue in (self.writes, self.reads, self.background):
+            if queue:
+                events += expire(self, queue, now)
+        a, served, slot = self.active, self.served, self.slot
+        if a is not None:
+            return (a.priority, int(self.lagging), a.order, served, slot), None
+        if self.writes:
+            return (Priority.WRITE, 0, self.writes[0].deadline, served, slot), None
+        if self.reads:
+            return (Priority.READ, 0, self.reads[0].deadline, served, slot), None
+        if not self.health.up:
+            if self.health.probe_due(now):
+                return (Priority.POLL, 0, self.health.next_probe, served, slot), None
+            return None, self.health.next_probe
+        due = self.first_due()
+        if due is not None and due <= now:
+            return (Priority.POLL, 0, due, served, slot), None
+        if self.background:
+            return (Priority.BACKGROUND, 0, self.background[0].deadline, served, slot), due
+        return None, due
 
     def transaction(
         self, items: list[Item], *, retries: int, deadline: float, stale: bytes | None = None
@@ -350,3 +379,12 @@ class DrivePlan:
         for poll in polls:
             poll.due = now
             self.push_poll(poll)
+
+
+def expire(d: DrivePlan, queue: deque[Job] | deque[Job | ProbeJob], now: float) -> list[Event]:
+    """End the jobs at the head of ``queue`` whose deadline passed before they were sent."""
+    events: list[Event] = []
+    while queue and queue[0].deadline <= now:
+        job = queue.popleft()
+        events.append(Finished(d.name, job, TimedOut("deadline passed before it was sent")))
+    return events

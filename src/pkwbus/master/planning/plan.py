@@ -171,6 +171,8 @@ class Described:
     forgotten: bool = False
     # Polls that wait for a type the drive did not describe (``PollSpec.described_only``).
     withheld: tuple[PollSpec, ...] = ()
+    # New polls of a parameter described before (a reload): their decoding, told again.
+    reloaded: bool = False
 
 
 Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

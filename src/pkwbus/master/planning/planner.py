@@ -28,14 +28,13 @@ A line asks :meth:`Planner.next_action`; a PROFIBUS DP cycle asks
 from __future__ import annotations
 
 import itertools
-from collections import deque
 from collections.abc import Sequence
 
-from pkwbus.master.planning.agenda import Agenda, Key
+from pkwbus.master.planning.agenda import Agenda
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.carrier import Transaction
 from pkwbus.master.planning.completion import complete, drain, withdraw
-from pkwbus.master.planning.drive import Active, DrivePlan, PollState
+from pkwbus.master.planning.drive import Active, DrivePlan, PollState, expire
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, Priority, ProbeJob
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
@@ -47,9 +46,11 @@ from pkwbus.master.planning.plan import (
     HealthChanged,
     Idle,
     PkwLengthTold,
+    PollSpec,
     Send,
     StatusWord,
 )
+from pkwbus.master.planning.polls_update import update_polls
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.planning.write_gate import gate_write
 
@@ -71,7 +72,7 @@ class Planner:
         retries: int = 2,
         policy: HealthPolicy | None = None,
     ) -> None:
-        policy = policy or HealthPolicy()
+        self._policy = policy = policy or HealthPolicy()
         self.retries = retries
         self.poll_deadline = poll_deadline  # a poll's transaction, retries included
         self.drives = [DrivePlan(s, policy, i, len(drives)) for i, s in enumerate(drives)]
@@ -83,10 +84,43 @@ class Planner:
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
+        self._leaving: dict[str, DrivePlan] = {}  # removed while an exchange of theirs is out
 
     def drive(self, name: str) -> DrivePlan:
         """The plan of drive ``name`` (KeyError for a drive not on this line)."""
         return self._by_name[name]
+
+    # ------------------------------------------------------------- a reload
+
+    def add_drive(self, spec: DriveSpec, now: float) -> None:
+        """A drive added to the line: planned as at the start, its polls due now."""
+        slot = max((d.slot for d in self.drives), default=-1) + 1
+        d = DrivePlan(spec, self._policy, slot, slot + 1)
+        self.drives.append(d)
+        self._by_name[d.name] = d
+        self._agenda.grow(len(self.drives))
+        self._index(d, now)
+
+    def remove_drive(self, name: str, reason: str, now: float) -> None:
+        """A drive gone from the line: its work ends with ``reason`` (an exchange of it out
+        at its result), nothing more goes out to it."""
+        d = self._by_name.pop(name)
+        self.drives.remove(d)
+        d.maintenance = True  # no claim, ever again
+        d.went_down()  # another drive of its kind describes what it was describing
+        self.events += withdraw(d, Cancelled(reason), now, retries=self.retries)
+        if d.busy:
+            self._leaving[name] = d
+        d.version += 1
+
+    def update_polls(self, name: str, polls: Sequence[PollSpec], now: float) -> list[PollSpec]:
+        """The drive's polls as the configuration now gives them (:mod:`.polls_update`);
+        each as it goes out now (as described)."""
+        d = self._by_name[name]
+        specs, events = update_polls(d, polls, now)
+        self.events += events
+        self._index(d, now)
+        return specs
 
     def take_events(self) -> list[Event]:
         events, self.events = self.events, []
@@ -164,7 +198,7 @@ class Planner:
     def stop(self, reason: str) -> None:
         """Take no new jobs; cancel the queued ones and the jobs in flight."""
         self.stopping = True
-        for d in self.drives:
+        for d in [*self.drives, *self._leaving.values()]:
             active, d.active = d.active, None
             if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
@@ -195,7 +229,7 @@ class Planner:
         if not self.up or self.stopping or d.busy:
             return None
         self._fire(now)
-        while self._claim(d, now)[0] is not None:
+        while d.claim(now, self.events)[0] is not None:
             send = self._start(d, now)
             if send is not None:
                 return send
@@ -214,7 +248,7 @@ class Planner:
         queued or in flight between its tries."""
         d = self._by_name[drive]
         for queue in (d.writes, d.reads, d.background):
-            self._expire(d, queue, now)
+            self.events += expire(d, queue, now)
         active = d.active
         if active is not None and not d.busy and now >= active.tx.deadline:
             self._complete(d, active, TimedOut("deadline passed"), now)
@@ -233,7 +267,7 @@ class Planner:
 
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
         """The result of ``send``'s exchange."""
-        d = self._by_name[send.drive]
+        d = self._by_name.get(send.drive) or self._leaving.pop(send.drive)
         d.busy = False
         d.served = next(self._served)
         if self._lagging:  # another drive had its turn: the lagging ones may go again
@@ -276,36 +310,10 @@ class Planner:
 
     # ---------------------------------------------------------- internals
 
-    def _claim(self, d: DrivePlan, now: float) -> tuple[Key | None, float | None]:
-        """The drive's claim on the next exchange, and when it will have a better one: a
-        background claim's next poll, or the first claim of a drive without one."""
-        if d.maintenance:
-            return None, None
-        for queue in (d.writes, d.reads, d.background):
-            if queue:
-                self._expire(d, queue, now)
-        a = d.active
-        if a is not None:
-            return (a.priority, int(d.lagging), a.order, d.served, d.slot), None
-        if d.writes:
-            return (Priority.WRITE, 0, d.writes[0].deadline, d.served, d.slot), None
-        if d.reads:
-            return (Priority.READ, 0, d.reads[0].deadline, d.served, d.slot), None
-        if not d.health.up:
-            if d.health.probe_due(now):
-                return (Priority.POLL, 0, d.health.next_probe, d.served, d.slot), None
-            return None, d.health.next_probe
-        due = d.first_due()
-        if due is not None and due <= now:
-            return (Priority.POLL, 0, due, d.served, d.slot), None
-        if d.background:
-            return (Priority.BACKGROUND, 0, d.background[0].deadline, d.served, d.slot), due
-        return None, due
-
     def _index(self, d: DrivePlan, now: float) -> None:
         """Put the drive in the heap it belongs to now (its older entries go stale)."""
         d.version += 1
-        key, at = self._claim(d, now)
+        key, at = d.claim(now, self.events)
         if d.busy or not self.up or self.stopping:
             return
         if key is not None:
@@ -316,13 +324,6 @@ class Planner:
     def _fire(self, now: float) -> None:
         for d in self._agenda.due(now):
             self._index(d, now)
-
-    def _expire(self, d: DrivePlan, queue: deque[Job] | deque[Job | ProbeJob], now: float) -> None:
-        while queue and queue[0].deadline <= now:
-            job = queue.popleft()
-            self.events.append(
-                Finished(d.name, job, TimedOut("deadline passed before it was sent"))
-            )
 
     def _start(self, d: DrivePlan, now: float) -> Send | None:
         """Begin the drive's exchange; None when its transaction ended instead."""
@@ -335,7 +336,7 @@ class Planner:
                 return None
             d.busy = True
             return a.send
-        if self._claim(d, now)[0] is None:  # its queued jobs ended at their deadline
+        if d.claim(now, self.events)[0] is None:  # its queued jobs ended at their deadline
             self._index(d, now)
             return None
         d.busy = True

@@ -1,0 +1,105 @@
+"""A drive's polls as a new configuration gives them (a reload), without a gap (pure).
+
+A poll the new configuration keeps as it was (its parameter, index, request and
+description) keeps its state: its due time, its place while it waits for its
+parameter's description, its exchange in flight. A changed interval applies from
+its next due time on. A new poll is due now, after its parameter's description
+where that is still awaited; one of a parameter already described is decoded as
+described at once. A poll no longer configured is not polled again: one in flight
+ends at its result, and is not due again.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Sequence
+from dataclasses import replace
+
+from pkwbus.master.planning.describing import Settled, described_poll
+from pkwbus.master.planning.drive import DrivePlan, PollState
+from pkwbus.master.planning.plan import Described, PollSpec
+
+__all__ = ["update_polls"]
+
+_Key = tuple[str, int]
+
+
+def _key(spec: PollSpec) -> _Key:
+    return spec.parameter, spec.index
+
+
+def update_polls(
+    d: DrivePlan, polls: Sequence[PollSpec], now: float
+) -> tuple[list[PollSpec], list[Described]]:
+    """Give ``d`` the configuration's ``polls``: each as it goes out now (as described), and
+    a :class:`Described` event for the new polls of each parameter already described (their
+    decoding, for whoever shows them)."""
+    was = {_key(p): p for p in d.spec.polls}
+    wanted = {_key(p): p for p in polls}
+    kept: dict[_Key, PollSpec] = {}
+
+    def keep(poll: PollState) -> bool:
+        k = _key(poll.spec)
+        new, old = wanted.get(k), was.get(k)
+        if new is None or old is None or replace(old, every=new.every) != new:
+            poll.retired = True  # not due again, whatever its exchange in flight brings
+            return False
+        poll.spec = replace(poll.spec, every=new.every)  # as described: its interval alone
+        kept[k] = poll.spec
+        return True
+
+    d.polls[:] = [entry for entry in d.polls if keep(entry[2])]
+    heapq.heapify(d.polls)
+    for pnu, held in list(d.held.items()):
+        held[:] = [poll for poll in held if keep(poll)]
+        if not held:
+            del d.held[pnu]
+    work = d.active.work if d.active is not None else None
+    for poll in work if isinstance(work, tuple) else (work,):
+        if isinstance(poll, PollState):
+            keep(poll)
+    d.spec = replace(d.spec, polls=tuple(polls))
+    described: dict[int, list[PollSpec]] = {}
+    specs = []
+    for k, spec in wanted.items():
+        if k in kept:
+            specs.append(kept[k])
+            continue
+        added, told = _add(d, spec, now)
+        specs.append(added)
+        if told:
+            described.setdefault(spec.request.pnu, []).append(added)
+    return specs, _described(d, described)
+
+
+def _add(d: DrivePlan, spec: PollSpec, now: float) -> tuple[PollSpec, bool]:
+    """A new poll, due now: its spec as it goes out, and whether it is decoded as its
+    parameter's description already says."""
+    poll = PollState(spec, now)
+    pnu = spec.request.pnu
+    describer = d.describer
+    if describer is None or pnu not in describer.described:
+        if describer is not None and describer.waiting(pnu):
+            d.held.setdefault(pnu, []).append(poll)  # due once it is described
+        else:
+            d.push_poll(poll)
+        return spec, False
+    found = describer.described[pnu]
+    if (found is None or found.vtype is None) and spec.described_only:
+        d.held.setdefault(pnu, []).append(poll)  # no type: it waits, as at the start
+        return spec, False
+    poll.spec = described_poll(spec, Settled(pnu, found, first=False), describer.dialect)
+    d.push_poll(poll)
+    return poll.spec, True
+
+
+def _described(d: DrivePlan, described: dict[int, list[PollSpec]]) -> list[Described]:
+    if not described or d.describer is None:
+        return []
+    targets = {t.pnu: t for t in d.spec.describe}
+    found = d.describer.described
+    return [
+        Described(d.name, targets[pnu], found[pnu], tuple(specs), first=False,
+                  identity=d.describer.identity, from_book=True, reloaded=True)
+        for pnu, specs in described.items() if pnu in targets
+    ]  # fmt: skip
