@@ -92,8 +92,8 @@ async def scrape(folder: Path) -> str:
     config = parse_config(text)
     runtime = await build_runtime(config)
     history = HistoryStore(folder / "history.sqlite")  # the drives' own logs, as `pkwbus run`
-    logs, settings = remember(config, runtime, history)
-    assert logs is not None and settings is not None
+    memory = remember(config, runtime, history)
+    assert memory.logs is not None and memory.settings is not None
     try:
         await runtime.start()
         deadline = time.monotonic() + 20
@@ -135,7 +135,15 @@ def exported_metrics(text: str) -> Exported:
 def exported(tmp_path_factory: pytest.TempPathFactory) -> Exported:
     text = asyncio.run(scrape(tmp_path_factory.mktemp("metrics")))
     names = exported_metrics(text)
-    empty = sorted(n for n, labels in names.items() if n.startswith("pkwbus_") and not labels)
+    # A series without labels (the configuration's gauges, as Prometheus' own) is a series.
+    unlabelled = {
+        s.name for f in text_string_to_metric_families(text) for s in f.samples if not s.labels
+    }
+    empty = sorted(
+        n
+        for n, labels in names.items()
+        if n.startswith("pkwbus_") and not labels and n not in unlabelled
+    )
     declared = declared_counters()
     for name in empty:
         if name in declared:

@@ -78,8 +78,16 @@ def run_service(args: argparse.Namespace) -> int:
     from pkwbus.service.assembly import root
 
     config = load(args.config, args.listen)
+
+    def reread() -> Config:  # a reload reads the file as the start did (ConfigError)
+        fresh = load_config(args.config)
+        return fresh.with_listen(args.listen) if args.listen else fresh
+
     try:
-        root.run_service(config, log_format=args.log_format or config.log_format, debug=args.debug)
+        root.run_service(
+            config, log_format=args.log_format or config.log_format, debug=args.debug,
+            reread=reread,
+        )  # fmt: skip
     except root.StartError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     return Exit.OK

@@ -39,7 +39,7 @@ from pkwbus.master.bus import Done, LineRefused, Port, Wire
 from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
-from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle, PollSpec
+from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
@@ -143,11 +143,12 @@ class LineRunner:
         self.flush()  # what ended, to its callers and the observers, before it is forgotten
         self.writer.remove_drive(drive)
 
-    def update_polls(self, drive: str, polls: Sequence[PollSpec]) -> None:
-        """The drive's polls now: a kept one goes on at its due time, a new one is due now,
-        the values of those gone leave (KeyError: not here)."""
+    def update_polls(self, spec: DriveSpec) -> None:
+        """The drive's polls and described parameters now (``spec``, its carrier and form
+        as they were): a kept poll goes on at its due time, a new one is due now, the values
+        of those gone leave (KeyError: not here)."""
         now = asyncio.get_running_loop().time()
-        self.writer.update_polls(drive, self.planner.update_polls(drive, polls, now))
+        self.writer.update_polls(spec.name, self.planner.update_polls(spec, now))
         self._changed()
 
     def _changed(self) -> None:

@@ -71,6 +71,15 @@ class Snapshot:
     # The drives in maintenance: nothing goes out to them.
     maintenance: dict[str, Maintained] = field(default_factory=dict)
 
+    def forget(self, drive: str) -> None:
+        """Everything of ``drive`` (gone from the configuration)."""
+        self.readings = {k: v for k, v in self.readings.items() if k[0] != drive}
+        self.latest = {k: v for k, v in self.latest.items() if k[0] != drive}
+        self.stated = {k: v for k, v in self.stated.items() if k[0] != drive}
+        self.drives.pop(drive, None)
+        self.slaves.pop(drive, None)
+        self.maintenance.pop(drive, None)
+
     def copy(self) -> Snapshot:
         return Snapshot(
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),

@@ -123,13 +123,7 @@ class SnapshotWriter:
         self._silent.discard(drive)
         self._waiting = {w for w in self._waiting if w[0] != drive}
         self._refused = {k: v for k, v in self._refused.items() if k[0] != drive}
-        snap = self.snapshot
-        snap.readings = {k: v for k, v in snap.readings.items() if k[0] != drive}
-        snap.latest = {k: v for k, v in snap.latest.items() if k[0] != drive}
-        snap.stated = {k: v for k, v in snap.stated.items() if k[0] != drive}
-        snap.drives.pop(drive, None)
-        snap.slaves.pop(drive, None)
-        snap.maintenance.pop(drive, None)
+        self.snapshot.forget(drive)
 
     def update_polls(self, drive: str, polls: Sequence[PollSpec]) -> None:
         """The drive's polls now (as described); the values of those gone leave."""

@@ -204,21 +204,50 @@ class Runtime:
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
         self.history: History | None = None  # the drives' own log entries (None: not kept)
         self.settings: Settings | None = None  # the sweep of the drives' settings (None: none)
-        self._tasks: list[asyncio.Task[None]] = []
+        self._tasks: dict[str, asyncio.Task[None]] = {}
         # What starts once the lines run (the watch of the drives' logs), and what ends
         # after they stopped.
         self.starters: list[Callable[[], Awaitable[None]]] = []
         self.cleanups: list[Callable[[], object]] = []
+        # What closes a line's simulated drives, after the line stopped.
+        self.closers: dict[str, Callable[[], object]] = {}
         # What the status page shows of each line besides the snapshot (service.metrics).
         self.counts: dict[str, LineCounts] = {}
 
     async def start(self) -> None:
         for runner in self.runners.values():
-            task = asyncio.create_task(runner.run(), name=f"line {runner.name}")
-            task.add_done_callback(self._line_ended)
-            self._tasks.append(task)
+            self.start_line(runner)
         for start in self.starters:
             await start()
+
+    def start_line(self, runner: LineTask) -> None:
+        """Run ``runner``'s line (at the start, or a line a reload added)."""
+        self.runners[runner.name] = runner
+        task = asyncio.create_task(runner.run(), name=f"line {runner.name}")
+        task.add_done_callback(self._line_ended)
+        self._tasks[runner.name] = task
+
+    async def stop_line(self, name: str, grace: float = 3.0) -> None:
+        """Stop one line (a reload): its exchange in flight finishes, its port closes."""
+        runner = self.runners.pop(name)
+        runner.stop()
+        task = self._tasks.pop(name, None)
+        if task is not None:
+            await self._end([task], grace)
+        await self._close(name)
+
+    async def _end(self, tasks: list[asyncio.Task[None]], grace: float) -> None:
+        _, pending = await asyncio.wait(tasks, timeout=grace)
+        for task in pending:
+            task.cancel()
+        if pending:
+            await asyncio.wait(pending, timeout=1.0)
+
+    async def _close(self, name: str) -> None:
+        close = self.closers.pop(name, None)
+        result = close() if close is not None else None
+        if asyncio.iscoroutine(result):
+            await result
 
     def _line_ended(self, task: asyncio.Task[None]) -> None:
         if not task.cancelled() and task.exception() is not None:
@@ -229,11 +258,9 @@ class Runtime:
         for runner in self.runners.values():
             runner.stop()
         if self._tasks:
-            _, pending = await asyncio.wait(self._tasks, timeout=grace)
-            for task in pending:
-                task.cancel()
-            if pending:
-                await asyncio.wait(pending, timeout=1.0)
+            await self._end(list(self._tasks.values()), grace)
+        for name in list(self.closers):
+            await self._close(name)
         for cleanup in reversed(self.cleanups):
             result = cleanup()
             if asyncio.iscoroutine(result):

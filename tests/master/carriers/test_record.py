@@ -11,11 +11,11 @@ import pytest
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.carriers import RecordCarrier
 from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
-from pkwbus.master.planning.batch import BatchTransaction
 from pkwbus.master.planning.carrier import Item as RecordItem
 from pkwbus.master.planning.outcomes import Answered, LineFailed, NotSent, Rejected, TimedOut
 from pkwbus.master.planning.plan import DriveSpec, Finished, PollSpec, Send
 from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.transaction import BatchTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp import ppo

@@ -17,8 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pkwbus.master.carriers import SerialCarrier, carrier_for
-from pkwbus.master.planning.drive import DrivePlan
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
+from pkwbus.master.planning.drive import DrivePlan
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
 from pkwbus.master.planning.outcomes import Answered, LineFailed, TimedOut

@@ -78,7 +78,7 @@ async def watching(text: str) -> AsyncIterator[LogWatcher]:
     config = parse_config(text, environ={})
     store = HistoryStore(config.history_path)
     runtime = await build_runtime(config)
-    watcher, _ = remember(config, runtime, store)
+    watcher = remember(config, runtime, store).logs
     assert watcher is not None
     await runtime.start()
     try:

@@ -16,9 +16,9 @@ import struct
 from collections.abc import Sequence
 
 from pkwbus.master.carriers.slave import SlaveHealth
-from pkwbus.master.planning.batch import BatchTransaction
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
+from pkwbus.master.planning.transaction import BatchTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Command, Dialect, Reply

@@ -17,8 +17,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from pkwbus.master.planning.answers import ExchangeResult
-from pkwbus.master.planning.batch import BatchTransaction
-from pkwbus.master.planning.transaction import PkwTransaction, ProbeTransaction
+from pkwbus.master.planning.transaction import BatchTransaction, PkwTransaction, ProbeTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.pkw.length import Gate, PkwLength

@@ -9,12 +9,12 @@ job is finished.
 
 from __future__ import annotations
 
-from pkwbus.master.planning.batch import BatchTransaction
 from pkwbus.master.planning.describing import DescribeStep
 from pkwbus.master.planning.drive import Active, DrivePlan, PollState
 from pkwbus.master.planning.jobs import Job
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import Event, Finished
+from pkwbus.master.planning.transaction import BatchTransaction
 from pkwbus.master.planning.write_gate import after_read
 
 __all__ = ["complete", "drain", "withdraw"]

@@ -121,6 +121,18 @@ class DriveDescriber:
         self.ready: list[Settled] = []  # settled from the book, for the planner to tell
         self._blocked: float | None = None  # all it could ask, another drive is asking
 
+    def want(self, pnu: int, elements: tuple[int, ...]) -> None:
+        """Describe ``pnu`` by ``elements`` from now on (a reload): a new parameter waits
+        for its description; one described already keeps it until the elements it lacked
+        (its limits, say) are read."""
+        param = self._params.get(pnu)
+        if param is None:
+            self._params[pnu] = _Parameter(pnu, elements)
+        elif param.elements != elements:
+            param.elements = elements
+            if param.next_element() is not None:  # read afresh, its description standing
+                param.settled, param.found, param.due, param.base = False, {}, 0.0, None
+
     def release(self) -> None:
         """The drive is away: another drive of its kind describes what it was describing."""
         if self.book is not None:

@@ -113,11 +113,11 @@ class Planner:
             self._leaving[name] = d
         d.version += 1
 
-    def update_polls(self, name: str, polls: Sequence[PollSpec], now: float) -> list[PollSpec]:
-        """The drive's polls as the configuration now gives them (:mod:`.polls_update`);
-        each as it goes out now (as described)."""
-        d = self._by_name[name]
-        specs, events = update_polls(d, polls, now)
+    def update_polls(self, spec: DriveSpec, now: float) -> list[PollSpec]:
+        """The drive's polls and described parameters as the configuration now gives them
+        (:mod:`.polls_update`); each poll as it goes out now (as described)."""
+        d = self._by_name[spec.name]
+        specs, events = update_polls(d, spec.polls, spec.describe, now)
         self.events += events
         self._index(d, now)
         return specs

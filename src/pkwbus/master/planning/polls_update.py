@@ -17,7 +17,7 @@ from dataclasses import replace
 
 from pkwbus.master.planning.describing import Settled, described_poll
 from pkwbus.master.planning.drive import DrivePlan, PollState
-from pkwbus.master.planning.plan import Described, PollSpec
+from pkwbus.master.planning.plan import Described, DescribeTarget, PollSpec
 
 __all__ = ["update_polls"]
 
@@ -29,11 +29,13 @@ def _key(spec: PollSpec) -> _Key:
 
 
 def update_polls(
-    d: DrivePlan, polls: Sequence[PollSpec], now: float
+    d: DrivePlan, polls: Sequence[PollSpec], describe: Sequence[DescribeTarget], now: float
 ) -> tuple[list[PollSpec], list[Described]]:
-    """Give ``d`` the configuration's ``polls``: each as it goes out now (as described), and
-    a :class:`Described` event for the new polls of each parameter already described (their
-    decoding, for whoever shows them)."""
+    """Give ``d`` the configuration's ``polls`` and what it has ``describe``d: each
+    poll as it goes out now (as described), and a :class:`Described` event for the new
+    polls of each parameter already described (their decoding, for whoever shows them). A
+    parameter no longer described stays known as it was."""
+    _describe(d, describe)
     was = {_key(p): p for p in d.spec.polls}
     wanted = {_key(p): p for p in polls}
     kept: dict[_Key, PollSpec] = {}
@@ -70,6 +72,15 @@ def update_polls(
         if told:
             described.setdefault(spec.request.pnu, []).append(added)
     return specs, _described(d, described)
+
+
+def _describe(d: DrivePlan, targets: Sequence[DescribeTarget]) -> None:
+    new = {t.pnu for t in targets}
+    kept = tuple(t for t in d.spec.describe if t.pnu not in new)
+    if d.describer is not None:
+        for target in targets:
+            d.describer.want(target.pnu, target.elements)
+    d.spec = replace(d.spec, describe=(*targets, *kept))
 
 
 def _add(d: DrivePlan, spec: PollSpec, now: float) -> tuple[PollSpec, bool]:

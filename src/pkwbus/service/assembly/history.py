@@ -23,7 +23,7 @@ from pkwbus.service.history.stream import EventStream
 from pkwbus.service.history.watch import LogWatcher, Watched
 from pkwbus.service.runtime import Runtime
 
-__all__ = ["log_of", "remember", "watch_logs", "watch_settings"]
+__all__ = ["Memory", "log_of", "remember", "watch_logs", "watch_settings"]
 
 log = logging.getLogger("pkwbus.service.history")
 
@@ -68,8 +68,6 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
         if isinstance(runner, LineRunner):
             runner.observers.append(watcher)  # drives and lines that come back
     runtime.history = stream.store
-    runtime.starters.append(watcher.start)
-    runtime.cleanups.append(watcher.stop)
     log.info("watching the logs of %d drive(s), kept in %s", len(watched), stream.store.path)
     return watcher
 
@@ -103,22 +101,68 @@ def watch_settings(
     store = SettingsStore(stream.store.path)
     runners = dict(runtime.runners)
     watcher = SettingsWatcher(runners, store, stream, swept, runtime.registry)
-    for runner in runners.values():
+    for name, runner in runners.items():
         if isinstance(runner, LineRunner):
             runner.observers.append(watcher)  # drives identified as other drives
+        watcher.line_state(name, runtime.snapshot.lines.get(name, False))  # a reload's
     runtime.settings = watcher
-    runtime.starters.append(watcher.start)
-    runtime.cleanups.append(watcher.stop)
-    runtime.cleanups.append(store.close)
     log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), store.path)
     return watcher
 
 
-def remember(
-    config: cfg.Config, runtime: Runtime, store: HistoryStore
-) -> tuple[LogWatcher | None, SettingsWatcher | None]:
+class Memory:
     """What the drives remember, watched: their own logs and their settings, both kept in
-    the history database ``store`` and told on one stream of events."""
-    stream = EventStream(store, runtime.registry)
-    runtime.history = store
-    return watch_logs(config, runtime, stream), watch_settings(config, runtime, stream)
+    the history database and told on one stream of events; watched afresh by a reload."""
+
+    def __init__(self, runtime: Runtime, store: HistoryStore) -> None:
+        self.runtime = runtime
+        self.stream = EventStream(store, runtime.registry)
+        runtime.history = store
+        self.logs: LogWatcher | None = None
+        self.settings: SettingsWatcher | None = None
+        self.running = False
+
+    def watch(self, config: cfg.Config) -> None:
+        """Watch the drives of ``config`` (started with the runtime, or by :meth:`renew`)."""
+        self.logs = watch_logs(config, self.runtime, self.stream)
+        self.settings = watch_settings(config, self.runtime, self.stream)
+
+    async def start(self) -> None:
+        self.running = True
+        for watcher in (self.logs, self.settings):
+            if watcher is not None:
+                await watcher.start()
+
+    async def stop(self) -> None:
+        """Stop watching: the watchers leave the lines, their gauges leave the registry."""
+        self.running = False
+        for runner in self.runtime.runners.values():
+            if isinstance(runner, LineRunner):
+                runner.observers[:] = [
+                    o for o in runner.observers if o is not self.logs and o is not self.settings
+                ]
+        if self.logs is not None:
+            await self.logs.stop()
+        if self.settings is not None:
+            await self.settings.stop()
+            self.settings.unregister(self.runtime.registry)
+            self.settings.store.close()
+        self.runtime.settings = None
+        self.logs = self.settings = None
+
+    async def renew(self, config: cfg.Config) -> None:
+        """Watch the drives of ``config`` now (a reload): what the history holds stays."""
+        running = self.running
+        await self.stop()
+        self.watch(config)
+        if running:
+            await self.start()
+
+
+def remember(config: cfg.Config, runtime: Runtime, store: HistoryStore) -> Memory:
+    """What the drives remember, watched from the runtime's start to its stop."""
+    memory = Memory(runtime, store)
+    memory.watch(config)
+    runtime.starters.append(memory.start)
+    runtime.cleanups.append(memory.stop)
+    return memory

@@ -4,7 +4,8 @@ service, and back.
 In order: logging; the audit log, its place checked first; the history
 database of the drives' own logs; the HTTP address bound; the runtime built
 from the configuration (:mod:`.build`) with the watch of the drives' logs
-(:mod:`.history`); the HTTP app over it (:mod:`pkwbus.service.http.api`);
+(:mod:`.history`) and its reloader (:mod:`.reload`); the HTTP app over it
+(:mod:`pkwbus.service.http.api`);
 writes an earlier run left without an outcome marked interrupted; then
 :func:`~.serve.serve` until a stop signal. On the way out the outcomes kept
 in memory are stored and the audit log and the history are closed.
@@ -19,18 +20,27 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+from collections.abc import Callable
 
 from pkwbus import link
 from pkwbus.errors import PkwbusError
-from pkwbus.service.assembly.build import build_runtime
+from pkwbus.service.assembly.build import assemble
 from pkwbus.service.assembly.description_file import DescriptionFile, description_path
 from pkwbus.service.assembly.history import remember
 from pkwbus.service.assembly.logs import setup_logging
-from pkwbus.service.assembly.serve import ListenError, bind, serve
+from pkwbus.service.assembly.reload import Reloader
+from pkwbus.service.assembly.serve import (
+    SPARE_DESCRIPTORS,
+    ListenError,
+    bind,
+    raise_open_files_limit,
+    serve,
+)
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
 from pkwbus.service.config import Config
 from pkwbus.service.history.store import HistoryError, HistoryStore
 from pkwbus.service.http.api import create_app
+from pkwbus.service.http.connections import ConnectionLimit
 
 __all__ = ["StartError", "open_audit", "open_history", "run_service"]
 
@@ -41,8 +51,15 @@ class StartError(PkwbusError):
     """The service cannot start: its audit log's place or its HTTP address is unusable."""
 
 
-def run_service(config: Config, *, log_format: str, debug: bool = False) -> None:
-    """Run the service of ``config`` until SIGTERM, SIGINT or SIGHUP."""
+def run_service(
+    config: Config,
+    *,
+    log_format: str,
+    debug: bool = False,
+    reread: Callable[[], Config] | None = None,
+) -> None:
+    """Run the service of ``config`` until SIGTERM or SIGINT; ``reread`` reads its file
+    again, for a reload (SIGHUP, POST /api/v1/reload; None: no reload)."""
     setup_logging(log_format, debug=debug)
     audit = open_audit(config)
     history: HistoryStore | None = None
@@ -52,7 +69,7 @@ def run_service(config: Config, *, log_format: str, debug: bool = False) -> None
             sock = bind(config.listen.host, config.listen.port)
         except ListenError as exc:
             raise StartError(str(exc)) from None
-        link.run(_serve(config, sock, audit, history))
+        link.run(_serve(config, sock, audit, history, reread))
     finally:
         if history is not None:
             history.close()
@@ -85,14 +102,31 @@ def open_history(config: Config) -> HistoryStore:
 
 
 async def _serve(
-    config: Config, sock: socket.socket, audit: AuditLog, history: HistoryStore
+    config: Config,
+    sock: socket.socket,
+    audit: AuditLog,
+    history: HistoryStore,
+    reread: Callable[[], Config] | None = None,
 ) -> None:
     # The drives' descriptions of an earlier run, beside the audit database.
     kept = DescriptionFile(description_path(config.audit_db))
-    runtime = await build_runtime(config, kept)
-    remember(config, runtime, history)
+    runtime, parts = await assemble(config, kept)
+    memory = remember(config, runtime, history)
     token = config.write_token()
-    app = create_app(runtime, audit=audit, write_token=token, read_token=config.read_token())
+    limit = ConnectionLimit(config.api.max_connections)
+
+    def apply_api(new: Config) -> None:  # a reloaded file's API settings, at once
+        app.state.set_tokens(new.write_token(), new.read_token())
+        if new.api.max_connections != limit.limit:
+            limit.limit = new.api.max_connections
+            raise_open_files_limit(limit.limit + SPARE_DESCRIPTORS)
+
+    reloader = None
+    if reread is not None:
+        reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api)
+    app = create_app(
+        runtime, audit=audit, write_token=token, read_token=config.read_token(), reloader=reloader
+    )
     audit_writer = app.state.audit_writer
     interrupted = await audit_writer.close_interrupted()
     if interrupted:
@@ -107,6 +141,6 @@ async def _serve(
     log.info("pkwbus: metrics on http://%s:%d/metrics", shown, port)
     log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
     try:
-        await serve(runtime, app, sock, max_connections=config.api.max_connections)
+        await serve(runtime, app, sock, limit=limit, on_hangup=app.state.reloads)
     finally:
         await asyncio.to_thread(audit_writer.save_late)

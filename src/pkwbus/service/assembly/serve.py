@@ -2,9 +2,10 @@
 HTTP server started, signals, shutdown in order (:func:`serve`); what
 :mod:`pkwbus.service.assembly.root` runs once it has built them.
 
-SIGTERM, SIGINT or SIGHUP: stop taking new jobs, let every line finish the
-exchange in flight, close the ports, stop the HTTP server, exit 0. SIGHUP
-does not reload the configuration: a new configuration takes a restart.
+SIGTERM or SIGINT: stop taking new jobs, let every line finish the exchange
+in flight, close the ports, stop the HTTP server, exit 0. SIGHUP reloads the
+configuration file (:mod:`pkwbus.service.assembly.reload`), one reload after
+the other; a service without a file to reload ignores it (logged).
 
 Raises :class:`ListenError` when the HTTP address cannot be bound.
 """
@@ -20,6 +21,7 @@ import resource
 import signal
 import socket
 from collections.abc import Iterator
+from typing import Protocol
 
 import uvicorn
 from fastapi import FastAPI
@@ -30,6 +32,7 @@ from pkwbus.service.http.connections import ConnectionLimit, bounded_protocol
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
+    "RELOAD_SIGNAL",
     "SPARE_DESCRIPTORS",
     "STOP_SIGNALS",
     "ListenError",
@@ -41,7 +44,14 @@ __all__ = [
 
 log = logging.getLogger("pkwbus.service.app")  # the name its log lines have always carried
 
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+RELOAD_SIGNAL = signal.SIGHUP
+
+
+class Hangup(Protocol):
+    """What a SIGHUP asks for: a reload (service.http.reload.Reloads)."""
+
+    async def by_signal(self, name: str = "SIGHUP") -> None: ...
 
 
 class ListenError(PkwbusError):
@@ -115,29 +125,50 @@ def settle_heap() -> None:
 
 
 async def serve(
-    runtime: Runtime, app: FastAPI, sock: socket.socket, *, max_connections: int = 500
+    runtime: Runtime,
+    app: FastAPI,
+    sock: socket.socket,
+    *,
+    max_connections: int = 500,
+    limit: ConnectionLimit | None = None,
+    on_hangup: Hangup | None = None,
 ) -> None:
-    """Run until SIGTERM, SIGINT or SIGHUP, then shut down in order."""
+    """Run until SIGTERM or SIGINT, then shut down in order; a SIGHUP reloads
+    (``on_hangup``)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     received: list[str] = []
+    reloads: set[asyncio.Task[None]] = set()
 
     def on_signal(sig: signal.Signals) -> None:
         received.append(sig.name)
         stop.set()
 
-    # A SIGHUP ignored by whoever started the service (nohup) stays ignored.
+    def on_hup() -> None:
+        if on_hangup is None:
+            log.warning("SIGHUP: this service has no configuration file to reload")
+            return
+        log.info("SIGHUP: reloading the configuration")
+        task = asyncio.create_task(on_hangup.by_signal(), name="reload")
+        reloads.add(task)
+        task.add_done_callback(reloads.discard)
+
     signals = [s for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN]
     for sig in signals:
         loop.add_signal_handler(sig, on_signal, sig)
-    raise_open_files_limit(max_connections + SPARE_DESCRIPTORS)
+    # A SIGHUP ignored by whoever started the service (nohup) stays ignored.
+    if signal.getsignal(RELOAD_SIGNAL) is not signal.SIG_IGN:
+        loop.add_signal_handler(RELOAD_SIGNAL, on_hup)
+        signals.append(RELOAD_SIGNAL)
+    limit = limit or ConnectionLimit(max_connections)
+    raise_open_files_limit(limit.limit + SPARE_DESCRIPTORS)
     config = uvicorn.Config(
         app,
         log_config=None,
         access_log=False,
         lifespan="off",
         timeout_graceful_shutdown=2,
-        http=bounded_protocol(ConnectionLimit(max_connections)),
+        http=bounded_protocol(limit),
     )
     server = _Server(config)
     settle_heap()
@@ -149,6 +180,9 @@ async def serve(
         by = f" ({received[0]})" if received else ""
         log.info("stopping%s: finishing the exchanges in flight", by)
     finally:
+        for task in list(reloads):  # a reload under way finishes before the lines stop
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(asyncio.shield(task), 30.0)
         await runtime.stop()
         server.should_exit = True
         try:

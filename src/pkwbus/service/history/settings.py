@@ -134,6 +134,16 @@ class SettingsWatcher:
     def _up(self, line: str) -> asyncio.Event:
         return self._lines.setdefault(line, asyncio.Event())
 
+    def line_state(self, line: str, up: bool) -> None:
+        """Whether ``line``'s port is open now (a watcher made while the lines run)."""
+        event = self._up(line)
+        event.set() if up else event.clear()
+
+    def unregister(self, registry: CollectorRegistry) -> None:
+        """Its gauges out of ``registry`` (a reload makes another watcher)."""
+        for gauge in (self.changed, self.swept_at):
+            registry.unregister(gauge)
+
     def on_events(self, events: Sequence[Event]) -> None:
         """A drive identified as another drive starts a new baseline; a line's port open
         or closed (the reads wait for it)."""

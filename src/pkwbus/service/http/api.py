@@ -38,6 +38,7 @@ from pkwbus.service.http.models import (
     MaintenanceBody,
     MaintenanceResult,
     Readiness,
+    ReloadResult,
     ValueBody,
     WriteBody,
     WriteResult,
@@ -50,6 +51,7 @@ from pkwbus.service.http.parameters import (
     ParameterService,
     WriteOrder,
 )
+from pkwbus.service.http.reload import Reloading, Reloads
 from pkwbus.service.http.settings_routes import add_settings_routes
 from pkwbus.service.http.views import (
     drive_view,
@@ -152,6 +154,7 @@ def create_app(
     audit: AuditLog | None = None,
     write_token: str | None = None,
     read_token: str | None = None,
+    reloader: Reloading | None = None,
 ) -> FastAPI:
     # /docs and /redoc with Swagger UI and ReDoc served from the package, no CDN, and
     # every URL the pages and the status page use relative: any path prefix works.
@@ -171,6 +174,16 @@ def create_app(
     switches = Maintenance(runtime, audit_writer, service.tokens)
     settings = service.settings()
     audit_tokens = [t.encode() for t in (write_token, read_token) if t]
+
+    def set_tokens(write: str | None, read: str | None) -> None:
+        """The tokens of a reloaded configuration, from now on."""
+        service.tokens.set(write, audit_writer.token_id(write) if write is not None else None)
+        audit_tokens[:] = [t.encode() for t in (write, read) if t]
+
+    app.state.set_tokens = set_tokens
+    reloads = app.state.reloads = (
+        Reloads(reloader, audit_writer, service.tokens) if reloader is not None else None
+    )
 
     @app.exception_handler(ApiError)
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
@@ -309,6 +322,16 @@ def create_app(
         if ready:
             return body
         return JSONResponse(body.model_dump(), status_code=503)
+
+    @app.post("/api/v1/reload", response_model=ReloadResult, responses=ERRORS,
+              dependencies=[Security(BEARER)])  # fmt: skip
+    async def reload(request: Request) -> dict[str, Any]:
+        """Read the configuration file again and apply what changed (as SIGHUP does): a
+        file with problems changes nothing (422 with the problems). Audited."""
+        if reloads is None:
+            raise ApiError(409, "reload_unavailable", "this service has no file to reload")
+        caller = Caller(_client(request), request.headers.get("authorization"))
+        return await reloads.by_api(caller)
 
     @app.get("/metrics", include_in_schema=False)
     async def metrics() -> Response:

@@ -23,6 +23,7 @@ __all__ = [
     "MaintenanceView",
     "ParameterReading",
     "Readiness",
+    "ReloadResult",
     "RestoreBody",
     "SlaveView",
     "ValueBody",
@@ -217,6 +218,17 @@ class EventsBody(BaseModel):
 
 class ErrorBody(BaseModel):
     error: dict[str, object]
+
+
+class ReloadResult(BaseModel):
+    """A reload that loaded the file: what changed, what takes a restart, lines that could
+    not start."""
+
+    loaded: bool
+    changes: list[str]
+    refused: list[str]
+    problems: list[str]
+    audit: str | None = None
 
 
 ERRORS: dict[int | str, dict[str, object]] = {

@@ -105,6 +105,10 @@ class TokenCheck:
         self._token = token
         self._token_id = token_id
 
+    def set(self, token: str | None, token_id: str | None) -> None:
+        """Another write token from now on (a reload)."""
+        self._token, self._token_id = token, token_id
+
     def identify(self, caller: Caller) -> str | None:
         """The token id of a caller with the write token; an :class:`ApiError` otherwise."""
         if self._token is None:

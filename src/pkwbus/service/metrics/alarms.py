@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 
 from prometheus_client import CollectorRegistry, Gauge
@@ -71,6 +71,19 @@ class AlarmBoard:
             if code not in new:
                 self._went(watched.line, drive, gone.alarm)
         self._by_source[key] = new
+
+    def watch(self, watched: Mapping[ReadingKey, Watched]) -> None:
+        """Watch these polled parameters too (a drive added by a reload)."""
+        self.watched.update(watched)
+
+    def forget(self, drive: str, keep: Collection[ReadingKey] | None = None) -> None:
+        """The drive's alarm parameters gone (a reload), all or those not in ``keep``:
+        what they showed leaves with them."""
+        for key in [k for k in self.watched if k[0] == drive and (keep is None or k not in keep)]:
+            watched = self.watched.pop(key)
+            for gone in self._by_source.pop(key, {}).values():
+                with contextlib.suppress(KeyError):
+                    self.gauge.remove(*self._labels(watched.line, drive, gone.alarm))
 
     def said(self, key: ReadingKey, value: object) -> str:
         """A polled alarm parameter's value in words (empty for any other parameter): the

@@ -157,6 +157,36 @@ class SnapshotCollector(Collector):
         self._drive_lines: dict[str, tuple[_DriveKey, _DriveLines]] = {}
         self._drive_heads = {name: self._heads_of(name, d.line) for name, d in self._drives.items()}
 
+    def add_drive(self, name: str, drive: DriveInfo, parameters: Iterable[ParameterInfo]) -> None:
+        """A drive and its polled parameters (at the start, or added by a reload)."""
+        self._drives[name] = drive
+        self._line_of[name] = drive.line
+        self._drive_heads[name] = self._heads_of(name, drive.line)
+        self._drive_lines.pop(name, None)
+        self.set_parameters(name, parameters)
+
+    def set_parameters(self, drive: str, parameters: Iterable[ParameterInfo]) -> None:
+        """The drive's polled parameters now (a reload): a kept one keeps its info as
+        described, the others' series go."""
+        given = {p.key: p for p in parameters}
+        for key in [k for k in self._parameters if k[0] == drive and k not in given]:
+            del self._parameters[key]
+            self._heads.pop(key, None)
+            self._readings.pop(key, None)
+        for key, info in given.items():
+            if key not in self._parameters:
+                self._parameters[key] = info
+                self._head(key)
+        self._info_text = None
+
+    def forget_drive(self, drive: str) -> None:
+        """Every series of ``drive`` (gone by a reload)."""
+        self.set_parameters(drive, ())
+        for table in (self._drives, self._line_of, self._drive_heads, self._drive_lines):
+            table.pop(drive, None)
+        for key in [k for k in self._mismatches if k[0] == drive]:
+            del self._mismatches[key]
+
     def described(self, info: ParameterInfo, mismatches: Iterable[Mismatch]) -> None:
         """A polled parameter's description settled (``info``), and the fields on which its
         drive contradicts the catalog (none when it agrees)."""

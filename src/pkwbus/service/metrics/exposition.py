@@ -177,6 +177,19 @@ class CounterFamily(Collector):
             series.show()
         return series
 
+    def forget(self, labels: Mapping[str, str]) -> int:
+        """Remove the series whose labels include all of ``labels`` (none when the family
+        lacks one of their names); how many went."""
+        if not all(k in self.labelnames for k in labels):
+            return 0
+        at = [(self.labelnames.index(k), v) for k, v in labels.items()]
+        gone = [key for key in self._series if all(key[i] == v for i, v in at)]
+        for key in gone:
+            del self._series[key]
+        if gone:
+            self._changes.count += 1
+        return len(gone)
+
     def describe(self) -> list[Metric]:
         return [CounterMetricFamily(self.name, self.documentation, labels=self.labelnames)]
 
@@ -232,6 +245,10 @@ class MetricsRegistry(CollectorRegistry):
     def unregister(self, collector: Collector) -> None:
         super().unregister(collector)
         self._ordered.pop(collector, None)
+
+    def collectors(self) -> list[Collector]:
+        """The registered collectors, in order."""
+        return list(self._ordered)
 
     def exposition(self) -> Iterator[str]:
         """The text of every family, as pieces to join."""

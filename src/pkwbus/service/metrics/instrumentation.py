@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import collections
 import platform
-import weakref
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+from prometheus_client import CollectorRegistry, Gauge, Histogram
 
 from pkwbus import __version__
 from pkwbus.catalog.precedence import Disagreement
@@ -43,13 +42,12 @@ from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.profibus.dp.slave import RestartReason, SlaveState
-from pkwbus.service.metrics.exposition import CounterFamily
+from pkwbus.service.metrics.exposition import CounterFamily, Series
+from pkwbus.service.metrics.service_metrics import ApiMetrics, api_metrics
 
 __all__ = [
-    "AUDIT_STAGES",
     "DURATION_BUCKETS",
     "ERROR_KINDS",
-    "REFUSAL_REASONS",
     "ApiMetrics",
     "LineMetrics",
     "ServiceMetrics",
@@ -233,14 +231,7 @@ class LineMetrics:
         self.values = values
         # Takes a parameter's settled description to the drive's table and the info metric.
         self.descriptions = descriptions
-        if uss:  # at 0 from the start: an alert or a panel sees the first conflict
-            for d in drives:
-                m.pkw_conflict.labels(line, d).set(0)
-        self._faults = {
-            (d, *labels): m.faults.labels(line, d, *labels, zero=True)
-            for d, dialect in drives.items()
-            for labels in (fault_labels(n, short) for n, short in pkw.rejections(dialect))
-        }
+        self._uss, self._dp = uss, dp
         self._busy = m.busy.labels(line, zero=True)
         # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
         self.busy_total = 0.0
@@ -248,25 +239,16 @@ class LineMetrics:
         self.fault_counts: collections.Counter[str] = collections.Counter()
         self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
-        self._telegrams = {d: m.telegrams.labels(line, d) for d in drives}
-        self._retries = {d: m.retries.labels(line, d) for d in drives}
-        self._overruns = {d: m.overruns.labels(line, d, zero=True) for d in drives}
-        self._errors = {(d, k): m.errors.labels(line, d, k) for d in drives for k in ERROR_KINDS}
-        self._jobs = {
-            (d, kind, outcome): m.jobs.labels(line, d, kind, outcome.value)
-            for d in drives
-            for kind in ("read", "write")
-            for outcome in JobOutcome
-        }
-        self._states = {
-            d: {s: m.dp_state.labels(line, d, s.value) for s in SlaveState}
-            for d in (drives if dp else ())
-        }
-        self._restarts = {
-            (d, r): m.dp_restarts.labels(line, d, r.value, zero=True)
-            for d in self._states
-            for r in RestartReason
-        }
+        self._faults: dict[tuple[str, ...], Series] = {}
+        self._telegrams: dict[str, Series] = {}
+        self._retries: dict[str, Series] = {}
+        self._overruns: dict[str, Series] = {}
+        self._errors: dict[tuple[str, str], Series] = {}
+        self._jobs: dict[tuple[str, str, JobOutcome], Series] = {}
+        self._states: dict[str, dict[SlaveState, Any]] = {}
+        self._restarts: dict[tuple[str, RestartReason], Series] = {}
+        for d, dialect in drives.items():
+            self.add_drive(d, dialect)
         self._on: dict[type, Callable[[Any], None]] = {
             Exchanged: self._exchanged,
             JobDone: self._job_done,
@@ -278,6 +260,40 @@ class LineMetrics:
             SlaveRestarted: self._restarted,
             SlaveDiagnosed: self._diagnosed,
         }
+
+    def add_drive(self, d: str, dialect: Dialect) -> None:
+        """A drive's series (at the start, or a drive a reload added to the line)."""
+        m, line = self._m, self._line
+        if self._uss:  # at 0 from the start: an alert or a panel sees the first conflict
+            m.pkw_conflict.labels(line, d).set(0)
+        for n, short in pkw.rejections(dialect):
+            labels = fault_labels(n, short)
+            self._faults[(d, *labels)] = m.faults.labels(line, d, *labels, zero=True)
+        self._telegrams[d] = m.telegrams.labels(line, d)
+        self._retries[d] = m.retries.labels(line, d)
+        self._overruns[d] = m.overruns.labels(line, d, zero=True)
+        for k in ERROR_KINDS:
+            self._errors[(d, k)] = m.errors.labels(line, d, k)
+        for kind in ("read", "write"):
+            for outcome in JobOutcome:
+                self._jobs[(d, kind, outcome)] = m.jobs.labels(line, d, kind, outcome.value)
+        if self._dp:
+            self._states[d] = {s: m.dp_state.labels(line, d, s.value) for s in SlaveState}
+            for r in RestartReason:
+                self._restarts[(d, r)] = m.dp_restarts.labels(line, d, r.value, zero=True)
+
+    def forget_drive(self, d: str) -> None:
+        """A drive a reload took from the line: its counts here (its series go with
+        :func:`~pkwbus.service.metrics.forget.forget_series`)."""
+        self._faults = {k: v for k, v in self._faults.items() if k[0] != d}
+        self._errors = {k: v for k, v in self._errors.items() if k[0] != d}
+        self._jobs = {k: v for k, v in self._jobs.items() if k[0] != d}
+        self._restarts = {k: v for k, v in self._restarts.items() if k[0] != d}
+        for by_drive in (self._telegrams, self._retries, self._overruns):
+            by_drive.pop(d, None)
+        self._states.pop(d, None)
+        self.fault_counts.pop(d, None)
+        self.error_counts.pop(d, None)
 
     def on_events(self, events: Sequence[Event]) -> None:
         on = self._on
@@ -351,42 +367,3 @@ class LineMetrics:
     def _diagnosed(self, event: SlaveDiagnosed) -> None:
         for flag in sorted(event.diagnosis.flags):
             self._m.dp_diagnostics.labels(self._line, event.drive, flag).inc()
-
-
-AUDIT_STAGES = ("attempt", "outcome", "refusals")
-REFUSAL_REASONS = ("unauthenticated", "forbidden", "writes_disabled")
-
-
-class ApiMetrics:
-    """The HTTP API's counters: audit stores that failed, requests refused for want of
-    a valid token. Every label value starts at zero, so an alert sees the series."""
-
-    def __init__(self, registry: CollectorRegistry) -> None:
-        self.audit_errors = Counter(
-            "pkwbus_audit_errors",
-            "Audit log stores that failed, by stage: attempt (the write was refused,"
-            " nothing sent), outcome (the row stays pending), refusals (the tally)",
-            ["stage"],
-            registry=registry,
-        )
-        self.refusals = Counter(
-            "pkwbus_api_refusals",
-            "API requests refused for want of a valid token, by reason",
-            ["reason"],
-            registry=registry,
-        )
-        for stage in AUDIT_STAGES:
-            self.audit_errors.labels(stage)
-        for reason in REFUSAL_REASONS:
-            self.refusals.labels(reason)
-
-
-_API_METRICS: weakref.WeakKeyDictionary[CollectorRegistry, ApiMetrics] = weakref.WeakKeyDictionary()
-
-
-def api_metrics(registry: CollectorRegistry) -> ApiMetrics:
-    """The registry's API counters, made on first use (a registry takes a name once)."""
-    metrics = _API_METRICS.get(registry)
-    if metrics is None:
-        metrics = _API_METRICS[registry] = ApiMetrics(registry)
-    return metrics

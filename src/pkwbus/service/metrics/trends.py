@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from array import array
+from collections.abc import Collection
 from typing import Final
 
 from pkwbus.master.snapshot import Reading, ReadingKey
@@ -48,6 +49,11 @@ class Trends:
             ring = self._rings[key] = _Ring(bucket)
         self._advance(ring, bucket)
         ring.values[bucket % POINTS] = float(value)
+
+    def forget(self, drive: str, keep: Collection[ReadingKey] | None = None) -> None:
+        """The drive's values gone (a reload), all or those not in ``keep``."""
+        for key in [k for k in self._rings if k[0] == drive and (keep is None or k not in keep)]:
+            del self._rings[key]
 
     def points(self, key: ReadingKey, now: float) -> list[float | None]:
         """The value's points up to ``now`` (wall clock), oldest first; None where none

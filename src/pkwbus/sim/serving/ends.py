@@ -43,6 +43,7 @@ class TcpEnd:
         self._server: asyncio.Server | None = None
         self._clients: dict[asyncio.Task[None], asyncio.StreamWriter] = {}
         self._lost_until = 0.0  # loop time until which the port is lost (interrupt)
+        self.connections = 0  # clients accepted: a master that reopened its port counts twice
 
     @property
     def url(self) -> str:
@@ -59,6 +60,7 @@ class TcpEnd:
             return
         task = asyncio.current_task()
         assert task is not None
+        self.connections += 1
         self._clients[task] = writer
         session = Session(self.sim, writer.write)
         try:
