@@ -271,8 +271,10 @@ class SnapshotWriter:
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
         if drive not in self._polls:  # gone from the line (a reload): its caller alone
-            if not isinstance(work, PollSpec):
+            if isinstance(work, ProbeJob):
                 work.resolve(JobResult(event.outcome, tally=event.tally))
+            elif isinstance(work, Job):
+                work.resolve(self._result(event, work))
             return
         if isinstance(work, ProbeJob):  # it answered or not: no value, nothing to remember
             result = JobResult(event.outcome, tally=event.tally)

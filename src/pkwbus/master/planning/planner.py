@@ -84,41 +84,39 @@ class Planner:
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
-        self._leaving: dict[str, DrivePlan] = {}  # removed while an exchange of theirs is out
+        self._leaving: dict[str, tuple[DrivePlan, str]] = {}  # removed, an exchange out
+        self._slots = itertools.count(len(self.drives))  # a drive's slot is never reused
 
     def drive(self, name: str) -> DrivePlan:
         """The plan of drive ``name`` (KeyError for a drive not on this line)."""
         return self._by_name[name]
 
-    # ------------------------------------------------------------- a reload
-
     def add_drive(self, spec: DriveSpec, now: float) -> None:
-        """A drive added to the line: planned as at the start, its polls due now."""
-        slot = max((d.slot for d in self.drives), default=-1) + 1
+        """A drive added to the line (a reload): planned as at the start, its polls due now."""
+        slot = next(self._slots)
         d = DrivePlan(spec, self._policy, slot, slot + 1)
         self.drives.append(d)
         self._by_name[d.name] = d
         self._agenda.grow(len(self.drives))
+        d.restart_polls(now)
         self._index(d, now)
 
     def remove_drive(self, name: str, reason: str, now: float) -> None:
-        """A drive gone from the line: its work ends with ``reason`` (an exchange of it out
-        at its result), nothing more goes out to it."""
+        """A drive gone: its work ends with ``reason`` (one on the wire at its result)."""
         d = self._by_name.pop(name)
         self.drives.remove(d)
         d.maintenance = True  # no claim, ever again
         d.went_down()  # another drive of its kind describes what it was describing
         self.events += withdraw(d, Cancelled(reason), now, retries=self.retries)
         if d.busy:
-            self._leaving[name] = d
+            self._leaving[name] = (d, reason)
         d.version += 1
 
     def update_polls(self, spec: DriveSpec, now: float) -> list[PollSpec]:
         """The drive's polls and described parameters as the configuration now gives them
         (:mod:`.polls_update`); each poll as it goes out now (as described)."""
         d = self._by_name[spec.name]
-        specs, events = update_polls(d, spec.polls, spec.describe, now)
-        self.events += events
+        specs = update_polls(d, spec.polls, spec.describe, now, self.events)
         self._index(d, now)
         return specs
 
@@ -198,7 +196,7 @@ class Planner:
     def stop(self, reason: str) -> None:
         """Take no new jobs; cancel the queued ones and the jobs in flight."""
         self.stopping = True
-        for d in [*self.drives, *self._leaving.values()]:
+        for d in [*self.drives, *(gone for gone, _ in self._leaving.values())]:
             active, d.active = d.active, None
             if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
@@ -266,8 +264,10 @@ class Planner:
             self._index(d, now)
 
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
-        """The result of ``send``'s exchange."""
-        d = self._by_name.get(send.drive) or self._leaving.pop(send.drive)
+        """The result of ``send``'s exchange (of a drive removed with it out first: one of
+        its name may be back already)."""
+        gone = self._leaving.pop(send.drive) if send.drive in self._leaving else None
+        d, why = gone or (self._by_name[send.drive], IN_MAINTENANCE)
         d.busy = False
         d.served = next(self._served)
         if self._lagging:  # another drive had its turn: the lagging ones may go again
@@ -281,8 +281,8 @@ class Planner:
                 # Its answer still counts (an acknowledged write is done; the telegram
                 # went out either way), but nothing is repeated or sent after it.
                 outcome = active.tx.feed(result, now)
-                self._complete(d, active, outcome or Cancelled(IN_MAINTENANCE), now)
-            self.events += withdraw(d, Cancelled(IN_MAINTENANCE), now, retries=self.retries)
+                self._complete(d, active, outcome or Cancelled(why), now)
+            self.events += withdraw(d, Cancelled(why), now, retries=self.retries)
             self._index(d, now)
             return
         self._health(d, result, now)

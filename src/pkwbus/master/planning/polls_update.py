@@ -17,7 +17,7 @@ from dataclasses import replace
 
 from pkwbus.master.planning.describing import Settled, described_poll
 from pkwbus.master.planning.drive import DrivePlan, PollState
-from pkwbus.master.planning.plan import Described, DescribeTarget, PollSpec
+from pkwbus.master.planning.plan import Described, DescribeTarget, Event, PollSpec
 
 __all__ = ["update_polls"]
 
@@ -29,12 +29,16 @@ def _key(spec: PollSpec) -> _Key:
 
 
 def update_polls(
-    d: DrivePlan, polls: Sequence[PollSpec], describe: Sequence[DescribeTarget], now: float
-) -> tuple[list[PollSpec], list[Described]]:
+    d: DrivePlan,
+    polls: Sequence[PollSpec],
+    describe: Sequence[DescribeTarget],
+    now: float,
+    events: list[Event],
+) -> list[PollSpec]:
     """Give ``d`` the configuration's ``polls`` and what it has ``describe``d: each
-    poll as it goes out now (as described), and a :class:`Described` event for the new
-    polls of each parameter already described (their decoding, for whoever shows them). A
-    parameter no longer described stays known as it was."""
+    poll as it goes out now (as described); into ``events`` a :class:`Described` event for
+    the new polls of each parameter already described (their decoding, for whoever shows
+    them). A parameter no longer described stays known as it was."""
     _describe(d, describe)
     was = {_key(p): p for p in d.spec.polls}
     wanted = {_key(p): p for p in polls}
@@ -71,7 +75,8 @@ def update_polls(
         specs.append(added)
         if told:
             described.setdefault(spec.request.pnu, []).append(added)
-    return specs, _described(d, described)
+    events += _described(d, described)
+    return specs
 
 
 def _describe(d: DrivePlan, targets: Sequence[DescribeTarget]) -> None:
