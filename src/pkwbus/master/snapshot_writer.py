@@ -270,7 +270,7 @@ class SnapshotWriter:
 
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
-        if drive not in self._polls:  # gone from the line (a reload): its caller alone
+        if event.gone or drive not in self._polls:  # gone from the line: its caller alone
             if isinstance(work, ProbeJob):
                 work.resolve(JobResult(event.outcome, tally=event.tally))
             elif isinstance(work, Job):

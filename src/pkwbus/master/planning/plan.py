@@ -116,6 +116,7 @@ class Finished:
     work: Job | ProbeJob | PollSpec
     outcome: Outcome
     tally: Tally | None = None
+    gone: bool = False  # its drive left the line (a reload): for the job's caller alone
 
 
 @dataclass(frozen=True, slots=True)

@@ -50,7 +50,7 @@ from pkwbus.master.planning.plan import (
     Send,
     StatusWord,
 )
-from pkwbus.master.planning.polls_update import update_polls
+from pkwbus.master.planning.reload import Roster, only_callers, update_polls
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.planning.write_gate import gate_write
 
@@ -72,11 +72,11 @@ class Planner:
         retries: int = 2,
         policy: HealthPolicy | None = None,
     ) -> None:
-        self._policy = policy = policy or HealthPolicy()
+        policy = policy or HealthPolicy()
         self.retries = retries
         self.poll_deadline = poll_deadline  # a poll's transaction, retries included
-        self.drives = [DrivePlan(s, policy, i, len(drives)) for i, s in enumerate(drives)]
-        self._by_name = {d.name: d for d in self.drives}
+        self._roster = Roster(drives, policy)  # the drives; a reload adds and removes them
+        self.drives, self._by_name = self._roster.drives, self._roster.by_name
         self.events: list[Event] = []
         self.up = False  # the line's port is open
         self.stopping = False
@@ -84,8 +84,6 @@ class Planner:
         self._served = itertools.count()
         self._job_seq = itertools.count()
         self._lagging: list[DrivePlan] = []
-        self._leaving: dict[str, tuple[DrivePlan, str]] = {}  # removed, an exchange out
-        self._slots = itertools.count(len(self.drives))  # a drive's slot is never reused
 
     def drive(self, name: str) -> DrivePlan:
         """The plan of drive ``name`` (KeyError for a drive not on this line)."""
@@ -93,28 +91,22 @@ class Planner:
 
     def add_drive(self, spec: DriveSpec, now: float) -> None:
         """A drive added to the line (a reload): planned as at the start, its polls due now."""
-        slot = next(self._slots)
-        d = DrivePlan(spec, self._policy, slot, slot + 1)
-        self.drives.append(d)
-        self._by_name[d.name] = d
+        d = self._roster.add(spec)
         self._agenda.grow(len(self.drives))
         d.restart_polls(now)
         self._index(d, now)
 
     def remove_drive(self, name: str, reason: str, now: float) -> None:
         """A drive gone: its work ends with ``reason`` (one on the wire at its result)."""
-        d = self._by_name.pop(name)
-        self.drives.remove(d)
+        d = self._roster.remove(name, reason)
         d.maintenance = True  # no claim, ever again
         d.went_down()  # another drive of its kind describes what it was describing
-        self.events += withdraw(d, Cancelled(reason), now, retries=self.retries)
-        if d.busy:
-            self._leaving[name] = (d, reason)
+        self.events += only_callers(withdraw(d, Cancelled(reason), now, retries=self.retries))
         d.version += 1
 
     def update_polls(self, spec: DriveSpec, now: float) -> list[PollSpec]:
         """The drive's polls and described parameters as the configuration now gives them
-        (:mod:`.polls_update`); each poll as it goes out now (as described)."""
+        (:mod:`.reload`); each poll as it goes out now (as described)."""
         d = self._by_name[spec.name]
         specs = update_polls(d, spec.polls, spec.describe, now, self.events)
         self._index(d, now)
@@ -157,6 +149,7 @@ class Planner:
         """The port is not open: no job waits for it, nothing in flight is sent later."""
         self.up = False
         self._lagging.clear()
+        self._roster.leaving.clear()  # their exchanges ended with the port
         for d in self.drives:
             d.busy = d.lagging = False
             if d.describer is not None:
@@ -196,7 +189,7 @@ class Planner:
     def stop(self, reason: str) -> None:
         """Take no new jobs; cancel the queued ones and the jobs in flight."""
         self.stopping = True
-        for d in [*self.drives, *(gone for gone, _ in self._leaving.values())]:
+        for d in self._roster.all():
             active, d.active = d.active, None
             if active is not None and isinstance(active.work, Job | ProbeJob):
                 tally = None if active.read_first else active.tx.tally  # a write not yet sent
@@ -266,8 +259,8 @@ class Planner:
     def exchanged(self, send: Send, result: ExchangeResult, now: float) -> None:
         """The result of ``send``'s exchange (of a drive removed with it out first: one of
         its name may be back already)."""
-        gone = self._leaving.pop(send.drive) if send.drive in self._leaving else None
-        d, why = gone or (self._by_name[send.drive], IN_MAINTENANCE)
+        d, why = self._roster.of(send)
+        mark = len(self.events)
         d.busy = False
         d.served = next(self._served)
         if self._lagging:  # another drive had its turn: the lagging ones may go again
@@ -281,8 +274,10 @@ class Planner:
                 # Its answer still counts (an acknowledged write is done; the telegram
                 # went out either way), but nothing is repeated or sent after it.
                 outcome = active.tx.feed(result, now)
-                self._complete(d, active, outcome or Cancelled(why), now)
-            self.events += withdraw(d, Cancelled(why), now, retries=self.retries)
+                self._complete(d, active, outcome or Cancelled(why or IN_MAINTENANCE), now)
+            self.events += withdraw(d, Cancelled(why or IN_MAINTENANCE), now, retries=self.retries)
+            if why is not None:  # it left the line: its callers alone hear of it
+                self.events[mark:] = only_callers(self.events[mark:])
             self._index(d, now)
             return
         self._health(d, result, now)

@@ -22,7 +22,7 @@ from pkwbus.link.port import Rs485Mode
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
+from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.master.wires.serial.port import TelegramPort
@@ -102,6 +102,8 @@ class Parts:
         self.book = kept.book if kept is not None else DescriptionBook()
         self.entries: dict[str, DriveEntry] = {}  # the runtime's drives, by name
         self.counts: dict[str, LineMetrics] = {}  # each line's counters
+        # Each PROFIBUS line's slaves' settings as built (their GSD files as read then).
+        self.resolved: dict[str, tuple[object, ...]] = {}
         self.line_of: dict[str, str] = {}
         self.collector = SnapshotCollector(snapshot, {}, [])
         registry.register(self.collector)
@@ -147,8 +149,15 @@ class Parts:
         if drive is None:
             forget_series(self.registry, line=line)
             self.snapshot.lines.pop(line, None)
+            self.resolved.pop(line, None)
         else:
             forget_series(self.registry, line=line, drive=drive)
+
+    def down(self, line: cfg.Line) -> None:
+        """A line shown (its drives) that could not start: down, as its alerts must see."""
+        self.snapshot.lines[line.name] = False
+        for drive in line.drives:
+            self.snapshot.drives[drive.name] = DriveState(up=False)
 
     async def build(self, plan: LinePlan) -> BuiltLine:
         """The runner of a planned line, its simulated drives started where it has them."""
@@ -167,6 +176,7 @@ class Parts:
         self.counts[line.name] = counts
         try:
             if isinstance(line, cfg.ProfibusLine):
+                self.resolved[line.name] = tuple(d.dp.settings()[0] for d in line.drives)
                 runner = _dp_runner(line, port, specs, self.snapshot, counts)
             else:
                 wire = ExchangeWire(port_for(line, port))

@@ -5,6 +5,7 @@ settings, the history database, the watchers on the lines' streams
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
 from pkwbus.catalog.logs import log_of_catalog
@@ -73,7 +74,10 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
 
 
 def watch_settings(
-    config: cfg.Config, runtime: Runtime, stream: EventStream
+    config: cfg.Config,
+    runtime: Runtime,
+    stream: EventStream,
+    store: Callable[[], SettingsStore] | None = None,
 ) -> SettingsWatcher | None:
     """The sweep of every drive's settings (``settings``), on the runtime's lines (None:
     none are swept); it starts once the lines run and stops after them."""
@@ -98,15 +102,15 @@ def watch_settings(
             turn += 1
     if not swept:
         return None
-    store = SettingsStore(stream.store.path)
+    kept = store() if store is not None else SettingsStore(stream.store.path)
     runners = dict(runtime.runners)
-    watcher = SettingsWatcher(runners, store, stream, swept, runtime.registry)
+    watcher = SettingsWatcher(runners, kept, stream, swept, runtime.registry)
     for name, runner in runners.items():
         if isinstance(runner, LineRunner):
             runner.observers.append(watcher)  # drives identified as other drives
         watcher.line_state(name, runtime.snapshot.lines.get(name, False))  # a reload's
     runtime.settings = watcher
-    log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), store.path)
+    log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), kept.path)
     return watcher
 
 
@@ -121,11 +125,19 @@ class Memory:
         self.logs: LogWatcher | None = None
         self.settings: SettingsWatcher | None = None
         self.running = False
+        # One store of the settings for every watcher a reload makes: a write that ends
+        # while a reload makes the next one moves the baseline the next one loads.
+        self._settings_store: SettingsStore | None = None
+
+    def _store(self) -> SettingsStore:
+        if self._settings_store is None:
+            self._settings_store = SettingsStore(self.stream.store.path)
+        return self._settings_store
 
     def watch(self, config: cfg.Config) -> None:
         """Watch the drives of ``config`` (started with the runtime, or by :meth:`renew`)."""
         self.logs = watch_logs(config, self.runtime, self.stream)
-        self.settings = watch_settings(config, self.runtime, self.stream)
+        self.settings = watch_settings(config, self.runtime, self.stream, self._store)
 
     async def start(self) -> None:
         self.running = True
@@ -133,8 +145,9 @@ class Memory:
             if watcher is not None:
                 await watcher.start()
 
-    async def stop(self) -> None:
-        """Stop watching: the watchers leave the lines, their gauges leave the registry."""
+    async def stop(self, *, final: bool = True) -> None:
+        """Stop watching: the watchers leave the lines, their gauges leave the registry;
+        ``final``: the service stops (not a reload)."""
         self.running = False
         for runner in self.runtime.runners.values():
             if isinstance(runner, LineRunner):
@@ -146,14 +159,16 @@ class Memory:
         if self.settings is not None:
             await self.settings.stop()
             self.settings.unregister(self.runtime.registry)
-            self.settings.store.close()
-        self.runtime.settings = None
+        if final and self._settings_store is not None:
+            self._settings_store.close()
+            self._settings_store = None
         self.logs = self.settings = None
+        self.stream.again()
 
     async def renew(self, config: cfg.Config) -> None:
         """Watch the drives of ``config`` now (a reload): what the history holds stays."""
         running = self.running
-        await self.stop()
+        await self.stop(final=False)
         self.watch(config)
         if running:
             await self.start()

@@ -53,6 +53,8 @@ class Hangup(Protocol):
 
     async def by_signal(self, name: str = "SIGHUP") -> None: ...
 
+    async def close(self) -> None: ...
+
 
 class ListenError(PkwbusError):
     """The HTTP address cannot be bound."""
@@ -180,9 +182,15 @@ async def serve(
         by = f" ({received[0]})" if received else ""
         log.info("stopping%s: finishing the exchanges in flight", by)
     finally:
-        for task in list(reloads):  # a reload under way finishes before the lines stop
+        if RELOAD_SIGNAL in signals:
+            loop.remove_signal_handler(RELOAD_SIGNAL)
+            signals.remove(RELOAD_SIGNAL)
+        if on_hangup is not None:  # no reload from now on; one under way finishes first
             with contextlib.suppress(Exception):
-                await asyncio.wait_for(asyncio.shield(task), 30.0)
+                await asyncio.wait_for(on_hangup.close(), 60.0)
+        for task in list(reloads):
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(asyncio.shield(task), 5.0)
         await runtime.stop()
         server.should_exit = True
         try:

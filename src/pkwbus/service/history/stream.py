@@ -44,6 +44,14 @@ class EventStream:
         self._newest: dict[tuple[str, str], tuple[str, ...]] = {}  # (drive, kind) -> labels
         self._started = False
 
+    def again(self) -> None:
+        """Count afresh at the next start (a reload: the drives and lines may be others, and
+        a line or drive gone took its series along): nothing is counted twice."""
+        self.counter.clear()
+        self.newest.clear()
+        self._newest.clear()
+        self._started = False
+
     async def start(self, kinds: Iterable[tuple[str, str, str]] = ()) -> bool:
         """Count what the history already holds (once), and show the newest entry of each
         (line, drive, kind) in ``kinds``; False when the history cannot be read."""

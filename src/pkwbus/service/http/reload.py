@@ -13,6 +13,7 @@ import asyncio
 import logging
 from typing import Any, Protocol
 
+from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.rows import AuditEntry
 from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.http.parameter_checks import (
@@ -24,7 +25,7 @@ from pkwbus.service.http.parameter_checks import (
     identified,
 )
 
-__all__ = ["RELOAD", "Reloaded", "Reloading", "Reloads"]
+__all__ = ["RELOAD", "ReloadRefused", "Reloaded", "Reloading", "Reloads"]
 
 log = logging.getLogger("pkwbus.service.reload")
 
@@ -32,9 +33,15 @@ RELOAD = "reload"  # the audit row's parameter
 MAX_PROBLEMS = 50  # of a broken file, in one answer (the log has them all)
 
 
+class ReloadRefused(PkwbusError):
+    """No reload now: the service is stopping."""
+
+
 class Reloaded(Protocol):
     @property
     def loaded(self) -> bool: ...
+    @property
+    def outcome(self) -> str: ...
     @property
     def problems(self) -> list[str]: ...
     @property
@@ -46,6 +53,7 @@ class Reloaded(Protocol):
 
 class Reloading(Protocol):
     async def reload(self) -> Reloaded: ...
+    async def close(self) -> None: ...
 
 
 class Reloads:
@@ -56,13 +64,19 @@ class Reloads:
         self.audit_writer = audit_writer
         self.tokens = tokens
 
+    async def close(self) -> None:
+        """No more reloads (the service stops); one under way finishes first."""
+        await self.reloader.close()
+
     async def by_signal(self, name: str = "SIGHUP") -> None:
         """A reload a signal asked for: its outcome in the log and the audit log."""
         entry = AuditEntry(client=name, drive="", parameter=RELOAD, index=0, outcome="pending")
         try:
             await self._run(entry)
-        except ApiError as exc:
+        except (ApiError, ReloadRefused) as exc:
             log.error("reload (%s) not done: %s", name, exc)
+        except Exception as exc:  # a defect: said in one line, the service goes on
+            log.error("reload (%s) failed: %r", name, exc)
 
     async def by_api(self, caller: Caller) -> dict[str, Any]:
         """A reload the API asked for (write token): what changed, or 422 with the file's
@@ -94,10 +108,12 @@ class Reloads:
     async def _run(self, entry: AuditEntry) -> tuple[Reloaded, bool]:
         row = await attempted(self.audit_writer, entry, "nothing was reloaded")
         # Once begun, a reload is finished and recorded even when the client goes away.
-        outcome = await asyncio.shield(self.reloader.reload())
+        try:
+            outcome = await asyncio.shield(self.reloader.reload())
+        except ReloadRefused as exc:
+            await asyncio.shield(self.audit_writer.outcome(row, outcome="refused", detail=str(exc)))
+            raise ApiError(503, "stopping", f"not reloaded: {exc}") from None
         stored = await asyncio.shield(
-            self.audit_writer.outcome(
-                row, outcome="ok" if outcome.loaded else "invalid", detail=outcome.summary()
-            )
+            self.audit_writer.outcome(row, outcome=outcome.outcome, detail=outcome.summary())
         )
         return outcome, stored

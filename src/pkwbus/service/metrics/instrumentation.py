@@ -306,10 +306,13 @@ class LineMetrics:
         error, drive, busy = event.error, event.drive, event.busy
         if error is ErrorKind.PORT:
             return  # nothing went on the wire
-        self._telegrams[drive].inc()
         self.telegram_total += 1
         self._busy.inc(busy)
         self.busy_total += busy
+        telegrams = self._telegrams.get(drive)
+        if telegrams is None:
+            return  # a drive a reload removed with its exchange out: the line's time alone
+        telegrams.inc()
         if error is not None:
             self._errors[(drive, error.value)].inc()
             self.error_counts[drive] += 1
@@ -343,9 +346,12 @@ class LineMetrics:
             self.fault_counts[drive] += 1
 
     def _overrun(self, event: Overrun) -> None:
-        self._overruns[event.drive].inc()
+        if (overruns := self._overruns.get(event.drive)) is not None:
+            overruns.inc()
 
     def _pkw_length(self, event: PkwLengthTold) -> None:
+        if event.drive not in self._telegrams:
+            return
         conflict = event.length.in_conflict
         self._m.pkw_conflict.labels(self._line, event.drive).set(int(conflict))
 

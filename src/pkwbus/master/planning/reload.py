@@ -1,4 +1,11 @@
-"""A drive's polls as a new configuration gives them (a reload), without a gap (pure).
+"""What a reload changes in a running line's plan (pure): its drives (:class:`Roster`), and a
+drive's polls as the new configuration gives them, without a gap (:func:`update_polls`).
+
+A drive removed while an exchange of it is out leaves the roster at once; that
+exchange's result still ends its work (a write the drive acknowledged is done),
+and only a job's caller hears of it (:data:`Finished.gone`): nothing of it is
+shown as the drive's (another drive of its name may have been added). A drive's
+slot is never given again (it breaks ties in the planner's heaps).
 
 A poll the new configuration keeps as it was (its parameter, index, request and
 description) keeps its state: its due time, its place while it waits for its
@@ -12,14 +19,69 @@ ends at its result, and is not due again.
 from __future__ import annotations
 
 import heapq
+import itertools
 from collections.abc import Sequence
 from dataclasses import replace
 
 from pkwbus.master.planning.describing import Settled, described_poll
 from pkwbus.master.planning.drive import DrivePlan, PollState
-from pkwbus.master.planning.plan import Described, DescribeTarget, Event, PollSpec
+from pkwbus.master.planning.health import HealthPolicy
+from pkwbus.master.planning.plan import (
+    Described,
+    DescribeTarget,
+    DriveSpec,
+    Event,
+    Finished,
+    PollSpec,
+    Send,
+)
 
-__all__ = ["update_polls"]
+__all__ = ["Roster", "only_callers", "update_polls"]
+
+
+class Roster:
+    """The drives of a line, in order and by name, and those that left with an exchange out."""
+
+    def __init__(self, specs: Sequence[DriveSpec], policy: HealthPolicy) -> None:
+        self.policy = policy
+        self.drives = [DrivePlan(s, policy, i, len(specs)) for i, s in enumerate(specs)]
+        self.by_name = {d.name: d for d in self.drives}
+        self.leaving: dict[str, tuple[DrivePlan, str]] = {}
+        self._slots = itertools.count(len(self.drives))
+
+    def add(self, spec: DriveSpec) -> DrivePlan:
+        slot = next(self._slots)
+        d = DrivePlan(spec, self.policy, slot, slot + 1)
+        self.drives.append(d)
+        self.by_name[d.name] = d
+        return d
+
+    def remove(self, name: str, reason: str) -> DrivePlan:
+        """Take ``name`` off the line (KeyError: not on it); kept as leaving while busy."""
+        d = self.by_name.pop(name)
+        self.drives.remove(d)
+        if d.busy:
+            self.leaving[name] = (d, reason)
+        return d
+
+    def of(self, send: Send) -> tuple[DrivePlan, str | None]:
+        """The drive ``send`` was for, and the reason it left (None: on the line). On one
+        line one exchange is out at a time: the first result of a name that left is its."""
+        gone = self.leaving.pop(send.drive, None)
+        return gone if gone is not None else (self.by_name[send.drive], None)
+
+    def all(self) -> list[DrivePlan]:
+        return [*self.drives, *(d for d, _ in self.leaving.values())]
+
+
+def only_callers(events: list[Event]) -> list[Event]:
+    """What a drive that left tells: its jobs' ends, to their callers alone."""
+    return [
+        replace(e, gone=True)
+        for e in events
+        if isinstance(e, Finished) and not isinstance(e.work, PollSpec)
+    ]
+
 
 _Key = tuple[str, int]
 

@@ -1,0 +1,161 @@
+"""A reload's changes to the drives of a line that keeps running (its port open): drives
+removed, added, replaced, and changed in place (:mod:`.reload`)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import replace
+from typing import Any
+
+from pydantic import BaseModel
+
+from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.runner import LineRunner
+from pkwbus.service import config as cfg
+from pkwbus.service.assembly.alarm_polls import alarm_parameters
+from pkwbus.service.assembly.build import LinePlan, Parts
+from pkwbus.service.runtime import DriveEntry, Runtime
+
+__all__ = ["CONFIGURED", "IN_PLACE", "REMOVED", "REPLACED", "DriveChanges", "fields"]
+
+# A drive's keys that change it in place: the line sees them as polls and described
+# parameters, the service as its entry, the watchers as what they watch.
+IN_PLACE = frozenset(
+    {"poll", "maintenance", "writable", "parameters", "alarms", "counters", "events",
+     "events_every", "settings"}
+)  # fmt: skip
+REMOVED = "removed from the configuration by a reload"
+REPLACED = "its configuration changed (a reload)"
+CONFIGURED = "configuration"  # the reason of a maintenance the file asks for
+
+
+def fields(model: BaseModel, without: Iterable[str] = ()) -> dict[str, Any]:
+    """A configuration model's fields, but ``without`` these."""
+    skip = set(without)
+    return {k: getattr(model, k) for k in type(model).model_fields if k not in skip}
+
+
+class DriveChanges:
+    """Applies a new configuration's drives to a running line."""
+
+    def __init__(self, runtime: Runtime, parts: Parts) -> None:
+        self.runtime = runtime
+        self.parts = parts
+
+    def removed(self, old: cfg.Line, new: cfg.Line) -> list[str]:
+        """The drives gone from a running line."""
+        runner = self.runtime.runners[new.name]
+        assert isinstance(runner, LineRunner)
+        news = {d.name for d in new.drives}
+        gone = [d.name for d in old.drives if d.name not in news]
+        for name in gone:
+            self._remove(runner, new.name, name, REMOVED)
+        return [f"line {new.name}: drive {name} removed" for name in gone]
+
+    def update(
+        self, config: cfg.Config, old: cfg.Line, new: cfg.Line, api_held: dict[str, str]
+    ) -> list[str]:
+        """Drives and polls of a running line, its port open throughout."""
+        runner = self.runtime.runners[new.name]
+        assert isinstance(runner, LineRunner)
+        plan = self.parts.plan(new)
+        specs = {s.name: s for s in plan.specs}
+        entries = {e.name: e for e in plan.entries}
+        counts = self.parts.counts[new.name]
+        olds = {d.name: d for d in old.drives}
+        said = f"line {new.name}:"
+        changes = []
+        defaults_same = fields(old, {"drives"}) == fields(new, {"drives"})
+        for drive in new.drives:
+            name = drive.name
+            before = olds.get(name)
+            if before is not None and before == drive and defaults_same:
+                continue
+            if before is not None and self._same_drive(runner, before, drive, specs[name],
+                                                       entries[name]):  # fmt: skip
+                changed = self._update_polls(config, runner, plan, specs[name], entries[name])
+                if changed:
+                    changes.append(f"{said} drive {name}: {changed}")
+                if drive.maintenance and not before.maintenance:
+                    runner.maintenance(name, True, CONFIGURED)
+                    changes.append(f"{said} drive {name} in maintenance")
+                elif before.maintenance and not drive.maintenance:
+                    held_now = self.runtime.snapshot.maintenance.get(name)
+                    if held_now is not None and held_now.reason == CONFIGURED:
+                        runner.maintenance(name, False)
+                        changes.append(f"{said} drive {name} out of maintenance")
+                continue
+            if before is not None:
+                self._remove(runner, new.name, name, REPLACED)
+            runner.add_drive(specs[name])
+            counts.add_drive(name, drive.pkw_dialect)
+            self.parts.show(config, plan, {name})
+            if name in api_held:  # the API's maintenance stays, on whichever line it is now
+                runner.maintenance(name, True, api_held[name])
+            elif drive.maintenance:
+                runner.maintenance(name, True, CONFIGURED)
+            changes.append(f"{said} drive {name} {'added' if before is None else 'replaced'}")
+        return changes
+
+    def _same_drive(
+        self, runner: LineRunner, old: cfg.Drive, new: cfg.Drive, spec: DriveSpec,
+        entry: DriveEntry,
+    ) -> bool:  # fmt: skip
+        """Whether ``new`` is the running drive with other polls, writable parameters,
+        overrides or watch settings (what it is, where and how it is reached, and how it
+        describes itself are the same): changed in place, its state kept."""
+        if fields(old, IN_PLACE) != fields(new, IN_PLACE):
+            return False
+        running = runner.planner.drive(new.name).spec
+        return (
+            self.runtime.drives[new.name].target == entry.target
+            and running.form == spec.form
+            and bool(running.describe) == bool(spec.describe)  # a describer, or none
+        )
+
+    def _update_polls(
+        self,
+        config: cfg.Config,
+        runner: LineRunner,
+        plan: LinePlan,
+        spec: DriveSpec,
+        entry: DriveEntry,
+    ) -> str | None:
+        """The drive's new polls, described parameters and entry (its writable list, its
+        overrides), its state kept; what changed (None: nothing the line sees)."""
+        name = entry.name
+        old = self.runtime.drives[name]
+        described = runner.planner.drive(name).spec.describe
+        changed = (
+            "polls changed"
+            if old.polls != entry.polls
+            else ("changed in place" if described != spec.describe else None)
+        )
+        # What the drive described stays; a poll kept keeps its decoding as described; a
+        # parameter new to its descriptions waits for its own.
+        entry.described.update(old.described)
+        new = {t.pnu for t in spec.describe} - {t.pnu for t in described}
+        entry.pending.intersection_update(old.pending | new)
+        was = {(p.parameter, p.index): p for p in old.polls}
+        for poll in entry.polls:
+            key = (poll.parameter, poll.index)
+            before = was.get(key)
+            if before is not None and replace(before, every=poll.every) == poll:
+                entry.formats[key] = old.formats.get(key, poll.fmt)
+                entry.units[poll.parameter] = old.units.get(poll.parameter, poll.fmt.unit)
+                if poll.parameter in old.sources:
+                    entry.sources[poll.parameter] = old.sources[poll.parameter]
+        keys = {(name, p.parameter, p.index) for p in entry.polls}
+        self.parts.entries[name] = entry
+        self.parts.collector.set_parameters(name, plan.infos_of(name))
+        self.parts.board.forget(name, keep=keys)
+        self.parts.board.watch(alarm_parameters(config, [entry]))
+        self.parts.trends.forget(name, keep=keys)
+        if changed is not None:
+            runner.update_polls(spec)
+        return changed
+
+    def _remove(self, runner: LineRunner, line: str, drive: str, reason: str) -> None:
+        runner.remove_drive(drive, reason)
+        self.parts.counts[line].forget_drive(drive)
+        self.parts.forget(line, drive)
