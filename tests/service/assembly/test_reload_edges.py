@@ -23,6 +23,7 @@ from pkwbus.service.metrics.exposition import render
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.serving.ends import TcpEnd
+from tests.service.assembly.test_reload_dp import until
 
 
 def drive(name: str, address: int, every: str = "100ms", **extra: Any) -> dict[str, Any]:
@@ -94,14 +95,6 @@ async def running(
         await until(lambda: all(
             any(k[0] == n for k in runtime.snapshot.readings) for n in polled))  # fmt: skip
         yield found_lines
-
-
-async def until(check: Callable[[], bool], timeout: float = 30.0) -> None:
-    loop = asyncio.get_running_loop()
-    end = loop.time() + timeout
-    while not check():
-        assert loop.time() < end, "not within the time"
-        await asyncio.sleep(0.005)
 
 
 def busy(lines: Lines, line_name: str, name: str) -> Callable[[], bool]:
