@@ -9,9 +9,11 @@ import asyncio
 from collections.abc import AsyncIterator, Callable
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 from prometheus_client import generate_latest
 
+from pkwbus.protocol.profibus.dp.services import Service
 from pkwbus.service.assembly.build import assemble
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.config import Config, parse_config
@@ -168,3 +170,39 @@ async def test_a_line_of_another_bus_changed_leaves_the_dp_line_alone() -> None:
         await asyncio.sleep(0.5)
         assert sum(found.wire.set_prm().values()) == before
         assert found.dp_end.connections == 1
+
+
+def gsd_text(user_prm: str) -> str:
+    """A drive's GSD file in the shape vendors ship (the keys pkwbus reads of it)."""
+    return (
+        '#Profibus_DP\r\nGSD_Revision = 1\r\nVendor_Name = "Drives Ltd"\r\n'
+        'Model_Name = "Test drive"\r\nIdent_Number = 0x0402\r\n19.2_supp = 1\r\n'
+        "MaxTsdr_19.2 = 60\r\n"
+        f"User_Prm_Data_Len = 1\r\nUser_Prm_Data = {user_prm}\r\n"
+        'Module = "PPO 1" 0xF3,0xF1\r\n1\r\nEndModule\r\n'
+    )
+
+
+async def test_a_gsd_file_changed_under_the_same_name_reopens_its_line(tmp_path: Path) -> None:
+    """Nothing in the configuration changed but the GSD file's content (its User_Prm data):
+    the slaves are parametrised again with it, the line opened again alone."""
+    gsd = tmp_path / "drive.gsd"
+    gsd.write_text(gsd_text("0x00"))
+
+    def with_gsd(address: int) -> str:
+        return slave(address, ["16-13"]).replace("ident: 0x0402", f"gsd: {gsd}")
+
+    async with lines((8, 9)) as found:
+        found.text[0] = config_text(found.dp_end.url, found.fc_end.url, [with_gsd(8), with_gsd(9)])
+        outcome = await found.reloader.reload()
+        assert outcome.changes == ["line dp reopened"]  # from ident to a GSD file
+        await until(lambda: all(found.value(NAMES[a], "16-13") for a in (8, 9)))
+        before = sum(found.wire.set_prm().values())
+        outcome = await found.reloader.reload()
+        assert outcome.changes == []  # the same file: nothing changes
+        gsd.write_text(gsd_text("0x01"))
+        outcome = await found.reloader.reload()
+        assert outcome.changes == ["line dp reopened"]
+        await until(lambda: sum(found.wire.set_prm().values()) >= before + 2)
+        sent = [f.data for f in found.wire.frames if f.dsap == Service.SET_PRM]
+        assert sent[-1].endswith(b"\x01") and sent[0].endswith(b"\x00")
