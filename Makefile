@@ -31,8 +31,8 @@ pytest: $(STAMP)
 test: lint typecheck pytest
 
 # The minute-long forms (60 s soak, a minute of three faulty pty lines on a busy machine,
-# schemathesis over the API, 4 minutes of make soak); .ci/run runs them after make test,
-# on two workers: the four minutes of make soak beside the others.
+# schemathesis over the API, 3 minutes of make soak); .ci/run runs them after make test,
+# on two workers: the three minutes of make soak beside the others.
 test-long: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) -m long
 
