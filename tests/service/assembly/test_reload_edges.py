@@ -17,8 +17,10 @@ import pytest
 
 from pkwbus.protocol.serial.telegram import Telegram, decode_adr
 from pkwbus.service.assembly.build import Parts, assemble
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.assembly.reload import Reloader, ReloadRefused
 from pkwbus.service.config import Config, parse_config
+from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.metrics.exposition import render
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
@@ -202,3 +204,77 @@ async def test_no_reload_once_the_service_stops(tmp_path: Path) -> None:
         await lines.reloader.close()
         with pytest.raises(ReloadRefused):
             await lines.reloader.reload()
+
+
+async def test_a_settings_change_stays_flagged_and_told_once_across_a_reload(
+    tmp_path: Path,
+) -> None:
+    """What the settings watcher knows lives in the history database: a reload that makes
+    the watchers again keeps a flagged change flagged, does not tell it again, and counts
+    the drive's events as before."""
+    sim = Simulator("fc", [1], timing=SimTiming(response_delay=0.002), seed=2,
+                    catalog="danfoss-fc")  # fmt: skip
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    swept = {"every": "1s", "parameters": ["3-41"]}
+
+    def text(polls: list[str]) -> str:
+        d1 = {"name": "d1", "address": 1, "catalog": "danfoss-fc",
+              "poll": [{"parameter": p, "every": "200ms"} for p in polls]}  # fmt: skip
+        found = line("a", end.url, [d1])
+        found["settings"] = swept
+        return json.dumps({"audit_db": str(tmp_path / "audit.sqlite"), "lines": [found]})
+
+    file = [text(["16-13"])]
+
+    def reread() -> Config:
+        return parse_config(file[0], environ={})
+
+    config = reread()
+    store = HistoryStore(config.history_path)
+    runtime, parts = await assemble(config)
+    memory = remember(config, runtime, store)
+    reloader = Reloader(config, reread, runtime, parts, memory)
+    await runtime.start()
+    flag = 'pkwbus_drive_setting_changed{drive="d1",index="0",line="a",parameter="3-41"} 1.0'
+    told = 'kind="setting"'
+
+    async def metrics() -> str:
+        return (await render(parts.registry)).decode()
+
+    async def shown(wanted: str) -> str:
+        latest = [""]
+
+        async def look() -> bool:
+            latest[0] = await metrics()
+            return wanted in latest[0]
+
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 30
+        while not await look():
+            assert loop.time() < deadline, latest[0]
+            await asyncio.sleep(0.1)
+        return latest[0]
+
+    def events(text: str) -> list[str]:
+        return [s for s in text.splitlines() if s.startswith("pkwbus_drive_events_total") and
+                told in s]  # fmt: skip
+
+    try:
+        await shown('pkwbus_drive_settings_swept_timestamp_seconds{drive="d1",line="a"}')
+        sim.keypad(1, 341, 777)  # 3-41 ramp up time, set at the drive
+        before = events(await shown(flag))
+        assert len(before) == 1 and before[0].endswith(" 1.0")
+        file[0] = text(["16-13", "16-14"])
+        outcome = await reloader.reload()
+        assert outcome.changes == ["line a: drive d1: polls changed"]
+        after = await shown(
+            'pkwbus_parameter_value{drive="d1",index="0",line="a",parameter="16-14"}'
+        )
+        assert flag in after and events(after) == before
+        await asyncio.sleep(2.5)  # two sweeps of the new watcher
+        later = await metrics()
+        assert flag in later and events(later) == before
+    finally:
+        await runtime.stop()
+        store.close()
+        await end.close()
