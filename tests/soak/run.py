@@ -30,6 +30,7 @@ import httpx
 
 from . import procs
 from .plan import LineSpec, service_config, soak_lines
+from .reloads import Reloads
 from .samples import Sample, judge, proc_sample, size, table, warmup
 from .traffic import Prober, Problems, Scraper, Writer
 
@@ -48,6 +49,7 @@ class Settings:
     drops_per_hour: float = 6.0  # per line
     restarts_per_hour: float = 12.0  # per PROFIBUS line
     deaths_per_hour: float = 4.0  # per line
+    reloads_per_hour: float = 4.0  # SIGHUP with a slightly changed file (.reloads)
     seed: int = 1
     folder: Path | None = None  # default: a new temporary folder
     say: bool = True  # print each sample as it is taken
@@ -111,8 +113,9 @@ async def _with_service(
                           token_env=procs.TOKEN_ENV)  # fmt: skip
     config.write_text(json.dumps(body, indent=1))
     service, base = await procs.start_service(config, log)
+    reloads = Reloads(config, body, service.pid, log, result.problems)
     try:
-        await _drive(result, lines, service.pid, base, control)
+        await _drive(result, lines, service.pid, base, control, reloads)
     finally:
         code = await procs.stop(service)
     if code != 0:
@@ -130,7 +133,12 @@ async def _with_service(
 
 
 async def _drive(
-    result: Soak, lines: list[LineSpec], pid: int, base: str, control: httpx.AsyncClient
+    result: Soak,
+    lines: list[LineSpec],
+    pid: int,
+    base: str,
+    control: httpx.AsyncClient,
+    reloads: Reloads,
 ) -> None:
     """Writes, scrapes and probes for the soak's time, sampling the service as it goes;
     then calm, and the checks at the end."""
@@ -145,6 +153,8 @@ async def _drive(
             asyncio.create_task(writer.run(settings.write_every, audit_every=20)),
             asyncio.create_task(scraper.run(settings.scrape_every)),
         ]
+        if settings.reloads_per_hour > 0:
+            tasks.append(asyncio.create_task(reloads.run(3600 / settings.reloads_per_hour)))
         try:
             loop = asyncio.get_running_loop()
             began = loop.time()
@@ -180,6 +190,8 @@ async def _drive(
             "scrapes": scraper.scrapes,
             "values checked": scraper.checked,
             "healthz probes": prober.probes,
+            "reloads sent": reloads.sent,
+            "reloads loaded": reloads.loaded,
             "longest healthz answer (s)": round(prober.longest_ever, 3),
         }
 
@@ -217,6 +229,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lines", type=int, default=int(os.environ.get("SOAK_LINES", 8)))
     parser.add_argument("--sample-every", type=float, default=60.0, metavar="SECONDS")
     parser.add_argument("--drops-per-hour", type=float, default=6.0, help="per line")
+    parser.add_argument("--reloads-per-hour", type=float, default=4.0, help="SIGHUPs")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--folder", type=Path, help="keep the logs, config and audit here")
     args = parser.parse_args(argv)
@@ -227,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
         lines=args.lines,
         sample_every=args.sample_every,
         drops_per_hour=args.drops_per_hour,
+        reloads_per_hour=args.reloads_per_hour,
         seed=args.seed,
         folder=args.folder,
     )

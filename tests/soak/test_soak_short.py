@@ -1,5 +1,6 @@
 """The short form of ``make soak``: three minutes on three lines (FC, USS, PROFIBUS DP),
-with troubles ten times as often, a sample every 6 s. ``make test-long`` runs it."""
+with troubles ten times as often, a reload a minute, a sample every 6 s. ``make
+test-long`` runs it."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ async def test_three_minutes_on_three_lines_with_faults_lost_ports_and_restarts(
 ) -> None:
     settings = Settings(
         minutes=3, lines=3, sample_every=6, drops_per_hour=60, restarts_per_hour=100,
-        deaths_per_hour=40, folder=tmp_path, say=False,
+        deaths_per_hour=40, reloads_per_hour=60, folder=tmp_path, say=False,
     )  # fmt: skip
     result = await soak(settings)
     report = result.report()
@@ -29,3 +30,6 @@ async def test_three_minutes_on_three_lines_with_faults_lost_ports_and_restarts(
         assert sum(n for event, n in events.items() if event.endswith(what)) > 0, events
     assert len(result.samples) >= 25
     assert result.counts["writes"] >= 45 and result.counts["values checked"] > 1000
+    # Reloads applied in place while all that went on, each loaded.
+    assert result.counts["reloads sent"] >= 2
+    assert result.counts["reloads loaded"] == result.counts["reloads sent"]

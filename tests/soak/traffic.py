@@ -115,6 +115,8 @@ class Writer:
         rows: list[dict[str, Any]] = answer.json()
         by_write: dict[tuple[str, str, float | None], dict[str, Any]] = {}
         for row in rows:
+            if row["parameter"] == "reload" and not row["drive"]:
+                continue  # a reload's row (the soak sends SIGHUP): not a write
             if int(row["id"]) > self.rows_seen:  # not one of the writes already matched
                 by_write[row["drive"], row["parameter"], _number(row["new_value"])] = row
         for write in self.writes[self.audited :]:
