@@ -142,12 +142,9 @@ class SnapshotWriter:
         out: list[Event] = []
         self._out = out
         snapshot = self.snapshot
-        ours = self._polls
         for event in events:
             if isinstance(event, Finished):
                 self._finished(event, at)
-            elif getattr(event, "drive", None) not in ours and not isinstance(event, LineState):
-                continue  # a drive gone from the line (a reload): nothing of it is shown
             elif isinstance(event, StatusWord):
                 old = snapshot.drives.get(event.drive, DriveState())
                 snapshot.drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)

@@ -14,9 +14,11 @@ from pathlib import Path
 from prometheus_client import generate_latest
 
 from pkwbus.protocol.profibus.dp.services import Service
-from pkwbus.service.assembly.build import assemble
+from pkwbus.service.assembly.build import Parts, assemble
+from pkwbus.service.assembly.history import remember
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.config import Config, parse_config
+from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.profibus.line import DpSimulator
@@ -100,18 +102,29 @@ async def lines(addresses: tuple[int, ...]) -> AsyncIterator[Lines]:
         stack.push_async_callback(fc_end.close)
         slaves = [slave(a, ["16-13"]) for a in addresses]
         text = [config_text(dp_end.url, fc_end.url, slaves)]
-
-        def reread() -> Config:
-            return parse_config(text[0], environ={})
-
-        config = reread()
-        runtime, parts = await assemble(config)
-        reloader = Reloader(config, reread, runtime, parts)
-        await runtime.start()
-        stack.push_async_callback(runtime.stop)
+        _, runtime, _, reloader = await reloadable(text, stack)
         found = Lines(dp, wire, dp_end, fc_end, runtime, reloader, text)
         await until(lambda: all(found.value(NAMES[a], "16-13") for a in addresses))
         yield found
+
+
+async def reloadable(
+    text: list[str], stack: AsyncExitStack, history: HistoryStore | None = None
+) -> tuple[Config, Runtime, Parts, Reloader]:
+    """The runtime of the configuration text ``text[0]``, started (stopped by ``stack``),
+    and its reloader, which reads ``text[0]`` again; ``history``: the drives' logs and
+    settings watched too."""
+
+    def reread() -> Config:
+        return parse_config(text[0], environ={})
+
+    config = reread()
+    runtime, parts = await assemble(config)
+    memory = remember(config, runtime, history) if history is not None else None
+    reloader = Reloader(config, reread, runtime, parts, memory)
+    await runtime.start()
+    stack.push_async_callback(runtime.stop)
+    return config, runtime, parts, reloader
 
 
 async def until(condition: Callable[[], bool], timeout: float = 30.0) -> None:

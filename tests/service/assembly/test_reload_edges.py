@@ -16,16 +16,15 @@ from typing import Any
 import pytest
 
 from pkwbus.protocol.serial.telegram import Telegram, decode_adr
-from pkwbus.service.assembly.build import Parts, assemble
-from pkwbus.service.assembly.history import remember
+from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.reload import Reloader, ReloadRefused
-from pkwbus.service.config import Config, parse_config
+from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.metrics.exposition import render
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.serving.ends import TcpEnd
-from tests.service.assembly.test_reload_dp import until
+from tests.service.assembly.test_reload_dp import reloadable, until
 
 
 def drive(name: str, address: int, every: str = "100ms", **extra: Any) -> dict[str, Any]:
@@ -78,20 +77,12 @@ async def running(
                 heard.append((loop.time(), n, decode_adr(sim.protocol, t.adr).address))
                 return answer(t, now)
 
-            sim.answer = hear  # type: ignore[method-assign]
+            sim.answer = hear  # type: ignore[method-assign,assignment]
             end = await sim.serve_tcp("127.0.0.1", 0)
             stack.push_async_callback(end.close)
             ends.append(end)
         text = [json.dumps({"audit_db": ":memory:", "lines": lines([e.url for e in ends])})]
-
-        def reread() -> Config:
-            return parse_config(text[0], environ={})
-
-        config = reread()
-        runtime, parts = await assemble(config)
-        reloader = Reloader(config, reread, runtime, parts)
-        await runtime.start()
-        stack.push_async_callback(runtime.stop)
+        config, runtime, parts, reloader = await reloadable(text, stack)
         found_lines = Lines(ends, heard, runtime, parts, reloader, text)
         polled = [d.name for _, d in config.drives() if not d.maintenance]
         await until(lambda: all(
@@ -225,16 +216,9 @@ async def test_a_settings_change_stays_flagged_and_told_once_across_a_reload(
         return json.dumps({"audit_db": str(tmp_path / "audit.sqlite"), "lines": [found]})
 
     file = [text(["16-13"])]
-
-    def reread() -> Config:
-        return parse_config(file[0], environ={})
-
-    config = reread()
-    store = HistoryStore(config.history_path)
-    runtime, parts = await assemble(config)
-    memory = remember(config, runtime, store)
-    reloader = Reloader(config, reread, runtime, parts, memory)
-    await runtime.start()
+    stack = AsyncExitStack()
+    store = HistoryStore(parse_config(file[0], environ={}).history_path)
+    _, _, parts, reloader = await reloadable(file, stack, store)
     flag = 'pkwbus_drive_setting_changed{drive="d1",index="0",line="a",parameter="3-41"} 1.0'
     told = 'kind="setting"'
 
@@ -275,6 +259,6 @@ async def test_a_settings_change_stays_flagged_and_told_once_across_a_reload(
         later = await metrics()
         assert flag in later and events(later) == before
     finally:
-        await runtime.stop()
+        await stack.aclose()
         store.close()
         await end.close()

@@ -124,7 +124,6 @@ class Memory:
         runtime.history = store
         self.logs: LogWatcher | None = None
         self.settings: SettingsWatcher | None = None
-        self.running = False
         # One store of the settings for every watcher a reload makes: a write that ends
         # while a reload makes the next one moves the baseline the next one loads.
         self._settings_store: SettingsStore | None = None
@@ -135,12 +134,11 @@ class Memory:
         return self._settings_store
 
     def watch(self, config: cfg.Config) -> None:
-        """Watch the drives of ``config`` (started with the runtime, or by :meth:`renew`)."""
+        """Watch the drives of ``config`` (started with the runtime, or by a reload)."""
         self.logs = watch_logs(config, self.runtime, self.stream)
         self.settings = watch_settings(config, self.runtime, self.stream, self._store)
 
     async def start(self) -> None:
-        self.running = True
         for watcher in (self.logs, self.settings):
             if watcher is not None:
                 await watcher.start()
@@ -148,7 +146,6 @@ class Memory:
     async def stop(self, *, final: bool = True) -> None:
         """Stop watching: the watchers leave the lines, their gauges leave the registry;
         ``final``: the service stops (not a reload)."""
-        self.running = False
         for runner in self.runtime.runners.values():
             if isinstance(runner, LineRunner):
                 runner.observers[:] = [
@@ -164,14 +161,6 @@ class Memory:
             self._settings_store = None
         self.logs = self.settings = None
         self.stream.again()
-
-    async def renew(self, config: cfg.Config) -> None:
-        """Watch the drives of ``config`` now (a reload): what the history holds stays."""
-        running = self.running
-        await self.stop(final=False)
-        self.watch(config)
-        if running:
-            await self.start()
 
 
 def remember(config: cfg.Config, runtime: Runtime, store: HistoryStore) -> Memory:

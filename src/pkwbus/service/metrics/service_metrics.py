@@ -69,9 +69,9 @@ class ConfigMetrics:
         )
         self.loaded()
 
-    def loaded(self, at: float | None = None) -> None:
+    def loaded(self) -> None:
         self.successful.set(1)
-        self.loaded_at.set(time.time() if at is None else at)
+        self.loaded_at.set(time.time())
 
     def failed(self) -> None:
         self.successful.set(0)
