@@ -44,6 +44,7 @@ def sim_process(
     flap_period: float = 2.0,
     catalog: str | None = None,
     timeout: float = 10.0,
+    extra: Sequence[str] = (),
 ) -> Iterator[str]:
     """Run the simulator in another process on a new pty; yield the pty's path."""
     tmp = Path(tempfile.mkdtemp(prefix="pkwbus-bench-sim-"))
@@ -76,6 +77,7 @@ def sim_process(
         argv += ["--flap", flap, "--flap-period", str(flap_period)]
     if catalog:
         argv += ["--catalog", catalog]
+    argv += extra  # any other option of pkwbus simulate
     with tempfile.TemporaryFile() as errors:
         proc = subprocess.Popen(
             argv,

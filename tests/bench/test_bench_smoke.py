@@ -146,8 +146,9 @@ def test_trend_memory_smallest() -> None:
     assert large["mib"] > small["mib"] > 0  # rings grow with the values
 
 
-def test_events_share_smallest() -> None:
-    found = load("events_share").run(seconds=1.0, repeat=1, settle=1.0)
+@pytest.mark.parametrize("protocol", ["fc", "uss"])
+def test_events_share_smallest(protocol: str) -> None:
+    found = load("events_share").run(seconds=1.0, repeat=1, settle=1.0, protocol=protocol)
     assert found["busy_off"] > 0 and found["busy_auto"] > 0
     assert found["polls_done_off"] > 0
 

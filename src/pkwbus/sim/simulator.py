@@ -151,6 +151,15 @@ class Simulator:
             raise ValueError(f"fault value {value} does not fit a signed 32-bit number")
         self._drive(address).trip(code, self.clock(), value=value)
 
+    def warn(self, address: int, bit: int | None) -> None:
+        """Drive ``address`` warns now with bit ``bit`` (0-31) of its warning word, the
+        warning there before going; None: the warning goes. A SINAMICS drive enters the
+        bit's alarm in its alarm buffer (r2122), and moves it into the history as it goes.
+        ValueError for an unknown drive or a bit out of range."""
+        if bit is not None and not 0 <= bit < 32:
+            raise ValueError(f"warning bit {bit} is outside 0-31")
+        self._drive(address).warn(bit, self.clock())
+
     def acknowledge(self, address: int) -> None:
         """The trip of drive ``address`` is acknowledged now (a local operator's reset)."""
         self._drive(address).acknowledge(self.clock())

@@ -1,7 +1,8 @@
 """The drives' own logs on a PROFIBUS DP line: the SINAMICS fault buffer (whose r0944 and
-r0947-r0949 are the PROFIdrive fault buffer's P944 and P947-P949) read through the PPO's
-PKW words of one slave and through data record 47 (DP-V1, PPO 3) of another, as on a
-serial line: a trip logged before pkwbus started is found with the drive's runtime time."""
+r0947-r0949 are the PROFIdrive fault buffer's P944 and P947-P949) and alarm buffer read
+through the PPO's PKW words of one slave and through data record 47 (DP-V1, PPO 3) of
+another, as on a serial line: a trip and an alarm logged before pkwbus started are found
+with the drive's runtime time."""
 
 from __future__ import annotations
 
@@ -55,17 +56,25 @@ async def test_a_trip_before_the_start_is_found_through_the_ppo_and_data_record_
         tripped_at = time.time()
         ppo.drives[8].trip(7801, ppo.clock(), value=-12)
         record.drives[9].trip(30001, record.clock(), value=5)
+        record.drives[9].warn(9, record.clock())  # A30030 comes, and stays
         async with watching(config_text(ppo_end.url, record_end.url, tmp_path)) as w:
-            assert len(w.watched) == 2
-            await until(lambda: bool(kept(w, "mixer")) and bool(kept(w, "pump")), timeout=60)
+            assert {(x.drive, x.log.name) for x in w.watched} == {
+                (drive, log)
+                for drive in ("mixer", "pump")
+                for log in ("SINAMICS fault buffer", "SINAMICS alarm buffer")
+            }
+            await until(lambda: bool(kept(w, "mixer")) and len(kept(w, "pump")) == 2, 60)
             (mixer,) = kept(w, "mixer")
-            (pump,) = kept(w, "pump")
+            pump = next(e for e in kept(w, "pump") if e.kind == "fault")
+            (alarm,) = (e for e in kept(w, "pump") if e.kind == "alarm")
             assert (mixer.code, mixer.number, mixer.value) == ("F07801", 7801, -12)
             assert (pump.code, pump.number, pump.value) == ("F30001", 30001, 5)
-            for entry in (mixer, pump):
+            assert (alarm.code, alarm.number) == ("A30030", 30030)
+            assert alarm.text == "Power unit: Internal overtemperature alarm"
+            for entry in (mixer, pump, alarm):
                 assert entry.time_source == "runtime" and entry.time is not None
                 assert entry.time == pytest.approx(tripped_at, abs=1.0)
-            await until(lambda: counted(w) == 2)  # each counted as it was stored
+            await until(lambda: counted(w) == 3)  # each counted as it was stored
     finally:
         await ppo_end.close()
         await record_end.close()

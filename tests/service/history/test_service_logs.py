@@ -162,3 +162,34 @@ async def test_an_entry_from_before_a_power_cycle_is_kept_without_a_runtime_time
             (pump,) = kept(w, "pump")
             assert pump.time_source == "seen" and pump.time is None
             assert pump.drive_time.startswith("0 d 00:00:0")  # the runtime it was logged at
+
+
+async def test_alarms_of_the_sinamics_alarm_buffer_are_found_once_with_the_drives_time(
+    tmp_path: Path,
+) -> None:
+    """An alarm that came and went while pkwbus was stopped is found at its start; one that
+    comes while it runs is found, and its going (into the history) is no new entry; one
+    that came and went between two watches is found; a restart repeats none."""
+    async with plant() as p:
+        came_at = time.time()
+        p.uss.warn(1, 1)  # A07409, while nobody watches
+        await asyncio.sleep(0.3)
+        p.uss.warn(1, None)  # gone into the history
+        async with service(p, tmp_path) as w:
+            await until(lambda: len(kept(w, "pump")) == 1)
+            (first,) = kept(w, "pump")
+            assert (first.kind, first.code, first.number) == ("alarm", "A07409", 7409)
+            assert first.text == "Drive: U/f control, current limiting controller active"
+            assert first.time_source == "runtime" and first.time is not None
+            assert first.time == pytest.approx(came_at, abs=0.5)
+            p.uss.warn(1, 9)  # A30030 comes while watched
+            await until(lambda: len(kept(w, "pump")) == 2)
+            p.uss.warn(1, 13)  # A30030 goes, A07402 comes
+            p.uss.warn(1, None)  # and goes, before the next watch
+            await until(lambda: len(kept(w, "pump")) == 3)
+            await asyncio.sleep(2.5)  # two more watches: nothing more
+            assert [e.number for e in kept(w, "pump")] == [7402, 30030, 7409]
+            await until(lambda: counted(w) == 3)
+        async with service(p, tmp_path) as w:
+            await until(lambda: all(x.last_watch is not None for x in w.watched))
+            assert len(kept(w, "pump")) == 3 and counted(w) == 3  # from the history, once

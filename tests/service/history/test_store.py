@@ -11,11 +11,16 @@ from pkwbus.service.history.store import DriveEvent, HistoryError, HistoryStore
 
 
 def event(
-    key: str, *, drive: str = "d1", time: float | None = None, seen: float = 100.0
+    key: str,
+    *,
+    drive: str = "d1",
+    time: float | None = None,
+    seen: float = 100.0,
+    kind: str = "fault",
 ) -> DriveEvent:
     source = "runtime" if time is not None else "seen"
     return DriveEvent(
-        "l1", drive, key, "fault", "F07801", 7801, "Motor overload", 5, time, source,
+        "l1", drive, key, kind, "F07801", 7801, "Motor overload", 5, time, source,
         "0 d 00:00:01.000", seen,
     )  # fmt: skip
 
@@ -48,10 +53,21 @@ def test_latest_newest_first_by_the_drives_time_else_when_seen(tmp_path: Path) -
 def test_pruning_keeps_what_the_drives_log_still_holds(tmp_path: Path) -> None:
     store = HistoryStore(tmp_path / "h.sqlite")
     store.add([event("gone", seen=10.0), event("held", seen=10.0), event("young", seen=900.0)])
-    assert store.prune("d1", ["held"], before=500.0) == 1
+    assert store.prune("d1", ["fault"], ["held"], before=500.0) == 1
     assert store.known("d1") == {"held", "young"}
     # Found again in the drive's log: still known, so not new (never counted twice).
     assert store.add([event("held")]) == []
+
+
+def test_one_logs_pruning_never_drops_another_logs_entries(tmp_path: Path) -> None:
+    """A SINAMICS drive has a fault buffer and an alarm buffer: the fault buffer's sweep
+    holds no alarm, and must not drop the alarms the other buffer still holds."""
+    store = HistoryStore(tmp_path / "h.sqlite")
+    store.add([event("fault gone", seen=10.0), event("alarm held", kind="alarm", seen=10.0)])
+    assert store.prune("d1", ["fault"], [], before=500.0) == 1
+    assert store.known("d1") == {"alarm held"}
+    assert store.prune("d1", ["alarm"], [], before=500.0) == 1
+    assert store.known("d1") == set()
 
 
 def test_a_place_that_cannot_hold_the_database_is_one_clear_error(tmp_path: Path) -> None:

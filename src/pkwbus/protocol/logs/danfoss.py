@@ -99,8 +99,8 @@ class AlarmLog:
     def watch(self) -> tuple[Read, ...]:
         return WATCHED
 
-    def sweep(self) -> _Sweep:
-        return _Sweep()
+    def sweep(self, previous: SweepResult | None = None) -> _Sweep:
+        return _Sweep()  # read whole each time: ten entries
 
 
 DANFOSS_ALARM_LOG = AlarmLog()

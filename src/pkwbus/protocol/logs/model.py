@@ -93,10 +93,13 @@ class LogEntry:
 @dataclass(frozen=True, slots=True)
 class SweepResult:
     """A whole log read: its entries, newest first, and the drive's runtime when it was
-    read (None where the log has no runtime base)."""
+    read (None where the log has no runtime base). ``places``: where each entry stood in
+    the log (its index), for a log whose next sweep reads only what came since (empty
+    where the log does not need it); never what tells entries apart."""
 
     entries: tuple[LogEntry, ...]
     runtime: Runtime | None
+    places: tuple[int, ...] = ()
 
 
 Values = Mapping[Read, int | None]  # what a round read; None: the drive refused that one
@@ -142,6 +145,7 @@ class DriveLog(Protocol):
         """What is read every ``events_every``: the change counter, or the newest entry."""
         ...
 
-    def sweep(self) -> Sweep:
-        """A new sweep of the whole log."""
+    def sweep(self, previous: SweepResult | None = None) -> Sweep:
+        """A new sweep of the whole log; ``previous``: what the last one found, where the
+        log's document lets a sweep skip what was already read (None: read it all)."""
         ...

@@ -34,7 +34,14 @@ from pkwbus.protocol.logs.model import (
     Values,
 )
 
-__all__ = ["CASES", "FAULTS_PER_CASE", "SINAMICS_FAULT_BUFFER", "FaultBuffer"]
+__all__ = [
+    "CASES",
+    "FAULTS_PER_CASE",
+    "RUNTIME_DAYS",
+    "RUNTIME_MS",
+    "SINAMICS_FAULT_BUFFER",
+    "FaultBuffer",
+]
 
 CASES = 8
 FAULTS_PER_CASE = 8
@@ -123,8 +130,8 @@ class FaultBuffer:
     def watch(self) -> tuple[Read, ...]:
         return (COUNTER,)
 
-    def sweep(self) -> _Sweep:
-        return _Sweep()
+    def sweep(self, previous: SweepResult | None = None) -> _Sweep:
+        return _Sweep()  # read whole each time: faults are rare, a change costs one sweep
 
 
 SINAMICS_FAULT_BUFFER = FaultBuffer()

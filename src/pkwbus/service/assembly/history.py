@@ -8,7 +8,7 @@ import logging
 from collections.abc import Callable
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
-from pkwbus.catalog.logs import log_of_catalog
+from pkwbus.catalog.logs import logs_of_catalog
 from pkwbus.master.runner import LineRunner
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
@@ -24,16 +24,16 @@ from pkwbus.service.history.stream import EventStream
 from pkwbus.service.history.watch import LogWatcher, Watched
 from pkwbus.service.runtime import Runtime
 
-__all__ = ["Memory", "log_of", "remember", "watch_logs", "watch_settings"]
+__all__ = ["Memory", "logs_of", "remember", "watch_logs", "watch_settings"]
 
 log = logging.getLogger("pkwbus.service.history")
 
 
-def log_of(line: cfg.Line, drive: cfg.Drive) -> DriveLog | None:
-    """The log a configured drive's events are read from (None: off, or none known)."""
+def logs_of(line: cfg.Line, drive: cfg.Drive) -> tuple[DriveLog, ...]:
+    """The logs a configured drive's events are read from (none: off, or none known)."""
     if (drive.events or line.events) == "off":
-        return None
-    return log_of_catalog(drive.catalog)
+        return ()
+    return logs_of_catalog(drive.catalog)
 
 
 def _codes(catalog: str, log: DriveLog) -> CodeTable | None:
@@ -53,14 +53,14 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
     it starts once the lines run and stops after them."""
     watched = []
     for line, drive in config.drives():
-        found = log_of(line, drive)
         entry = runtime.drives.get(drive.name)
-        if found is None or entry is None or drive.catalog is None:
+        if entry is None or drive.catalog is None:
             continue
         every = drive.events_every or line.events_every
         dialect = entry.target.dialect
-        codes = _codes(drive.catalog, found)
-        watched.append(Watched(line.name, drive.name, dialect, found, every, codes))
+        for found in logs_of(line, drive):
+            codes = _codes(drive.catalog, found)
+            watched.append(Watched(line.name, drive.name, dialect, found, every, codes))
     if not watched:
         return None
     runners = dict(runtime.runners)
@@ -69,7 +69,8 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
         if isinstance(runner, LineRunner):
             runner.observers.append(watcher)  # drives and lines that come back
     runtime.history = stream.store
-    log.info("watching the logs of %d drive(s), kept in %s", len(watched), stream.store.path)
+    drives, path = len({w.drive for w in watched}), stream.store.path
+    log.info("watching %d log(s) of %d drive(s), kept in %s", len(watched), drives, path)
     return watcher
 
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final
 
-from pkwbus.catalog.logs import log_of_catalog
+from pkwbus.catalog.logs import logs_of_catalog
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
@@ -149,13 +149,13 @@ def poll_rates(line: Line, drive: Drive) -> list[float]:
 
 
 def watch_rate(line: Line, drive: Drive) -> float:
-    """The reads per second the watch of the drive's own log asks for (``events``): its
-    change counter or newest entry every ``events_every`` (the sweeps when it changed are
+    """The reads per second the watch of the drive's own logs asks for (``events``): each
+    one's change counter or newest entry every ``events_every`` (the sweeps when it changed are
     rare, and not counted)."""
-    log = log_of_catalog(drive.catalog)
-    if log is None or (drive.events or line.events) == "off":
+    logs = logs_of_catalog(drive.catalog)
+    if (drive.events or line.events) == "off":
         return 0.0
-    return len(log.watch()) / (drive.events_every or line.events_every)
+    return sum(len(log.watch()) for log in logs) / (drive.events_every or line.events_every)
 
 
 def record_seconds(drive: ProfibusDrive, count: int, baudrate: int) -> float:

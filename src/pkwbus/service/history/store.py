@@ -182,17 +182,19 @@ class HistoryStore:
         )
         return DriveEvent(*rows[0]) if rows else None
 
-    def prune(self, drive: str, still_held: Iterable[str], before: float) -> int:
-        """Drop the entries of ``drive`` first seen before ``before`` that its log no longer
-        holds; how many."""
-        held = list(still_held)
-        marks = ", ".join("?" * len(held))
-        sql = "DELETE FROM events WHERE drive = ? AND seen < ?"
+    def prune(
+        self, drive: str, kinds: Iterable[str], still_held: Iterable[str], before: float
+    ) -> int:
+        """Drop the entries of ``drive`` of ``kinds`` first seen before ``before`` that its
+        log no longer holds; how many. A drive has a log for each kind of entry: one log's
+        sweep never drops another's."""
+        held, of = list(still_held), list(kinds)
+        sql = f"DELETE FROM events WHERE drive = ? AND seen < ? AND kind IN ({_marks(of)})"
         if held:
-            sql += f" AND key NOT IN ({marks})"
+            sql += f" AND key NOT IN ({_marks(held)})"
         with self._lock:
             try:
-                return self._db.execute(sql, (drive, before, *held)).rowcount
+                return self._db.execute(sql, (drive, before, *of, *held)).rowcount
             except sqlite3.Error as exc:
                 raise HistoryError(f"history database {self.path}: {exc}") from None
 
@@ -206,3 +208,7 @@ class HistoryStore:
                 return self._db.execute(sql, args).fetchall()
             except sqlite3.Error as exc:
                 raise HistoryError(f"history database {self.path}: {exc}") from None
+
+
+def _marks(values: list[str]) -> str:
+    return ", ".join("?" * len(values))

@@ -38,7 +38,7 @@ from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.master.planning.plan import HealthChanged
 from pkwbus.protocol import pkw
-from pkwbus.protocol.logs import DriveLog, LogEntry, Opaque, Read, Runtime
+from pkwbus.protocol.logs import DriveLog, LogEntry, Opaque, Read, Runtime, SweepResult
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.service.history.store import DriveEvent, HistoryError
 from pkwbus.service.history.stream import EVENT_LABELS, EventStream
@@ -65,6 +65,7 @@ class Watched:
     # Sweep at the next watch: at start, and when the drive or its line comes back.
     due_sweep: bool = True
     last_watch: tuple[int | None, ...] | None = None
+    last_sweep: SweepResult | None = None  # what the last sweep found, for the next one
     pruned: float = 0.0
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     answered: dict[Read, float] = field(default_factory=dict)  # the last round's answer times
@@ -126,7 +127,8 @@ class LogWatcher:
         if not await self.stream.start(kinds):
             return
         for w in self.watched:
-            self._tasks.append(asyncio.create_task(self._watch(w), name=f"log {w.drive}"))
+            name = f"{w.log.name} of {w.drive}"
+            self._tasks.append(asyncio.create_task(self._watch(w), name=name))
 
     async def stop(self) -> None:
         for task in self._tasks:
@@ -189,7 +191,7 @@ class LogWatcher:
         )  # fmt: skip
 
     async def _sweep(self, w: Watched) -> bool:
-        sweep = w.log.sweep()
+        sweep = w.log.sweep(w.last_sweep)
         read_at = self.clock()
         while reads := sweep.next():
             sweep.feed(await self._round(w, reads))
@@ -198,6 +200,7 @@ class LogWatcher:
         found = sweep.result()
         if found is None:
             return False
+        w.last_sweep = found
         seen = self.clock()
         events = [self._event(w, e, found.runtime, read_at, seen) for e in found.entries]
         new = await self.stream.record(events)
@@ -206,7 +209,10 @@ class LogWatcher:
         if seen - w.pruned >= PRUNE_EVERY:
             w.pruned = seen
             held = [e.key for e in events]
-            await asyncio.to_thread(self.store.prune, w.drive, held, seen - self.retention)
+            # A setting's change is held by no log: it goes once older than the retention.
+            kinds = [*(k.value for k in w.log.kinds), "setting"]
+            cutoff = seen - self.retention
+            await asyncio.to_thread(self.store.prune, w.drive, kinds, held, cutoff)
         return True
 
     def _event(

@@ -145,6 +145,12 @@ class SimDrive:
         self.tick(now)
         self.model.trip(code, value=value)
 
+    def warn(self, bit: int | None, now: float) -> None:
+        """A warning (``bit`` of the warning word) comes at ``now``, or the one there goes
+        (None) (:meth:`DriveModel.warn`)."""
+        self.tick(now)
+        self.model.warn(bit)
+
     def acknowledge(self, now: float) -> None:
         """The trip is acknowledged at ``now`` (as a local operator would)."""
         self.tick(now)

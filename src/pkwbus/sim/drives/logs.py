@@ -1,5 +1,5 @@
-"""The logs a simulated drive keeps of its own trips: the SINAMICS fault buffer and the
-Danfoss FC alarm log. Pure: the drive model passes the times.
+"""The logs a simulated drive keeps of its own trips and alarms: the SINAMICS fault and
+alarm buffers and the Danfoss FC alarm log. Pure: the drive model passes the times.
 
 SINAMICS fault buffer (:class:`FaultBuffer`), laid out as the SINAMICS S200 Operating
 Instructions (11/2023, FW V6.3, appendix A.3, the fault buffer) describe it: 64
@@ -31,7 +31,19 @@ Programming Guide section 5.3); no vendor page confirmed them, and the simulator
 them so. A trip goes in at index 0, the others move down and the oldest is dropped;
 an acknowledgement removes nothing.
 
-An empty entry reads 0 in every field of both logs: for the Danfoss log 0 is the usual
+SINAMICS alarm buffer (:class:`AlarmBuffer`): r2122 code, r2124 value, r2123/r2145 time
+received (ms, days), r2125/r2146 time removed, [0..7] the alarms there, sorted by time
+received, the oldest at [0]; eight there and another: [7] is overwritten (SINAMICS G120C
+Operating Instructions 09/2017, section 8.3). A gone alarm moves at once into the
+history [8..63], the latest at [8] (SINAMICS G220 Operating Instructions 04/2024, section
+15.6: "The last alarm that was resolved has index [8]"; G120 parameter descriptions,
+r2122: [63] the oldest, dropped beyond). r2121, "incremented every time the alarm buffer
+changes" (Unsigned16), counts each alarm that comes and each that goes. Other SINAMICS
+drives keep gone alarms at their places until the eight are full (ET 200pro FC-2
+Operating Instructions 09/2017, section 10.4); the simulator keeps the G220's way, so
+that [0] is always an alarm there now.
+
+An empty entry reads 0 in every field of these logs: for the Danfoss log 0 is the usual
 default of these arrays' range, not a confirmed reading; for the SINAMICS buffer it is
 the simulator's choice.
 """
@@ -44,12 +56,15 @@ from typing import Final
 
 __all__ = [
     "ALARM_FIELDS",
+    "BUFFERED_ALARM_FIELDS",
     "CASES",
     "DAY_MS",
     "FAULT_FIELDS",
     "PLACES",
     "Alarm",
+    "AlarmBuffer",
     "AlarmLog",
+    "BufferedAlarm",
     "Fault",
     "FaultBuffer",
     "runtime_words",
@@ -145,6 +160,75 @@ class FaultBuffer:
         """Parameter ``name`` (a key of :data:`FAULT_FIELDS`) at ``index``; 0 when empty."""
         fault = self.entry(index)
         return 0 if fault is None else FAULT_FIELDS[name](fault)
+
+    def _changed(self) -> None:
+        self.changes = (self.changes + 1) % _COUNTER_WRAP
+
+
+@dataclass(frozen=True, slots=True)
+class BufferedAlarm:
+    """One entry of the SINAMICS alarm buffer; times in ms of system runtime."""
+
+    code: int
+    value: int
+    received: int
+    removed: int | None = None  # None while the alarm is there
+
+
+def _alarm_removed(alarm: BufferedAlarm, day: bool) -> int:
+    return 0 if alarm.removed is None else runtime_words(alarm.removed)[day]
+
+
+BUFFERED_ALARM_FIELDS: Final[Mapping[str, Callable[[BufferedAlarm], int]]] = {
+    "buffered_alarm_code": lambda a: a.code,  # r2122
+    "buffered_alarm_value": lambda a: a.value,  # r2124
+    "buffered_alarm_received_ms": lambda a: runtime_words(a.received)[0],  # r2123
+    "buffered_alarm_received_days": lambda a: runtime_words(a.received)[1],  # r2145
+    "buffered_alarm_removed_ms": lambda a: _alarm_removed(a, False),  # r2125
+    "buffered_alarm_removed_days": lambda a: _alarm_removed(a, True),  # r2146
+}
+ALARM_PLACES = 8
+ALARM_ENTRIES = 64
+
+
+class AlarmBuffer:
+    """The SINAMICS alarm buffer: ``there`` the alarms now ([0..7], the oldest first),
+    ``history`` the gone ones ([8..63], the latest first); ``changes`` the counter r2121."""
+
+    def __init__(self) -> None:
+        self.there: list[BufferedAlarm] = []
+        self.history: list[BufferedAlarm] = []
+        self.changes = 0
+
+    def come(self, code: int, value: int, runtime_ms: int) -> None:
+        """An alarm comes: at the next place, or over [7] when eight are there."""
+        alarm = BufferedAlarm(code, value, runtime_ms)
+        if len(self.there) < ALARM_PLACES:
+            self.there.append(alarm)
+        else:
+            self.there[-1] = alarm
+        self._changed()
+
+    def go(self, code: int, runtime_ms: int) -> bool:
+        """The oldest alarm ``code`` there goes into the history; False: none is there."""
+        for i, alarm in enumerate(self.there):
+            if alarm.code == code:
+                del self.there[i]
+                gone = replace(alarm, removed=runtime_ms)
+                self.history = [gone, *self.history][: ALARM_ENTRIES - ALARM_PLACES]
+                self._changed()
+                return True
+        return False
+
+    def read(self, name: str, index: int) -> int:
+        """Parameter ``name`` (a key of :data:`BUFFERED_ALARM_FIELDS`) at ``index``; 0 when
+        empty."""
+        if index < ALARM_PLACES:
+            alarm = self.there[index] if index < len(self.there) else None
+        else:
+            at = index - ALARM_PLACES
+            alarm = self.history[at] if at < len(self.history) else None
+        return 0 if alarm is None else BUFFERED_ALARM_FIELDS[name](alarm)
 
     def _changed(self) -> None:
         self.changes = (self.changes + 1) % _COUNTER_WRAP

@@ -20,7 +20,15 @@ from dataclasses import dataclass, field
 
 from pkwbus.protocol import pzd
 from pkwbus.protocol.pzd import Profile
-from pkwbus.sim.drives.logs import ALARM_FIELDS, FAULT_FIELDS, AlarmLog, FaultBuffer, runtime_words
+from pkwbus.sim.drives.logs import (
+    ALARM_FIELDS,
+    BUFFERED_ALARM_FIELDS,
+    FAULT_FIELDS,
+    AlarmBuffer,
+    AlarmLog,
+    FaultBuffer,
+    runtime_words,
+)
 
 __all__ = [
     "ALARMS",
@@ -63,6 +71,10 @@ class ModelConfig:
 # log codes are illustrative. PROFIdrive: illustrative.
 ALARMS = {Profile.FC: ((13, 6), (14, 2), (4, 14)), Profile.PROFIDRIVE: ((1, 0), (2, 1), (11, 2))}
 WARNING_BITS = (1, 9, 13)
+# The SINAMICS alarm each warning bit enters in the alarm buffer (r2122): numbers and names
+# from the CU240B-2/CU240E-2 List Manual (catalog/data/alarms/siemens-g120.yaml); which
+# alarm goes with which bit is illustrative.
+BUFFERED_ALARMS = {1: 7409, 9: 30030, 13: 7402}
 
 
 @dataclass(slots=True)
@@ -96,6 +108,7 @@ class DriveModel:
     powered_ms: int = 0  # over all power-ups
     power_ups: int = 1  # Danfoss 15-03; the simulated drive's first is its creation
     faults: FaultBuffer = field(default_factory=FaultBuffer)  # SINAMICS r0947 and the rest
+    alarms: AlarmBuffer = field(default_factory=AlarmBuffer)  # SINAMICS r2122 and the rest
     log: AlarmLog = field(init=False)  # Danfoss 15-30..15-32, ``log_length`` entries
     _limits: Limits = field(default_factory=Limits)  # as at the last update
     _tripped_at: float = 0.0
@@ -117,6 +130,9 @@ class DriveModel:
             value = self.rng.randrange(1500, 3000)  # an output current in 0.01 A
             self.faults.enter(code, value, at)
             self.faults.acknowledge(at + 60_000)
+            alarm = BUFFERED_ALARMS[self.rng.choice(WARNING_BITS)]  # a warning before it
+            self.alarms.come(alarm, value, at - 20_000)
+            self.alarms.go(alarm, at - 5_000)
             self.log.enter(code, value, at // 1000)
 
     @property
@@ -163,9 +179,9 @@ class DriveModel:
             code, bit = self.rng.choice(ALARMS[self.profile])
             self.trip(code, bit)
         if self.warning_word and self.now >= self._warning_until:
-            self.warning_word = 0
+            self.warn(None)
         if not self.warning_word and self._chance(cfg.warning_rate, dt):
-            self.warning_word = 1 << self.rng.choice(WARNING_BITS)
+            self.warn(self.rng.choice(WARNING_BITS))
             self._warning_until = self.now + cfg.warning_seconds
 
     def _chance(self, rate: float, dt: float) -> bool:
@@ -188,6 +204,18 @@ class DriveModel:
         self._tripped_at = self.now
         self.alarm_word |= 1 << bit
         self.frequency = 0.0
+
+    def warn(self, bit: int | None) -> None:
+        """A warning comes (``bit`` of the warning word), or the one there goes (None); the
+        SINAMICS alarm buffer enters it or moves it into its history. Its value: the output
+        current in 0.01 A (illustrative)."""
+        for was in range(32):
+            if self.warning_word >> was & 1 and was in BUFFERED_ALARMS:
+                self.alarms.go(BUFFERED_ALARMS[was], self.runtime_ms)
+        self.warning_word = 0 if bit is None else 1 << bit
+        if bit is not None and bit in BUFFERED_ALARMS:
+            value = round(self._current(self._limits) * 100)
+            self.alarms.come(BUFFERED_ALARMS[bit], value, self.runtime_ms)
 
     def reset(self) -> None:
         """The trip is acknowledged. The SINAMICS fault buffer moves the active fault case
@@ -260,6 +288,10 @@ class DriveModel:
             return self.log.read(name, index)
         if name == "fault_changes":
             return self.faults.changes
+        if name in BUFFERED_ALARM_FIELDS:
+            return self.alarms.read(name, index)
+        if name == "alarm_changes":
+            return self.alarms.changes
         if name == "runtime":
             return runtime_words(self.runtime_ms)[index]
         if name == "power_ups":

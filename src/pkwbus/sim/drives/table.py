@@ -29,6 +29,10 @@ we chose and say so:
   (8 fault cases x 8 faults). Only r0947's type is confirmed; the others' are not.
   r0944 Counter of fault buffer changes: u16 as the PROFIdrive profile's P944, not
   confirmed for SINAMICS. r2114 System runtime: [0] ms, [1] days, u32 (unconfirmed).
+- USS alarm buffer (SINAMICS G120 parameter descriptions, r2121 to r2125): r2121
+  Counter alarm buffer changes u16, r2122 Alarm code u16, r2124 Alarm value i32
+  (as listed there), r2123 and r2125 time received / removed in ms u32, r2145 and
+  r2146 the same in days u16 (the days' type unconfirmed): arrays of 64.
 - The log parameters carry no unit here: a catalog's unit for them then needs no
   conversion (they are counts, codes and times the model gives as they are).
 - USS p0199 stands in for a text parameter (G120's p0199 is numeric).
@@ -175,6 +179,14 @@ USS_TABLE: Final = (
     ParamSpec(2114, "r2114", U32, array=2, live="runtime"),  # [0] ms, [1] days
     ParamSpec(2130, "r2130", U16, array=64, live="fault_received_days"),
     ParamSpec(2136, "r2136", U16, array=64, live="fault_removed_days"),
+    # The alarm buffer: [0..7] the alarms there, [8..63] the history.
+    ParamSpec(2121, "r2121", U16, live="alarm_changes"),
+    ParamSpec(2122, "r2122", U16, array=64, live="buffered_alarm_code"),
+    ParamSpec(2123, "r2123", U32, array=64, live="buffered_alarm_received_ms"),
+    ParamSpec(2124, "r2124", I32, array=64, live="buffered_alarm_value"),
+    ParamSpec(2125, "r2125", U32, array=64, live="buffered_alarm_removed_ms"),
+    ParamSpec(2145, "r2145", U16, array=64, live="buffered_alarm_received_days"),
+    ParamSpec(2146, "r2146", U16, array=64, live="buffered_alarm_removed_days"),
 )
 
 # Which parameters steer the model: maximum frequency (MAV scale), ramp times.

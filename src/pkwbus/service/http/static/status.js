@@ -348,8 +348,11 @@ let eventsAt = 0;
 const TIME_FROM = { runtime: "the drive's runtime", drive_clock: "the drive's clock",
   seen: "when read" };
 
+// Red: a trip, or a setting nobody audited; a SINAMICS alarm (A-number) is a warning's kind.
+const BAD_EVENTS = new Set(["fault", "setting"]);
+
 function drawEvents(events) {
-  const rows = events.map((e) => el("tr", { class: e.kind === "warning" ? "" : "bad" },
+  const rows = events.map((e) => el("tr", { class: BAD_EVENTS.has(e.kind) ? "bad" : "" },
     el("td", {}, new Date(e.time).toLocaleString()), el("td", {}, e.drive),
     el("td", {}, e.kind), el("td", {}, e.text ? `${e.code} ${e.text}` : e.code),
     el("td", {}, e.value ?? ""), el("td", {}, TIME_FROM[e.time_source] || e.time_source)));
