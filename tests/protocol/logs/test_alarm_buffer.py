@@ -204,6 +204,26 @@ def test_a_refused_code_in_the_history_fails_the_sweep() -> None:
     assert sweep(refusing, first) is None
 
 
+def test_a_newest_entry_whose_time_was_refused_is_no_mark() -> None:
+    """A drive that refuses r2145: entries differ only by code and value, so the same alarm
+    again could pass for the last sweep's newest; the history is read to its end instead."""
+    buffer = AlarmBuffer(at_once=True)
+
+    def no_days(read: Read) -> int | None:
+        return None if read.pnu == 2145 else buffer(read)
+
+    buffer.come(7001, 1)
+    buffer.go(0)
+    first = sweep(no_days)
+    buffer.come(7002, 2)
+    buffer.go(0)
+    buffer.come(7001, 1)
+    buffer.go(0)
+    found = sweep(no_days, first)
+    assert found is not None and [e.code for e in found.entries] == [7001, 7002, 7001]
+    assert found == sweep(no_days)
+
+
 def test_a_cleared_history_is_read_down_to_its_end() -> None:
     """The mark is not met (the history was cleared meanwhile): everything there is read,
     nothing of the last sweep is carried."""
@@ -258,3 +278,33 @@ def test_every_alarm_is_found_and_a_sweep_reads_what_a_whole_one_does(
             found |= set(result.entries)
             previous = result
     assert {_entry(a) for a in came} - found <= buffer.dropped
+
+
+@settings(max_examples=300)
+@given(at_once=st.booleans(), script=steps, refused=st.sampled_from([2123, 2124, 2145]))
+def test_with_a_detail_refused_a_sweep_still_reads_what_a_whole_one_does(
+    at_once: bool, script: list[Step], refused: int
+) -> None:
+    """A drive that refuses one of the details (value, ms or days): the same alarm again
+    looks like the last sweep's newest, so none is taken as the mark, and every alarm the
+    buffer holds is still found, as many times as it holds it."""
+    buffer = AlarmBuffer(at_once=at_once)
+
+    def drive(read: Read) -> int | None:
+        return None if read.pnu == refused else buffer(read)
+
+    previous: SweepResult | None = None
+    for kind, n in [*script, ("sweep", 0)]:
+        if kind == "come":
+            buffer.come(7000 + n, n)
+        elif kind == "go":
+            buffer.go(n)
+        else:
+            result = sweep(drive, previous)
+            assert result is not None
+            assert result == sweep(drive)
+            assert len(result.entries) == len(buffer.places) + len(buffer.history)
+            assert sorted(e.code for e in result.entries) == sorted(
+                a.code for a in buffer.places + buffer.history
+            )
+            previous = result

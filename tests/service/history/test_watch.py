@@ -18,10 +18,18 @@ from pkwbus.master.planning.outcomes import Answered, Rejected, TimedOut
 from pkwbus.master.planning.plan import HealthChanged
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
-from pkwbus.protocol.logs import DANFOSS_ALARM_LOG, SINAMICS_FAULT_BUFFER, DriveLog, Read, Runtime
+from pkwbus.protocol.logs import (
+    DANFOSS_ALARM_LOG,
+    SINAMICS_ALARM_BUFFER,
+    SINAMICS_FAULT_BUFFER,
+    DriveLog,
+    Read,
+    Runtime,
+)
 from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.history.stream import EventStream
-from pkwbus.service.history.watch import LogWatcher, Watched
+from pkwbus.service.history.watch import WHOLE_EVERY, LogWatcher, Watched
+from tests.protocol.logs.test_alarm_buffer import AlarmBuffer
 from tests.protocol.logs.test_logs import AlarmLog, FaultBuffer
 
 EVERY = 0.02
@@ -231,3 +239,52 @@ async def test_the_newest_entry_found_is_a_gauge_from_the_start_and_over_restart
     await settle(again.runners["l1"])  # type: ignore[arg-type]
     assert newest(registry) == {("13", "fault"): 200.0}  # not found again: not new
     await again.stop()
+
+
+async def test_the_alarm_buffer_is_read_whole_at_first_hourly_and_after_a_comeback(
+    tmp_path: Path,
+) -> None:
+    """Between, a sweep reads its history only down to what the last one found newest."""
+    buffer = AlarmBuffer(at_once=True)
+    for n in range(10):
+        buffer.come(7000 + n, n)
+        buffer.go(0)
+    line = FakeLine(buffer)
+    now = [1000.0]
+    dialect = DriveTarget.create("uss", 1).dialect
+    w = Watched("l1", "d1", dialect, SINAMICS_ALARM_BUFFER, EVERY)
+    store = HistoryStore(tmp_path / "history.sqlite")
+    watch = LogWatcher({"l1": line}, EventStream(store, CollectorRegistry()), [w],
+                       retention=3600.0, clock=lambda: now[0])  # fmt: skip
+
+    def history_read(since: int) -> set[int]:
+        return {j.request.subindex for j in line.jobs[since:] if j.request.pnu == 2122} - set(
+            range(8)
+        )
+
+    def changes(code: int) -> int:
+        mark = len(line.jobs)
+        buffer.come(code, 1)
+        buffer.go(0)
+        return mark
+
+    await watch.start()
+    await settle(line)
+    assert history_read(0) == set(range(8, 19))  # the ten, and the end
+    mark = changes(7100)
+    await settle(line)
+    assert history_read(mark) == {8, 9}  # the new one, and the last sweep's newest
+    now[0] += WHOLE_EVERY
+    mark = changes(7101)
+    await settle(line)
+    assert history_read(mark) == set(range(8, 21))  # an hour on: whole
+    mark = changes(7102)
+    await settle(line)
+    assert history_read(mark) == {8, 9}
+    mark = len(line.jobs)
+    watch.on_events([HealthChanged("d1", True, "answers again")])
+    await settle(line)
+    assert history_read(mark) == set(range(8, 22))  # back: whole
+    assert len(store.known("d1")) == 13
+    await watch.stop()
+    store.close()

@@ -60,6 +60,11 @@ class Runtime:
     def of(cls, days: int, ms: int) -> Runtime:
         return cls(days * MS_PER_DAY + ms)
 
+    @classmethod
+    def read(cls, days: int | None, ms: int | None) -> Runtime | None:
+        """The runtime of two values read (None where the drive refused either)."""
+        return cls.of(days, ms) if days is not None and ms is not None else None
+
     def __str__(self) -> str:
         days, rest = divmod(self.ms, MS_PER_DAY)
         seconds, ms = divmod(rest, 1000)

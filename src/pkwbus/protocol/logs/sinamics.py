@@ -99,7 +99,7 @@ class _Sweep:
         if before is None or before != self.counter_after:
             return None  # the buffer changed while it was read
         ms, days = known.get(RUNTIME_MS), known.get(RUNTIME_DAYS)
-        runtime = Runtime.of(days, ms) if ms is not None and days is not None else None
+        runtime = Runtime.read(days, ms)
         entries = []
         for case in range(CASES):  # the newest case first; in a case, the latest fault first
             for place in reversed(range(FAULTS_PER_CASE)):
@@ -108,12 +108,7 @@ class _Sweep:
                 if not code:
                     continue
                 value_read, ms_read, days_read = _details(i)
-                at_ms, at_days = known.get(ms_read), known.get(days_read)
-                when = (
-                    Runtime.of(at_days, at_ms)
-                    if at_ms is not None and at_days is not None
-                    else None
-                )
+                when = Runtime.read(known.get(days_read), known.get(ms_read))
                 entries.append(LogEntry(Kind.FAULT, code, known.get(value_read), when))
         return SweepResult(tuple(entries), runtime)
 

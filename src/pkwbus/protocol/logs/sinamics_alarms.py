@@ -25,11 +25,14 @@ with a delay.
 
 The eight places [0..7] are read whole at every sweep. The history only grows
 at [8], its older entries moving one place down and the oldest leaving at
-[63]: so a sweep reads the history from [8] down, an entry at a time, only
-until it meets the entry the last sweep found newest there; everything below
-it is what the last sweep found below it, moved down as far. A sweep with
-none to meet (the first, the history cleared, or more than its length new)
-reads it down to its end (the first code 0, or [63]).
+[63] (G220: "The last alarm that was resolved has index [8]"): so a sweep
+reads the history from [8] down, an entry at a time, only until it meets the
+entry the last sweep found newest there; everything below it is what the last
+sweep found below it, moved down as far. A sweep with none to meet (the first,
+the history cleared, more than its length new, or a newest entry whose value
+or time the drive refused) reads it down to its end (the first code 0, or
+[63]); so does one given no earlier sweep, which the watcher asks for now and
+then, so that a history kept in another order costs time, not entries.
 
 Times are in the drive's runtime base r2114 as the fault buffer's are (SINAMICS
 G115D Operating Instructions 07/2023, section 9.2: the inverter transfers r2114
@@ -95,7 +98,9 @@ class _Sweep:
         if previous is not None and len(previous.places) == len(previous.entries):
             placed = zip(previous.places, previous.entries, strict=True)
             history = [(p, e) for p, e in placed if p >= ALARMS]
-            if history:
+            # A mark is only met by its whole content: one whose value or time the drive
+            # refused could be another alarm of the same code, so none is taken.
+            if history and history[0][1].drive_time is not None and history[0][1].value is not None:
                 self._mark, self._below = history[0], history[1:]
 
     def next(self) -> tuple[Read, ...]:
@@ -142,8 +147,7 @@ class _Sweep:
 
     def _entry_at(self, i: int) -> LogEntry:
         value_read, ms_read, days_read = _details(i)
-        at_ms, at_days = self.known.get(ms_read), self.known.get(days_read)
-        when = Runtime.of(at_days, at_ms) if at_ms is not None and at_days is not None else None
+        when = Runtime.read(self.known.get(days_read), self.known.get(ms_read))
         return LogEntry(Kind.ALARM, self.known[_code(i)] or 0, self.known.get(value_read), when)
 
     def result(self) -> SweepResult | None:
@@ -156,7 +160,7 @@ class _Sweep:
         if before is None or before != self.counter_after:
             return None  # the buffer changed while it was read
         ms, days = known.get(RUNTIME_MS), known.get(RUNTIME_DAYS)
-        runtime = Runtime.of(days, ms) if ms is not None and days is not None else None
+        runtime = Runtime.read(days, ms)
         # The newest first: the eight places latest first, then the history from [8] down.
         order = [*reversed(range(ALARMS)), *range(ALARMS, self._history_end)]
         found = [(i, self._entry_at(i)) for i in order if known[_code(i)]]

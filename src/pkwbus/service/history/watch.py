@@ -50,6 +50,10 @@ log = logging.getLogger("pkwbus.service.history")
 
 SWEEP_TRIES = 3  # a log that changes while it is read is read again, this many times
 PRUNE_EVERY = 3600.0  # seconds between two prunings of a drive's old entries
+# A log whose sweeps read only what came since (the SINAMICS alarm buffer) is read whole
+# by its first sweep this long after the last whole one, and after the drive or its line
+# came back; only a whole read says what the drive no longer holds (pruning).
+WHOLE_EVERY = 3600.0
 
 
 @dataclass
@@ -66,6 +70,7 @@ class Watched:
     due_sweep: bool = True
     last_watch: tuple[int | None, ...] | None = None
     last_sweep: SweepResult | None = None  # what the last sweep found, for the next one
+    whole_at: float | None = None  # when the log was last read whole
     pruned: float = 0.0
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     answered: dict[Read, float] = field(default_factory=dict)  # the last round's answer times
@@ -149,6 +154,7 @@ class LogWatcher:
     def _again(self, which: list[Watched]) -> None:
         for w in which:
             w.due_sweep = True
+            w.whole_at = None  # read whole: a power cycle may have rearranged it
             w.wake.set()
 
     # ------------------------------------------------------------ one drive
@@ -191,8 +197,9 @@ class LogWatcher:
         )  # fmt: skip
 
     async def _sweep(self, w: Watched) -> bool:
-        sweep = w.log.sweep(w.last_sweep)
         read_at = self.clock()
+        whole = w.whole_at is None or read_at - w.whole_at >= WHOLE_EVERY
+        sweep = w.log.sweep(None if whole else w.last_sweep)
         while reads := sweep.next():
             sweep.feed(await self._round(w, reads))
             for r in w.log.runtime[:1]:  # when the drive's runtime now was answered
@@ -202,11 +209,13 @@ class LogWatcher:
             return False
         w.last_sweep = found
         seen = self.clock()
+        if whole:
+            w.whole_at = read_at
         events = [self._event(w, e, found.runtime, read_at, seen) for e in found.entries]
         new = await self.stream.record(events)
         for e in reversed(new):  # the oldest first
             self._tell(e)
-        if seen - w.pruned >= PRUNE_EVERY:
+        if whole and seen - w.pruned >= PRUNE_EVERY:
             w.pruned = seen
             held = [e.key for e in events]
             # A setting's change is held by no log: it goes once older than the retention.
