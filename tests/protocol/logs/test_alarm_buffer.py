@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from pkwbus.protocol.logs import SINAMICS_ALARM_BUFFER, Kind, LogEntry, Read, Runtime, SweepResult
 from pkwbus.protocol.logs.model import MS_PER_DAY
+from tests.protocol.logs.test_logs import sweep as logs_sweep
 
 
 @dataclass(frozen=True)
@@ -106,14 +107,7 @@ def sweep(
     previous: SweepResult | None = None,
     between: Callable[[int], None] = lambda _: None,
 ) -> SweepResult | None:
-    s = SINAMICS_ALARM_BUFFER.sweep(previous)
-    rounds = 0
-    while reads := s.next():
-        s.feed({r: buffer(r) for r in reads})
-        between(rounds)
-        rounds += 1
-        assert rounds < 70
-    return s.result()
+    return logs_sweep(SINAMICS_ALARM_BUFFER, buffer, between, previous)
 
 
 @pytest.mark.parametrize("at_once", [True, False])

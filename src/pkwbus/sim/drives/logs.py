@@ -102,8 +102,8 @@ class Alarm:
     time: int
 
 
-def _removed(fault: Fault, day: bool) -> int:
-    return 0 if fault.removed is None else runtime_words(fault.removed)[day]
+def _removed(entry: Fault | BufferedAlarm, day: bool) -> int:
+    return 0 if entry.removed is None else runtime_words(entry.removed)[day]
 
 
 # The ``live`` names of the buffer's parameters (table.py) and what each shows of a fault.
@@ -175,17 +175,13 @@ class BufferedAlarm:
     removed: int | None = None  # None while the alarm is there
 
 
-def _alarm_removed(alarm: BufferedAlarm, day: bool) -> int:
-    return 0 if alarm.removed is None else runtime_words(alarm.removed)[day]
-
-
 BUFFERED_ALARM_FIELDS: Final[Mapping[str, Callable[[BufferedAlarm], int]]] = {
     "buffered_alarm_code": lambda a: a.code,  # r2122
     "buffered_alarm_value": lambda a: a.value,  # r2124
     "buffered_alarm_received_ms": lambda a: runtime_words(a.received)[0],  # r2123
     "buffered_alarm_received_days": lambda a: runtime_words(a.received)[1],  # r2145
-    "buffered_alarm_removed_ms": lambda a: _alarm_removed(a, False),  # r2125
-    "buffered_alarm_removed_days": lambda a: _alarm_removed(a, True),  # r2146
+    "buffered_alarm_removed_ms": lambda a: _removed(a, False),  # r2125
+    "buffered_alarm_removed_days": lambda a: _removed(a, True),  # r2146
 }
 ALARM_PLACES = 8
 ALARM_ENTRIES = 64

@@ -209,9 +209,9 @@ class DriveModel:
         """A warning comes (``bit`` of the warning word), or the one there goes (None); the
         SINAMICS alarm buffer enters it or moves it into its history. Its value: the output
         current in 0.01 A (illustrative)."""
-        for was in range(32):
-            if self.warning_word >> was & 1 and was in BUFFERED_ALARMS:
-                self.alarms.go(BUFFERED_ALARMS[was], self.runtime_ms)
+        for was, code in BUFFERED_ALARMS.items():
+            if self.warning_word >> was & 1:
+                self.alarms.go(code, self.runtime_ms)
         self.warning_word = 0 if bit is None else 1 << bit
         if bit is not None and bit in BUFFERED_ALARMS:
             value = round(self._current(self._limits) * 100)
