@@ -54,7 +54,7 @@ PARAMETERS = (
 def _telegrams(runtime: Any) -> float:
     """Telegrams exchanged on every line: the lines' plain counts, not a registry
     collect(), which would hold the event loop for a quarter of a second at 8 lines."""
-    return float(sum(counts.telegram_total for counts in runtime.counts.values()))
+    return float(sum(t.telegrams for t in runtime.snapshot.totals.values()))
 
 
 async def _render(registry: Any) -> bytes:

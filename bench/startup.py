@@ -61,7 +61,7 @@ async def _start(text: str, kept: DescriptionFile | None, polled: int) -> dict[s
         while len(runtime.snapshot.readings) < polled and time.perf_counter() < deadline:
             await asyncio.sleep(0.05)
         took = time.perf_counter() - t0
-        telegrams = sum(c.telegram_total for c in runtime.counts.values())
+        telegrams = sum(t.telegrams for t in runtime.snapshot.totals.values())
         values = len(runtime.snapshot.readings)
     finally:
         await runtime.stop()

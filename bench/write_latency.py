@@ -93,7 +93,7 @@ async def _direct(runtime: Any, writes: int, gap: float) -> list[float]:
 
 
 def _busy(runtime: Any) -> float:
-    return float(runtime.counts["line0"].busy_total)
+    return float(runtime.snapshot.totals["line0"].busy)
 
 
 def _row(path: str, baud: int, latencies: list[float], errors: int, busy: float) -> dict[str, Any]:

@@ -458,3 +458,52 @@ def test_names_without_the_unit_they_would_contradict() -> None:
     assert name_for_unit("Speed [RPM]", "1/s") == "Speed"
     assert name_for_unit("Speed [RPM]", "rpm") == "Speed [RPM]"
     assert name_for_unit("Limit [x] of y", "W") == "Limit [x] of y"  # not at the end
+
+
+# --- element units ------------------------------------------------------------
+
+
+def test_the_system_runtime_counts_its_elements_in_their_own_units() -> None:
+    # SINAMICS CU240D-2 OI 04/2018, 8.2: "System runtime = r2114[1] x days + r2114[0] x
+    # milliseconds": the value has no one unit, each element its own.
+    runtime = load_catalog("siemens-g120").get(2114)
+    assert runtime is not None and runtime.source == "S-CU240D2-OI"
+    assert (runtime.unit, runtime.element_units, runtime.array) == ("", {0: "ms", 1: "d"}, 2)
+    described = ParameterDescription.from_spec(runtime)
+    assert described.counter and described.element_unit == ""  # the parameter as a whole
+    assert [described.at(i).element_unit for i in (0, 1, 2, None)] == ["ms", "d", "", ""]
+    assert described.at(0).unit == ""  # the API's and /metrics' unit stays the entry's
+    assert ParameterDescription().at(0) == ParameterDescription()
+
+
+def test_element_units_load(tmp_path: Path) -> None:
+    path = write_catalog(tmp_path, "r2114: {name: Runtime, array: 2, element_units: {0: ms}}\n",
+                         HEADER.replace("fc", "uss"))  # fmt: skip
+    spec = load_catalog_file(path).get(2114)
+    assert spec is not None and spec.element_units == {0: "ms"}
+
+
+@pytest.mark.parametrize(
+    ("entry", "problem"),
+    [
+        ("element_units: {0: ms}", "element_units need an array"),
+        ("array: 2, unit: s, element_units: {0: ms}", "either unit (all elements)"),
+        ("array: 2, element_units: {2: ms}", "element 2 is outside the array (0 to 1)"),
+        ("array: 2, element_units: {-1: ms}", "element -1 is outside the array"),
+        ('array: 2, element_units: {0: " "}', "element 0 has no unit"),
+        ("array: 2, element_units: {x: ms}", "element_units.x"),
+    ],
+)
+def test_element_units_are_checked(tmp_path: Path, entry: str, problem: str) -> None:
+    message = load_error(tmp_path, f'"15-00": {{name: Hours, {entry}}}\n')
+    assert 'parameters."15-00"' in message and problem in message
+
+
+@pytest.mark.parametrize("changes", [{"type": "i32"}, {"scale": 0.1}, {"conversion": -3}])
+def test_an_override_that_reads_the_value_another_way_drops_the_element_units(
+    changes: dict[str, object],
+) -> None:
+    runtime = load_catalog("siemens-g120").get(2114)
+    assert runtime is not None and runtime.element_units
+    assert runtime.overridden(changes).element_units == {}
+    assert runtime.overridden({"name": "Laufzeit"}).element_units == runtime.element_units

@@ -82,3 +82,17 @@ def test_the_catalogs_options_stand_only_while_the_drive_reads_the_number_unscal
     assert plain.enumerates and plain.option(4) == "Danish"
     scaled = resolve(layers, DriveDescription(type_code=6, conversion=-1)).description
     assert not scaled.enumerates and scaled.option(4) == ""  # raw 40 is no "Danish"
+
+
+def test_an_element_unit_stays_with_its_own_scaling() -> None:
+    """r2114's elements count ms and days unscaled: a drive that describes another
+    scaling reads them another way, so the catalog's element units no longer apply."""
+    runtime = ParameterDescription(
+        "System runtime", ValueType.U32, array=2, counter=True,
+        element_units=MappingProxyType({0: "ms", 1: "d"}),
+    ).at(0)  # fmt: skip
+    layers = Layers(runtime, catalog=runtime)
+    same = resolve(layers, DriveDescription(type_code=7, array=2)).description
+    assert same.element_unit == "ms"
+    other = resolve(layers, DriveDescription(type_code=7, conversion=-3)).description
+    assert (other.element_unit, dict(other.element_units)) == ("", {})

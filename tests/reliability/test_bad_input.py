@@ -129,7 +129,9 @@ async def api() -> AsyncIterator[httpx.AsyncClient]:
     text = config_text([fc_line("l1", end.url, [1], ["16-13"], every="1s")])
     runtime = await build_runtime(parse_config(text, environ={}))
     await runtime.start()
-    while any(d.pending for d in runtime.drives.values()):  # writes wait for descriptions
+    while any(
+        d.pending for d in runtime.snapshot.decoding.values()
+    ):  # writes wait for descriptions
         await asyncio.sleep(0.01)
     sock = bind("127.0.0.1", 0)
     port = sock.getsockname()[1]

@@ -87,6 +87,13 @@ class ParameterDescription:
     prefix: str = ""  # Siemens r (read-only) or p (settable), when the catalog says
     # An enumeration's options (number -> the catalog's sourced text); empty for none.
     options: Mapping[int, str] = field(default_factory=_no_options, hash=False)
+    counter: bool = False  # a counter the drive keeps of its own life (catalog ``counter``)
+    # The unit of each element where an array's elements count in different units
+    # (catalog ``element_units``: r2114 [0] ms, [1] d), and the one of the element
+    # described (:meth:`at`). They tell how the value reads out (``readable``); ``unit``,
+    # the unit the API and /metrics give the value, stays as it is.
+    element_units: Mapping[int, str] = field(default_factory=_no_options, hash=False)
+    element_unit: str = ""
 
     def __post_init__(self) -> None:
         # A unit in the name ("Power [kW]", as the vendor names 16-10) that is not the unit
@@ -117,7 +124,19 @@ class ParameterDescription:
             spec.writable,
             spec.prefix,
             MappingProxyType(dict(spec.options)) if spec.options else _NO_OPTIONS,
+            counter=spec.counter,
+            element_units=(
+                MappingProxyType(dict(spec.element_units)) if spec.element_units else _NO_OPTIONS
+            ),
         )
+
+    def at(self, index: int | None) -> ParameterDescription:
+        """The description of element ``index`` (None: the parameter as a whole): with the
+        element's own unit where the catalog gives its elements different units."""
+        if not self.element_units:
+            return self
+        unit = self.element_units.get(index, "") if index is not None else ""
+        return self if unit == self.element_unit else replace(self, element_unit=unit)
 
     def with_type(self, vtype: ValueType | None) -> ParameterDescription:
         """The same with the value type ``vtype`` (from the command line, say), if given."""
@@ -210,15 +229,16 @@ class ParameterTable:
     catalog: Mapping[int, ParameterDescription] = field(default_factory=_empty_catalog)
 
     def describe(self, ref: ParameterRef) -> ParameterDescription:
-        """What is known of ``ref`` (with its index) on the drive."""
+        """What is known of ``ref`` (with its index, :meth:`ParameterDescription.at`) on the
+        drive."""
         keys: tuple[ParameterKey, ...] = ((ref.pnu, ref.index),)
         if ref.index is not None:
             keys += ((ref.pnu, OTHER_INDEX), (ref.pnu, None))
         for key in keys:
             found = self.configured.get(key)
             if found is not None:
-                return found
-        return self.catalog.get(ref.pnu, _UNKNOWN)
+                return found.at(ref.index)
+        return self.catalog.get(ref.pnu, _UNKNOWN).at(ref.index)
 
     def canonical(self, ref: ParameterRef) -> ParameterRef:
         """``ref`` under the drive's one name for it (``3-41`` for ``341`` on an FC drive,

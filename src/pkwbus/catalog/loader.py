@@ -89,6 +89,11 @@ class ParameterSpec(BaseModel):
     # number not listed is shown as its number alone. ``options_source`` names it.
     options: dict[StrictInt, str] = Field(default_factory=dict)
     options_source: str = ""
+    # The unit of each element of an array whose elements count in different units
+    # (SINAMICS r2114 System runtime: [0] ms, [1] days), where ``unit`` can give none. It
+    # tells how a counter's value is read out (the status page's text); the value's unit
+    # in the API and /metrics stays ``unit``.
+    element_units: dict[StrictInt, str] = Field(default_factory=dict)
     # Siemens r (read-only) or p (settable), from the key ("r0021"); empty otherwise.
     prefix: Literal["", "r", "p"] = ""
 
@@ -97,6 +102,7 @@ class ParameterSpec(BaseModel):
         _check_scaling(self)
         _check_limits(self)
         _check_options(self)
+        _check_element_units(self)
         if not self.verified and not self.note.strip():
             raise ValueError("verified: false needs a note saying what could not be sourced")
         return self
@@ -123,9 +129,11 @@ class ParameterSpec(BaseModel):
         if "conversion" in changes or changes.get("type") == "text":
             fields["scale"] = None
         if {"type", "scale", "conversion"} & changes.keys():
-            # The catalog's options number the raw value of its type: another type or a
-            # scaling reads the value another way, so they no longer apply.
+            # The catalog's options number the raw value of its type, and its element
+            # units are those of its scaling: another type or a scaling reads the value
+            # another way, so they no longer apply.
             fields["options"], fields["options_source"] = {}, ""
+            fields["element_units"] = {}
         try:
             return ParameterSpec.model_validate({**fields, **changes})
         except ValidationError as exc:
@@ -166,6 +174,20 @@ def _check_options(spec: ParameterSpec) -> None:
             raise ValueError(f"option {number} is outside {spec.type} ({low} to {high})")
         if not text.strip():
             raise ValueError(f"option {number} has no text")
+
+
+def _check_element_units(spec: ParameterSpec) -> None:
+    if not spec.element_units:
+        return
+    if spec.array is None:
+        raise ValueError("element_units need an array")
+    if spec.unit:
+        raise ValueError("give either unit (all elements) or element_units, not both")
+    for index, unit in spec.element_units.items():
+        if not 0 <= index < spec.array:
+            raise ValueError(f"element {index} is outside the array (0 to {spec.array - 1})")
+        if not unit.strip():
+            raise ValueError(f"element {index} has no unit")
 
 
 class Catalog(BaseModel):

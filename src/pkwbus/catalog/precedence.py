@@ -79,6 +79,10 @@ def resolve(layers: Layers, drive: DriveDescription | None) -> Resolved:
         merged, name=name, vtype=vtype, scaling=scaling, unit=unit, minimum=low, maximum=high,
         array=array,
     )  # fmt: skip
+    if scaling != merged.scaling and merged.element_units:
+        # The catalog's element units are those of its scaling, as its unit is (_unit).
+        resolved = replace(resolved, element_units=ParameterDescription().element_units,
+                           element_unit="")  # fmt: skip
     return Resolved(resolved, _source(given, described, catalog))
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "LineState",
     "MaintenanceChanged",
     "Observer",
+    "Outputs",
     "Overrun",
     "PkwLengthTold",
     "SlaveDiagnosed",
@@ -199,3 +200,20 @@ class Observer(Protocol):
     """One who follows a line's stream of events."""
 
     def on_events(self, events: Sequence[Event]) -> None: ...
+
+
+class Outputs:
+    """The outputs every line's stream goes to, one list: given to each runner at its
+    construction, swapped whole by one call (a reload's new watchers)."""
+
+    __slots__ = ("items",)
+
+    def __init__(self, items: Sequence[Observer] = ()) -> None:
+        self.items: tuple[Observer, ...] = tuple(items)
+
+    def swap(self, items: Sequence[Observer]) -> None:
+        self.items = tuple(items)
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        for output in self.items:
+            output.on_events(events)

@@ -148,8 +148,13 @@ class LineRunner:
         as they were): a kept poll goes on at its due time, a new one is due now, the values
         of those gone leave (KeyError: not here)."""
         now = asyncio.get_running_loop().time()
-        self.writer.update_polls(spec.name, self.planner.update_polls(spec, now))
+        self.writer.update_polls(spec, self.planner.update_polls(spec, now))
         self._changed()
+
+    def forget(self) -> None:
+        """The line gone from the configuration, after :meth:`run` ended: nothing of it
+        stays in the snapshot."""
+        self.writer.forget_line()
 
     def _changed(self) -> None:
         self.flush()
@@ -194,7 +199,7 @@ class LineRunner:
             self.flush()
             with contextlib.suppress(Exception):
                 await self.wire.port.close()
-            self.snapshot.lines[self.name] = False
+            self.writer.apply([LineState(self.name, False)])
 
     def _refused(self, exc: LineRefused) -> None:
         log.error("line %s: %s", self.name, exc, extra={"line": self.name})

@@ -6,14 +6,21 @@ touching the bus. A value is only ever one the drive actually sent.
 
 from __future__ import annotations
 
+import itertools
+import os
 from dataclasses import dataclass, field
 
-from pkwbus.catalog.description import Value
+from pkwbus.catalog.description import ParameterDescription, Value
+from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.profibus.dp.slave_model import SlaveState
 from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
+    "Changes",
+    "Decoding",
+    "DriveCounts",
     "DriveState",
+    "LineTotals",
     "LiveSlave",
     "Maintained",
     "Reading",
@@ -53,11 +60,100 @@ ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index
 ValueKey = tuple[str, int, int]  # drive, PNU, index
 
 
+@dataclass(slots=True)
+class Decoding:
+    """How a drive's values are decoded now: each polled (parameter, index) as described
+    (``formats``), where each polled parameter's description came from when the drive
+    described it (``sources``, catalog.precedence.SOURCES), what the drive described of
+    its parameters by PNU (``described``), and the PNUs it is describing (``pending``: no
+    value of theirs lands, no API read or write of theirs goes out, until it has)."""
+
+    formats: dict[tuple[str, int], ParameterDescription] = field(default_factory=dict)
+    sources: dict[str, str] = field(default_factory=dict)
+    described: dict[int, DriveDescription] = field(default_factory=dict)
+    pending: set[int] = field(default_factory=set)
+
+
+@dataclass(slots=True)
+class DriveCounts:
+    """What the status page counts of a drive: the drive's fault answers, its telegram
+    errors, and when its latest polled value landed (wall clock; None: none yet)."""
+
+    faults: int = 0
+    errors: int = 0
+    landed: float | None = None
+
+
+@dataclass(slots=True)
+class LineTotals:
+    """A line's busy seconds on the wire and its telegrams, since the start."""
+
+    busy: float = 0.0
+    telegrams: int = 0
+
+
+_epochs = itertools.count()
+
+
+class Changes:
+    """Which drives changed, and in what order: each change of a drive's state takes the
+    next number, and :meth:`since` walks back from the newest only as far as a token, so
+    that an answer of the drives changed since a token costs what it returns.
+
+    A token is ``EPOCH.NUMBER``; a forgotten drive starts a new epoch, so that a client
+    holding an older token is given everything again (and sees the drive gone)."""
+
+    __slots__ = ("_at", "epoch", "number")
+
+    def __init__(self) -> None:
+        self.epoch = f"{os.getpid():x}{next(_epochs):x}"
+        self.number = 0
+        self._at: dict[str, int] = {}  # drive -> number of its latest change, oldest first
+
+    def touch(self, drive: str) -> None:
+        self.number += 1
+        at = self._at
+        at.pop(drive, None)
+        at[drive] = self.number
+
+    def forget(self, drive: str) -> None:
+        if self._at.pop(drive, None) is not None:
+            self.epoch = f"{os.getpid():x}{next(_epochs):x}"
+
+    def number_of(self, drive: str) -> int:
+        """The number of the drive's latest change (0: none, or not here)."""
+        return self._at.get(drive, 0)
+
+    def token(self) -> str:
+        return f"{self.epoch}.{self.number}"
+
+    def since(self, token: str) -> list[str] | None:
+        """The drives changed after ``token``, newest first; None when the token is not
+        one of this snapshot's epoch (everything is to be sent again)."""
+        epoch, _, number = token.partition(".")
+        if epoch != self.epoch or not number.isdigit() or int(number) > self.number:
+            return None
+        after = int(number)
+        changed = []
+        at = self._at
+        for drive in reversed(at):
+            if at[drive] <= after:
+                break
+            changed.append(drive)
+        return changed
+
+
 @dataclass
 class Snapshot:
-    """``readings``: the polled parameters (metrics, /api/v1/drives). ``latest``: the
+    """The read model: every view (the metrics, the API, the status page) reads it, and
+    each line's :class:`~pkwbus.master.snapshot_writer.SnapshotWriter` is its only
+    writer, fed by the line's events.
+
+    ``readings``: the polled parameters (metrics, /api/v1/drives). ``latest``: the
     latest value each drive confirmed of any parameter, polled, read or written; a
-    write counts once the drive's answer echoes the value it now holds."""
+    write counts once the drive's answer echoes the value it now holds. By drive:
+    ``decoding`` (how its values are decoded), ``counts`` (faults, telegram errors);
+    by line: ``totals``; ``changes``: which drives changed since a token."""
 
     readings: dict[ReadingKey, Reading] = field(default_factory=dict)
     drives: dict[str, DriveState] = field(default_factory=dict)
@@ -70,6 +166,10 @@ class Snapshot:
     slaves: dict[str, LiveSlave] = field(default_factory=dict)
     # The drives in maintenance: nothing goes out to them.
     maintenance: dict[str, Maintained] = field(default_factory=dict)
+    decoding: dict[str, Decoding] = field(default_factory=dict)
+    counts: dict[str, DriveCounts] = field(default_factory=dict)
+    totals: dict[str, LineTotals] = field(default_factory=dict)
+    changes: Changes = field(default_factory=Changes)
 
     def forget(self, drive: str) -> None:
         """Everything of ``drive`` (gone from the configuration)."""
@@ -79,11 +179,16 @@ class Snapshot:
         self.drives.pop(drive, None)
         self.slaves.pop(drive, None)
         self.maintenance.pop(drive, None)
+        self.decoding.pop(drive, None)
+        self.counts.pop(drive, None)
+        self.changes.forget(drive)
 
     def copy(self) -> Snapshot:
+        """The dicts copied (their entries shared): what a scrape reads between awaits."""
         return Snapshot(
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
             dict(self.stated), dict(self.slaves), dict(self.maintenance),
+            dict(self.decoding), dict(self.counts), dict(self.totals), self.changes,
         )  # fmt: skip
 
 

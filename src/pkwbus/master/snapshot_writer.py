@@ -15,12 +15,15 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription
-from pkwbus.catalog.precedence import Disagreement, disagreements
+from pkwbus.catalog.precedence import resolve
+from pkwbus.master import told
 from pkwbus.master.events import (
     DescriptionChecked,
     Event,
+    Exchanged,
     JobDone,
     LineState,
     MaintenanceChanged,
@@ -28,11 +31,12 @@ from pkwbus.master.events import (
     SlaveStateChanged,
     ValueLanded,
 )
-from pkwbus.master.planning.describing import ASK_AGAIN
+from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, ProbeJob
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
+    DescribeTarget,
     DriveSpec,
     Finished,
     HealthChanged,
@@ -42,7 +46,10 @@ from pkwbus.master.planning.plan import (
 )
 from pkwbus.master.planning.transaction import Tally
 from pkwbus.master.snapshot import (
+    Decoding,
+    DriveCounts,
     DriveState,
+    LineTotals,
     LiveSlave,
     Maintained,
     Reading,
@@ -51,7 +58,6 @@ from pkwbus.master.snapshot import (
 )
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
-from pkwbus.protocol.pkw.length import AUTO, shown
 
 __all__ = ["REFUSAL_RETELL", "SnapshotWriter", "job_result"]
 
@@ -92,27 +98,44 @@ class SnapshotWriter:
         self._clock = clock
         # A poll the drive refuses, by (drive, parameter, index): when it was last told.
         self._refused: dict[tuple[str, str, int], float] = {}
-        self._polls = {d.name: d.polls for d in drives}
+        self._polls: dict[str, tuple[PollSpec, ...]] = {}
         # What lands in the snapshot's readings: the configured polls.
-        self._keys = {(d.name, p.parameter, p.index) for d in drives for p in d.polls}
-        # Parameters whose description is awaited: no value of theirs lands before it.
-        self._waiting = {(d.name, t.pnu) for d in drives if d.form is not None for t in d.describe}
+        self._keys: set[ReadingKey] = set()
         self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
-        self._targets = {d.name: d.describe for d in drives}
+        self._targets: dict[str, tuple[DescribeTarget, ...]] = {}
+        self._totals = snapshot.totals.setdefault(line, LineTotals())
+        self._on: dict[type, Callable[[Any, float], None]] = {
+            Exchanged: self._exchanged,
+            Finished: self._finished,
+            StatusWord: self._status_word,
+            HealthChanged: self._health,
+            PkwLengthTold: self._pkw_length,
+            Described: self._described,
+            LineState: self._line_state,
+            MaintenanceChanged: self._maintenance,
+            SlaveStateChanged: self._slave_state,
+            SlaveDiagnosed: self._slave_diagnosed,
+        }
         snapshot.lines[line] = False
         for d in drives:
-            snapshot.drives[d.name] = DriveState()
+            self.add_drive(d)
 
     # ------------------------------------------------------------ a reload
 
     def add_drive(self, spec: DriveSpec) -> None:
-        """A drive added to the line: shown up until it fails, its values to come."""
-        self._polls[spec.name] = spec.polls
-        self._keys.update((spec.name, p.parameter, p.index) for p in spec.polls)
-        self._targets[spec.name] = spec.describe
-        if spec.form is not None:
-            self._waiting.update((spec.name, t.pnu) for t in spec.describe)
-        self.snapshot.drives[spec.name] = DriveState()
+        """A drive of the line (at the start, or added by a reload): shown up until it
+        fails, its values to come, decoded as its polls say until it describes them (no
+        value of a parameter it is asked to describe lands before)."""
+        name, snapshot = spec.name, self.snapshot
+        self._polls[name] = spec.polls
+        self._keys.update((name, p.parameter, p.index) for p in spec.polls)
+        self._targets[name] = spec.describe
+        pending = {t.pnu for t in spec.describe} if spec.form is not None else set()
+        formats = {(p.parameter, p.index): p.fmt for p in spec.polls}
+        snapshot.decoding[name] = Decoding(formats, pending=pending)
+        snapshot.counts[name] = DriveCounts()
+        snapshot.drives[name] = DriveState()
+        snapshot.changes.touch(name)
 
     def remove_drive(self, drive: str) -> None:
         """A drive gone from the line: everything the snapshot shows of it goes; whatever of
@@ -121,18 +144,35 @@ class SnapshotWriter:
         self._keys = {k for k in self._keys if k[0] != drive}
         self._targets.pop(drive, None)
         self._silent.discard(drive)
-        self._waiting = {w for w in self._waiting if w[0] != drive}
         self._refused = {k: v for k, v in self._refused.items() if k[0] != drive}
         self.snapshot.forget(drive)
 
-    def update_polls(self, drive: str, polls: Sequence[PollSpec]) -> None:
-        """The drive's polls now (as described); the values of those gone leave."""
+    def forget_line(self) -> None:
+        """The line gone from the configuration (its runner stopped): all of it leaves."""
+        for drive in list(self._polls):
+            self.remove_drive(drive)
+        self.snapshot.lines.pop(self.line, None)
+        self.snapshot.totals.pop(self.line, None)
+
+    def update_polls(self, spec: DriveSpec, polls: Sequence[PollSpec]) -> None:
+        """The drive's polls now (as described) and the parameters it is asked to
+        describe (``spec``); the values of the polls gone leave, a new parameter to describe
+        waits for its description."""
+        drive = spec.name
         self._polls[drive] = tuple(polls)
         now = {(p.parameter, p.index) for p in polls}
         self._keys = {k for k in self._keys if k[0] != drive} | {(drive, *k) for k in now}
         readings = self.snapshot.readings
         for key in [k for k in readings if k[0] == drive and k[1:] not in now]:
             del readings[key]
+        decoding = self.snapshot.decoding[drive]
+        known = {t.pnu for t in self._targets.get(drive, ())}
+        self._targets[drive] = spec.describe
+        asked = {t.pnu for t in spec.describe}
+        if spec.form is not None:
+            decoding.pending = (decoding.pending & asked) | (asked - known)
+        decoding.formats = {(p.parameter, p.index): p.fmt for p in polls}
+        self.snapshot.changes.touch(drive)
 
     def apply(self, events: Sequence[Event], at: float | None = None) -> list[Event]:
         """Apply ``events``; ``at`` is when they happened (``time.time()``; default: now).
@@ -141,94 +181,101 @@ class SnapshotWriter:
             at = time.time()
         out: list[Event] = []
         self._out = out
-        snapshot = self.snapshot
+        on = self._on
         for event in events:
-            if isinstance(event, Finished):
-                self._finished(event, at)
-            elif isinstance(event, StatusWord):
-                old = snapshot.drives.get(event.drive, DriveState())
-                snapshot.drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)
-            elif isinstance(event, HealthChanged):
-                self._health(event)
-            elif isinstance(event, PkwLengthTold):
-                self._pkw_length(event)
-            elif isinstance(event, Described):
-                self._described(event)
-            elif isinstance(event, LineState):
-                snapshot.lines[event.line] = event.up
-            elif isinstance(event, MaintenanceChanged):
-                self._maintenance(event, at)
-            elif isinstance(event, SlaveStateChanged):
-                old_slave = snapshot.slaves.get(event.drive, LiveSlave(self.line))
-                snapshot.slaves[event.drive] = replace(old_slave, state=event.state)
-            elif isinstance(event, SlaveDiagnosed):
-                old_slave = snapshot.slaves.get(event.drive, LiveSlave(self.line))
-                found = event.diagnosis
-                snapshot.slaves[event.drive] = replace(
-                    old_slave, ident=found.ident, owner=found.master, flags=found.flags,
-                    diagnosed=at,
-                )  # fmt: skip
+            handler = on.get(type(event))
+            if handler is not None:
+                handler(event, at)
         return out
 
-    def _described(self, event: Described) -> None:
+    def _exchanged(self, event: Exchanged, at: float) -> None:
+        if event.error is ErrorKind.PORT:
+            return  # nothing went on the wire
+        totals = self._totals
+        totals.telegrams += 1
+        totals.busy += event.busy
+        if event.error is not None and (counts := self.snapshot.counts.get(event.drive)):
+            counts.errors += 1
+            self.snapshot.changes.touch(event.drive)
+
+    def _status_word(self, event: StatusWord, at: float) -> None:
+        drives = self.snapshot.drives
+        old = drives.get(event.drive)
+        if old is None:
+            return  # a drive gone from the line
+        drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)
+        if old.status_word != event.word or old.main_actual != event.main_actual:
+            self.snapshot.changes.touch(event.drive)
+
+    def _line_state(self, event: LineState, at: float) -> None:
+        self.snapshot.lines[event.line] = event.up
+
+    def _slave_state(self, event: SlaveStateChanged, at: float) -> None:
+        slaves = self.snapshot.slaves
+        slaves[event.drive] = replace(
+            slaves.get(event.drive, LiveSlave(self.line)), state=event.state
+        )
+        self.snapshot.changes.touch(event.drive)
+
+    def _slave_diagnosed(self, event: SlaveDiagnosed, at: float) -> None:
+        slaves, found = self.snapshot.slaves, event.diagnosis
+        slaves[event.drive] = replace(
+            slaves.get(event.drive, LiveSlave(self.line)), ident=found.ident,
+            owner=found.master, flags=found.flags, diagnosed=at,
+        )  # fmt: skip
+        self.snapshot.changes.touch(event.drive)
+
+    def _decode_as(self, decoding: Decoding, event: Described) -> None:
+        """The event's polls decode as now described, from now on."""
+        for poll in event.polls:
+            decoding.formats[(poll.parameter, poll.index)] = poll.fmt
+            layers = poll.layers
+            source = resolve(layers, event.description).source if layers else "none"
+            decoding.sources[poll.parameter] = source
+
+    def _described(self, event: Described, at: float) -> None:
         """A parameter's description settled: its polls decode as it says from now on; one
         log line when the drive gave none, one per field it contradicts the catalog on."""
         drive, target, found = event.drive, event.target, event.description
         ctx = {"line": self.line, "drive": drive}
+        decoding = self.snapshot.decoding.get(drive)
+        if decoding is None:
+            return  # a drive gone from the line
+        self.snapshot.changes.touch(drive)
         if event.reloaded:  # new polls of a parameter told before: nothing to log again
+            self._decode_as(decoding, event)
             self._out.append(DescriptionChecked(event))
             return
         if event.forgotten:  # another drive now: no value of its parameters until described
             if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
                 log.warning("drive %s is %s: its parameters are described afresh", drive,
                             event.why, extra=ctx)  # fmt: skip
-            self._waiting.add((drive, target.pnu))
+            decoding.pending.add(target.pnu)
+            decoding.described.pop(target.pnu, None)
             self._out.append(DescriptionChecked(event))
             return
-        self._waiting.discard((drive, target.pnu))
+        decoding.pending.discard(target.pnu)
+        if found is not None:
+            decoding.described[target.pnu] = found
+        else:
+            decoding.described.pop(target.pnu, None)
+        self._decode_as(decoding, event)
         new = {(p.parameter, p.index): p for p in event.polls}
         self._polls[drive] = tuple(
             new.get((p.parameter, p.index), p) for p in self._polls.get(drive, ())
         )
-        contradicts: list[Disagreement] = []
-        if found is None:
-            if event.unanswered and drive not in self._silent:
-                self._silent.add(drive)  # one line for all its parameters still waiting
-                log.warning("drive %s: %s: the catalog's descriptions are used for the"
-                            " parameters still waiting, and it is asked again in %d minutes",
-                            drive, event.why, ASK_AGAIN // 60, extra=ctx)  # fmt: skip
-            elif event.unanswered:
-                pass
-            elif event.first and not event.withheld:
-                log.info("drive %s: %s: %s; the catalog's description is used", drive,
-                         target.parameter, event.why, extra=ctx)  # fmt: skip
-        else:
+        if found is None and event.unanswered and drive not in self._silent:
+            self._silent.add(drive)  # one line for all its parameters still waiting
+            told.unanswered(self.line, event)
+        elif found is not None:
             self._silent.discard(drive)
-        if event.withheld and event.first:
-            log.info(
-                "drive %s: %s is not polled: no vendor document types it, and the drive did"
-                " not describe its type (%s)", drive, target.parameter,
-                event.why or "no type in its description", extra=ctx,
-            )  # fmt: skip
-        if found is not None and found.read_only and target.writable and event.first:
-            log.warning(
-                "drive %s describes %s as read-only, but the configuration lists it as"
-                " writable: the drive will refuse its writes", drive, target.parameter,
-                extra=ctx,
-            )  # fmt: skip
-        if found is not None and target.catalog is not None:
-            contradicts = disagreements(found, target.catalog)
-            for d in contradicts:
-                log.warning(
-                    "drive %s: %s: the drive gives its %s as %s, the catalog as %s; the"
-                    " drive's is used", drive, target.parameter, d.field, d.drive, d.catalog,
-                    extra=ctx,
-                )  # fmt: skip
+        contradicts = told.described(self.line, event)
         self._out.append(DescriptionChecked(event, tuple(contradicts)))
 
     def _maintenance(self, event: MaintenanceChanged, at: float) -> None:
         """A drive in maintenance, or out of it: one log line each."""
         drive, ctx = event.drive, {"line": self.line, "drive": event.drive}
+        self.snapshot.changes.touch(drive)
         if event.on:
             self.snapshot.maintenance[drive] = Maintained(event.reason, at)
             log.warning("drive %s is in maintenance (%s): nothing goes out to it", drive,
@@ -236,34 +283,14 @@ class SnapshotWriter:
         elif self.snapshot.maintenance.pop(drive, None) is not None:
             log.warning("drive %s is out of maintenance: it is polled again", drive, extra=ctx)
 
-    def _pkw_length(self, event: PkwLengthTold) -> None:
-        """One log line per change of what a drive's PKW length is known to be."""
-        length, drive = event.length, event.drive
-        ctx = {"line": self.line, "drive": drive}
-        conflict = length.conflict
-        if not isinstance(conflict, str):
-            log.warning(
-                "drive %s answers with a PKW length of %s, but pkw_words is %s: no write goes"
-                " out to it until they agree (set pkw_words: %s, or auto)",
-                drive, shown(conflict), shown(length.configured),
-                "127" if conflict is None else conflict, extra=ctx,
-            )  # fmt: skip
-        elif length.configured != AUTO:
-            log.info("drive %s answers with its configured PKW length again", drive, extra=ctx)
-        elif length.known:
-            log.info("drive %s: PKW length %s, learned from its answers", drive,
-                     shown(length.words), extra=ctx)  # fmt: skip
+    def _pkw_length(self, event: PkwLengthTold, at: float) -> None:
+        told.pkw_length(self.line, event)
 
-    def _health(self, event: HealthChanged) -> None:
-        ctx = {"line": self.line, "drive": event.drive}
-        if event.reason and event.up:
-            log.info("drive %s %s", event.drive, event.reason, extra=ctx)
-        elif event.reason:
-            log.warning(
-                "drive %s is down: %s (probing at back-off)", event.drive, event.reason, extra=ctx
-            )
+    def _health(self, event: HealthChanged, at: float) -> None:
+        told.health(self.line, event)
         old = self.snapshot.drives.get(event.drive, DriveState())
         self.snapshot.drives[event.drive] = replace(old, up=event.up)
+        self.snapshot.changes.touch(event.drive)
 
     def _finished(self, event: Finished, at: float) -> None:
         work, drive = event.work, event.drive
@@ -273,6 +300,7 @@ class SnapshotWriter:
             elif isinstance(work, Job):
                 work.resolve(self._result(event, work))
             return
+        self._count(drive, event)
         if isinstance(work, ProbeJob):  # it answered or not: no value, nothing to remember
             result = JobResult(event.outcome, tally=event.tally)
             self._out.append(JobDone(drive, work.kind, result))
@@ -296,6 +324,16 @@ class SnapshotWriter:
             result = replace(result, previous=previous)  # it ran: a write's old value
         self._out.append(JobDone(drive, work.kind, result))
         work.resolve(result)
+
+    def _count(self, drive: str, event: Finished) -> None:
+        """A fault answer, or answers the request did not ask for, counted for the page."""
+        unexpected = event.tally.errors.get(ErrorKind.UNEXPECTED, 0) if event.tally else 0
+        faulted = isinstance(event.outcome, Rejected)
+        if unexpected or faulted:
+            counts = self.snapshot.counts[drive]
+            counts.errors += unexpected
+            counts.faults += faulted
+            self.snapshot.changes.touch(drive)
 
     def _tell_refusal(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
         """A poll the drive refuses is logged once with the fault text, then once a day
@@ -339,12 +377,13 @@ class SnapshotWriter:
             return None, previous
         reading = Reading(result.value, result.raw, at)
         self.snapshot.latest[key] = reading
+        self.snapshot.changes.touch(drive)
         return reading, previous
 
     def _show_confirmed(self, drive: str, job: Job, reading: Reading) -> None:
         """A polled parameter shows what a read or an acknowledged write confirmed,
         when the job decoded it as the poll does."""
-        if (drive, job.request.pnu) in self._waiting:
+        if job.request.pnu in self.snapshot.decoding[drive].pending:
             return  # decoded as the catalog says, before the drive described it
         for spec in self._polls.get(drive, ()):
             same = spec.request.pnu == job.request.pnu
@@ -352,5 +391,7 @@ class SnapshotWriter:
                 self._land((drive, spec.parameter, spec.index), reading)
 
     def _land(self, key: ReadingKey, reading: Reading) -> None:
-        self.snapshot.readings[key] = reading
+        snapshot = self.snapshot
+        snapshot.readings[key] = reading
+        snapshot.counts[key[0]].landed = reading.timestamp
         self._out.append(ValueLanded(key, reading))

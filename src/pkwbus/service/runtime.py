@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Iterable, Mapping
+from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Protocol
@@ -24,6 +24,7 @@ from pkwbus.catalog.description import (
     ParameterTable,
 )
 from pkwbus.catalog.precedence import Layers, resolve
+from pkwbus.master.events import Observer, Outputs
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import ReadingKey, Snapshot
@@ -37,7 +38,6 @@ __all__ = [
     "Alarms",
     "DriveEntry",
     "History",
-    "LineCounts",
     "LineTask",
     "Runtime",
     "Settings",
@@ -49,7 +49,9 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class DriveEntry:
-    """A configured drive as the service knows it: its parameters resolved at build time.
+    """A configured drive as the service knows it: its parameters resolved at build time,
+    never changed after (a reload makes a new entry). What the drive described since, and
+    how its values are decoded now, is the snapshot's (:class:`~pkwbus.master.snapshot.Decoding`).
 
     It holds no configuration model: what a parameter is, whether it may be
     written and its name on the drive come from ``parameters``.
@@ -60,23 +62,12 @@ class DriveEntry:
     target: DriveTarget
     polls: tuple[PollSpec, ...] = ()
     parameters: ParameterTable = field(default_factory=ParameterTable)
-    # The unit of each polled parameter, by its name on the drive (as now described).
-    units: dict[str, str] = field(default_factory=dict)
     # What the configuration sets explicitly and the catalog says, of each parameter the
     # configuration names, keyed as ParameterTable.configured.
     layers: Mapping[ParameterKey, Layers] = field(default_factory=lambda: MappingProxyType({}))
-    # What the drive described of its parameters, by PNU, as their descriptions settle.
-    described: dict[int, DriveDescription] = field(default_factory=dict)
-    # PNUs the drive is describing: no API read or write of theirs until it has.
-    pending: set[int] = field(default_factory=set)
-    # Where each polled parameter's description came from (catalog.precedence.SOURCES).
-    sources: dict[str, str] = field(default_factory=dict)
-    # Each polled (parameter, index) as it is decoded now.
-    formats: dict[tuple[str, int], ParameterDescription] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        for poll in self.polls:
-            self.formats.setdefault((poll.parameter, poll.index), poll.fmt)
+    # Where each polled parameter's description comes from before the drive described it
+    # (catalog.precedence.SOURCES): the configuration, the catalog or none.
+    sources: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
 
     @property
     def access(self) -> str:
@@ -87,18 +78,22 @@ class DriveEntry:
         """Whether the drive's ``writable`` list allows writing ``ref``."""
         return self.parameters.describe(ref).writable
 
-    def format_of(self, ref: ParameterRef, stated: ValueType | None = None) -> ParameterDescription:
+    def format_of(
+        self,
+        ref: ParameterRef,
+        described: Mapping[int, DriveDescription],
+        stated: ValueType | None = None,
+    ) -> ParameterDescription:
         """What is known of ``ref``: type, scaling, unit, limits (empty when nothing); the
-        configuration first, then what the drive described, then the catalog; where none
-        of them types it, the type the drive ``stated`` in its answers."""
-        described = self._described(ref)
-        if described.vtype is None and stated is not None:
-            return described.with_type(stated)
-        return described
+        configuration first, then what the drive ``described`` (by PNU), then the catalog;
+        where none of them types it, the type the drive ``stated`` in its answers."""
+        found = self._described(ref, described.get(ref.pnu))
+        if found.vtype is None and stated is not None:
+            return found.with_type(stated)
+        return found
 
-    def _described(self, ref: ParameterRef) -> ParameterDescription:
+    def _described(self, ref: ParameterRef, drive: DriveDescription | None) -> ParameterDescription:
         known = self.parameters.describe(ref)
-        drive = self.described.get(ref.pnu)
         if drive is None:
             return known
         keys: tuple[ParameterKey, ...] = ((ref.pnu, ref.index),)
@@ -114,26 +109,6 @@ class DriveEntry:
         notation the drive does not use."""
         return self.parameters.canonical(ref)
 
-    def unit_of(self, parameter: str) -> str:
-        return self.units.get(parameter, "")
-
-
-class LineCounts(Protocol):
-    """Plain counts of one line: busy seconds, telegrams, and faults and telegram errors
-    by drive."""
-
-    @property
-    def busy_total(self) -> float: ...
-
-    @property
-    def telegram_total(self) -> int: ...
-
-    @property
-    def fault_counts(self) -> Mapping[str, int]: ...
-
-    @property
-    def error_counts(self) -> Mapping[str, int]: ...
-
 
 class LineTask(Protocol):
     """One line's task: a :class:`~pkwbus.master.runner.LineRunner` of any bus."""
@@ -143,6 +118,7 @@ class LineTask(Protocol):
     def submit(self, job: Job) -> None: ...
     def maintenance(self, drive: str, on: bool, reason: str = "") -> None: ...
     def stop(self) -> None: ...
+    def forget(self) -> None: ...
     async def run(self) -> None: ...
 
 
@@ -194,6 +170,8 @@ class Runtime:
         job_timeout: float = 5.0,
         alarms: Alarms | None = None,
         trends: Trends | None = None,
+        outputs: Outputs | None = None,
+        base: Sequence[Observer] = (),
     ) -> None:
         self.runners = {s.name: s for s in runners}
         self.drives = {d.name: d for d in drives}
@@ -202,6 +180,10 @@ class Runtime:
         self.job_timeout = job_timeout
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
+        # What every line's stream goes to (given to each runner at its construction), and
+        # the part of it that is there from the start (the drives' watchers join it).
+        self.outputs = outputs if outputs is not None else Outputs()
+        self.base = tuple(base)
         self.history: History | None = None  # the drives' own log entries (None: not kept)
         self.settings: Settings | None = None  # the sweep of the drives' settings (None: none)
         self._tasks: dict[str, asyncio.Task[None]] = {}
@@ -211,8 +193,14 @@ class Runtime:
         self.cleanups: list[Callable[[], object]] = []
         # What closes a line's simulated drives, after the line stopped.
         self.closers: dict[str, Callable[[], object]] = {}
-        # What the status page shows of each line besides the snapshot (service.metrics).
-        self.counts: dict[str, LineCounts] = {}
+
+    def format_of(self, drive: str, ref: ParameterRef) -> ParameterDescription:
+        """What is known of the drive's ``ref`` now (:meth:`DriveEntry.format_of`), with
+        what the drive described and stated of it."""
+        snap = self.snapshot
+        decoding = snap.decoding.get(drive)
+        described = decoding.described if decoding is not None else {}
+        return self.drives[drive].format_of(ref, described, snap.stated.get((drive, ref.pnu)))
 
     async def start(self) -> None:
         for runner in self.runners.values():
@@ -228,12 +216,14 @@ class Runtime:
         self._tasks[runner.name] = task
 
     async def stop_line(self, name: str, grace: float = 3.0) -> None:
-        """Stop one line (a reload): its exchange in flight finishes, its port closes."""
+        """Stop one line for good (a reload): its exchange in flight finishes, its port
+        closes, and nothing of it stays in the snapshot."""
         runner = self.runners.pop(name)
         runner.stop()
         task = self._tasks.pop(name, None)
         if task is not None:
             await self._end([task], grace)
+        runner.forget()
         await self._close(name)
 
     async def _end(self, tasks: list[asyncio.Task[None]], grace: float) -> None:

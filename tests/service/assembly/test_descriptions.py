@@ -17,7 +17,7 @@ from pkwbus.catalog import load_catalog
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import Scaling, ValueType
-from pkwbus.service.http.views import drive_view
+from pkwbus.service.http.views.drives import drive_view
 from pkwbus.service.metrics.devices import SnapshotCollector
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
@@ -83,7 +83,7 @@ def info(runtime: Runtime, drive: str, parameter: str) -> dict[str, str]:
 async def described(runtime: Runtime) -> None:
     """Until every drive's descriptions have settled where the service shows them (the
     runner tells its events in batches, after the planner)."""
-    await until(lambda: not any(d.pending for d in runtime.drives.values()), timeout=20)
+    await until(lambda: not any(d.pending for d in runtime.snapshot.decoding.values()), timeout=20)
 
 
 async def test_fc_drive_scaling_wins_and_no_value_goes_out_with_the_catalogs_first(

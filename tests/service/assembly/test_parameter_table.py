@@ -66,26 +66,27 @@ async def test_the_table_holds_the_catalog_merged_with_the_overrides() -> None:
     runtime, _ = await built()
     fan = runtime.drives["fan"]
     catalog = load_catalog("danfoss-fc")
-    ramp = fan.format_of(ref("3-41"))
+    ramp = fan.format_of(ref("3-41"), {})
     spec = catalog.get(341)
     assert spec is not None
     assert (ramp.minimum, ramp.maximum, ramp.unit) == (1, 60, spec.unit)
     assert ramp.scaling == ParameterDescription.from_spec(spec).scaling
     assert fan.may_write(ref("3-41")) and fan.may_write(ref("3-41[4]"))
-    speed = fan.format_of(ref("16-13"))
+    speed = fan.format_of(ref("16-13"), {})
     assert (speed.unit, speed.scaling.factor, speed.writable) == ("rpm", 1, False)
     # Only index 1 of 3-42 is writable, with its own limit; the catalog's default is not enough.
-    assert fan.may_write(ref("3-42[1]")) and fan.format_of(ref("3-42[1]")).maximum == 30
-    assert not fan.may_write(ref("3-42[2]")) and fan.format_of(ref("3-42[2]")).maximum is None
+    assert fan.may_write(ref("3-42[1]")) and fan.format_of(ref("3-42[1]"), {}).maximum == 30
+    assert not fan.may_write(ref("3-42[2]")) and fan.format_of(ref("3-42[2]"), {}).maximum is None
     assert catalog.parameters[414].writable and not fan.may_write(ref("4-14"))
     assert fan.canonical(ref("341")).name == "3-41"
     pump = runtime.drives["pump"]
-    limits = pump.format_of(ref("1082"))
+    limits = pump.format_of(ref("1082"), {})
     assert (limits.minimum, limits.maximum, limits.writable) == (0, 50, True)
     assert pump.canonical(ref("1082")).name == "p1082"
     assert pump.canonical(ref("21")).name == "r0021"
-    assert pump.format_of(ref("2000")) == ParameterDescription()
-    assert pump.unit_of("r0021") == "Hz" and fan.unit_of("16-13") == "rpm"
+    assert pump.format_of(ref("2000"), {}) == ParameterDescription()
+    formats = {d: runtime.snapshot.decoding[d].formats for d in ("pump", "fan")}
+    assert formats["pump"][("r0021", 0)].unit == "Hz" and formats["fan"][("16-13", 0)].unit == "rpm"
 
 
 @pytest.mark.parametrize("drive", ["fan", "pump"])

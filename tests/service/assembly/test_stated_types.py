@@ -25,7 +25,7 @@ def entry() -> DriveEntry:
 def test_a_stated_type_only_where_nothing_types_the_parameter() -> None:
     drive = entry()
     untyped = ParameterRef(1082, None, "p")
-    assert drive.format_of(untyped).vtype is None
-    assert drive.format_of(untyped, ValueType.U32).vtype is ValueType.U32
+    assert drive.format_of(untyped, {}).vtype is None
+    assert drive.format_of(untyped, {}, ValueType.U32).vtype is ValueType.U32
     typed = ParameterRef(1121, None, "p")
-    assert drive.format_of(typed, ValueType.U32) == TYPED  # the configuration's stays
+    assert drive.format_of(typed, {}, ValueType.U32) == TYPED  # the configuration's stays

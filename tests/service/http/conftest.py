@@ -279,7 +279,7 @@ async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:
         lines = runtime.snapshot.lines
         up = lines and all(lines.values()) and len(lines) == len(runtime.runners)
         # The API's view (what a write is checked against), told after the planner's.
-        described = not any(d.pending for d in runtime.drives.values())
+        described = not any(d.pending for d in runtime.snapshot.decoding.values())
         if up and described and polled <= runtime.snapshot.readings.keys():
             return
         await asyncio.sleep(0.01)

@@ -31,6 +31,15 @@ async def test_the_drives_counters_are_polled_by_default_and_shown(tmp_path: Pat
         # r2114 as the drive counts its runtime: days x 86,400,000 + ms, never ahead of it.
         shown = pump["r2114", 1]["value"] * 86_400_000 + pump["r2114", 0]["value"]
         assert 0 < shown <= svc.sims["uss"].drives[1].model.runtime_ms
+        # Read out as durations (the catalog's units: 15-00 raw hours in s, r2114 [0] ms and
+        # [1] days), the values and units as the drives give them.
+        hours, ms, days = fan["15-00", 0], pump["r2114", 0], pump["r2114", 1]
+        assert (hours["unit"], hours["value"] % 3600) == ("s", 0)
+        assert hours["shown"] == f"{hours['value'] // 3600:,} h"
+        assert days["shown"] == f"{days['value']:,} d" and days["unit"] == ""
+        seconds = ms["value"] // 1000
+        clock = f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+        assert ms["shown"] == clock and ms["unit"] == ""
         metrics = (await svc.client.get("/metrics")).text
         assert 'parameter="r2114"' in metrics and 'parameter="15-03"' in metrics
 

@@ -97,11 +97,11 @@ async def test_a_parameter_not_described_yet_is_503_and_nothing_is_sent(tmp_path
     """While the drive describes a parameter (at start, or when it is another drive now), a
     write or read of it would be scaled as the catalog says: refused until it has."""
     async with service(tmp_path) as svc:
-        entry = svc.runtime.drives["fan1"]
-        entry.pending.add(341)  # as the service marks it while the drive describes 3-41
+        decoding = svc.runtime.snapshot.decoding["fan1"]
+        decoding.pending.add(341)  # as the service marks it while the drive describes 3-41
         written = await svc.put("fan1", "3-41", {"value": 10})
         read = await svc.client.get("/api/v1/drives/fan1/parameters/3-41")
-        entry.pending.discard(341)
+        decoding.pending.discard(341)
         after = await svc.put("fan1", "3-41", {"value": 10})
         assert svc.audit is not None
         outcomes = [row.outcome for row in svc.audit.latest(2)]

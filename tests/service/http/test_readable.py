@@ -4,17 +4,22 @@ significant digits; the API's value keeps full precision."""
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Callable
 from dataclasses import replace
+from fractions import Fraction
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
 import pytest
 
-from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.values import Scaling, ValueType
-from pkwbus.service.http.readable import readable
+from pkwbus.catalog import load_catalog
+from pkwbus.catalog.description import ParameterDescription, ParameterTable
+from pkwbus.catalog.loader import ParameterSpec
+from pkwbus.protocol.pkw import Width
+from pkwbus.protocol.values import ParameterRef, Scaling, ValueType, decode_value
+from pkwbus.service.http.views.readable import TIME_UNITS, duration, readable
 from tests.service.http.conftest import USS_DRIVES, service
 
 
@@ -65,6 +70,101 @@ async def test_the_drives_view_carries_names_and_readable_values(tmp_path: Path)
     (frequency,) = [v for v in drives["fan1"]["values"] if v["parameter"] == "16-13"]
     assert frequency["name"] == "Frequency"
     assert frequency["shown"] == f"{frequency['value']:.1f}"  # conversion index -1
+
+
+def table_of(catalog: str) -> ParameterTable:
+    """The catalog's entries as the service looks a poll up (its index with it)."""
+    specs = load_catalog(catalog).parameters
+    return ParameterTable(catalog={p: ParameterDescription.from_spec(s) for p, s in specs.items()})
+
+
+def time_counters(catalog: str) -> dict[int, ParameterSpec]:
+    """The counters the catalog gives a unit of time, as a whole or element by element."""
+    return {
+        pnu: spec
+        for pnu, spec in load_catalog(catalog).parameters.items()
+        if spec.counter and {spec.unit, *spec.element_units.values()} & TIME_UNITS.keys()
+    }
+
+
+def test_the_danfoss_hour_counters_read_in_hours() -> None:
+    """15-00 Operating hours and 15-01 Running Hours count hours that conversion index 74
+    turns into seconds (the catalog's unit): 13 hours are the value 46800 s, read "13 h"."""
+    counters = time_counters("danfoss-fc")
+    assert sorted(counters) == [1500, 1501]  # 15-02 kWh Counter counts energy, not time
+    table = table_of("danfoss-fc")
+    for pnu, spec in counters.items():
+        fmt = table.describe(ParameterRef(pnu, None, str(pnu)))
+        assert (fmt.unit, fmt.scaling) == (spec.unit, Scaling.conversion(74))
+        for hours, shown in ((13, "13 h"), (0, "0 h"), (1234, "1,234 h"), (61_000, "61,000 h")):
+            value = decode_value(hours, Width.DWORD, fmt.vtype, fmt.scaling)
+            assert value == hours * 3600  # the value (and /metrics) stays in seconds
+            assert readable(value, fmt) == shown
+    # A site that reads them in hours (docs/catalogs.md: scale 1, unit h) reads the same.
+    spec = counters[1500].overridden({"scale": 1, "unit": "h"})
+    assert readable(13, ParameterDescription.from_spec(spec)) == "13 h"
+
+
+def test_the_sinamics_system_runtime_reads_as_a_clock_and_in_days() -> None:
+    """r2114 System runtime: [0] ms within the day, [1] days (CU240D-2 OI 04/2018, 8.2),
+    each element read in its own unit; the value, and its unit (none), as they are."""
+    assert sorted(time_counters("siemens-g120")) == [2114]
+    table = table_of("siemens-g120")
+    units = load_catalog("siemens-g120").parameters[2114].element_units
+
+    def fmt(index: int | None) -> ParameterDescription:
+        return table.describe(ParameterRef(2114, index, "r2114"))
+
+    assert (fmt(0).element_unit, fmt(1).element_unit) == (units[0], units[1]) == ("ms", "d")
+    assert fmt(0).unit == fmt(1).unit == ""
+    assert readable(12_345_678, fmt(0)) == "3:25:45"  # 3 h 25 min 45.678 s
+    assert readable(86_399_999, fmt(0)) == "23:59:59"  # the last millisecond of a day
+    assert readable(0, fmt(0)) == "0:00:00"
+    assert readable(12, fmt(1)) == "12 d"
+    assert readable(1234, fmt(1)) == "1,234 d"
+    assert readable(12, fmt(None)) == "12"  # the parameter as a whole has no unit
+
+
+def test_only_counters_of_time_read_as_durations() -> None:
+    """A ramp time in s is no counter: to its resolution, as before; 15-02 kWh Counter
+    (energy, J) and 15-03 Power Up's neither."""
+    fc, siemens = table_of("danfoss-fc"), table_of("siemens-g120")
+    ramp = fc.describe(ParameterRef(341, None, "3-41"))
+    assert ramp.unit == "s" and readable(10.0, ramp) == "10.00"
+    assert readable(3600.0, ramp) == "3600.00"
+    ramp_up = siemens.describe(ParameterRef(1120, None, "p1120"))
+    assert ramp_up.unit == "s" and readable(7200.0, ramp_up) == "7200"
+    energy = fc.describe(ParameterRef(1502, None, "15-02"))
+    assert energy.counter and readable(18_000_000, energy) == "18000000"
+    power_ups = fc.describe(ParameterRef(1503, None, "15-03"))
+    assert power_ups.counter and readable(3600, power_ups) == "3600"
+
+
+@pytest.mark.parametrize(
+    ("value", "unit", "step", "shown"),
+    [
+        (46800, "s", Fraction(3600), "13 h"),  # counts hours: whole hours
+        (13, "h", Fraction(1), "13 h"),
+        (12.5, "h", Fraction(1), "12.5 h"),  # a float of hours: to a tenth
+        (2, "d", Fraction(1), "2 d"),
+        (42, "s", Fraction(1), "0:00:42"),  # finer than an hour: a clock within a day
+        (5400, "s", Fraction(1), "1:30:00"),
+        (90, "min", Fraction(1), "1:30:00"),
+        (1500, "ms", Fraction(1), "0:00:01"),  # the second begun is not counted yet
+        (90000, "s", Fraction(1), "25.0 h"),  # above a day: hours to a tenth
+        (-1, "s", Fraction(1), None),  # no duration: shown as any other number
+        (math.nan, "s", Fraction(1), None),
+    ],
+)
+def test_a_duration_in_its_own_units(
+    value: float, unit: str, step: Fraction, shown: str | None
+) -> None:
+    assert duration(value, unit, step) == shown
+
+
+def test_a_negative_counter_falls_back_to_its_number() -> None:
+    fmt = ParameterDescription(vtype=ValueType.I32, unit="s", counter=True)
+    assert readable(-5, fmt) == "-5"
 
 
 def test_options_apply_only_to_an_unscaled_whole_number() -> None:

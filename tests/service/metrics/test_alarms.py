@@ -9,7 +9,7 @@ import httpx
 import pytest
 from prometheus_client import CollectorRegistry, generate_latest
 
-from pkwbus.catalog.alarms import alarm_table
+from pkwbus.catalog.alarms import CodeTable, alarm_table
 from pkwbus.master.snapshot import Reading
 from pkwbus.service.http.api import create_app
 from pkwbus.service.metrics.alarms import AlarmBoard, Watched
@@ -131,6 +131,33 @@ def test_the_sinamics_fault_numbers_against_the_list_manual() -> None:
     ]
     assert [(a.code, a.text) for a in faults.decode(1)] == [("F00001", "")]  # unexplained
     assert faults.decode(0) == ()
+
+
+# Common SINAMICS faults, each with the text its table gives it (source S-CU240-LM).
+COMMON_FAULTS = (7011, 7801, 30001, 30002, 30004, 30005, 30011, 30021)
+
+
+@pytest.mark.parametrize("number", COMMON_FAULTS)
+def test_a_fault_number_is_shown_in_words_as_an_alarm_number_is(number: int) -> None:
+    """r0947 (faults, F) and r2122 (alarms, A) are told in words the same way: what the
+    status page shows of the polled value (``said``, its ``shown``), and the alarm."""
+    table = alarm_table("siemens-g120")
+    assert table is not None
+    faults, alarms = table.decoder(947), table.decoder(2122)
+    assert isinstance(faults, CodeTable) and isinstance(alarms, CodeTable)
+    assert faults.source == alarms.source  # the same List Manual, cited in its sources
+    text = faults.texts[number]
+    assert text.strip()
+    watched = {("pump", "r0947", 0): Watched("l1", faults),
+               ("pump", "r2122", 0): Watched("l1", alarms)}  # fmt: skip
+    board = AlarmBoard(watched, CollectorRegistry())
+    assert board.said(("pump", "r0947", 0), number) == f"F{number:05d} {text}"
+    assert board.said(("pump", "r2122", 0), 7409) == f"A07409 {alarms.texts[7409]}"
+    board.landed(("pump", "r0947", 0), Reading(number, number, 1000.0))
+    (active,) = board.active("pump")
+    assert (active.alarm.code, active.alarm.text, active.alarm.kind) == (
+        f"F{number:05d}", text, "alarm"
+    )  # fmt: skip
 
 
 async def test_a_sinamics_fault_number_is_shown_in_words_until_acknowledged() -> None:

@@ -8,11 +8,16 @@ from pathlib import Path
 import pytest
 from prometheus_client import CollectorRegistry
 
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.events import Exchanged, Overrun
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, JobKind, JobResult
 from pkwbus.master.planning.outcomes import Answered, Rejected, TimedOut, metric_label
+from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.planning.transaction import Tally
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import SnapshotWriter
+from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import DIALECTS, FC, Dialect, Reply
 from pkwbus.service.assembly.build import build_runtime
@@ -78,27 +83,38 @@ def test_only_the_counters_an_alert_needs_at_zero_exist_before_they_move() -> No
     )
 
 
-def test_the_plain_counts_agree_with_the_exported_counters() -> None:
-    """The status page's and benchmarks' plain counts: what /metrics says, without a collect()."""
+def test_the_read_models_counts_agree_with_the_exported_counters() -> None:
+    """The status page's plain counts, kept by the snapshot's writer from the same events:
+    what /metrics says, without a collect()."""
     registry = CollectorRegistry()
     metrics = ServiceMetrics(registry).for_line("l", {"d1": FC, "d2": FC})
+    snapshot = Snapshot()
+    specs = [
+        DriveSpec(d, carrier_for(DriveTarget.create("fc", n)))
+        for n, d in enumerate(("d1", "d2"), 1)
+    ]
+    writer = SnapshotWriter("l", specs, snapshot)
     for drive, error in [
         ("d1", ErrorKind.TIMEOUT),
         ("d2", ErrorKind.CHECKSUM),
         ("d1", ErrorKind.PORT),  # nothing went on the wire
         ("d2", ErrorKind.TIMEOUT),
+        ("d1", None),
     ]:
-        metrics.on_events([Exchanged(drive, error, 0.01)])
-    exported = sum(
-        sample.value
-        for family in registry.collect()
-        for sample in family.samples
-        if sample.name == "pkwbus_telegrams_total"
-    )
-    assert metrics.telegram_total == exported == 3
-    assert metrics.error_counts == {"d1": 1, "d2": 2}
+        events = [Exchanged(drive, error, 0.01)]
+        writer.apply(events)
+        metrics.on_events(events)
+    samples = [s for family in registry.collect() for s in family.samples]
+    exported = sum(s.value for s in samples if s.name == "pkwbus_telegrams_total")
+    assert snapshot.totals["l"].telegrams == exported == 4
+    errors = {
+        d: sum(s.value for s in samples
+               if s.name == "pkwbus_telegram_errors_total" and s.labels["drive"] == d)
+        for d in ("d1", "d2")
+    }  # fmt: skip
+    assert {d: snapshot.counts[d].errors for d in errors} == errors == {"d1": 1, "d2": 2}
     busy = registry.get_sample_value("pkwbus_line_busy_seconds_total", {"line": "l"})
-    assert metrics.busy_total == pytest.approx(busy) == pytest.approx(0.03)
+    assert snapshot.totals["l"].busy == pytest.approx(busy) == pytest.approx(0.04)
 
 
 def test_outcome_labels() -> None:

@@ -19,10 +19,12 @@ import prometheus_client
 
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
+from pkwbus.master.events import Observer, Outputs
 from pkwbus.master.planning.identity import DescriptionBook
-from pkwbus.master.planning.plan import DriveSpec
+from pkwbus.master.planning.plan import DriveSpec, HealthChanged
 from pkwbus.master.runner import LineRunner
-from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.master.wires.serial.port import TelegramPort
@@ -102,6 +104,7 @@ class Parts:
         self.book = kept.book if kept is not None else DescriptionBook()
         self.entries: dict[str, DriveEntry] = {}  # the runtime's drives, by name
         self.counts: dict[str, LineMetrics] = {}  # each line's counters
+        self._down: dict[str, SnapshotWriter] = {}  # the writers of lines that cannot start
         # Each PROFIBUS line's slaves' settings as built (their GSD files as read then).
         self.resolved: dict[str, tuple[object, ...]] = {}
         self.line_of: dict[str, str] = {}
@@ -111,11 +114,11 @@ class Parts:
         self.board = AlarmBoard({}, registry)
         self.trends = Trends()
         self.descriptions = DescriptionSink(self.entries, self.collector, kept)
-
-    def landed(self, key: ReadingKey, reading: Reading) -> None:  # each value, to each observer
-        self.collector.landed(key, reading)
-        self.board.landed(key, reading)
-        self.trends.landed(key, reading)
+        # What every line's stream goes to besides its own counters: one list, given to
+        # each runner at its construction; the drives' watchers join it by one swap.
+        self.base: tuple[Observer, ...] = (self.collector, self.board, self.trends,
+                                           self.descriptions)  # fmt: skip
+        self.outputs = Outputs(self.base)
 
     def plan(self, line: cfg.Line) -> LinePlan:
         entries: list[DriveEntry] = []
@@ -140,7 +143,6 @@ class Parts:
         ``line`` when None), and of the line itself then."""
         gone = [n for n, at in self.line_of.items() if at == line and drive in (None, n)]
         for name in gone:
-            self.snapshot.forget(name)
             self.entries.pop(name, None)
             self.line_of.pop(name, None)
             self.collector.forget_drive(name)
@@ -148,16 +150,19 @@ class Parts:
             self.trends.forget(name)
         if drive is None:
             forget_series(self.registry, line=line)
-            self.snapshot.lines.pop(line, None)
             self.resolved.pop(line, None)
+            down = self._down.pop(line, None)
+            if down is not None:
+                down.forget_line()
         else:
             forget_series(self.registry, line=line, drive=drive)
 
-    def down(self, line: cfg.Line) -> None:
-        """A line shown (its drives) that could not start: down, as its alerts must see."""
-        self.snapshot.lines[line.name] = False
-        for drive in line.drives:
-            self.snapshot.drives[drive.name] = DriveState(up=False)
+    def down(self, plan: LinePlan) -> None:
+        """A line shown (its drives) that could not start: down, as its alerts must see; its
+        writer tells the read model so until the line is forgotten."""
+        name = plan.line.name
+        writer = self._down[name] = SnapshotWriter(name, plan.specs, self.snapshot)
+        writer.apply([HealthChanged(s.name, False) for s in plan.specs])
 
     async def build(self, plan: LinePlan) -> BuiltLine:
         """The runner of a planned line, its simulated drives started where it has them."""
@@ -170,19 +175,17 @@ class Parts:
                 port, close = await start_sim(line, line.sim)
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
-        counts = self.metrics.for_line(
-            line.name, dialects, self.landed, uss=uss, dp=dp, descriptions=self.descriptions
-        )
+        counts = self.metrics.for_line(line.name, dialects, uss=uss, dp=dp)
         self.counts[line.name] = counts
         try:
             if isinstance(line, cfg.ProfibusLine):
                 self.resolved[line.name] = tuple(d.dp.settings()[0] for d in line.drives)
-                runner = _dp_runner(line, port, specs, self.snapshot, counts)
+                runner = _dp_runner(line, port, specs, self.snapshot, [counts, self.outputs])
             else:
                 wire = ExchangeWire(port_for(line, port))
                 runner = LineRunner(
                     line.name, wire, specs, retries=line.retries, snapshot=self.snapshot,
-                    observers=[counts],
+                    observers=[counts, self.outputs],
                 )  # fmt: skip
         except BaseException:
             if close is not None:
@@ -213,11 +216,10 @@ async def assemble(
     built = [await parts.build(plan) for plan in plans]
     runtime = Runtime(
         [b.runner for b in built], [], parts.snapshot, parts.registry, alarms=parts.board,
-        trends=parts.trends,
+        trends=parts.trends, outputs=parts.outputs, base=parts.base,
     )  # fmt: skip
     runtime.drives = parts.entries
     for b in built:
-        runtime.counts[b.runner.name] = b.counts
         if b.close is not None:
             runtime.closers[b.runner.name] = b.close
     return runtime, parts
@@ -248,7 +250,7 @@ def _dp_runner(
     port: str,
     specs: list[DriveSpec],
     snapshot: Snapshot,
-    events: LineMetrics,
+    outputs: list[Observer],
 ) -> LineRunner:
     """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
     settings = PortSettings(
@@ -284,6 +286,6 @@ def _dp_runner(
     deadline = max(2.0, 20 * dp.slot_time * len(specs))
     wire = CycleWire(dp, slaves, name=line.name)
     return LineRunner(
-        line.name, wire, specs, snapshot=snapshot, observers=[events], poll_deadline=deadline,
+        line.name, wire, specs, snapshot=snapshot, observers=outputs, poll_deadline=deadline,
         retries=line.retries,
     )  # fmt: skip

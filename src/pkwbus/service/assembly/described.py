@@ -1,13 +1,15 @@
-"""Where a parameter's settled description goes in the service: the drive's table (what the
-API decodes and checks writes by) and ``pkwbus_parameter_info`` / ``pkwbus_catalog_mismatch``.
+"""Where a parameter's settled description goes in the service besides the read model (whose
+writer keeps how each drive's values decode): ``pkwbus_parameter_info`` /
+``pkwbus_catalog_mismatch``, and the description book kept between runs.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
 from pkwbus.catalog.precedence import Disagreement, resolve
+from pkwbus.master.events import DescriptionChecked, Event
 from pkwbus.master.planning.plan import Described
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.metrics.devices import Mismatch, ParameterInfo, SnapshotCollector
@@ -17,7 +19,7 @@ __all__ = ["DescriptionSink"]
 
 
 class DescriptionSink:
-    """Takes each settled description to the drive's entry and to the metrics."""
+    """Takes each settled description to the metrics and the book."""
 
     def __init__(
         self,
@@ -29,21 +31,19 @@ class DescriptionSink:
         self._collector = collector
         self._kept = kept
 
+    def on_events(self, events: Sequence[Event]) -> None:
+        """Each description checked (an output of the lines' streams)."""
+        for event in events:
+            if type(event) is DescriptionChecked:
+                entry = self._entries.get(event.event.drive)
+                if entry is not None:
+                    self(entry.line, event.event, list(event.found))
+
     def __call__(self, line: str, event: Described, found: list[Disagreement]) -> None:
         if self._kept is not None and event.identity is not None and not event.from_book:
             self._kept.save()  # the drive described something its identity did not have
-        entry = self._entries.get(event.drive)
-        if entry is None:
-            return
-        if event.forgotten:  # another drive now: nothing goes to it until it is described
-            entry.pending.add(event.target.pnu)
-            entry.described.pop(event.target.pnu, None)
-            return
-        entry.pending.discard(event.target.pnu)
-        if event.description is not None:
-            entry.described[event.target.pnu] = event.description
-        else:
-            entry.described.pop(event.target.pnu, None)
+        if event.drive not in self._entries or event.forgotten:
+            return  # gone; or another drive now, described afresh
         mismatches = [
             Mismatch(line, event.drive, event.target.parameter, d.field, d.drive, d.catalog)
             for d in found
@@ -52,9 +52,6 @@ class DescriptionSink:
         for poll in event.polls:
             fmt = poll.fmt
             source = resolve(poll.layers, event.description).source if poll.layers else "none"
-            entry.units[poll.parameter] = fmt.unit
-            entry.sources[poll.parameter] = source
-            entry.formats[(poll.parameter, poll.index)] = fmt
             info = ParameterInfo(
                 line, event.drive, poll.parameter, poll.index, poll.request.pnu, fmt.name,
                 fmt.unit, fmt.vtype.value if fmt.vtype else "raw", source,

@@ -4,6 +4,7 @@ reached, what is polled and described of it (:func:`plan_drive`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 from pkwbus.catalog.description import ParameterDescription, ParameterTable
 from pkwbus.master.carriers import carrier_for
@@ -66,7 +67,6 @@ def plan_drive(
     table = parameter_table(drive)
     form = description_form(line, drive)
     polls: list[PollSpec] = []
-    units: dict[str, str] = {}
     sources: dict[str, str] = {}
 
     def add(ref: ParameterRef, every: float, *, layered: bool, only_described: bool = False
@@ -81,7 +81,6 @@ def plan_drive(
             PollSpec(ref.name, ref.index or 0, _read(target, ref, fmt), every, fmt,
                      found if layered else None, described_only=only_described)
         )  # fmt: skip
-        units[ref.name] = fmt.unit
         info = _info(line, drive, ref, fmt, found.catalog)
         infos.append(info)
         sources[ref.name] = info.source
@@ -105,10 +104,8 @@ def plan_drive(
             target,
             tuple(polls),
             parameters=table,
-            units=units,
             layers=explicit_layers(drive, table),
-            pending={t.pnu for t in describe},
-            sources=sources,
+            sources=MappingProxyType(sources),
         )
     )
     return DriveSpec(drive.name, carrier_for(target), tuple(polls), describe, form, book)

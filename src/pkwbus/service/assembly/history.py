@@ -9,7 +9,6 @@ from collections.abc import Callable
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
 from pkwbus.catalog.logs import logs_of_catalog
-from pkwbus.master.runner import LineRunner
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
 from pkwbus.protocol.values import ParameterRef
@@ -65,9 +64,6 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
         return None
     runners = dict(runtime.runners)
     watcher = LogWatcher(runners, stream, watched, retention=config.history_retention)
-    for runner in runners.values():
-        if isinstance(runner, LineRunner):
-            runner.observers.append(watcher)  # drives and lines that come back
     runtime.history = stream.store
     drives, path = len({w.drive for w in watched}), stream.store.path
     log.info("watching %d log(s) of %d drive(s), kept in %s", len(watched), drives, path)
@@ -99,16 +95,15 @@ def watch_settings(
                 named.append(ParameterRef(canonical.pnu, ref.index, canonical.name))
             offset = turn / len(line.drives)
             form = description_form(line, drive)
-            swept.append(Swept(line.name, entry, every, named, drive.catalog, form, offset))
+            swept.append(Swept(line.name, entry, every, named, drive.catalog, form, offset,
+                               snapshot=runtime.snapshot))  # fmt: skip
             turn += 1
     if not swept:
         return None
     kept = store() if store is not None else SettingsStore(stream.store.path)
     runners = dict(runtime.runners)
     watcher = SettingsWatcher(runners, kept, stream, swept, runtime.registry)
-    for name, runner in runners.items():
-        if isinstance(runner, LineRunner):
-            runner.observers.append(watcher)  # drives identified as other drives
+    for name in runners:
         watcher.line_state(name, runtime.snapshot.lines.get(name, False))  # a reload's
     runtime.settings = watcher
     log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), kept.path)
@@ -138,6 +133,10 @@ class Memory:
         """Watch the drives of ``config`` (started with the runtime, or by a reload)."""
         self.logs = watch_logs(config, self.runtime, self.stream)
         self.settings = watch_settings(config, self.runtime, self.stream, self._store)
+        # Drives and lines that come back, drives identified as other drives: the watchers
+        # follow every line's stream, as outputs.
+        watchers = [w for w in (self.logs, self.settings) if w is not None]
+        self.runtime.outputs.swap([*self.runtime.base, *watchers])
 
     async def start(self) -> None:
         for watcher in (self.logs, self.settings):
@@ -147,11 +146,7 @@ class Memory:
     async def stop(self, *, final: bool = True) -> None:
         """Stop watching: the watchers leave the lines, their gauges leave the registry;
         ``final``: the service stops (not a reload)."""
-        for runner in self.runtime.runners.values():
-            if isinstance(runner, LineRunner):
-                runner.observers[:] = [
-                    o for o in runner.observers if o is not self.logs and o is not self.settings
-                ]
+        self.runtime.outputs.swap(self.runtime.base)
         if self.logs is not None:
             await self.logs.stop()
         if self.settings is not None:

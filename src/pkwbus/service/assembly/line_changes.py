@@ -4,7 +4,6 @@ removed, added, replaced, and changed in place (:mod:`.reload`)."""
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import replace
 from typing import Any
 
 from pydantic import BaseModel
@@ -131,20 +130,9 @@ class DriveChanges:
             if old.polls != entry.polls
             else ("changed in place" if described != spec.describe else None)
         )
-        # What the drive described stays; a poll kept keeps its decoding as described; a
-        # parameter new to its descriptions waits for its own.
-        entry.described.update(old.described)
-        new = {t.pnu for t in spec.describe} - {t.pnu for t in described}
-        entry.pending.intersection_update(old.pending | new)
-        was = {(p.parameter, p.index): p for p in old.polls}
-        for poll in entry.polls:
-            key = (poll.parameter, poll.index)
-            before = was.get(key)
-            if before is not None and replace(before, every=poll.every) == poll:
-                entry.formats[key] = old.formats.get(key, poll.fmt)
-                entry.units[poll.parameter] = old.units.get(poll.parameter, poll.fmt.unit)
-                if poll.parameter in old.sources:
-                    entry.sources[poll.parameter] = old.sources[poll.parameter]
+        # What the drive described stays in the read model; its writer takes the polls as
+        # the planner decodes them now, and a parameter new to its descriptions waits for its
+        # own (SnapshotWriter.update_polls).
         keys = {(name, p.parameter, p.index) for p in entry.polls}
         self.parts.entries[name] = entry
         self.parts.collector.set_parameters(name, plan.infos_of(name))

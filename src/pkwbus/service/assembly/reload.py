@@ -270,7 +270,6 @@ class Reloader:
     async def _stop_line(self, name: str) -> None:
         if name in self.runtime.runners:
             await self.runtime.stop_line(name)
-        self.runtime.counts.pop(name, None)
         self.parts.counts.pop(name, None)
         self.parts.forget(name)
         self._down.discard(name)
@@ -289,7 +288,7 @@ class Reloader:
             built = await self.parts.build(plan)
         except Exception as exc:  # a sim that cannot start, a GSD file gone since the check
             self._down.add(line.name)
-            self.parts.down(line)  # shown down (its alerts fire), started by the next reload
+            self.parts.down(plan)  # shown down (its alerts fire), started by the next reload
             problem = f"line {line.name} {how} but cannot start: {exc}"
             log.error("reload: %s", problem)
             failed.append(problem)
@@ -297,7 +296,6 @@ class Reloader:
         for drive in line.drives:  # a maintenance the API began survives a reload
             if drive.name in held:
                 built.runner.maintenance(drive.name, True, held[drive.name])
-        self.runtime.counts[line.name] = built.counts
         if built.close is not None:
             self.runtime.closers[line.name] = built.close
         self.runtime.start_line(built.runner)

@@ -14,6 +14,7 @@ from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.errors import PkwbusError
 from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Answered, Rejected
+from pkwbus.master.snapshot import Snapshot
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import (
     CHARACTERISTICS,
@@ -61,10 +62,17 @@ class Swept:
     # Writes pkwbus made whose answer was lost (or not yet stored), by setting: the raw
     # number a sweep takes as pkwbus's.
     expected: dict[tuple[int, int], int] = field(default_factory=dict)
+    # The read model whose decoding tells what the drive described (None: nothing).
+    snapshot: Snapshot | None = None
 
     @property
     def drive(self) -> str:
         return self.entry.name
+
+    def format_of(self, ref: ParameterRef) -> ParameterDescription:
+        """What is known of ``ref`` now, with what the drive described of it."""
+        decoding = self.snapshot.decoding.get(self.drive) if self.snapshot else None
+        return self.entry.format_of(ref, decoding.described if decoding is not None else {})
 
 
 class Unanswered(PkwbusError):
@@ -83,7 +91,7 @@ class SettingReads:
         its factory setting); None when it is not swept (a text, or the drive refuses it).
         :class:`Unanswered` when a read got no answer."""
         key = (ref.pnu, ref.index or 0)
-        fmt = s.entry.format_of(ref)
+        fmt = s.format_of(ref)
         if fmt.is_text:
             s.refused[key] = "a text: not swept"
             return None

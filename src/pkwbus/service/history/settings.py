@@ -247,7 +247,7 @@ class SettingsWatcher:
         parameters = []
         for ref in s.refs:
             row = s.rows.get((ref.pnu, ref.index or 0))
-            fmt = s.entry.format_of(ref)
+            fmt = s.format_of(ref)
             parameters.append({
                 "parameter": ref.name,
                 "index": ref.index or 0,
@@ -318,7 +318,7 @@ class SettingsWatcher:
         """Read one setting, compare it with its baseline."""
         found = await self.reads.read(s, ref)
         if found is not None:
-            await self._compare(s, ref, s.entry.format_of(ref), *found)
+            await self._compare(s, ref, s.format_of(ref), *found)
 
     async def _compare(
         self, s: Swept, ref: ParameterRef, fmt: ParameterDescription, raw: int, value: Value

@@ -14,7 +14,7 @@ import asyncio
 import hmac
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
@@ -31,6 +31,7 @@ from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.maintenance import Maintenance
 from pkwbus.service.http.models import (
     ERRORS,
+    DriveOverview,
     DriveView,
     EventsBody,
     Health,
@@ -54,12 +55,12 @@ from pkwbus.service.http.parameters import (
 from pkwbus.service.http.reload import Reloading, Reloads
 from pkwbus.service.http.settings_routes import add_settings_routes
 from pkwbus.service.http.views import (
-    drive_view,
     event_views,
     line_views,
     parse_since,
     trend_views,
 )
+from pkwbus.service.http.views.drives import TOKEN_HEADER, DriveViews, Selection, drive_view
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
@@ -344,9 +345,23 @@ def create_app(
     async def status_page() -> FileResponse:
         return FileResponse(STATIC / "status.html", media_type="text/html")
 
-    @app.get("/api/v1/drives", response_model=list[DriveView])
-    async def drives() -> list[DriveView]:
-        return [drive_view(runtime, name) for name in runtime.drives]
+    views = DriveViews(runtime)
+
+    @app.get("/api/v1/drives", response_model=list[DriveView] | list[DriveOverview],
+             responses=ERRORS)  # fmt: skip
+    async def drives(
+        line: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
+        drive: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
+        changed_since: str | None = Query(default=None, max_length=64),
+        view: Literal["full", "overview"] = "full",
+    ) -> Response:
+        """The drives with their state and latest values (``view=overview``: one short row
+        each); of one ``line`` or one ``drive``; ``changed_since``: only the drives changed
+        since the token an earlier answer gave in its X-Changes-Token header (all of them
+        when the token is not this run's). Costs what it returns."""
+        names, token = views.select(Selection(line, drive, changed_since))
+        body = await (views.overview(names) if view == "overview" else views.full(names))
+        return Response(body, media_type="application/json", headers={TOKEN_HEADER: token})
 
     @app.get("/api/v1/trends", response_model=dict[str, dict[str, list[float | None]]])
     async def trends() -> dict[str, dict[str, list[float | None]]]:

@@ -12,6 +12,7 @@ from pkwbus.protocol import pkw
 __all__ = [
     "ERRORS",
     "AlarmView",
+    "DriveOverview",
     "DriveView",
     "ErrorBody",
     "EventView",
@@ -40,8 +41,14 @@ class ParameterReading(BaseModel):
     raw: int | None
     unit: str
     timestamp: float
+    # How often it is polled, seconds: a value is stale only when it is older than that
+    # (None: not polled on a schedule).
+    interval: float | None = None
     name: str = ""  # as the configuration, the drive or the catalog names it; else empty
     shown: str = ""  # the value to its resolution, for people (the status page)
+    # The unit to show after ``shown``: ``unit``, but empty where ``shown`` names its own (a
+    # duration such as "13 h").
+    shown_unit: str = ""
     option: str = ""  # an enumeration's text for the value, from the catalog's source
     # Where its type and scaling came from: config, drive (its own description), catalog, none.
     source: str = "catalog"
@@ -130,6 +137,21 @@ class DriveView(BaseModel):
     dp: SlaveView | None = None  # a PROFIBUS DP slave: its place in the live list
     maintenance: MaintenanceView | None = None  # in maintenance: nothing goes out to it
     settings: bool = False  # its settings are swept: GET .../settings answers them
+
+
+class DriveOverview(BaseModel):
+    """One drive in a row (``GET /api/v1/drives?view=overview``)."""
+
+    name: str
+    line: str
+    address: int
+    state: Literal["up", "down", "maintenance"]
+    faults: int = 0  # fault answers since the service started
+    telegram_errors: int = 0  # exchanges without a usable answer since the service started
+    alarms: list[str] = []  # active alarms in words (code and text), oldest first
+    warnings: list[str] = []  # active warnings in words
+    updated: float | None = None  # wall clock of its latest polled value (None: none yet)
+    age: float | None = None  # seconds since then, at the answer
 
 
 class LineView(BaseModel):

@@ -79,12 +79,13 @@ def described_format(
     """What ``ref`` is on the drive; 503 while the drive has not described it yet (a value
     written or read now would be scaled as the catalog says, maybe not as the drive does).
     Where nothing else types it, the type the drive named in its own answers."""
-    if ref.pnu in entry.pending:
+    decoding = runtime.snapshot.decoding.get(entry.name)
+    if decoding is not None and ref.pnu in decoding.pending:
         raise ApiError(
             503, "not_described",
             f"{entry.name} has not described {ref.name} yet: try again in a few seconds",
         )  # fmt: skip
-    return entry.format_of(ref, runtime.snapshot.stated.get((entry.name, ref.pnu)))
+    return runtime.format_of(entry.name, ref)
 
 
 def clip(name: str, limit: int) -> str:

@@ -240,9 +240,9 @@ class DriveSettings:
             return Present(None, fmt, refused=result.outcome.text)
         if not isinstance(result.outcome, Answered):
             return Present(None, fmt)
-        read_only = fmt.prefix == "r" or bool(
-            (d := entry.described.get(ref.pnu)) is not None and d.read_only
-        )
+        decoding = self.runtime.snapshot.decoding.get(entry.name)
+        described = decoding.described.get(ref.pnu) if decoding is not None else None
+        read_only = fmt.prefix == "r" or bool(described is not None and described.read_only)
         characteristics = await self._characteristics(entry, ref.pnu)
         return Present(result.value, fmt, None, characteristics, read_only)
 

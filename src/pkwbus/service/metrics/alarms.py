@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 from prometheus_client import CollectorRegistry, Gauge
 
 from pkwbus.catalog.alarms import ActiveAlarm, Alarm, CodeTable, WordTable
+from pkwbus.master.events import Event, ValueLanded
 from pkwbus.master.snapshot import Reading, ReadingKey
 
 __all__ = ["ALARM_LABELS", "AlarmBoard", "Watched"]
@@ -42,7 +43,8 @@ class AlarmBoard:
 
     def __init__(self, watched: Mapping[ReadingKey, Watched], registry: CollectorRegistry) -> None:
         self.watched = dict(watched)
-        self._by_source: dict[ReadingKey, dict[str, ActiveAlarm]] = {}
+        # By drive, then by the parameter that shows them: a drive's alarms cost its own.
+        self._by_source: dict[str, dict[ReadingKey, dict[str, ActiveAlarm]]] = {}
         self.gauge = Gauge(
             "pkwbus_drive_alarm",
             "1 while the drive shows this alarm or warning (code and text from the vendor's"
@@ -59,9 +61,10 @@ class AlarmBoard:
         if decoder.kind == "status" or (isinstance(decoder, CodeTable) and not decoder.active):
             return  # a status word or a log: never an active alarm
         now = decoder.decode(int(reading.value))
-        old = self._by_source.get(key, {})
-        new: dict[str, ActiveAlarm] = {}
         drive = key[0]
+        sources = self._by_source.setdefault(drive, {})
+        old = sources.get(key, {})
+        new: dict[str, ActiveAlarm] = {}
         for alarm in now:
             kept = old.get(alarm.code)
             new[alarm.code] = kept if kept is not None else ActiveAlarm(alarm, reading.timestamp)
@@ -70,7 +73,13 @@ class AlarmBoard:
         for code, gone in old.items():
             if code not in new:
                 self._went(watched.line, drive, gone.alarm)
-        self._by_source[key] = new
+        sources[key] = new
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        """Each value that landed (an output of the lines' streams)."""
+        for event in events:
+            if type(event) is ValueLanded:
+                self.landed(event.key, event.reading)
 
     def watch(self, watched: Mapping[ReadingKey, Watched]) -> None:
         """Watch these polled parameters too (a drive added by a reload)."""
@@ -81,9 +90,11 @@ class AlarmBoard:
         what they showed leaves with them."""
         for key in [k for k in self.watched if k[0] == drive and (keep is None or k not in keep)]:
             watched = self.watched.pop(key)
-            for gone in self._by_source.pop(key, {}).values():
+            for gone in self._by_source.get(drive, {}).pop(key, {}).values():
                 with contextlib.suppress(KeyError):
                     self.gauge.remove(*self._labels(watched.line, drive, gone.alarm))
+        if keep is None:
+            self._by_source.pop(drive, None)
 
     def said(self, key: ReadingKey, value: object) -> str:
         """A polled alarm parameter's value in words (empty for any other parameter): the
@@ -96,8 +107,7 @@ class AlarmBoard:
 
     def active(self, drive: str) -> list[ActiveAlarm]:
         """The drive's active alarms and warnings, alarms first, oldest first."""
-        found = [a for key, alarms in self._by_source.items() if key[0] == drive
-                 for a in alarms.values()]  # fmt: skip
+        found = [a for alarms in self._by_source.get(drive, {}).values() for a in alarms.values()]
         return sorted(found, key=lambda a: (a.alarm.kind != "alarm", a.since, a.alarm.code))
 
     def _labels(self, line: str, drive: str, alarm: Alarm) -> tuple[str, ...]:

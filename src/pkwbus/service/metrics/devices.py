@@ -14,13 +14,14 @@ changed (see :mod:`pkwbus.service.metrics.exposition`).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from itertools import islice
 
 from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
+from pkwbus.master.events import Event, ValueLanded
 from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
 from pkwbus.service.metrics.exposition import CHUNK, format_value, head, header
@@ -321,6 +322,12 @@ class SnapshotCollector(Collector):
     def landed(self, key: ReadingKey, reading: Reading) -> None:
         """A new reading: its lines are made now, when its poll lands, not at the scrape."""
         self._reading(key, reading)
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        """Each value that landed (an output of the lines' streams)."""
+        for event in events:
+            if type(event) is ValueLanded:
+                self.landed(event.key, event.reading)
 
     def _reading(self, key: ReadingKey, reading: Reading) -> _Rendered:
         rendered = self._readings.get(key)

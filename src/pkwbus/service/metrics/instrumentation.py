@@ -13,7 +13,6 @@ label values exist at 0 from the start is said at :class:`LineMetrics`.
 
 from __future__ import annotations
 
-import collections
 import platform
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -21,9 +20,7 @@ from typing import Any
 from prometheus_client import CollectorRegistry, Gauge, Histogram
 
 from pkwbus import __version__
-from pkwbus.catalog.precedence import Disagreement
 from pkwbus.master.events import (
-    DescriptionChecked,
     Event,
     Exchanged,
     JobDone,
@@ -32,13 +29,10 @@ from pkwbus.master.events import (
     SlaveDiagnosed,
     SlaveRestarted,
     SlaveStateChanged,
-    ValueLanded,
 )
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import JobOutcome, Rejected, metric_label
-from pkwbus.master.planning.plan import Described
-from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.profibus.dp.slave import RestartReason, SlaveState
@@ -62,11 +56,6 @@ DURATION_BUCKETS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0
 # The fault_code of an answer that carries no fault number ("no change rights"):
 # an empty label value would be no label at all to Prometheus, and a blank legend.
 NO_FAULT_NUMBER = "-"
-
-
-Landed = Callable[[ReadingKey, Reading], object]  # a new reading, as it lands
-# A parameter's description settled (line, the event, where the drive contradicts its catalog).
-Descriptions = Callable[[str, Described, list[Disagreement]], object]
 
 
 def fault_labels(fault: int | None, short: str) -> tuple[str, str]:
@@ -166,18 +155,14 @@ class ServiceMetrics:
         self,
         line: str,
         drives: Mapping[str, Dialect],
-        values: Landed | None = None,
         *,
         uss: bool = False,
         dp: bool = False,
-        descriptions: Descriptions | None = None,
     ) -> LineMetrics:
         """The counters of ``line``; ``drives`` maps each configured drive to its dialect,
-        ``values`` renders a new reading as it lands (the exposition's), ``uss``: a USS
-        line, whose drives' PKW length can contradict the configuration; ``dp``: a
-        PROFIBUS DP line, whose slaves have states; ``descriptions`` takes each
-        parameter's description as it settles."""
-        return LineMetrics(self, line, drives, values, uss=uss, dp=dp, descriptions=descriptions)
+        ``uss``: a USS line, whose drives' PKW length can contradict the configuration;
+        ``dp``: a PROFIBUS DP line, whose slaves have states."""
+        return LineMetrics(self, line, drives, uss=uss, dp=dp)
 
 
 class LineMetrics:
@@ -218,26 +203,14 @@ class LineMetrics:
         m: ServiceMetrics,
         line: str,
         drives: Mapping[str, Dialect],
-        values: Landed | None = None,
         *,
         uss: bool = False,
         dp: bool = False,
-        descriptions: Descriptions | None = None,
     ) -> None:
         self._m = m
         self._line = line
-        # Renders a new reading's lines as it lands (SnapshotCollector.landed), so
-        # that a scrape only joins them.
-        self.values = values
-        # Takes a parameter's settled description to the drive's table and the info metric.
-        self.descriptions = descriptions
         self._uss, self._dp = uss, dp
         self._busy = m.busy.labels(line, zero=True)
-        # Plain counts for the status page (GET /api/v1/lines and /api/v1/drives).
-        self.busy_total = 0.0
-        self.telegram_total = 0
-        self.fault_counts: collections.Counter[str] = collections.Counter()
-        self.error_counts: collections.Counter[str] = collections.Counter()
         self._duration = m.duration.labels(line)
         self._faults: dict[tuple[str, ...], Series] = {}
         self._telegrams: dict[str, Series] = {}
@@ -254,8 +227,6 @@ class LineMetrics:
             JobDone: self._job_done,
             Overrun: self._overrun,
             PkwLengthTold: self._pkw_length,
-            ValueLanded: self._value,
-            DescriptionChecked: self._described,
             SlaveStateChanged: self._slave_state,
             SlaveRestarted: self._restarted,
             SlaveDiagnosed: self._diagnosed,
@@ -292,8 +263,6 @@ class LineMetrics:
         for by_drive in (self._telegrams, self._retries, self._overruns):
             by_drive.pop(d, None)
         self._states.pop(d, None)
-        self.fault_counts.pop(d, None)
-        self.error_counts.pop(d, None)
 
     def on_events(self, events: Sequence[Event]) -> None:
         on = self._on
@@ -306,16 +275,13 @@ class LineMetrics:
         error, drive, busy = event.error, event.drive, event.busy
         if error is ErrorKind.PORT:
             return  # nothing went on the wire
-        self.telegram_total += 1
         self._busy.inc(busy)
-        self.busy_total += busy
         telegrams = self._telegrams.get(drive)
         if telegrams is None:
             return  # a drive a reload removed with its exchange out: the line's time alone
         telegrams.inc()
         if error is not None:
             self._errors[(drive, error.value)].inc()
-            self.error_counts[drive] += 1
         elif event.answered is not None:
             self._duration.observe(event.answered)
 
@@ -336,14 +302,12 @@ class LineMetrics:
             unexpected = tally.errors.get(ErrorKind.UNEXPECTED, 0)
             if unexpected:
                 self._errors[(drive, ErrorKind.UNEXPECTED.value)].inc(unexpected)
-                self.error_counts[drive] += unexpected
         if isinstance(outcome, Rejected):
             labels = fault_labels(outcome.fault, outcome.short)
             fault = self._faults.get((drive, *labels))
             if fault is None:
                 fault = self._m.faults.labels(self._line, drive, *labels)
             fault.inc()
-            self.fault_counts[drive] += 1
 
     def _overrun(self, event: Overrun) -> None:
         if (overruns := self._overruns.get(event.drive)) is not None:
@@ -354,14 +318,6 @@ class LineMetrics:
             return
         conflict = event.length.in_conflict
         self._m.pkw_conflict.labels(self._line, event.drive).set(int(conflict))
-
-    def _value(self, event: ValueLanded) -> None:
-        if self.values is not None:
-            self.values(event.key, event.reading)
-
-    def _described(self, event: DescriptionChecked) -> None:
-        if self.descriptions is not None:
-            self.descriptions(self._line, event.event, list(event.found))
 
     def _slave_state(self, event: SlaveStateChanged) -> None:
         for s, gauge in self._states[event.drive].items():

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import math
 from array import array
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from typing import Final
 
+from pkwbus.master.events import Event, ValueLanded
 from pkwbus.master.snapshot import Reading, ReadingKey
 
 __all__ = ["PERIOD", "POINTS", "Trends"]
@@ -49,6 +50,12 @@ class Trends:
             ring = self._rings[key] = _Ring(bucket)
         self._advance(ring, bucket)
         ring.values[bucket % POINTS] = float(value)
+
+    def on_events(self, events: Sequence[Event]) -> None:
+        """Each value that landed (an output of the lines' streams)."""
+        for event in events:
+            if type(event) is ValueLanded:
+                self.landed(event.key, event.reading)
 
     def forget(self, drive: str, keep: Collection[ReadingKey] | None = None) -> None:
         """The drive's values gone (a reload), all or those not in ``keep``."""

@@ -6,30 +6,25 @@ from __future__ import annotations
 
 import datetime
 
-from pkwbus.catalog.description import ParameterDescription
-from pkwbus.protocol.pzd import status_bits
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.history.store import DriveEvent
 from pkwbus.service.http.models import (
     AlarmView,
-    DriveView,
     EventView,
     LineView,
     MaintenanceView,
-    ParameterReading,
     SlaveView,
     WritableView,
 )
 from pkwbus.service.http.parameter_checks import ApiError
-from pkwbus.service.http.readable import readable
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
     "alarm_views",
-    "drive_view",
     "event_views",
     "iso_time",
     "line_views",
+    "maintenance_view",
     "parse_since",
     "slave_view",
     "trend_views",
@@ -43,11 +38,14 @@ def line_views(
     """Each line's port, drives and how busy it was since ``looks`` last saw it."""
     snap = runtime.snapshot
     views = []
+    by_line: dict[str, list[str]] = {name: [] for name in runtime.runners}
+    for d, e in runtime.drives.items():
+        by_line.setdefault(e.line, []).append(d)
     for name in runtime.runners:
-        mine = [d for d, e in runtime.drives.items() if e.line == name]
+        mine = by_line[name]
         up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
-        counts = runtime.counts.get(name)
-        busy = counts.busy_total if counts is not None else 0.0
+        totals = snap.totals.get(name)
+        busy = totals.busy if totals is not None else 0.0
         utilisation = None
         seen = looks.get(name)
         if seen is not None and now > seen[0]:
@@ -86,7 +84,7 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
         if not known.writable or (index is not None and index < 0):
             continue
         ref = entry.canonical(ParameterRef(pnu, index, ""))
-        fmt = entry.format_of(ref, runtime.snapshot.stated.get((name, pnu)))
+        fmt = runtime.format_of(name, ref)
         latest = runtime.snapshot.latest.get((name, pnu, index or 0))
         views.append(
             WritableView(
@@ -111,54 +109,6 @@ def slave_view(runtime: Runtime, name: str) -> SlaveView | None:
     )  # fmt: skip
 
 
-def drive_view(runtime: Runtime, name: str) -> DriveView:
-    entry = runtime.drives[name]
-    snap = runtime.snapshot
-    counts = runtime.counts.get(entry.line)
-    state = snap.drives.get(name)
-    word = state.status_word if state else None
-    formats = entry.formats
-    values = []
-    for (drive, parameter, index), reading in list(snap.readings.items()):
-        if drive != name:
-            continue
-        fmt = formats.get((parameter, index), ParameterDescription())
-        board = runtime.alarms
-        alarm_words = board.said((drive, parameter, index), reading.value) if board else ""
-        values.append(
-            ParameterReading(
-                parameter=parameter,
-                index=index,
-                value=reading.value,
-                raw=reading.raw,
-                unit=entry.unit_of(parameter),
-                timestamp=reading.timestamp,
-                name=fmt.name,
-                shown=alarm_words or readable(reading.value, fmt),
-                option=fmt.option(reading.value),
-                source=entry.sources.get(parameter, "none"),
-            )
-        )
-    return DriveView(
-        name=name,
-        line=entry.line,
-        protocol=entry.target.protocol.value,
-        address=entry.target.address,
-        dialect=entry.target.dialect.name,
-        up=state.up if state else True,
-        status_word=word,
-        status=status_bits(word, entry.target.profile) if word is not None else {},
-        faults=counts.fault_counts.get(name, 0) if counts is not None else 0,
-        telegram_errors=counts.error_counts.get(name, 0) if counts is not None else 0,
-        values=values,
-        alarms=alarm_views(runtime, name),
-        writable=writable_views(runtime, name),
-        dp=slave_view(runtime, name),
-        maintenance=maintenance_view(runtime, name),
-        settings=runtime.settings is not None and name in runtime.settings.swept,
-    )
-
-
 def maintenance_view(runtime: Runtime, name: str) -> MaintenanceView | None:
     held = runtime.snapshot.maintenance.get(name)
     return MaintenanceView(reason=held.reason, since=held.since) if held is not None else None
@@ -171,11 +121,11 @@ def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float
     if trends is None:
         return {}
     out: dict[str, list[float | None]] = {}
-    for drive, parameter, index in list(runtime.snapshot.readings):
-        if drive == name:
-            points = trends.points((drive, parameter, index), now)
-            if points:
-                out[f"{parameter}[{index}]" if index else parameter] = points
+    readings = runtime.snapshot.readings
+    for poll in runtime.drives[name].polls:
+        key = (name, poll.parameter, poll.index)
+        if key in readings and (points := trends.points(key, now)):
+            out[f"{poll.parameter}[{poll.index}]" if poll.index else poll.parameter] = points
     return out
 
 

@@ -1,0 +1,85 @@
+"""What the snapshot's writer tells people of a line's events: one log line per thing that
+changed, in the runner's logger (a description settled or left unanswered, a drive's PKW
+length learned or in conflict)."""
+
+from __future__ import annotations
+
+import logging
+
+from pkwbus.catalog.precedence import Disagreement, disagreements
+from pkwbus.master.planning.describing import ASK_AGAIN
+from pkwbus.master.planning.plan import Described, HealthChanged, PkwLengthTold
+from pkwbus.protocol.pkw.length import AUTO, shown
+
+__all__ = ["described", "health", "pkw_length", "unanswered"]
+
+log = logging.getLogger("pkwbus.master.runner")  # what the runner records
+
+
+def unanswered(line: str, event: Described) -> None:
+    """The drive left its descriptions unanswered: one line for all its parameters."""
+    log.warning("drive %s: %s: the catalog's descriptions are used for the parameters still"
+                " waiting, and it is asked again in %d minutes", event.drive, event.why,
+                ASK_AGAIN // 60, extra={"line": line, "drive": event.drive})  # fmt: skip
+
+
+def described(line: str, event: Described) -> tuple[Disagreement, ...]:
+    """A settled description's log lines: the catalog's used where the drive gave none, a
+    parameter not polled for want of a type, a writable parameter the drive says is
+    read-only, and each field the drive contradicts the catalog on (returned)."""
+    drive, target, found = event.drive, event.target, event.description
+    ctx = {"line": line, "drive": drive}
+    if found is None and not event.unanswered and event.first and not event.withheld:
+        log.info("drive %s: %s: %s; the catalog's description is used", drive,
+                 target.parameter, event.why, extra=ctx)  # fmt: skip
+    if event.withheld and event.first:
+        log.info(
+            "drive %s: %s is not polled: no vendor document types it, and the drive did"
+            " not describe its type (%s)", drive, target.parameter,
+            event.why or "no type in its description", extra=ctx,
+        )  # fmt: skip
+    if found is not None and found.read_only and target.writable and event.first:
+        log.warning(
+            "drive %s describes %s as read-only, but the configuration lists it as"
+            " writable: the drive will refuse its writes", drive, target.parameter,
+            extra=ctx,
+        )  # fmt: skip
+    if found is None or target.catalog is None:
+        return ()
+    contradicts = tuple(disagreements(found, target.catalog))
+    for d in contradicts:
+        log.warning(
+            "drive %s: %s: the drive gives its %s as %s, the catalog as %s; the"
+            " drive's is used", drive, target.parameter, d.field, d.drive, d.catalog,
+            extra=ctx,
+        )  # fmt: skip
+    return contradicts
+
+
+def health(line: str, event: HealthChanged) -> None:
+    """A drive shown up again (and why), or down (and why)."""
+    ctx = {"line": line, "drive": event.drive}
+    if event.reason and event.up:
+        log.info("drive %s %s", event.drive, event.reason, extra=ctx)
+    elif event.reason:
+        log.warning("drive %s is down: %s (probing at back-off)", event.drive, event.reason,
+                    extra=ctx)  # fmt: skip
+
+
+def pkw_length(line: str, event: PkwLengthTold) -> None:
+    """One log line per change of what a drive's PKW length is known to be."""
+    length, drive = event.length, event.drive
+    ctx = {"line": line, "drive": drive}
+    conflict = length.conflict
+    if not isinstance(conflict, str):
+        log.warning(
+            "drive %s answers with a PKW length of %s, but pkw_words is %s: no write goes"
+            " out to it until they agree (set pkw_words: %s, or auto)",
+            drive, shown(conflict), shown(length.configured),
+            "127" if conflict is None else conflict, extra=ctx,
+        )  # fmt: skip
+    elif length.configured != AUTO:
+        log.info("drive %s answers with its configured PKW length again", drive, extra=ctx)
+    elif length.known:
+        log.info("drive %s: PKW length %s, learned from its answers", drive,
+                 shown(length.words), extra=ctx)  # fmt: skip
