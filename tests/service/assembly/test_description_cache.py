@@ -54,10 +54,11 @@ async def run_once(
     """One run of the service until the drive is described and two values came."""
     requests = asked(sim)
     server = await sim.serve_tcp("127.0.0.1", 0)
+    kept = DescriptionFile(path)
     try:
         with landed_values() as seen:
             runtime = await build_runtime(
-                parse_config(config(server.url, DRIVES), environ={}), DescriptionFile(path)
+                parse_config(config(server.url, DRIVES), environ={}), kept
             )
             await runtime.start()
             try:
@@ -67,6 +68,7 @@ async def run_once(
                 await runtime.stop()
     finally:
         await server.close()
+        await kept.settled()  # written by a thread of its own: as the service's stop waits
     return requests, seen
 
 
@@ -161,6 +163,7 @@ def test_a_file_that_cannot_be_written_is_one_warning(
         described = DriveDescription(type_code=4, conversion=conversion)
         kept.book.put("fc:FC-302|05.11", 1614, described, (1, 2, 4, 6))
         kept.save()
+        assert kept.flush(10.0)
     stores = [r for r in caplog.records if "cannot store" in r.getMessage()]
     assert len(stores) == 1 and stores[0].levelno == logging.WARNING
 

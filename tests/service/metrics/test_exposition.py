@@ -14,7 +14,7 @@ from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.utils import floatToGoString
 
-from pkwbus.master.events import Exchanged, Overrun, ValueLanded
+from pkwbus.master.events import Exchanged, Outputs, Overrun, ValueLanded
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Rejected, TimedOut
@@ -57,9 +57,9 @@ class Plant:
         self.infos = infos
         collector = SnapshotCollector(self.snapshot, kinds, infos)
         self.registry.register(collector)
-        if landed:  # as build_runtime wires it: the lines' metrics hear of new readings
-            for line_metrics in self.lines.values():
-                line_metrics.values = collector.landed
+        # As build_runtime wires it: the collector is one of the lines' outputs and hears of
+        # new readings (``landed``), or (not) only scraped.
+        self.outputs = Outputs([collector] if landed else [])
 
     def info_text(self) -> str:
         text = generate_latest(self.registry).decode()
@@ -76,6 +76,7 @@ class Plant:
             key, reading = (p.drive, p.parameter, p.index), Reading(value, i, t)
             self.snapshot.readings[key] = reading
             self.lines[p.line].on_events([ValueLanded(key, reading)])
+            self.outputs.on_events([ValueLanded(key, reading)])
         for i, p in enumerate(self.infos[::4]):
             word = None if i % 5 == 4 else (int(t) * 97 + i) & 0xFFFF
             # A main actual value of either sign, or none (a drive without a second PZD word).

@@ -7,8 +7,9 @@ from the configuration (:mod:`.build`) with the watch of the drives' logs
 (:mod:`.history`) and its reloader (:mod:`.reload`); the HTTP app over it
 (:mod:`pkwbus.service.http.api`);
 writes an earlier run left without an outcome marked interrupted; then
-:func:`~.serve.serve` until a stop signal. On the way out the outcomes kept
-in memory are stored and the audit log and the history are closed.
+:func:`~.serve.serve` until a stop signal. On the way out the drives'
+descriptions under way are written, the outcomes kept in memory are stored and
+the audit log and the history are closed.
 
 Raises :class:`StartError` (one line) when the audit log's or the history's
 place or the HTTP address cannot be used, before any line or the HTTP server
@@ -108,9 +109,11 @@ async def _serve(
     history: HistoryStore,
     reread: Callable[[], Config] | None = None,
 ) -> None:
-    # The drives' descriptions of an earlier run, beside the audit database.
-    kept = DescriptionFile(description_path(config.audit_db))
+    # The drives' descriptions of an earlier run, beside the audit database (read, and
+    # written as drives describe more, off the loop).
+    kept = await asyncio.to_thread(DescriptionFile, description_path(config.audit_db))
     runtime, parts = await assemble(config, kept)
+    runtime.cleanups.insert(0, kept.settled)  # the last: a write under way ends first
     memory = remember(config, runtime, history)
     token = config.write_token()
     limit = ConnectionLimit(config.api.max_connections)

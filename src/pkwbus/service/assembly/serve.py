@@ -2,6 +2,10 @@
 HTTP server started, signals, shutdown in order (:func:`serve`); what
 :mod:`pkwbus.service.assembly.root` runs once it has built them.
 
+From the start to the stop the event loop is watched
+(:mod:`pkwbus.service.metrics.event_loop`): ``pkwbus_event_loop_lag_seconds``, and a
+log line for a callback that holds it.
+
 SIGTERM or SIGINT: stop taking new jobs, let every line finish the exchange
 in flight, close the ports, stop the HTTP server, exit 0. SIGHUP reloads the
 configuration file (:mod:`pkwbus.service.assembly.reload`), one reload after
@@ -29,6 +33,7 @@ from fastapi import FastAPI
 from pkwbus.errors import PkwbusError
 from pkwbus.service.config import LISTEN_ENV
 from pkwbus.service.http.connections import ConnectionLimit, bounded_protocol
+from pkwbus.service.metrics.event_loop import LoopWatch
 from pkwbus.service.runtime import Runtime
 
 __all__ = [
@@ -174,6 +179,10 @@ async def serve(
     )
     server = _Server(config)
     settle_heap()
+    # How late the loop runs, and which callback held it: from here to the end (the heap
+    # settled above is the start's, no callback's).
+    watch = LoopWatch(runtime.registry)
+    watch.start()
     await runtime.start()
     server_task = asyncio.create_task(server.serve(sockets=[sock]), name="http")
     stop_task = asyncio.create_task(stop.wait(), name="signal")
@@ -202,4 +211,5 @@ async def serve(
         stop_task.cancel()
         for sig in signals:
             loop.remove_signal_handler(sig)
+        watch.stop()
     log.info("stopped")

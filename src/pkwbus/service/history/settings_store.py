@@ -8,7 +8,8 @@ for the identity the baseline belongs to and the end of its last complete sweep.
 store is one synced transaction (:mod:`pkwbus.service.audit.synced`), so a restart
 neither forgets a baseline nor reports a change twice.
 
-Thread-safe: the service calls it off the event loop. Raises
+Thread-safe: the service calls it off the event loop, and opens it there (at the first
+load or store, not when it is made). Raises
 :class:`~pkwbus.service.history.store.HistoryError` (one line) when the database cannot
 be opened or written.
 """
@@ -104,13 +105,34 @@ class SweptDrive:
 
 
 class SettingsStore:
+    """The settings' tables of the history database, opened at the first load or store: it
+    is made on the event loop (at the start, or by a reload) and used off it."""
+
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._lock = threading.Lock()
-        try:
-            self._db = connect_synced(path, SCHEMA + SETTINGS_SCHEMA)
-        except (sqlite3.Error, OSError) as exc:
-            raise HistoryError(f"cannot open the history database {self.path}: {exc}") from None
+        self._opening = threading.Lock()
+        self._conn: sqlite3.Connection | None = None
+        self._closed = False
+
+    @property
+    def _db(self) -> sqlite3.Connection:
+        """The connection, opened on first use; :class:`HistoryError` when it cannot be, or
+        once the store is closed."""
+        conn = self._conn
+        if conn is not None:
+            return conn
+        with self._opening:
+            if self._closed:
+                raise HistoryError(f"the history database {self.path} is closed")
+            if self._conn is None:
+                try:
+                    self._conn = connect_synced(self.path, SCHEMA + SETTINGS_SCHEMA)
+                except (sqlite3.Error, OSError) as exc:
+                    raise HistoryError(
+                        f"cannot open the history database {self.path}: {exc}"
+                    ) from None
+            return self._conn
 
     def load(self, drive: str) -> SweptDrive:
         """What is kept of ``drive`` (empty when nothing is)."""
@@ -153,8 +175,11 @@ class SettingsStore:
         self._write([("DELETE FROM settings WHERE drive = ?", (drive,)), (head, (drive, identity))])
 
     def close(self) -> None:
-        with self._lock:
-            self._db.close()
+        with self._lock, self._opening:  # the order of a load's first use
+            self._closed = True
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
 
     def _write(self, statements: list[tuple[str, tuple[Any, ...]]]) -> None:
         with synced_transaction(self._db, self._lock, self.path):
