@@ -8,7 +8,8 @@ says of each setting (its description: type, scaling, limits, read-only; FC elem
 (:func:`pkwbus.service.history.backup.plan_restore`) writes what differs, in the
 backup's order, and skips with its reason what cannot be written; it is printed, and
 with ``--dry-run`` nothing more happens. Otherwise each planned value is written as
-`pkwbus write` writes it (EEPROM unless ``--store ram``) and read back:
+`pkwbus write` writes it (EEPROM unless ``--store ram``) and read back, by the rules of
+:mod:`pkwbus.service.history.restore` (the API's restore follows them too):
 
 - a read-back with another value, or a write or read-back without an answer, stops
   the restore (the rest is reported not sent): exit 5 (mismatch) or 3 (no answer);
@@ -56,15 +57,9 @@ from pkwbus.service.history.backup import (
     drive_type,
     plan_restore,
 )
+from pkwbus.service.history.restore import carry_out
 
-__all__ = ["RUNNING_FAULT", "add_parsers", "run_restore"]
-
-# Fault 17 (FC: "Certain parameters can only be changed when the motor is turned off";
-# Siemens: "cannot be executed because of the operating state"): the pkw dialect tables.
-RUNNING_FAULT = 17
-# What stops a restore: the drive holds another value than the one written, or it did
-# not answer (the write or its read-back).
-STOPPING = frozenset({"mismatch", "unverified", "timeout", "line_error"})
+__all__ = ["add_parsers", "run_restore"]
 
 Key = tuple[str, int]
 Target = tuple[ParameterRef, ParameterDescription]
@@ -99,7 +94,13 @@ def run_restore(args: argparse.Namespace) -> int:
     plan, skipped = plan_restore(backup, present, target_identity=identity, force=args.force)
     done = Restored(backup, identity, plan, skipped, args.dry_run)
     if not args.dry_run:
-        done.results = _write_all(access, plan, targets, pkw.Store(args.store))
+        store = pkw.Store(args.store)
+
+        async def write(step: Planned) -> dict[str, Any]:
+            ref, fmt = targets[(step.parameter, step.index)]
+            return await _write(access, ref, fmt, step.new, store)
+
+        done.results = link.run(carry_out(plan, write))
     report(args, done)
     return exit_code(done)
 
@@ -173,25 +174,7 @@ def _present(
     return present, targets
 
 
-def _write_all(
-    access: DriveAccess, plan: list[Planned], targets: dict[Key, Target], store: pkw.Store
-) -> list[dict[str, Any]]:
-    """Each planned write in order, read back; a mismatch or no answer stops the rest."""
-    results: list[dict[str, Any]] = []
-    stopped: str | None = None
-    for step in plan:
-        if stopped is not None:
-            results.append({**step.as_dict(), "outcome": "not_sent", "detail": stopped})
-            continue
-        ref, fmt = targets[(step.parameter, step.index)]
-        result = {**step.as_dict(), **_write(access, ref, fmt, step.new, store)}
-        results.append(result)
-        if result["outcome"] in STOPPING:
-            stopped = f"the restore stopped at {ref}: {result['outcome']}"
-    return results
-
-
-def _write(
+async def _write(
     access: DriveAccess, ref: ParameterRef, fmt: ParameterDescription, value: Value,
     store: pkw.Store,
 ) -> dict[str, Any]:  # fmt: skip
@@ -206,7 +189,7 @@ def _write(
         return {"outcome": "invalid", "detail": f"not sent: {exc}"}
     back = pkw.read(d, ref.pnu, ref.index)
     try:
-        written, answer = link.run(access.run([request, back], fmt.vtype))
+        written, answer = await access.run([request, back], fmt.vtype)
     except CommandError as exc:  # the port cannot be opened any more
         return {"outcome": "line_error", "detail": str(exc)}
     failure = command_failure(written)
@@ -214,8 +197,6 @@ def _write(
         result: dict[str, Any] = {"outcome": failure.kind, "detail": failure.message}
         if failure.fault is not None:
             result["fault"] = failure.fault
-        if failure.kind == "rejected" and failure.fault == RUNNING_FAULT:
-            result["when_stopped"] = True  # only while the motor is stopped
         return result
     if not isinstance(answer, Answered) or not isinstance(answer.response, pkw.ValueResponse):
         why = answer.text if isinstance(answer, Rejected) else "no answer"

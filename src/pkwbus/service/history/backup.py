@@ -170,6 +170,9 @@ def _unwritable(s: BackupSetting, now: Present | None) -> str | None:
         return "a text: not restored"
     if now is None:
         return "not asked"
+    readout = _readout(now.fmt)
+    if readout is not None:
+        return readout
     if now.refused is not None:
         return f"this drive refuses to read it: {now.refused}"
     if now.value is None:
@@ -185,6 +188,17 @@ def _unwritable(s: BackupSetting, now: Present | None) -> str | None:
         (low is not None and s.value < low) or (high is not None and s.value > high)
     ):
         return f"{s.value} is outside this drive's limits {_limits(low, high, fmt.unit)}"
+    return None
+
+
+def _readout(fmt: ParameterDescription) -> str | None:
+    """Why a parameter the catalog knows as a readout is never written by a restore,
+    whatever the drive describes of it: a counter the drive keeps of its own life
+    (operating hours, energy), or a display parameter (``r``)."""
+    if fmt.counter:
+        return "a readout: a counter the drive keeps itself, never restored"
+    if fmt.prefix == "r":
+        return "a readout (an r parameter), never restored"
     return None
 
 

@@ -37,7 +37,8 @@ from pkwbus.protocol.pkw.descriptions import (
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditWriter
-from pkwbus.service.history.backup import Backup, Present, plan_restore
+from pkwbus.service.history.backup import Backup, Planned, Present, plan_restore
+from pkwbus.service.history.restore import carry_out
 from pkwbus.service.history.store import HistoryError
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
@@ -55,15 +56,12 @@ from pkwbus.service.http.parameter_writes import WriteOrder, Writes
 from pkwbus.service.http.views import iso_time
 from pkwbus.service.runtime import DriveEntry, Runtime, Settings
 
-__all__ = ["BASELINE", "RUNNING_FAULT", "SETUP_PNU", "DriveSettings"]
+__all__ = ["BASELINE", "SETUP_PNU", "DriveSettings"]
 
 BASELINE = "settings/baseline"  # the audit row's parameter of an accepted baseline
 # Danfoss 0-10 Active Set-up ("[9] Multi set-ups ... in parameter 0-10 Active Set-up":
 # Danfoss VLT CANopen MCA 105 manual, "Bit 13/14, Selection of set-up").
 SETUP_PNU = 10
-# Fault 17 (FC: "Certain parameters can only be changed when the motor is turned off";
-# Siemens: "cannot be executed because of the operating state"): pkw dialect tables.
-RUNNING_FAULT = 17
 _TIMES = ("seen", "baseline_since", "changed_seen")
 
 
@@ -186,18 +184,13 @@ class DriveSettings:
             backup, present, target_identity=view["identity"], force=force,
             target_dialect=entry.target.dialect.name, target_catalog=view["catalog"],
         )  # fmt: skip
-        results: list[dict[str, Any]] = []
-        stopped: str | None = None
-        for step in plan:
+
+        async def write(step: Planned) -> dict[str, Any]:
             order = WriteOrder(step.new, step.index, store, verify=True, dry_run=dry_run,
                                restoring=True)  # fmt: skip
-            if stopped is not None:
-                results.append({**step.as_dict(), "outcome": "not_sent", "detail": stopped})
-                continue
-            results.append(await self._write(drive, step.parameter, order, caller, step.as_dict()))
-            outcome = results[-1]["outcome"]
-            if outcome in ("mismatch", "unverified", "timeout", "line_error", "cancelled"):
-                stopped = f"the restore stopped at {step.parameter}: {outcome}"
+            return await self._write(drive, step.parameter, order, caller)
+
+        results = await carry_out(plan, write)
         return {
             "drive": drive,
             "dry_run": dry_run,
@@ -209,20 +202,21 @@ class DriveSettings:
     # ------------------------------------------------------------ steps
 
     async def _write(
-        self, drive: str, parameter: str, order: WriteOrder, caller: Caller, step: dict[str, Any]
+        self, drive: str, parameter: str, order: WriteOrder, caller: Caller
     ) -> dict[str, Any]:
+        """One planned write through the one write path, read back: its outcome."""
         try:
             done = await self._writes.write(drive, parameter, order, caller)
         except ApiError as exc:
-            result = {**step, "outcome": exc.kind, "detail": str(exc)}
-            if exc.kind == "rejected" and exc.extra.get("fault") == RUNNING_FAULT:
-                result["when_stopped"] = True  # only while the motor is stopped
+            result: dict[str, Any] = {"outcome": exc.kind, "detail": str(exc)}
+            if "fault" in exc.extra:
+                result["fault"] = exc.extra["fault"]
             return result
         if order.dry_run:
-            return {**step, "outcome": "dry_run", "audit_id": done["audit_id"]}
+            return {"outcome": "dry_run", "audit_id": done["audit_id"]}
         # Read back: a value other than the one written (or none) stops the restore.
         outcome = "ok" if done.get("verified") else "mismatch"
-        return {**step, "outcome": outcome, "audit_id": done["audit_id"]}
+        return {"outcome": outcome, "audit_id": done["audit_id"]}
 
     async def _present(self, entry: DriveEntry, parameter: str, index: int) -> Present:
         """What the drive says of one setting of the backup now."""
