@@ -13,7 +13,7 @@ drive's settings are asked for.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +24,7 @@ from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.ppo import PpoType
 from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
+from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profibus.gsd import Gsd, GsdModule
 
 __all__ = [
@@ -34,6 +35,8 @@ __all__ = [
     "Problem",
     "read_gsd_file",
     "resolve",
+    "slot_time",
+    "watchdog",
 ]
 
 MAX_GSD_BYTES = 1 << 20
@@ -196,3 +199,29 @@ def _cfg_problems(cfg: bytes, kind: PpoType) -> list[Problem]:
             )
         ]
     return []
+
+
+def slot_time(baudrate: int, given: float | None, gsds: Iterable[Gsd | None]) -> float:
+    """A line's slot time: as ``given``, else the default at ``baudrate`` waiting for the
+    slowest of its slaves (the longest ``MaxTsdr_<rate>`` of their GSD files: a slave may
+    begin to answer that many bit times after a request). The one rule of the service's
+    lines and the commands' (which address one slave)."""
+    if given is not None:
+        return float(given)
+    tsdrs = [g.max_tsdr[baudrate] for g in gsds if g is not None and baudrate in g.max_tsdr]
+    return dp_timing.default_slot_time(baudrate, max(tsdrs, default=None))
+
+
+def watchdog(slot: float, retries: int, slaves: int, given: float | None = None) -> float:
+    """The watchdog time a line's slaves are parametrised with: as ``given``, else ten
+    worst-case cycles of the master, at least a second.
+
+    A slave whose watchdog is on leaves data exchange (its outputs to their safe state)
+    when no frame of its master reached it within the watchdog time (IEC 61158 / EN 50170
+    DP, Set_Prm watchdog factors). The master addresses each slave of its cycle once a
+    cycle, and each exchange may take its retries, each up to a slot time: a cycle is
+    ``slaves`` such exchanges, so the time grows with the slaves the master cycles
+    through (the service: every slave of the line; a command: the one it addresses)."""
+    if given:
+        return float(given)
+    return max(1.0, 10 * slot * (retries + 1) * slaves)

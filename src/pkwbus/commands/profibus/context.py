@@ -187,8 +187,7 @@ def build_context(args: argparse.Namespace) -> DpContext:
         raise CommandError(f"{where}{text}", Exit.BAD_INPUT)
     ident, user_prm, cfg, dpv1 = found.ident, found.user_prm, found.cfg, found.dpv1
     slot = _slot_time(args, found.gsd)
-    # The watchdog: several worst-case cycles, at least a second.
-    watchdog = max(1.0, 10 * slot * (args.retries + 1))
+    watchdog = dp_settings.watchdog(slot, args.retries, 1)  # the one slave it addresses
     try:
         parameters = dps.Parameters(ident, dps.watchdog_factors(watchdog), user_prm=user_prm)
         parameters.encode()
@@ -234,16 +233,18 @@ def _slot_time(args: argparse.Namespace, found: Gsd | None) -> float:
             f" {found.rates_text()}): give --baudrate",
             Exit.BAD_INPUT,
         )
-    if args.slot_time is None:
-        return dp_timing.default_slot_time(rate, tsdr)
-    if tsdr is not None and args.slot_time < dp_timing.bits(tsdr, rate):
+    if (
+        args.slot_time is not None
+        and tsdr is not None
+        and args.slot_time < dp_timing.bits(tsdr, rate)
+    ):
         raise CommandError(
             f"--slot-time: the slave may begin to answer {tsdr} bit times"
             f" ({dp_timing.bits(tsdr, rate) * 1000:.3g} ms) after a request at {rate} baud"
             f" (its GSD file's MaxTsdr): give a longer one",
             Exit.BAD_INPUT,
         )
-    return float(args.slot_time)
+    return dp_settings.slot_time(rate, args.slot_time, [found])
 
 
 def fdl_port(args: argparse.Namespace, slot_time: float | None = None) -> FdlPort:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import prometheus_client
 
+from pkwbus import dp_settings
 from pkwbus.link import PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.events import Observer, Outputs
@@ -31,7 +32,6 @@ from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.slave import SlaveSetup
-from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.alarm_polls import alarm_parameters
@@ -266,12 +266,9 @@ def _dp_runner(
         if found is None:  # the configuration checked it; a GSD file changed since
             raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
         resolved.append(found)
-    # The slot time: as configured, else one that waits for the slowest slave's GSD MaxTsdr.
-    tsdr = [s.gsd.max_tsdr.get(line.baudrate, 0) for s in resolved if s.gsd is not None]
-    slot = line.slot_time or dp_timing.default_slot_time(line.baudrate, max(tsdr, default=None))
+    slot = dp_settings.slot_time(line.baudrate, line.slot_time, (s.gsd for s in resolved))
     dp = FdlPort(settings, line.master_address, slot_time=slot)
-    # The watchdog: as configured, else several worst-case cycles and at least a second.
-    watchdog = line.watchdog or max(1.0, 10 * dp.slot_time * (line.retries + 1) * len(specs))
+    watchdog = dp_settings.watchdog(slot, line.retries, len(specs), line.watchdog)
     slaves = []
     for drive, spec, found in zip(line.drives, specs, resolved, strict=True):
         parameters = dp_services.Parameters(
