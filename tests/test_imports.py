@@ -163,3 +163,22 @@ def test_nothing_in_master_prints() -> None:
         )
     )
     assert not printing
+
+
+# The command line hands over to the service here (`pkwbus run`), and nowhere else.
+SERVICE_ENTRY = {("pkwbus.commands.service", "pkwbus.service.assembly.root")}
+
+
+def test_the_commands_use_neither_the_api_nor_the_service_assembly() -> None:
+    """A command shares the service's configuration, history and audit, never its HTTP
+    layer or its composition root (what both need lives below them)."""
+    wrong = sorted(
+        f"{name} imports {dep}"
+        for name, deps in GRAPH.items()
+        if layer(name) == "commands"
+        for dep in deps
+        if dep.startswith(("pkwbus.service.http", "pkwbus.service.assembly"))
+        and (name, dep) not in SERVICE_ENTRY
+    )
+    assert not wrong
+    assert all(dep in GRAPH[name] for name, dep in SERVICE_ENTRY), "the entry is seen"

@@ -14,7 +14,7 @@ from pkwbus.link import Link, LinkState, PortError, PortSettings
 from pkwbus.link.serialport import apply_adapter_settings
 from pkwbus.link.serialport import open_port as _open_port
 from pkwbus.link.settings import Rs485Mode
-from pkwbus.service.assembly.build import port_for as _line
+from pkwbus.service.config.resolved import port_for as _line
 from tests.service.config.test_config import parse, problems_of
 
 linux = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux ptys")

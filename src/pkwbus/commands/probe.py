@@ -34,13 +34,13 @@ from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.pkw.length import AUTO, shown
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.build import (
+from pkwbus.service.config.resolved import (
     describe_targets,
     description_form,
+    parameter_table,
     port_for,
     target_for,
 )
-from pkwbus.service.assembly.parameter_table import parameter_table
 
 __all__ = ["probe", "run_probe"]
 

@@ -15,8 +15,8 @@ from pydantic import BaseModel
 from pkwbus.catalog import ParameterDescription, load_catalog
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 from pkwbus.service.assembly.build import build_runtime
-from pkwbus.service.assembly.parameter_table import parameter_table
 from pkwbus.service.config import Config, parse_config
+from pkwbus.service.config.resolved import parameter_table
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 CONFIG = """

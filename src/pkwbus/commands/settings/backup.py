@@ -117,6 +117,6 @@ def run_backup(args: argparse.Namespace) -> int:
 
 def _now() -> str:
     """Now as the service's API writes times: ISO 8601 in UTC, to the millisecond."""
-    from pkwbus.service.http.views import iso_time  # the HTTP views: only when used
+    from pkwbus.service.history.times import iso_time
 
     return iso_time(time.time())

@@ -28,7 +28,6 @@ from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
-from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.slave import SlaveSetup
@@ -37,13 +36,9 @@ from pkwbus.service import config as cfg
 from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
-from pkwbus.service.assembly.drive_plans import (
-    describe_targets,
-    description_form,
-    plan_drive,
-    target_for,
-)
+from pkwbus.service.assembly.drive_plans import plan_drive
 from pkwbus.service.assembly.simulated import start_dp_sim, start_sim
+from pkwbus.service.config.resolved import port_for
 from pkwbus.service.metrics.alarms import AlarmBoard
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
@@ -60,10 +55,6 @@ __all__ = [
     "Parts",
     "assemble",
     "build_runtime",
-    "describe_targets",
-    "description_form",
-    "port_for",
-    "target_for",
 ]
 
 
@@ -223,26 +214,6 @@ async def assemble(
         if b.close is not None:
             runtime.closers[b.runner.name] = b.close
     return runtime, parts
-
-
-def port_for(line: cfg.Line, port: str) -> TelegramPort:
-    """The FC/USS line a configuration describes, on ``port``."""
-    settings = PortSettings(
-        port,
-        baudrate=line.baudrate,
-        parity=line.parity,
-        stopbits=line.stopbits,
-        pause=line.pause,
-        echo=line.echo,
-        low_latency=line.low_latency,
-        rs485=Rs485Mode(**line.rs485.model_dump()) if line.rs485 is not None else None,
-    )
-    return TelegramPort(
-        settings,
-        Protocol(line.protocol),
-        timeout=line.timeout,
-        inter_char_timeout=line.inter_char_seconds,
-    )
 
 
 def _dp_runner(

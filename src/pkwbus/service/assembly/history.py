@@ -13,8 +13,8 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.build import description_form
 from pkwbus.service.config.default_polls import swept_settings
+from pkwbus.service.config.resolved import description_form
 from pkwbus.service.history.setting_reads import Swept
 from pkwbus.service.history.settings import SettingsWatcher
 from pkwbus.service.history.settings_store import SettingsStore

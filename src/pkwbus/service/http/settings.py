@@ -40,6 +40,7 @@ from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.history.backup import Backup, Planned, Present, plan_restore
 from pkwbus.service.history.restore import carry_out
 from pkwbus.service.history.store import HistoryError
+from pkwbus.service.history.times import iso_time
 from pkwbus.service.http.parameter_checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
@@ -53,7 +54,6 @@ from pkwbus.service.http.parameter_checks import (
 )
 from pkwbus.service.http.parameter_reads import Reads
 from pkwbus.service.http.parameter_writes import WriteOrder, Writes
-from pkwbus.service.http.views import iso_time
 from pkwbus.service.runtime import DriveEntry, Runtime, Settings
 
 __all__ = ["BASELINE", "SETUP_PNU", "DriveSettings"]

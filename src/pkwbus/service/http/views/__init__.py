@@ -8,6 +8,7 @@ import datetime
 
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.history.store import DriveEvent
+from pkwbus.service.history.times import iso_time
 from pkwbus.service.http.models import (
     AlarmView,
     EventView,
@@ -22,7 +23,6 @@ from pkwbus.service.runtime import Runtime
 __all__ = [
     "alarm_views",
     "event_views",
-    "iso_time",
     "line_views",
     "maintenance_view",
     "parse_since",
@@ -127,12 +127,6 @@ def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float
         if key in readings and (points := trends.points(key, now)):
             out[f"{poll.parameter}[{poll.index}]" if poll.index else poll.parameter] = points
     return out
-
-
-def iso_time(seconds: float) -> str:
-    """Wall-clock seconds as ISO 8601 in UTC, to the millisecond."""
-    moment = datetime.datetime.fromtimestamp(seconds, datetime.UTC)
-    return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def parse_since(text: str | None) -> float | None:
