@@ -25,7 +25,8 @@ MS_PER_DAY = 86_400_000
 
 
 class Kind(enum.StrEnum):
-    """What a log entry is (interface.md): a Danfoss alarm-log entry is a trip, a fault."""
+    """What a log entry is, as `GET /api/v1/events` names its `kind` (README.md, "HTTP API"):
+    a Danfoss alarm-log entry is a trip, a fault."""
 
     FAULT = "fault"
     ALARM = "alarm"
