@@ -28,7 +28,7 @@ from pkwbus.service.assembly.history import remember
 from pkwbus.service.audit.log import AuditLog
 from pkwbus.service.config import Config, parse_config
 from pkwbus.service.history.store import HistoryStore
-from pkwbus.service.http.api import create_app
+from pkwbus.service.http.api import Api, build_api
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import ModelConfig, SimFaults, SimTiming, Simulator
 
@@ -89,6 +89,7 @@ class Service:
     audit_path: Path
     client: httpx.AsyncClient
     app: Any
+    api: Api
 
     @property
     def sim(self) -> Simulator:
@@ -261,12 +262,13 @@ async def service(
         tokens = {"write_token": config.write_token(env)}
         if read_token is not None:
             tokens["read_token"] = config.read_token(env)
-        app = create_app(runtime, audit=log, **tokens)
+        api = build_api(runtime, audit=log, **tokens)
+        app = api.app
         client = httpx.AsyncClient(
             transport=httpx.ASGITransport(app=app), base_url="http://pkwbus.test", timeout=30.0
         )
         stack.push_async_callback(client.aclose)
-        yield Service(sims, audit_writer, config, runtime, log, audit_path, client, app)
+        yield Service(sims, audit_writer, config, runtime, log, audit_path, client, app, api)
 
 
 async def wait_ready(runtime: Runtime, timeout: float = 20.0) -> None:

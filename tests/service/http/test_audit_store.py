@@ -100,7 +100,7 @@ async def test_a_write_whose_row_cannot_be_stored_is_not_sent(
 
         # Room again: /readyz tries a small store (here at once) and recovers.
         conn.fail = set()
-        svc.app.state.audit_writer.probe_interval = 0.0
+        svc.api.audit_writer.probe_interval = 0.0
         ready = await svc.client.get("/readyz")
         assert ready.status_code == 200, ready.text
         assert ready.json()["writes"] is True and ready.json()["reason"] is None
@@ -159,7 +159,7 @@ async def test_an_outcome_that_cannot_be_stored_leaves_the_row_pending(
 
         # When the log records again, the kept outcome is stored.
         conn.fail = set()
-        svc.app.state.audit_writer.probe_interval = 0.0
+        svc.api.audit_writer.probe_interval = 0.0
         assert (await svc.client.get("/readyz")).status_code == 200
         (row,) = svc.audit.latest(5)
         assert row.outcome == outcome
@@ -199,7 +199,7 @@ async def test_refused_and_invalid_attempts_say_when_they_are_not_audited(
 
         # Room again: every refusal counted meanwhile is stored, none lost.
         conn.fail = set()
-        svc.app.state.audit_writer.probe_interval = 0.0
+        svc.api.audit_writer.probe_interval = 0.0
         assert (await svc.client.get("/readyz")).status_code == 200
         rows = [(e.time, e.count) for e in svc.audit.latest(5) if e.outcome == "refused"]
         assert rows == [(NOW + 60, 20), (NOW, 10)]

@@ -138,3 +138,13 @@ async def test_the_overview_is_one_short_row_per_drive(tmp_path: Path) -> None:
             assert row["updated"] == newest and row["age"] >= 0
             assert "values" not in row
         assert [r["state"] for r in rows] == ["up", "up", "maintenance"]
+
+
+async def test_one_drives_trends(tmp_path: Path) -> None:
+    async with service(tmp_path, fc=fc_drives(polls=QUIET)) as svc:
+        every = (await svc.client.get("/api/v1/trends")).json()
+        one = await svc.client.get("/api/v1/trends", params={"drive": "fan2"})
+        assert one.status_code == 200 and one.json() == {"fan2": every["fan2"]}
+        assert every["fan2"], "its values have points"
+        r = await svc.client.get("/api/v1/trends", params={"drive": "nobody"})
+        assert r.status_code == 404 and r.json()["error"]["kind"] == "unknown_drive"

@@ -40,7 +40,7 @@ from pkwbus.service.assembly.serve import (
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
 from pkwbus.service.config import Config
 from pkwbus.service.history.store import HistoryError, HistoryStore
-from pkwbus.service.http.api import create_app
+from pkwbus.service.http.api import build_api
 from pkwbus.service.http.connections import ConnectionLimit
 
 __all__ = ["StartError", "open_audit", "open_history", "run_service"]
@@ -119,7 +119,7 @@ async def _serve(
     limit = ConnectionLimit(config.api.max_connections)
 
     def apply_api(new: Config) -> None:  # a reloaded file's API settings, at once
-        app.state.set_tokens(new.write_token(), new.read_token())
+        api.set_tokens(new.write_token(), new.read_token())
         if new.api.max_connections != limit.limit:
             limit.limit = new.api.max_connections
             raise_open_files_limit(limit.limit + SPARE_DESCRIPTORS)
@@ -127,10 +127,10 @@ async def _serve(
     reloader = None
     if reread is not None:
         reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api)
-    app = create_app(
+    api = build_api(
         runtime, audit=audit, write_token=token, read_token=config.read_token(), reloader=reloader
     )
-    audit_writer = app.state.audit_writer
+    audit_writer = api.audit_writer
     interrupted = await audit_writer.close_interrupted()
     if interrupted:
         log.warning(
@@ -144,6 +144,6 @@ async def _serve(
     log.info("pkwbus: metrics on http://%s:%d/metrics", shown, port)
     log.info("writes %s", "allowed with the token" if token else "refused: no write token is set")
     try:
-        await serve(runtime, app, sock, limit=limit, on_hangup=app.state.reloads)
+        await serve(runtime, api.app, sock, limit=limit, on_hangup=api.reloads)
     finally:
         await asyncio.to_thread(audit_writer.save_late)

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import asyncio
 import hmac
-import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.exceptions import RequestValidationError
@@ -31,11 +32,8 @@ from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.maintenance import Maintenance
 from pkwbus.service.http.models import (
     ERRORS,
-    DriveOverview,
-    DriveView,
     EventsBody,
     Health,
-    LineView,
     MaintenanceBody,
     MaintenanceResult,
     Readiness,
@@ -54,13 +52,11 @@ from pkwbus.service.http.parameters import (
 )
 from pkwbus.service.http.reload import Reloading, Reloads
 from pkwbus.service.http.settings_routes import add_settings_routes
+from pkwbus.service.http.view_routes import add_view_routes
 from pkwbus.service.http.views import (
     event_views,
-    line_views,
     parse_since,
-    trend_views,
 )
-from pkwbus.service.http.views.drives import TOKEN_HEADER, DriveViews, Selection, drive_view
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
@@ -71,10 +67,10 @@ __all__ = [
     "MAX_BODY",
     "MAX_MESSAGE",
     "STATIC",
+    "Api",
     "BodyLimit",
+    "build_api",
     "create_app",
-    "drive_view",
-    "line_views",
 ]
 
 MAX_BODY = 4096
@@ -149,6 +145,17 @@ class BodyLimit:
         await JSONResponse(body, status_code=413)(scope, receive, send)
 
 
+@dataclass(frozen=True)
+class Api:
+    """The HTTP app of a runtime and what the service holds of it: the audit log's writer,
+    how a reloaded configuration's tokens apply, and the reloads (SIGHUP's too)."""
+
+    app: FastAPI
+    audit_writer: AuditWriter
+    set_tokens: Callable[[str | None, str | None], None]
+    reloads: Reloads | None
+
+
 def create_app(
     runtime: Runtime,
     *,
@@ -157,6 +164,22 @@ def create_app(
     read_token: str | None = None,
     reloader: Reloading | None = None,
 ) -> FastAPI:
+    """The HTTP app of ``runtime`` (:func:`build_api`'s)."""
+    return build_api(
+        runtime, audit=audit, write_token=write_token, read_token=read_token, reloader=reloader
+    ).app
+
+
+def build_api(
+    runtime: Runtime,
+    *,
+    audit: AuditLog | None = None,
+    write_token: str | None = None,
+    read_token: str | None = None,
+    reloader: Reloading | None = None,
+) -> Api:
+    """The HTTP app of ``runtime``, handed everything it serves explicitly, and what the
+    service holds of it."""
     # /docs and /redoc with Swagger UI and ReDoc served from the package, no CDN, and
     # every URL the pages and the status page use relative: any path prefix works.
     app = FastAPI(
@@ -168,9 +191,7 @@ def create_app(
         servers=SERVERS,
     )
     add_docs(app)
-    app.state.runtime = runtime
     audit_writer = AuditWriter(audit, api_metrics(runtime.registry))
-    app.state.audit_writer = audit_writer
     service = ParameterService(runtime, audit_writer, write_token)
     switches = Maintenance(runtime, audit_writer, service.tokens)
     settings = service.settings()
@@ -181,10 +202,7 @@ def create_app(
         service.tokens.set(write, audit_writer.token_id(write) if write is not None else None)
         audit_tokens[:] = [t.encode() for t in (write, read) if t]
 
-    app.state.set_tokens = set_tokens
-    reloads = app.state.reloads = (
-        Reloads(reloader, audit_writer, service.tokens) if reloader is not None else None
-    )
+    reloads = Reloads(reloader, audit_writer, service.tokens) if reloader is not None else None
 
     @app.exception_handler(ApiError)
     async def api_error(request: Request, exc: ApiError) -> JSONResponse:
@@ -345,38 +363,9 @@ def create_app(
     async def status_page() -> FileResponse:
         return FileResponse(STATIC / "status.html", media_type="text/html")
 
-    views = DriveViews(runtime)
+    add_view_routes(app, runtime, ERRORS)
 
-    @app.get("/api/v1/drives", response_model=list[DriveView] | list[DriveOverview],
-             responses=ERRORS)  # fmt: skip
-    async def drives(
-        line: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
-        drive: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
-        changed_since: str | None = Query(default=None, max_length=64),
-        view: Literal["full", "overview"] = "full",
-    ) -> Response:
-        """The drives with their state and latest values (``view=overview``: one short row
-        each); of one ``line`` or one ``drive``; ``changed_since``: only the drives changed
-        since the token an earlier answer gave in its X-Changes-Token header (all of them
-        when the token is not this run's). Costs what it returns."""
-        names, token = views.select(Selection(line, drive, changed_since))
-        body = await (views.overview(names) if view == "overview" else views.full(names))
-        return Response(body, media_type="application/json", headers={TOKEN_HEADER: token})
-
-    @app.get("/api/v1/trends", response_model=dict[str, dict[str, list[float | None]]])
-    async def trends() -> dict[str, dict[str, list[float | None]]]:
-        """Each drive's values over the last 15 minutes, a point a 15 s (the page's
-        sparklines; /metrics and the drives' views keep full precision)."""
-        now = time.time()
-        return {name: trend_views(runtime, name, now) for name in runtime.drives}
-
-    looks: dict[str, tuple[float, float]] = {}  # line -> (monotonic time, busy seconds)
-
-    @app.get("/api/v1/lines", response_model=list[LineView])
-    async def lines() -> list[LineView]:
-        return line_views(runtime, looks, time.monotonic())
-
-    return app
+    return Api(app, audit_writer, set_tokens, reloads)
 
 
 def _client(request: Request) -> str:
