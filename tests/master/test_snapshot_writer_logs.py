@@ -9,11 +9,12 @@ import pytest
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.master.planning.plan import (
-    Described,
+    DescribedAnew,
     DescribeTarget,
     DriveSpec,
     Finished,
     HealthChanged,
+    LeftUnanswered,
     PollSpec,
 )
 from pkwbus.master.snapshot import Snapshot
@@ -75,12 +76,12 @@ def test_a_drive_silent_on_its_descriptions_is_one_warning_not_one_per_parameter
     rec = record([0.0])
     why = "no answer to 2 description requests in a row"
     targets = [DescribeTarget(pnu, f"16-{pnu % 100:02d}", (1, 2, 4, 6)) for pnu in (1613, 1614)]
-    rec.apply([Described("fan", t, None, (), why, unanswered=True) for t in targets])
+    rec.apply([LeftUnanswered("fan", t, None, (), why) for t in targets])
     assert len(lines(caplog, logging.WARNING)) == 1
     assert why in lines(caplog, logging.WARNING)[0]
     described = DriveDescription(type_code=3, conversion=-1, unit="Hz")
-    rec.apply([Described("fan", targets[0], described, ())])  # it answers again
-    rec.apply([Described("fan", targets[1], None, (), why, first=False, unanswered=True)])
+    rec.apply([DescribedAnew("fan", targets[0], described, ())])  # it answers again
+    rec.apply([LeftUnanswered("fan", targets[1], None, (), why, first=False)])
     assert len(lines(caplog, logging.WARNING)) == 2  # told again after it had answered
 
 
@@ -92,6 +93,7 @@ def test_a_writable_parameter_the_drive_calls_read_only_is_told_once(
     writable = DescribeTarget(341, "3-41", (1, 2, 4, 6, 7, 8), writable=True)
     polled = DescribeTarget(1614, "16-14", (1, 2, 4, 6))
     read_only = DriveDescription(type_code=7, conversion=-2, read_only=True)
-    rec.apply([Described("fan", writable, read_only, ()), Described("fan", polled, read_only, ())])
+    rec.apply([DescribedAnew("fan", writable, read_only, ()),
+               DescribedAnew("fan", polled, read_only, ())])  # fmt: skip
     told = lines(caplog, logging.WARNING)
     assert len(told) == 1 and "3-41" in told[0] and "read-only" in told[0]

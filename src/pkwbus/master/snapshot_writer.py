@@ -35,13 +35,18 @@ from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, ProbeJob
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
-    Described,
+    DescribedAnew,
+    DescribedFromBook,
     DescribeTarget,
+    DescriptionSettled,
     DriveSpec,
     Finished,
+    Forgotten,
     HealthChanged,
+    LeftUnanswered,
     PkwLengthTold,
     PollSpec,
+    Redecoded,
     StatusWord,
 )
 from pkwbus.master.planning.transaction import Tally
@@ -110,7 +115,11 @@ class SnapshotWriter:
             StatusWord: self._status_word,
             HealthChanged: self._health,
             PkwLengthTold: self._pkw_length,
-            Described: self._described,
+            DescribedAnew: self._settled,
+            DescribedFromBook: self._settled,
+            LeftUnanswered: self._settled,
+            Forgotten: self._forgotten,
+            Redecoded: self._redecoded,
             LineState: self._line_state,
             MaintenanceChanged: self._maintenance,
             SlaveStateChanged: self._slave_state,
@@ -225,7 +234,7 @@ class SnapshotWriter:
         )  # fmt: skip
         self.snapshot.changes.touch(event.drive)
 
-    def _decode_as(self, decoding: Decoding, event: Described) -> None:
+    def _decode_as(self, decoding: Decoding, event: DescriptionSettled | Redecoded) -> None:
         """The event's polls decode as now described, from now on."""
         for poll in event.polls:
             decoding.formats[(poll.parameter, poll.index)] = poll.fmt
@@ -233,26 +242,35 @@ class SnapshotWriter:
             source = resolve(layers, event.description).source if layers else "none"
             decoding.sources[poll.parameter] = source
 
-    def _described(self, event: Described, at: float) -> None:
+    def _decoding(self, drive: str) -> Decoding | None:
+        decoding = self.snapshot.decoding.get(drive)
+        if decoding is not None:
+            self.snapshot.changes.touch(drive)
+        return decoding  # None: a drive gone from the line
+
+    def _redecoded(self, event: Redecoded, at: float) -> None:
+        """New polls of a parameter told before (a reload): nothing to log again."""
+        if (decoding := self._decoding(event.drive)) is not None:
+            self._decode_as(decoding, event)
+            self._out.append(DescriptionChecked(event))
+
+    def _forgotten(self, event: Forgotten, at: float) -> None:
+        """Another drive now: no value of its parameters until it described them."""
+        drive, target = event.drive, event.target
+        if (decoding := self._decoding(drive)) is None:
+            return
+        if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
+            log.warning("drive %s is %s: its parameters are described afresh", drive,
+                        event.why, extra={"line": self.line, "drive": drive})  # fmt: skip
+        decoding.pending.add(target.pnu)
+        decoding.described.pop(target.pnu, None)
+        self._out.append(DescriptionChecked(event))
+
+    def _settled(self, event: DescriptionSettled, at: float) -> None:
         """A parameter's description settled: its polls decode as it says from now on; one
         log line when the drive gave none, one per field it contradicts the catalog on."""
         drive, target, found = event.drive, event.target, event.description
-        ctx = {"line": self.line, "drive": drive}
-        decoding = self.snapshot.decoding.get(drive)
-        if decoding is None:
-            return  # a drive gone from the line
-        self.snapshot.changes.touch(drive)
-        if event.reloaded:  # new polls of a parameter told before: nothing to log again
-            self._decode_as(decoding, event)
-            self._out.append(DescriptionChecked(event))
-            return
-        if event.forgotten:  # another drive now: no value of its parameters until described
-            if target == next(iter(self._targets.get(drive, ())), None):  # one line a drive
-                log.warning("drive %s is %s: its parameters are described afresh", drive,
-                            event.why, extra=ctx)  # fmt: skip
-            decoding.pending.add(target.pnu)
-            decoding.described.pop(target.pnu, None)
-            self._out.append(DescriptionChecked(event))
+        if (decoding := self._decoding(drive)) is None:
             return
         decoding.pending.discard(target.pnu)
         if found is not None:
@@ -264,7 +282,7 @@ class SnapshotWriter:
         self._polls[drive] = tuple(
             new.get((p.parameter, p.index), p) for p in self._polls.get(drive, ())
         )
-        if found is None and event.unanswered and drive not in self._silent:
+        if isinstance(event, LeftUnanswered) and drive not in self._silent:
             self._silent.add(drive)  # one line for all its parameters still waiting
             told.unanswered(self.line, event)
         elif found is not None:

@@ -8,7 +8,12 @@ import logging
 
 from pkwbus.catalog.precedence import Disagreement, disagreements
 from pkwbus.master.planning.describing import ASK_AGAIN
-from pkwbus.master.planning.plan import Described, HealthChanged, PkwLengthTold
+from pkwbus.master.planning.plan import (
+    DescriptionSettled,
+    HealthChanged,
+    LeftUnanswered,
+    PkwLengthTold,
+)
 from pkwbus.protocol.pkw.length import AUTO, shown
 
 __all__ = ["described", "health", "pkw_length", "unanswered"]
@@ -16,20 +21,21 @@ __all__ = ["described", "health", "pkw_length", "unanswered"]
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
 
 
-def unanswered(line: str, event: Described) -> None:
+def unanswered(line: str, event: LeftUnanswered) -> None:
     """The drive left its descriptions unanswered: one line for all its parameters."""
     log.warning("drive %s: %s: the catalog's descriptions are used for the parameters still"
                 " waiting, and it is asked again in %d minutes", event.drive, event.why,
                 ASK_AGAIN // 60, extra={"line": line, "drive": event.drive})  # fmt: skip
 
 
-def described(line: str, event: Described) -> tuple[Disagreement, ...]:
+def described(line: str, event: DescriptionSettled) -> tuple[Disagreement, ...]:
     """A settled description's log lines: the catalog's used where the drive gave none, a
     parameter not polled for want of a type, a writable parameter the drive says is
     read-only, and each field the drive contradicts the catalog on (returned)."""
     drive, target, found = event.drive, event.target, event.description
     ctx = {"line": line, "drive": drive}
-    if found is None and not event.unanswered and event.first and not event.withheld:
+    left = isinstance(event, LeftUnanswered)
+    if found is None and not left and event.first and not event.withheld:
         log.info("drive %s: %s: %s; the catalog's description is used", drive,
                  target.parameter, event.why, extra=ctx)  # fmt: skip
     if event.withheld and event.first:

@@ -22,6 +22,7 @@ from pkwbus.master.planning.plan import (
     DriveSpec,
     Finished,
     HealthChanged,
+    LeftUnanswered,
     Overrun,
     PollSpec,
     Send,
@@ -113,7 +114,7 @@ def test_a_drive_silent_on_descriptions_keeps_the_catalog_and_is_asked_again() -
     described = [e for e in fake.events if isinstance(e, Described) and e.drive == "d1"]
     assert len(described) == 1
     (done,) = described
-    assert done.description is None and done.unanswered
+    assert isinstance(done, LeftUnanswered) and done.description is None
     polls = [p for p in polls_of(fake, "d1") if isinstance(p.outcome, Answered)]
     assert polls, "its values flow with the catalog's description"
     assert all(

@@ -22,7 +22,15 @@ from hypothesis import strategies as st
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
 from pkwbus.master.planning.outcomes import Answered
-from pkwbus.master.planning.plan import Described, Finished, Idle, Overrun, PollSpec, Send
+from pkwbus.master.planning.plan import (
+    Described,
+    Finished,
+    Idle,
+    Overrun,
+    PollSpec,
+    Redecoded,
+    Send,
+)
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
@@ -481,7 +489,7 @@ def test_a_new_poll_of_a_described_parameter_is_decoded_as_described_at_once() -
     fake._collect()
     assert [p.fmt.scaling.factor for p in specs] == [Fraction(1, 1000)] * 2
     told = [e for e in fake.events[events:] if isinstance(e, Described)]
-    assert len(told) == 1 and told[0].reloaded and told[0].polls == (specs[1],)
+    assert len(told) == 1 and isinstance(told[0], Redecoded) and told[0].polls == (specs[1],)
     assert told[0].drive == "d1"
     at = fake.now
     while not [e for e in fake.events[events:] if isinstance(e, Finished) and e.work == specs[1]]:

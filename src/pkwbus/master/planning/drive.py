@@ -17,9 +17,14 @@ from pkwbus.master.planning.jobs import Job, Priority, ProbeJob
 from pkwbus.master.planning.outcomes import NotSent, Outcome, TimedOut
 from pkwbus.master.planning.plan import (
     Described,
+    DescribedAnew,
+    DescribedFromBook,
+    DescriptionSettled,
     DriveSpec,
     Event,
     Finished,
+    Forgotten,
+    LeftUnanswered,
     Overrun,
     PkwLengthTold,
     PollSpec,
@@ -293,8 +298,7 @@ class DrivePlan:
             self._hold_again()
             why = f"another drive now ({describer.identity})"
             forgotten = [
-                Described(self.name, t, None, (), why, identity=describer.identity,
-                          forgotten=True)
+                Forgotten(self.name, t, why, describer.identity)
                 for t in self.spec.describe
             ]  # fmt: skip
         return forgotten + self.settle(settled, now)
@@ -312,10 +316,10 @@ class DrivePlan:
         self.polls[:] = kept
         heapq.heapify(self.polls)
 
-    def settle(self, settled: list[Settled], now: float) -> list[Described]:
+    def settle(self, settled: list[Settled], now: float) -> list[DescriptionSettled]:
         """Parameters whose description settled: their polls, decoded as now described,
         go out from now on (those that waited are due now)."""
-        events = []
+        events: list[DescriptionSettled] = []
         targets = {t.pnu: t for t in self.spec.describe}
         for done in settled:
             polls = self.held.pop(done.pnu, [])
@@ -339,10 +343,11 @@ class DrivePlan:
                 poll.due, poll.fresh = now, True
                 self.push_poll(poll)
             specs = tuple(p.spec for p in polls if p not in withheld)
+            state = (LeftUnanswered if done.unanswered
+                     else DescribedFromBook if done.from_book else DescribedAnew)  # fmt: skip
             events.append(
-                Described(self.name, targets[done.pnu], done.description, specs, done.why,
-                          done.first, done.identity, done.from_book, done.unanswered,
-                          withheld=tuple(p.spec for p in withheld))
+                state(self.name, targets[done.pnu], done.description, specs, done.why,
+                      done.first, done.identity, tuple(p.spec for p in withheld))
             )  # fmt: skip
         if any(e.polls for e in events):
             heapq.heapify(self.polls)
@@ -370,7 +375,7 @@ class DrivePlan:
         self._hold_again()
         targets = [t for t in self.spec.describe if t.pnu in again]
         why = "back after it was away"
-        return [Described(self.name, t, None, (), why, forgotten=True) for t in targets]
+        return [Forgotten(self.name, t, why) for t in targets]
 
     def restart_polls(self, now: float) -> None:
         """Every poll due now: after the drive or its line was away, none of them is late."""

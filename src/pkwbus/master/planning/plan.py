@@ -25,14 +25,20 @@ __all__ = [
     "Action",
     "DescribeTarget",
     "Described",
+    "DescribedAnew",
+    "DescribedFromBook",
+    "DescriptionSettled",
     "DriveSpec",
     "Event",
     "Finished",
+    "Forgotten",
     "HealthChanged",
     "Idle",
+    "LeftUnanswered",
     "Overrun",
     "PkwLengthTold",
     "PollSpec",
+    "Redecoded",
     "Send",
     "StatusWord",
 ]
@@ -154,9 +160,12 @@ class PkwLengthTold:
 
 
 @dataclass(frozen=True, slots=True)
-class Described:
+class _Settled:
     """A parameter's description settled: what the drive said (None: nothing, ``why``), its
-    polls as they go out from now on, and its catalog entry (to cross-check)."""
+    polls as they go out from now on, and its catalog entry (``target``, to cross-check);
+    ``first``: the first time it settled (what is logged once); ``identity``: the drive's
+    model and software, when known; ``withheld``: polls that wait for a type the drive did
+    not describe (``PollSpec.described_only``)."""
 
     drive: str
     target: DescribeTarget
@@ -164,16 +173,50 @@ class Described:
     polls: tuple[PollSpec, ...]
     why: str = ""
     first: bool = True
-    identity: str | None = None  # the drive's model and software, when known
-    from_book: bool = False  # known from a drive of that identity, or an earlier run
-    unanswered: bool = False  # left unanswered: the catalog stands, asked again later
-    # The drive is another one now (its identity changed): described afresh, its values
-    # waiting for it (``description`` is None).
-    forgotten: bool = False
-    # Polls that wait for a type the drive did not describe (``PollSpec.described_only``).
+    identity: str | None = None
     withheld: tuple[PollSpec, ...] = ()
-    # New polls of a parameter described before (a reload): their decoding, told again.
-    reloaded: bool = False
 
+
+@dataclass(frozen=True, slots=True)
+class DescribedAnew(_Settled):
+    """Settled by the drive's answers now (or by its saying nothing of it: ``why``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DescribedFromBook(_Settled):
+    """Settled from the book: known from a drive of the same identity, or an earlier run."""
+
+
+@dataclass(frozen=True, slots=True)
+class LeftUnanswered(_Settled):
+    """The drive left it unanswered: the catalog stands (``description`` None), and it is
+    asked again later."""
+
+
+@dataclass(frozen=True, slots=True)
+class Forgotten:
+    """The drive is another one now (its identity changed), or it came back after it was
+    away: the parameter is described afresh, its values waiting for it."""
+
+    drive: str
+    target: DescribeTarget
+    why: str
+    identity: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Redecoded:
+    """New polls of a parameter described before (a reload): their decoding, told again."""
+
+    drive: str
+    target: DescribeTarget
+    description: DriveDescription | None
+    polls: tuple[PollSpec, ...]
+    identity: str | None = None
+
+
+DescriptionSettled = DescribedAnew | DescribedFromBook | LeftUnanswered
+# What became of a parameter's description: one of these states, never a set of flags.
+Described = DescribedAnew | DescribedFromBook | LeftUnanswered | Forgotten | Redecoded
 
 Event = Finished | Overrun | HealthChanged | StatusWord | PkwLengthTold | Described

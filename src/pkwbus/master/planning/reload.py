@@ -33,6 +33,7 @@ from pkwbus.master.planning.plan import (
     Event,
     Finished,
     PollSpec,
+    Redecoded,
     Send,
 )
 
@@ -177,7 +178,6 @@ def _described(d: DrivePlan, described: dict[int, list[PollSpec]]) -> list[Descr
     targets = {t.pnu: t for t in d.spec.describe}
     found = d.describer.described
     return [
-        Described(d.name, targets[pnu], found[pnu], tuple(specs), first=False,
-                  identity=d.describer.identity, from_book=True, reloaded=True)
+        Redecoded(d.name, targets[pnu], found[pnu], tuple(specs), d.describer.identity)
         for pnu, specs in described.items() if pnu in targets
     ]  # fmt: skip

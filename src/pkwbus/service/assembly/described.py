@@ -10,7 +10,7 @@ from dataclasses import replace
 
 from pkwbus.catalog.precedence import Disagreement, resolve
 from pkwbus.master.events import DescriptionChecked, Event
-from pkwbus.master.planning.plan import Described
+from pkwbus.master.planning.plan import Described, DescribedFromBook, Forgotten, Redecoded
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.metrics.devices import Mismatch, ParameterInfo, SnapshotCollector
 from pkwbus.service.runtime import DriveEntry
@@ -40,9 +40,10 @@ class DescriptionSink:
                     self(entry.line, event.event, list(event.found))
 
     def __call__(self, line: str, event: Described, found: list[Disagreement]) -> None:
-        if self._kept is not None and event.identity is not None and not event.from_book:
+        told_now = not isinstance(event, DescribedFromBook | Redecoded)
+        if self._kept is not None and event.identity is not None and told_now:
             self._kept.save()  # the drive described something its identity did not have
-        if event.drive not in self._entries or event.forgotten:
+        if event.drive not in self._entries or isinstance(event, Forgotten):
             return  # gone; or another drive now, described afresh
         mismatches = [
             Mismatch(line, event.drive, event.target.parameter, d.field, d.drive, d.catalog)
