@@ -318,7 +318,8 @@ def check_grafana() -> None:
     }
     if not paths & targets:
         problem(
-            f"{prov_dir}: provider path {paths} is not where compose mounts the dashboards {targets}"
+            f"{prov_dir}: provider path {paths} is not where compose mounts the dashboards"
+            f" {targets}"
         )
 
 
@@ -406,7 +407,8 @@ def check_kubernetes() -> None:
             problem(f"Service {name}: selector {sel} matches {len(pods)} Deployments, not 1")
         if not svc["spec"].get("publishNotReadyAddresses"):
             problem(
-                f"Service {name}: publishNotReadyAddresses must be true (scrape while /readyz is 503)"
+                f"Service {name}: publishNotReadyAddresses must be true"
+                " (scrape while /readyz is 503)"
             )
     for name, sm in by_kind.get("ServiceMonitor", {}).items():
         sel = sm["spec"]["selector"].get("matchLabels", {})
@@ -419,12 +421,14 @@ def check_kubernetes() -> None:
             for s in matched:
                 if ep["port"] not in {p.get("name") for p in s["spec"]["ports"]}:
                     problem(
-                        f"ServiceMonitor {name}: Service {s['metadata']['name']} has no port {ep['port']}"
+                        f"ServiceMonitor {name}: Service {s['metadata']['name']}"
+                        f" has no port {ep['port']}"
                     )
         job_label = sm["spec"].get("jobLabel")
         if any(s["metadata"]["labels"].get(job_label) != "pkwbus" for s in matched):
             problem(
-                f"ServiceMonitor {name}: job label would not be 'pkwbus' (rules select job=\"pkwbus\")"
+                f"ServiceMonitor {name}: job label would not be 'pkwbus'"
+                ' (rules select job="pkwbus")'
             )
     print(f"  {len(docs)} Kubernetes objects, {len(deployments)} Deployments wired up")
 
