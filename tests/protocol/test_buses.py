@@ -63,3 +63,12 @@ def test_address_lists() -> None:
     ):
         with pytest.raises(ValueError, match=words):
             limits.parse_addresses(bad, 0, 126)
+
+
+def test_a_masters_pkw_length_may_also_be_learned() -> None:
+    assert buses.pkw_setting("auto") == "auto"
+    assert [buses.pkw_setting(n) for n in (0, 3, 4, 127, "variable")] == [0, 3, 4, None, None]
+    assert buses.pkw_setting("4", text=True) == 4
+    for bad in (5, "Auto", "4", None):
+        with pytest.raises(ValueError, match=r"is not a PKW length: use auto, 0, 3, 4 or variable"):
+            buses.pkw_setting(bad)

@@ -15,6 +15,7 @@ from pkwbus.protocol.pkw.descriptions import (
     DescriptionForm,
     DriveDescription,
     changed_from_factory,
+    elements_to_read,
     factory_raw,
     form_of,
     read_elements,
@@ -110,7 +111,9 @@ def test_fc_int16_limit_in_the_fixed_4_word_block() -> None:
     assert said.low_raw == -100
 
 
-@pytest.mark.parametrize(("word", "unit"), [(0x0008, "J"), (0x4B08, "J"), (0x0011, "K")])
+@pytest.mark.parametrize(
+    ("word", "unit"), [(0x0008, "J"), (0x4B08, "J"), (0x0011, "K"), (0x6411, "°C")]
+)
 def test_fc_unit_index_table(word: int, unit: str) -> None:
     """FC 300 Design Guide, "Read parameter description", the unit index table: energy
     (8) is J at conversion 0 and kWh at 75 (3 600 000 J); temperature (17) is K at 0 and
@@ -314,3 +317,26 @@ def test_profidrive_identifier_bit_12_tells_a_change_from_the_factory_setting(
     assert changed_from_factory(element(1, identifier)) is changed
     # The rest of the identifier reads as before: the type and read-only bits.
     assert read(PROFIDRIVE_FORM, e1=element(1, identifier)).type_code == identifier & 0xFF
+
+
+# ------------------------------------------------------- what a master reads, and nothing
+
+
+def test_a_master_reads_the_limits_only_of_what_it_may_write() -> None:
+    """Elements 1 type, 2 size, 4 scaling, 6 name; 7 and 8 the limits (both forms)."""
+    assert elements_to_read(limits=False) == (1, 2, 4, 6)
+    assert elements_to_read(limits=True) == (1, 2, 4, 6, 7, 8)
+
+
+def test_a_description_of_nothing_says_nothing() -> None:
+    said = read_elements(PROFIDRIVE_FORM, {})
+    assert said.empty and said == DriveDescription()
+    assert (said.vtype, said.type_name, said.scaling) == (None, "", None)
+    assert (said.minimum, said.maximum) == (None, None)
+    assert not read(PROFIDRIVE_FORM, e1=element(1, 6)).empty
+
+
+def test_a_float_limit_in_one_word_cannot_be_read() -> None:
+    """A FloatingPoint32 limit is four bytes: a one-word answer does not hold it."""
+    said = read(FC_FORM, e1=element(1, 8, dialect=FC), e7=element(7, 0x4248, WORD, FC))
+    assert said.vtype is ValueType.F32 and said.low_raw is None

@@ -534,3 +534,48 @@ def test_encode_response_text_and_short_blocks() -> None:
     big = pkw.ValueResponse(2, 21, 0, 0x10000, pkw.Width.DWORD)
     with pytest.raises(LocalProtocolError):
         pkw.encode_response(big, USS, IndLayout.USS, 3)
+
+
+def test_every_rejection_a_dialect_can_carry() -> None:
+    """The fault numbers of the dialect's table, and "no change rights" (no number)
+    where the dialect has that answer (USS, PROFIdrive, PCV, Hitachi: AK 8; FC has none)."""
+    uss = pkw.rejections(USS)
+    assert (0, "illegal parameter number") in uss and (2, "limit exceeded") in uss
+    assert (None, pkw.NO_CHANGE_RIGHTS) in uss
+    assert len(uss) == len(USS.faults) + 1
+    fc = pkw.rejections(FC)
+    assert all(number is not None for number, _ in fc) and len(fc) == len(FC.faults)
+    for d in (PROFIDRIVE, DANFOSS_PCV, HITACHI_SJPB):
+        assert (None, pkw.NO_CHANGE_RIGHTS) in pkw.rejections(d)
+
+
+def test_ak_0_in_a_variable_block_is_pke_and_ind_alone() -> None:
+    """USS specification, part C, 4.1.2: AK 0 carries no PWE with a variable length; a
+    fixed block is filled with zeros."""
+    idle = pkw.NoResponse(0, 0, 0)
+    assert pkw.encode_response(idle, USS, IndLayout.USS, None) == bytes(4)
+    assert pkw.encode_response(idle, USS, IndLayout.USS, 4) == bytes(8)
+    assert pkw.encode_response(idle, USS, IndLayout.USS, 3) == bytes(6)
+
+
+def test_judge_tells_an_answer_a_wait_and_a_change_acknowledged_with_another_value() -> None:
+    """SINAMICS G120 CU240B-2/CU240E-2 Operating Instructions, 6.3: the answer to a change
+    echoes the value in PWE. An acknowledgement (AK 2) of the parameter with another value
+    means the drive took something else: a mismatch, never "not yet" (a repeat would write
+    it again)."""
+    fifty, forty = 0x42480000, 0x42200000  # 50.0 and 40.0 as f32
+    change = pkw.write(USS, 1082, fifty, pkw.Width.DWORD)  # AK 3
+    echo = pkw.ValueResponse(2, 1082, 0, fifty, pkw.Width.DWORD)
+    assert pkw.judge(change, echo, USS) is pkw.Verdict.ANSWER
+    other = pkw.ValueResponse(2, 1082, 0, forty, pkw.Width.DWORD)
+    assert pkw.judge(change, other, USS) is pkw.Verdict.MISMATCH
+    refused = pkw.Rejection(7, 1082, 0, 2, "Lower or upper value limit exceeded", "limit")
+    assert pkw.judge(change, refused, USS) is pkw.Verdict.ANSWER
+    for not_yet in (
+        pkw.ValueResponse(2, 1083, 0, fifty, pkw.Width.DWORD),  # another parameter's
+        pkw.NoResponse(0, 0, 0),  # AK 0
+    ):
+        assert pkw.judge(change, not_yet, USS) is pkw.Verdict.NOT_YET
+    # a read has no value of its own to compare: any value of its parameter answers it
+    read = pkw.read(USS, 1082)
+    assert pkw.judge(read, other, USS) is pkw.Verdict.ANSWER

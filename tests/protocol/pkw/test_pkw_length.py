@@ -20,7 +20,7 @@ import pytest
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command, IndLayout, dialect
-from pkwbus.protocol.pkw.length import AUTO, VARIABLE, Gate, PkwLength, told
+from pkwbus.protocol.pkw.length import AUTO, VARIABLE, Gate, PkwLength, shown, told
 from pkwbus.protocol.serial.telegram import BlockShape, bcc, frame
 
 USS = dialect("uss")
@@ -207,3 +207,30 @@ def test_a_learned_target_splits_answers_by_their_length() -> None:
     # a text checks and shows as the variable block it needs, before the length is known
     text = target.telegram(pkw.write_text(USS, 199, b"FAN-12"))
     assert text[3:13] == words("F0C7 0000") + b"FAN-12"
+
+
+def test_a_length_as_people_configure_it() -> None:
+    assert [shown(w) for w in (AUTO, VARIABLE, 3, 4, 0)] == [
+        "auto", "127 (variable)", "3", "4", "0",
+    ]  # fmt: skip
+
+
+def test_a_rejection_with_a_fault_number_tells_a_fixed_4_drive() -> None:
+    """A variable drive answers a fault number in one PWE word (MICROMASTER 420 Reference
+    Manual, 3.3.5: 743A 0000 0005, 3 words); in 4 words to 4 words it is a fixed-4
+    drive. "No change rights" carries no number: it tells nothing."""
+    fault = pkw.decode_response(words("743A 0000 0000 0005"), USS, LAYOUT)
+    assert isinstance(fault, pkw.Rejection) and fault.fault == 5
+    assert told(4, 4, fault) == 4
+    no_rights = pkw.decode_response(words("843A 0000 0000 0000"), USS, LAYOUT)
+    assert isinstance(no_rights, pkw.Rejection) and no_rights.fault is None
+    assert told(4, 4, no_rights) == "?"
+
+
+def test_an_answer_that_fits_both_tells_a_configured_length_nothing() -> None:
+    """A double word in 4 words to 4 words fits a variable drive as well as a fixed-4
+    one: for a drive configured variable it is no conflict, and no agreement either."""
+    length = PkwLength(VARIABLE)
+    dword = pkw.ValueResponse(2, 1082, 0, 0x42480000, pkw.Width.DWORD)
+    assert not length.observe(4, 4, dword)
+    assert not length.in_conflict and length.words is VARIABLE

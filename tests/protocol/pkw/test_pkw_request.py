@@ -107,3 +107,24 @@ def test_response_id(name: str, reply: Reply, ak: int) -> None:
 def test_response_id_for_a_reply_the_dialect_lacks() -> None:
     with pytest.raises(LocalProtocolError):
         pkw.response_id(HITACHI_SJPB, Reply.TEXT)
+
+
+def test_a_parameter_is_read_by_its_value_or_its_text() -> None:
+    """A text parameter is read with AK 15 (USS: "request text"), any other by its value."""
+    assert pkw.read_parameter(USS, 1082, None, text=False) == pkw.read(USS, 1082)
+    assert pkw.read_parameter(USS, 947, 3, text=False) == pkw.read(USS, 947, 3)
+    text = pkw.read_parameter(USS, 199, None, text=True)
+    assert text == pkw.read_text(USS, 199, 0)
+    assert (text.ak, text.command, text.subindex) == (15, Command.TEXT, 0)
+    assert pkw.read_parameter(USS, 199, 2, text=True).subindex == 2
+
+
+def test_a_variable_read_without_pwe_is_a_read() -> None:
+    """With a variable length a read needs no PWE: PKE and IND alone ask for the value
+    (the follower ignores PWE when a value is requested, MICROMASTER 420 Reference
+    Manual, 3.3.5)."""
+    req = pkw.decode_request(bytes.fromhex("143A 0000"), USS, IndLayout.USS, None)
+    assert req == pkw.PkwRequest(1, Command.READ, 1082, 0, 0)
+    # a change needs its value: without PWE it is the peer's error
+    with pytest.raises(RemoteProtocolError):
+        pkw.decode_request(bytes.fromhex("243A 0000"), USS, IndLayout.USS, None)

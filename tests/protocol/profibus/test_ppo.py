@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from pkwbus.protocol import pkw, pzd
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
-from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout
+from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout, dialect
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, ppo_type
@@ -230,3 +230,18 @@ def test_answers_that_are_no_pkw_answers_end_the_wait_for_ak_0(dialect: str) -> 
     assert pkw_of(slot.outputs(), d).pnu == 5
     update = slot.feed(b"\xff" * PPO1.length)
     assert update.garbled is not None and update.garbled.request is request
+
+
+def test_a_dialect_of_another_bus_and_a_text_do_not_go_into_a_ppo() -> None:
+    """FC and USS are no PROFIBUS dialects; a text needs a variable PKW length, and a PPO's
+    parameter channel is 4 fixed words."""
+    uss = dialect("uss")
+    with pytest.raises(LocalProtocolError, match="dialect 'uss' is not used over PROFIBUS"):
+        ppo.encode_ppo_write(PPO1, uss)
+    with pytest.raises(LocalProtocolError, match="dialect 'fc' is not used over PROFIBUS"):
+        PkwSlot(PPO1, dialect("fc"))
+    text = pkw.write_text(PROFIDRIVE, 199, b"FAN-12")
+    with pytest.raises(LocalProtocolError, match="a text write does not fit the 4 PKW words"):
+        ppo.encode_ppo_write(PPO1, PROFIDRIVE, text)
+    with pytest.raises(LocalProtocolError, match="a text write does not fit the 4 PKW words"):
+        PkwSlot(PPO1, PROFIDRIVE).submit(text)

@@ -342,3 +342,69 @@ def test_a_refusal_names_values_that_are_taken(
     else:
         signed = raw - (1 << 32) if raw >> 31 else raw
         assert signed * scaling.factor == Fraction(number)
+
+
+# ------------------------------------------------------------- what is no value
+
+
+def test_a_text_too_long_to_be_a_number_is_refused_unread() -> None:
+    with pytest.raises(
+        LocalProtocolError, match=r"^1{20}\.\.\. is not a parameter value \(too long\)"
+    ):
+        encode_exact("1" * 101, ValueType.U32)
+
+
+@pytest.mark.parametrize("number", [math.inf, -math.inf, math.nan])
+def test_an_infinite_float_is_no_f32_value(number: float) -> None:
+    with pytest.raises(LocalProtocolError, match="is not a finite number"):
+        encode_value(number, ValueType.F32)
+
+
+def test_a_value_whose_neighbouring_steps_are_all_outside_the_limits() -> None:
+    message = _refusal("0.5", ValueType.U16, minimum=0.2, maximum=0.8)
+    assert message == "0.5 is not a multiple of 1: no value near it is within the limits"
+
+
+@pytest.mark.parametrize("value", ["1e39", "-3.5e38"])
+def test_a_value_beyond_the_largest_f32_is_refused(value: str) -> None:
+    # the largest single is 3.4028235e38 (taken, see test_f32_takes_what_it_holds)
+    assert _refusal(value, ValueType.F32) == f"{value} is outside the f32 range"
+
+
+def test_no_subnormal_is_offered_as_the_nearest_f32() -> None:
+    # Just below the smallest normal single (1.1754944e-38): its lower neighbour is a
+    # subnormal, no exact value, so only the normal one above is named.
+    message = _refusal("1.17549435e-38", ValueType.F32)
+    assert message == "1.17549435e-38 has no exact f32 value: nearest 1.1754944e-38"
+
+
+@pytest.mark.parametrize(
+    ("value", "nearest"),
+    [
+        # 1 + 2^-24 (the midpoint of the singles 1 and 1.0000001) + 1e-28: a double
+        # rounds it onto the midpoint; it is nearer 1.0000001 and exactly neither.
+        ("1.0000000596046447753906250001", "nearest 1 or 1.0000001"),
+        ("0.9999999701976776123046875001", "nearest 0.99999994 or 1"),
+    ],
+)
+def test_a_value_a_double_puts_between_two_singles(value: str, nearest: str) -> None:
+    assert _refusal(value, ValueType.F32) == f"{value} has no exact f32 value: {nearest}"
+
+
+def test_the_whole_number_types_are_the_ones_with_bounds() -> None:
+    assert [t for t in ValueType if t.whole] == [
+        ValueType.U16, ValueType.I16, ValueType.U32, ValueType.I32,
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("value", "vtype", "message"),
+    [
+        ("-1.5", ValueType.U16, "-1.5 is raw -2, outside the u16 range 0..65535"),
+        ("32768.5", ValueType.I16, "32768.5 is raw 32769, outside the i16 range -32768..32767"),
+    ],
+)
+def test_a_value_off_the_step_and_outside_the_type_says_the_range(
+    value: str, vtype: ValueType, message: str
+) -> None:
+    assert _refusal(value, vtype) == message
