@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.service.http.views.drives import TOKEN_HEADER
+from pkwbus.service.http.views.drives import TOKEN_HEADER, drive_view
 from tests.service.http.conftest import AUTH, fc_drives, service
 
 # Polled once at the start, then not for a minute: the drives keep still while a test looks.
@@ -148,3 +148,13 @@ async def test_one_drives_trends(tmp_path: Path) -> None:
         assert every["fan2"], "its values have points"
         r = await svc.client.get("/api/v1/trends", params={"drive": "nobody"})
         assert r.status_code == 404 and r.json()["error"]["kind"] == "unknown_drive"
+
+
+async def test_the_kept_json_is_the_drives_view(tmp_path: Path) -> None:
+    """What the answer joins from its kept pieces says what the drive's view says."""
+    async with service(tmp_path, fc=fc_drives(polls=QUIET)) as svc:
+        for _ in range(2):  # made, then (partly) kept
+            answer = (await svc.client.get("/api/v1/drives")).json()
+            for got in answer:
+                view = drive_view(svc.runtime, got["name"]).model_dump(mode="json")
+                assert got == view

@@ -13,11 +13,15 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
+
+from pydantic_core import to_json
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.planning.plan import PollSpec
+from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReading
 from pkwbus.service.http.parameter_checks import ApiError
@@ -79,35 +83,54 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
 def readings_of(runtime: Runtime, entry: DriveEntry) -> list[ParameterReading]:
     """The drive's polled values, in the order of its polls (the same on every drive of a
     catalog): each reading of it looked at once."""
+    return [
+        ParameterReading.model_construct(**_reading_fields(runtime, *polled))
+        for polled in _polled(runtime, entry)
+    ]
+
+
+Polled = tuple[PollSpec, Reading, ParameterDescription, str, str]
+
+
+def _polled(runtime: Runtime, entry: DriveEntry) -> Iterator[Polled]:
+    """Each polled value of the drive that landed, in the order of its polls: its poll, its
+    reading, how it is decoded now, where that came from, the drive's name."""
     name = entry.name
     readings = runtime.snapshot.readings
     decoding = runtime.snapshot.decoding.get(name)
     formats = decoding.formats if decoding is not None else {}
     sources = decoding.sources if decoding is not None else {}
-    board = runtime.alarms
-    values = []
     for poll in entry.polls:
         parameter, index = poll.parameter, poll.index
         reading = readings.get((name, parameter, index))
-        if reading is None:
-            continue
-        fmt = formats.get((parameter, index), _NO_FORMAT)
-        value = reading.value
-        words = board.said((name, parameter, index), value) if board is not None else ""
-        shown = words or readable(value, fmt)
-        counts_in = time_unit(fmt)  # a duration names its own unit ("13 h")
-        named = bool(counts_in) and not words and not isinstance(value, str)
-        named = named and duration(float(value), counts_in, fmt.scaling.factor) is not None
-        values.append(
-            ParameterReading(
-                parameter=parameter, index=index, value=value, raw=reading.raw,
-                unit=fmt.unit, timestamp=reading.timestamp, interval=poll.every,
-                name=fmt.name, shown=shown, shown_unit="" if named else fmt.unit,
-                option=fmt.option(value),
-                source=sources.get(parameter) or entry.sources.get(parameter, "none"),
-            )
-        )  # fmt: skip
-    return values
+        if reading is not None:
+            fmt = formats.get((parameter, index), _NO_FORMAT)
+            source = sources.get(parameter) or entry.sources.get(parameter, "none")
+            yield poll, reading, fmt, source, name
+
+
+def _reading_fields(
+    runtime: Runtime,
+    poll: PollSpec,
+    reading: Reading,
+    fmt: ParameterDescription,
+    source: str,
+    name: str,
+) -> dict[str, Any]:
+    """A ParameterReading's fields."""
+    parameter, index, value = poll.parameter, poll.index, reading.value
+    board = runtime.alarms
+    words = board.said((name, parameter, index), value) if board is not None else ""
+    shown = words or readable(value, fmt)
+    counts_in = time_unit(fmt)  # a duration names its own unit ("13 h")
+    named = bool(counts_in) and not words and not isinstance(value, str)
+    named = named and duration(float(value), counts_in, fmt.scaling.factor) is not None
+    return {
+        "parameter": parameter, "index": index, "value": value, "raw": reading.raw,
+        "unit": fmt.unit, "timestamp": reading.timestamp, "interval": poll.every,
+        "name": fmt.name, "shown": shown, "shown_unit": "" if named else fmt.unit,
+        "option": fmt.option(value), "source": source,
+    }  # fmt: skip
 
 
 def overview_row(runtime: Runtime, name: str, now: float) -> DriveOverview:
@@ -141,6 +164,9 @@ class DriveViews:
         # drive -> (its change number, its entry, swept, the JSON of its view)
         self._kept: dict[str, tuple[int, DriveEntry, bool, bytes]] = {}
         self.made = 0  # views made (not taken from what was kept): for tests and benches
+        # Each value's JSON piece: (its reading, its decoding, the entry, its source, piece).
+        self._values: dict[ReadingKey, tuple[Reading, ParameterDescription, DriveEntry, str,
+                                             bytes]] = {}  # fmt: skip
         self._places: dict[str, int] = {}
 
     def select(self, chosen: Selection) -> tuple[list[str], str]:
@@ -210,10 +236,43 @@ class DriveViews:
         kept = self._kept.get(name)
         if kept is not None and kept[0] == number and kept[1] is entry and kept[2] == swept:
             return kept[3]
-        made = _VIEW.to_json(drive_view(runtime, name))
+        made = self._render(name, entry, swept)
         self.made += 1
         self._kept[name] = (number, entry, swept, made)
         return made
+
+    def _render(self, name: str, entry: DriveEntry, swept: bool) -> bytes:
+        """The JSON of the drive's view, as :func:`drive_view` gives it, each value's piece
+        kept until its reading, its decoding or the drive's entry changes."""
+        runtime, snap, kept = self.runtime, self.runtime.snapshot, self._values
+        pieces = []
+        for polled in _polled(runtime, entry):
+            poll, reading, fmt, source, _ = polled
+            key = (name, poll.parameter, poll.index)
+            was = kept.get(key)
+            if was is not None and was[:3] == (reading, fmt, entry) and was[3] == source:
+                pieces.append(was[4])
+                continue
+            piece = to_json(_reading_fields(runtime, *polled), inf_nan_mode="null")
+            kept[key] = (reading, fmt, entry, source, piece)
+            pieces.append(piece)
+        state, counts = snap.drives.get(name), snap.counts.get(name)
+        word = state.status_word if state else None
+        head = {
+            "name": name, "line": entry.line, "protocol": entry.target.protocol.value,
+            "address": entry.target.address, "dialect": entry.target.dialect.name,
+            "up": state.up if state else True, "status_word": word,
+            "status": status_bits(word, entry.target.profile) if word is not None else {},
+        }  # fmt: skip
+        tail = {
+            "faults": counts.faults if counts is not None else 0,
+            "telegram_errors": counts.errors if counts is not None else 0,
+            "alarms": alarm_views(runtime, name), "writable": writable_views(runtime, name),
+            "dp": slave_view(runtime, name), "maintenance": maintenance_view(runtime, name),
+            "settings": swept,
+        }  # fmt: skip
+        values = b'"values":[' + b",".join(pieces) + b"],"
+        return to_json(head)[:-1] + b"," + values + to_json(tail, inf_nan_mode="null")[1:]
 
     def _drop_gone(self) -> None:
         if len(self._kept) > len(self.runtime.drives):
