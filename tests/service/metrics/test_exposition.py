@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from prometheus_client import generate_latest
+from prometheus_client import metrics as client_metrics
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.utils import floatToGoString
 
@@ -110,11 +111,17 @@ def _samples(text: str) -> list[tuple[str, tuple[tuple[str, str], ...], str]]:
     ]
 
 
+@pytest.mark.parametrize("created", [False, True])
 @pytest.mark.parametrize("landed", [False, True])
-def test_the_text_is_generate_latest_of_the_same_registry(landed: bool) -> None:
+def test_the_text_is_generate_latest_of_the_same_registry(
+    landed: bool, created: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """Sample by sample (names, labels, values) and byte for byte, after each change:
     a value, a timestamp, a drive's state, a counter, a new series; whether the lines
-    were made when the values landed or at the scrape."""
+    were made when the values landed or at the scrape; with the ``_created`` samples of
+    prometheus_client's counters and histograms (generate_latest renders those) or
+    without, as the service runs (their text made from their values)."""
+    monkeypatch.setattr(client_metrics, "_use_created", created)
     plant = Plant(landed=landed)
     for step in range(4):
         plant.poll(1_700_000_000.25 + step)

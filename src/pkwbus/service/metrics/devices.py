@@ -1,22 +1,22 @@
 """The device-value families: parameter values, drive and line state, from the snapshot.
 
-Built from a copy of the snapshot at each scrape, so a scrape never causes
-bus traffic and values that disappear also disappear from the output.
+Read from the snapshot as it is at each scrape, so a scrape never causes bus
+traffic and values that disappear also disappear from the output.
 ``pkwbus_parameter_info`` changes only when a drive's description of a
 parameter settles (:meth:`SnapshotCollector.described`): its text is made
 then, with ``pkwbus_catalog_mismatch``, the fields on which a drive
-contradicts its catalog. A value's lines are made when its reading lands in the snapshot
-(:meth:`SnapshotCollector.landed`, called by the line's metrics), so that a
-scrape only joins them; a drive's lines are made again only when its state
-changed (see :mod:`pkwbus.service.metrics.exposition`).
+contradicts its catalog. A value's lines are made when its reading lands in the
+snapshot (:meth:`SnapshotCollector.landed`, an output of the lines' streams), a
+drive's when the scrape finds a new state whose lines differ; a scrape compares
+what the snapshot holds with what the lines were made of, by identity, makes only
+what differs, and joins again only the pieces that changed (:mod:`.rows`).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from itertools import islice
+from functools import lru_cache
 
 from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
@@ -24,7 +24,9 @@ from prometheus_client.registry import Collector
 from pkwbus.master.events import Event, ValueLanded
 from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
 from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
-from pkwbus.service.metrics.exposition import CHUNK, format_value, head, header
+from pkwbus.service.metrics.exposition import CHUNK
+from pkwbus.service.metrics.rows import Made, Rows
+from pkwbus.service.metrics.textformat import format_value, head, header, same_number
 
 __all__ = ["MISMATCH_LABELS", "DriveInfo", "Mismatch", "ParameterInfo", "SnapshotCollector"]
 
@@ -51,6 +53,9 @@ MAV = (
     "Last main actual value (second process data word), percent of nominal",
 )
 LINE_UP = ("pkwbus_line_up", "1 while the port is open")
+_HEADERS = {
+    f: header(*f, "gauge").encode() for f in (VALUE, STAMP, DRIVE_UP, WORD, BIT, MAV, LINE_UP)
+}
 
 
 @dataclass(frozen=True)
@@ -98,41 +103,14 @@ class DriveInfo:
     profile: Profile
 
 
-_DriveKey = tuple[str, bool, int | None, int | None]  # line, up, status word, main actual
-
-
-@dataclass(frozen=True, slots=True)
-class _DriveLines:
-    """A drive's rendered lines: up, status word, status bits, main actual value."""
-
-    up: str
-    word: str = ""
-    bits: tuple[str, ...] = ()
-    mav: str = ""
-
-
-def _same_number(old: float | str, value: float) -> bool:
-    """Whether ``old`` prints as ``value`` does: a number equal to it and of the same
-    sign (-0.0 is printed as such, though it equals 0.0); never a text."""
-    if isinstance(old, str):
-        return False
-    number = float(old)
-    return number == value and math.copysign(1.0, number) == math.copysign(1.0, value)
-
-
 @dataclass(frozen=True, slots=True)
 class _DriveHeads:
     """The text before the value of each of a drive's lines, made once."""
 
-    up: str
+    up: tuple[bytes, bytes]  # the whole line: down, up
     word: str
-    bits: tuple[tuple[int, str], ...]  # (bit number, head) of each named bit
+    bits: tuple[tuple[int, bytes, bytes], ...]  # each named bit: its number, lines at 0, 1
     mav: str
-
-
-_Rendered = tuple[Reading, str, str]  # the reading, its value line, its timestamp line
-# Drives whose lines are brought up to date between two turns of the event loop.
-DRIVES_A_TURN = 100
 
 
 class SnapshotCollector(Collector):
@@ -150,12 +128,14 @@ class SnapshotCollector(Collector):
         self._mismatches: dict[tuple[str, str, str], Mismatch] = {}
         self._line_of = {p.drive: p.line for p in self._parameters.values()}
         self._line_of.update({name: d.line for name, d in self._drives.items()})
-        self._info_text: str | None = None  # made at the next scrape after a change
+        self._info_text: bytes | None = None  # made at the next scrape after a change
         self._heads: dict[ReadingKey, tuple[str, str]] = {}
         for p in self._parameters.values():
             self._head((p.drive, p.parameter, p.index))
-        self._readings: dict[ReadingKey, _Rendered] = {}
-        self._drive_lines: dict[str, tuple[_DriveKey, _DriveLines]] = {}
+        # Each value's line and timestamp line; each drive's up, status word, status bits
+        # and main actual value lines: in the snapshot's order, made as they land.
+        self._values: Rows[ReadingKey, Reading] = Rows(2, self._reading, CHUNK)
+        self._drive_rows: Rows[str, DriveState] = Rows(4, self._drive, CHUNK)
         self._drive_heads = {name: self._heads_of(name, d.line) for name, d in self._drives.items()}
 
     def add_drive(self, name: str, drive: DriveInfo, parameters: Iterable[ParameterInfo]) -> None:
@@ -163,7 +143,7 @@ class SnapshotCollector(Collector):
         self._drives[name] = drive
         self._line_of[name] = drive.line
         self._drive_heads[name] = self._heads_of(name, drive.line)
-        self._drive_lines.pop(name, None)
+        self._drive_rows.drop(name)
         self.set_parameters(name, parameters)
 
     def set_parameters(self, drive: str, parameters: Iterable[ParameterInfo]) -> None:
@@ -173,7 +153,7 @@ class SnapshotCollector(Collector):
         for key in [k for k in self._parameters if k[0] == drive and k not in given]:
             del self._parameters[key]
             self._heads.pop(key, None)
-            self._readings.pop(key, None)
+            self._values.drop(key)
         for key, info in given.items():
             if key not in self._parameters:
                 self._parameters[key] = info
@@ -183,8 +163,9 @@ class SnapshotCollector(Collector):
     def forget_drive(self, drive: str) -> None:
         """Every series of ``drive`` (gone by a reload)."""
         self.set_parameters(drive, ())
-        for table in (self._drives, self._line_of, self._drive_heads, self._drive_lines):
+        for table in (self._drives, self._line_of, self._drive_heads):
             table.pop(drive, None)
+        self._drive_rows.drop(drive)
         for key in [k for k in self._mismatches if k[0] == drive]:
             del self._mismatches[key]
 
@@ -200,7 +181,7 @@ class SnapshotCollector(Collector):
             self._mismatches[(m.drive, m.parameter, m.field)] = m
         self._info_text = None  # a start-up settles thousands: rendered once, when scraped
 
-    def _render_info(self) -> str:
+    def _render_info(self) -> bytes:
         info = header(*INFO, "gauge") + "".join(
             f"{head(INFO[0], dict(zip(_INFO, p.labels(), strict=True)))}1.0\n"
             for p in self._parameters.values()
@@ -212,7 +193,7 @@ class SnapshotCollector(Collector):
                 f"{head(MISMATCH[0], dict(zip(MISMATCH_LABELS, m.labels(), strict=True)))}1.0\n"
                 for m in self._mismatches.values()
             )
-        )
+        ).encode()
 
     def _line(self, drive: str) -> str:
         info = self._drives.get(drive)
@@ -269,59 +250,39 @@ class SnapshotCollector(Collector):
             line_up.add_metric([line_name], 1.0 if is_up else 0.0)
         yield line_up
 
-    # -- exposition(): the same text, from cached lines ---------------------------
+    # -- exposition(): the same text, from the lines made as the values landed -------
 
-    def exposition(self) -> Iterator[str]:
+    def exposition(self) -> Iterator[bytes]:
         """The text of the families, in pieces of at most ``CHUNK`` lines."""
         snap = self._snapshot
-        # Copies (of the dicts, not their entries): the loop runs between pieces.
-        readings = dict(snap.readings)
-        drives = dict(snap.drives)
+        # The lines as the snapshot is now (a copy of each column: the loop runs between
+        # pieces); only a value or drive that changed unannounced is made here.
+        values, stamps = self._values.sync(snap.readings)
+        ups, words, bits, mavs = self._drive_rows.sync(snap.drives)
         lines = dict(snap.lines)
-        cache = self._readings
-        stamps: list[str] = []
-        yield header(*VALUE, "gauge")
-        entries = iter(readings.items())
-        for _ in range(0, len(readings), CHUNK):
-            values: list[str] = []
-            for key, reading in islice(entries, CHUNK):
-                rendered = cache.get(key)
-                if rendered is None or rendered[0] is not reading:
-                    rendered = self._reading(key, reading)
-                values.append(rendered[1])
-                stamps.append(rendered[2])
-            yield "".join(values)
-        yield header(*STAMP, "gauge")
-        for start in range(0, len(stamps), CHUNK):
-            yield "".join(stamps[start : start + CHUNK])
+        yield _HEADERS[VALUE]
+        yield from filter(None, values)  # no empty piece: that asks render() for a turn
+        yield _HEADERS[STAMP]
+        yield from filter(None, stamps)
         if self._info_text is None:
             self._info_text = self._render_info()
         yield self._info_text
-        ups: list[str] = []
-        words: list[str] = []
-        bits: list[str] = []
-        mavs: list[str] = []
-        for count, (drive, state) in enumerate(drives.items(), 1):
-            drive_lines = self._drive(drive, state)
-            ups.append(drive_lines.up)
-            words.append(drive_lines.word)
-            bits.extend(drive_lines.bits)
-            mavs.append(drive_lines.mav)
-            if count % DRIVES_A_TURN == 0:
-                yield ""  # a turn of the event loop (see exposition.render)
-        yield header(*DRIVE_UP, "gauge") + "".join(ups)
-        yield header(*WORD, "gauge") + "".join(words)
-        yield header(*BIT, "gauge")
-        yield "".join(bits)
-        yield header(*MAV, "gauge") + "".join(mavs)
-        yield header(*LINE_UP, "gauge") + "".join(
-            f"{head(LINE_UP[0], {'line': name})}{'1.0' if is_up else '0.0'}\n"
-            for name, is_up in lines.items()
+        yield _HEADERS[DRIVE_UP] + b"".join(ups)
+        yield _HEADERS[WORD] + b"".join(words)
+        yield _HEADERS[BIT]
+        yield from filter(None, bits)
+        yield _HEADERS[MAV] + b"".join(mavs)
+        yield (
+            _HEADERS[LINE_UP]
+            + "".join(
+                f"{head(LINE_UP[0], {'line': name})}{'1.0' if is_up else '0.0'}\n"
+                for name, is_up in lines.items()
+            ).encode()
         )
 
     def landed(self, key: ReadingKey, reading: Reading) -> None:
         """A new reading: its lines are made now, when its poll lands, not at the scrape."""
-        self._reading(key, reading)
+        self._values.update(key, reading)
 
     def on_events(self, events: Sequence[Event]) -> None:
         """Each value that landed (an output of the lines' streams)."""
@@ -329,20 +290,20 @@ class SnapshotCollector(Collector):
             if type(event) is ValueLanded:
                 self.landed(event.key, event.reading)
 
-    def _reading(self, key: ReadingKey, reading: Reading) -> _Rendered:
-        rendered = self._readings.get(key)
-        if isinstance(reading.value, str):  # text values appear in the API, not as numbers
-            rendered = self._readings[key] = (reading, "", "")
-            return rendered
+    def _reading(
+        self, key: ReadingKey, reading: Reading, previous: tuple[Reading, Made] | None
+    ) -> Made:
+        """A reading's value line and timestamp line (none for a text: in the API, not
+        as numbers); the value line of the previous reading when it printed the same."""
+        if isinstance(reading.value, str):
+            return (b"", b"")
         heads = self._heads.get(key) or self._head(key)
-        value = float(reading.value)  # text values are skipped before
-        if rendered is not None and _same_number(rendered[0].value, value):
-            value_line = rendered[1]
+        value = float(reading.value)
+        if previous is not None and previous[1][0] and same_number(previous[0].value, value):
+            value_line = previous[1][0]
         else:
-            value_line = f"{heads[0]}{format_value(value)}\n"
-        rendered = (reading, value_line, f"{heads[1]}{format_value(reading.timestamp)}\n")
-        self._readings[key] = rendered
-        return rendered
+            value_line = f"{heads[0]}{format_value(value)}\n".encode()
+        return (value_line, f"{heads[1]}{format_value(reading.timestamp)}\n".encode())
 
     def _head(self, key: ReadingKey) -> tuple[str, str]:
         drive, parameter, index = key
@@ -351,41 +312,51 @@ class SnapshotCollector(Collector):
         heads = self._heads[key] = (head(VALUE[0], labels), head(STAMP[0], labels))
         return heads
 
-    def _drive(self, drive: str, state: DriveState) -> _DriveLines:
+    def _drive(
+        self, drive: str, state: DriveState, previous: tuple[DriveState, Made] | None
+    ) -> Made:
         """The drive's up line, its status word and bit lines if it has a word, and its
-        main actual value line if that came with the word; only what changed is made
-        again."""
-        line = self._line(drive)
-        key = (line, state.up, state.status_word, state.main_actual)
-        cached = self._drive_lines.get(drive)
-        if cached is not None and cached[0] == key:
-            return cached[1]
+        main actual value line if that came with the word; what did not change since
+        ``previous`` is kept."""
         heads = self._drive_heads.get(drive)
         if heads is None:
-            heads = self._drive_heads[drive] = self._heads_of(drive, line)
-        up = f"{heads.up}{'1.0' if state.up else '0.0'}\n"
+            heads = self._drive_heads[drive] = self._heads_of(drive, self._line(drive))
+        up = heads.up[state.up]
         word = state.status_word
-        result = _DriveLines(up)
-        if word is not None and drive in self._drives:
-            if cached is not None and cached[0][2] == word and cached[1].bits:
-                word_line, bits = cached[1].word, cached[1].bits
-            else:
-                word_line = f"{heads.word}{format_value(float(word))}\n"
-                bits = tuple(f"{h}{'1.0' if word >> bit & 1 else '0.0'}\n" for bit, h in heads.bits)
-            mav = ""
-            if state.main_actual is not None:
-                mav = f"{heads.mav}{format_value(ref_to_percent(state.main_actual))}\n"
-            result = _DriveLines(up, word_line, bits, mav)
-        self._drive_lines[drive] = (key, result)
-        return result
+        if word is None or drive not in self._drives:
+            return (up, b"", b"", b"")
+        mav = b""
+        if previous is not None and previous[1][2] and previous[0].status_word == word:
+            old, row = previous
+            if old.main_actual == state.main_actual:
+                return row if row[0] is up else (up, row[1], row[2], row[3])
+            word_line, bits = row[1], row[2]
+        else:
+            word_line = f"{heads.word}{format_value(float(word))}\n".encode()
+            bits = b"".join(one if word >> bit & 1 else zero for bit, zero, one in heads.bits)
+        if state.main_actual is not None:
+            mav = f"{heads.mav}{_percent(state.main_actual)}\n".encode()
+        return (up, word_line, bits, mav)
 
     def _heads_of(self, drive: str, line: str) -> _DriveHeads:
         labels = {"line": line, "drive": drive}
         info = self._drives.get(drive)
         named = STATUS_BITS[info.profile].items() if info is not None else ()
+        up = head(DRIVE_UP[0], labels)
+        bits = []
+        for bit, name in named:
+            h = head(BIT[0], {**labels, "bit": name})
+            bits.append((bit, f"{h}0.0\n".encode(), f"{h}1.0\n".encode()))
         return _DriveHeads(
-            head(DRIVE_UP[0], labels),
+            (f"{up}0.0\n".encode(), f"{up}1.0\n".encode()),
             head(WORD[0], labels),
-            tuple((bit, head(BIT[0], {**labels, "bit": name})) for bit, name in named),
+            tuple(bits),
             head(MAV[0], labels),
         )
+
+
+@lru_cache(maxsize=4096)
+def _percent(raw: int) -> str:
+    """A main actual value word's text, in percent (the same few words come again and
+    again while the drives run at their speeds)."""
+    return format_value(ref_to_percent(raw))

@@ -4,7 +4,12 @@
 escapes its labels and formats its value at every scrape: about a second for
 eight lines of 126 drives with 20 parameters each. Here each series keeps the
 text before its value (``name{labels} ``), made once, and its last rendered
-line, made again only when the value changed; a scrape joins the lines.
+line (UTF-8 bytes), made again only when the value changed; a scrape joins the
+lines. The service's own counters are :class:`CounterFamily` families (their
+text kept until a series changes), the drives' values come from
+:mod:`.devices`, and prometheus_client's gauges, counters and histograms are
+rendered from their values (:mod:`.native`); another collector's families go
+through ``generate_latest``.
 
 The output is the same text ``generate_latest`` makes of the same registry
 (labels sorted by name, values as Go prints them, the same escaping): the
@@ -12,9 +17,9 @@ collectors below also answer ``collect()`` with the same series, so
 ``registry.get_sample_value`` and ``generate_latest`` still see them.
 
 :func:`render` hands the event loop back between pieces of text (at most
-:data:`CHUNK` lines each, :data:`YIELD_EVERY` characters together, about a
-millisecond of work), and wherever a collector yields an empty piece, so
-polling keeps its pace while a large configuration is scraped.
+:data:`CHUNK` lines each, :data:`YIELD_EVERY` bytes together), and wherever a
+collector yields an empty piece, so polling keeps its pace while a large
+configuration is scraped.
 """
 
 from __future__ import annotations
@@ -27,6 +32,9 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.core import CounterMetricFamily, Metric
 from prometheus_client.exposition import CONTENT_TYPE_PLAIN_0_0_4
 from prometheus_client.registry import Collector
+
+from pkwbus.service.metrics.native import NativeFamily, native
+from pkwbus.service.metrics.textformat import format_value, head, header
 
 __all__ = [
     "CHUNK",
@@ -47,37 +55,6 @@ CONTENT_TYPE = CONTENT_TYPE_PLAIN_0_0_4
 # the scrape returns to the event loop: a few milliseconds of work.
 CHUNK = 500
 YIELD_EVERY = 200_000
-_SPECIAL = {"inf": "+Inf", "-inf": "-Inf", "nan": "NaN"}
-
-
-def format_value(value: float) -> str:
-    """A sample value as Go prints it: the text of ``prometheus_client.utils.floatToGoString``."""
-    text = repr(float(value))
-    dot = text.find(".")
-    if dot < 0:  # inf, nan, or an exponent: 1e+16
-        return _SPECIAL.get(text, text)
-    if dot > 6 and text[0] != "-":  # seven digits before the point: an exponent, as in Go
-        mantissa = f"{text[0]}.{text[1:dot]}{text[dot + 1 :]}".rstrip("0.")
-        return f"{mantissa}e+{dot - 1:02d}"
-    return text
-
-
-def _escape(value: str) -> str:
-    return value.replace("\\", r"\\").replace("\n", r"\n").replace('"', r"\"")
-
-
-def head(name: str, labels: Mapping[str, str]) -> str:
-    """The text of a sample line before its value: ``name{a="x",b="y"} ``."""
-    if not labels:
-        return f"{name} "
-    inner = ",".join(f'{k}="{_escape(v)}"' for k, v in sorted(labels.items()))
-    return f"{name}{{{inner}}} "
-
-
-def header(name: str, documentation: str, kind: str) -> str:
-    """The ``# HELP`` and ``# TYPE`` lines of a family."""
-    doc = documentation.replace("\\", r"\\").replace("\n", r"\n")
-    return f"# HELP {name} {doc}\n# TYPE {name} {kind}\n"
 
 
 @runtime_checkable
@@ -88,16 +65,18 @@ class Exposed(Protocol):
     whose work between two pieces of text is long yields one now and then.
     """
 
-    def exposition(self) -> Iterator[str]: ...
+    def exposition(self) -> Iterator[bytes]: ...
 
 
 class _Changes:
-    """How many times a family's series changed: its text is made again only then."""
+    """How many times a family's series changed (``count``: its text is made again only
+    then) and how many times a series came, went or became visible (``shown``)."""
 
-    __slots__ = ("count",)
+    __slots__ = ("count", "shown")
 
     def __init__(self) -> None:
         self.count = 0
+        self.shown = 0
 
 
 class Series:
@@ -115,24 +94,29 @@ class Series:
         self.visible = visible
         self._changes = changes if changes is not None else _Changes()
         self._shown: float | None = None
-        self._line = ""
+        self._line = b""
 
     def inc(self, amount: float = 1.0) -> None:
         if amount < 0:
             raise ValueError("a counter only goes up")
         self.value += amount
-        self.visible = True
-        self._changes.count += 1
+        changes = self._changes
+        if not self.visible:
+            self.visible = True
+            changes.shown += 1
+        changes.count += 1
 
     def show(self) -> None:
         """Export the series from now on, at its value (0 until it moves)."""
-        self.visible = True
+        if not self.visible:
+            self.visible = True
+            self._changes.shown += 1
         self._changes.count += 1
 
-    def line(self) -> str:
+    def line(self) -> bytes:
         value = self.value
         if value != self._shown:
-            self._line = f"{self.head}{format_value(value)}\n"
+            self._line = f"{self.head}{format_value(value)}\n".encode()
             self._shown = value
         return self._line
 
@@ -156,10 +140,12 @@ class CounterFamily(Collector):
         self.documentation = documentation
         self.labelnames = tuple(labelnames)
         self._series: dict[tuple[str, ...], Series] = {}
-        self._header = header(f"{name}_total", documentation, "counter")
+        self._header = header(f"{name}_total", documentation, "counter").encode()
         self._changes = _Changes()
-        self._pieces: list[str] | None = None  # the text, as of ``_seen`` changes
+        self._pieces: list[bytes] | None = None  # the text, as of ``_seen`` changes
         self._seen = 0
+        self._visible: list[Series] = []  # the series exported, as of ``_shown`` changes
+        self._shown = -1
         if registry is not None:
             registry.register(self)
 
@@ -173,6 +159,7 @@ class CounterFamily(Collector):
             series = Series(head(f"{self.name}_total", labels), zero, self._changes)
             self._series[values] = series
             self._changes.count += 1
+            self._changes.shown += 1
         elif zero:
             series.show()
         return series
@@ -188,6 +175,7 @@ class CounterFamily(Collector):
             del self._series[key]
         if gone:
             self._changes.count += 1
+            self._changes.shown += 1
         return len(gone)
 
     def describe(self) -> list[Metric]:
@@ -200,7 +188,7 @@ class CounterFamily(Collector):
                 family.add_metric(list(values), series.value)
         yield family
 
-    def exposition(self) -> Iterator[str]:
+    def exposition(self) -> Iterator[bytes]:
         yield self._header
         pieces = self._pieces
         if pieces is not None and self._seen == self._changes.count:
@@ -208,13 +196,15 @@ class CounterFamily(Collector):
             return
         self._pieces = None  # made again below; a change meanwhile shows at the next scrape
         self._seen = self._changes.count
+        if self._shown != self._changes.shown:
+            self._shown = self._changes.shown
+            self._visible = [s for s in self._series.values() if s.visible]
         pieces = []
-        every = list(self._series.values())
+        every = self._visible
         for start in range(0, len(every), CHUNK):
-            text = "".join([s.line() for s in every[start : start + CHUNK] if s.visible])
-            if text:  # an empty piece would ask render() for a turn of the loop
-                pieces.append(text)
-                yield text
+            text = b"".join([s.line() for s in every[start : start + CHUNK]])
+            pieces.append(text)
+            yield text
         self._pieces = pieces
 
 
@@ -229,18 +219,23 @@ class _Collected:
 class MetricsRegistry(CollectorRegistry):
     """A registry that keeps its collectors in order, for :func:`render`.
 
-    Collectors that are :class:`Exposed` render their own text; any other
-    collector's families go through ``generate_latest`` (the small ones: the
-    histogram, build and API counters).
+    Collectors that are :class:`Exposed` render their own text; prometheus_client's
+    gauges, counters and histograms are rendered from their values
+    (:mod:`pkwbus.service.metrics.native`); any other collector's families go
+    through ``generate_latest``.
     """
 
     def __init__(self) -> None:
         super().__init__()
-        self._ordered: dict[Collector, None] = {}
+        # Each collector, in order, and how its text is made: by itself, from its values,
+        # or (None) by generate_latest.
+        self._ordered: dict[Collector, Exposed | NativeFamily | None] = {}
 
     def register(self, collector: Collector) -> None:
         super().register(collector)
-        self._ordered[collector] = None
+        self._ordered[collector] = (
+            collector if isinstance(collector, Exposed) else native(collector)
+        )
 
     def unregister(self, collector: Collector) -> None:
         super().unregister(collector)
@@ -250,14 +245,21 @@ class MetricsRegistry(CollectorRegistry):
         """The registered collectors, in order."""
         return list(self._ordered)
 
-    def exposition(self) -> Iterator[str]:
+    def exposition(self) -> Iterator[bytes]:
         """The text of every family, as pieces to join."""
         for collector in list(self._ordered):
-            if isinstance(collector, Exposed):
-                yield from collector.exposition()
-            else:
-                text = generate_latest(_Collected(collector.collect()))
-                yield text.decode("utf-8")
+            yield from self.exposition_of(collector)
+
+    def exposition_of(self, collector: Collector) -> Iterator[bytes]:
+        """The text of one registered collector's families."""
+        way = self._ordered.get(collector)
+        if way is not None and not isinstance(way, NativeFamily):
+            yield from way.exposition()
+            return
+        text = way.text() if way is not None else None
+        if text is None:
+            text = generate_latest(_Collected(collector.collect()))
+        yield text
 
 
 async def render(registry: CollectorRegistry) -> bytes:
@@ -268,7 +270,7 @@ async def render(registry: CollectorRegistry) -> bytes:
     size = 0
     for piece in registry.exposition():
         if piece:
-            parts.append(piece.encode("utf-8"))
+            parts.append(piece)
             size += len(piece)
         if not piece or size >= YIELD_EVERY:  # an empty piece asks for a turn
             size = 0
