@@ -277,7 +277,7 @@ class Link:
     def _write(self, transport: SerialTransport, data: bytes) -> None:
         """Write straight to the port when nothing is queued; else through the transport."""
         fd = self._fd
-        if fd >= 0 and not transport.get_write_buffer_size():
+        if fd >= 0 and not transport.queued:
             try:
                 n = os.write(fd, data)
             except (BlockingIOError, InterruptedError):

@@ -145,6 +145,11 @@ class SerialTransport(serial_asyncio.SerialTransport):  # type: ignore[misc]
     def _read(self, size: int) -> bytes:
         return os.read(self.fd, size)
 
+    @property
+    def queued(self) -> bool:
+        """Whether bytes wait to be written (what ``get_write_buffer_size`` sums up)."""
+        return bool(self._write_buffer)
+
     def _empty_read(self) -> None:
         """A tty gave nothing: ask it whether it is still there."""
         events = self._poll()

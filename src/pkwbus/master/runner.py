@@ -54,11 +54,11 @@ BATCH_EVERY = 0.05
 
 def _waited_for(events: Sequence[Event]) -> bool:
     """Whether any of ``events`` is one somebody waits for: record it at once."""
-    for event in events:
-        if isinstance(event, Finished):
+    for event in events:  # by type: Finished and HealthChanged have no subclass
+        if type(event) is Finished:
             if isinstance(event.work, Job):
                 return True
-        elif isinstance(event, HealthChanged):
+        elif type(event) is HealthChanged:
             return True
     return False
 
@@ -261,7 +261,7 @@ class LineRunner:
             wire.received(planner, self._request, answer, now, now - self._started,
                           now - port.sent_at)  # fmt: skip
             until: float | None = None
-            if not self.stopping and self.link.is_open:
+            if not self.stopping and port.link.is_open:
                 action = wire.transmit(planner, now)
                 if not isinstance(action, Idle):
                     self._start(action, loop)

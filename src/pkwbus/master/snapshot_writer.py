@@ -61,14 +61,13 @@ from pkwbus.master.snapshot import (
     ReadingKey,
     Snapshot,
 )
+from pkwbus.master.told import REFUSAL_RETELL
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import RemoteProtocolError
 
 __all__ = ["REFUSAL_RETELL", "SnapshotWriter", "job_result"]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
-
-REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
 
 
 def job_result(
@@ -100,9 +99,7 @@ class SnapshotWriter:
         self.line = line
         self.snapshot = snapshot
         self._out: list[Event] = []  # what this writer makes of the events it applies
-        self._clock = clock
-        # A poll the drive refuses, by (drive, parameter, index): when it was last told.
-        self._refused: dict[tuple[str, str, int], float] = {}
+        self._refusals = told.Refusals(line, clock)
         self._polls: dict[str, tuple[PollSpec, ...]] = {}
         # What lands in the snapshot's readings: the configured polls.
         self._keys: set[ReadingKey] = set()
@@ -153,7 +150,7 @@ class SnapshotWriter:
         self._keys = {k for k in self._keys if k[0] != drive}
         self._targets.pop(drive, None)
         self._silent.discard(drive)
-        self._refused = {k: v for k, v in self._refused.items() if k[0] != drive}
+        self._refusals.forget(drive)
         self.snapshot.forget(drive)
 
     def forget_line(self) -> None:
@@ -330,7 +327,7 @@ class SnapshotWriter:
         result = self._result(event, work)
         reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):
-            self._tell_refusal(drive, work, event.outcome)
+            self._refusals.tell(drive, work, event.outcome)
             self._out.append(JobDone(drive, JobKind.READ, result))
             key = (drive, work.parameter, work.index)
             if reading is not None and key in self._keys:  # still polled (a reload)
@@ -352,25 +349,6 @@ class SnapshotWriter:
             counts.errors += unexpected
             counts.faults += faulted
             self.snapshot.changes.touch(drive)
-
-    def _tell_refusal(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
-        """A poll the drive refuses is logged once with the fault text, then once a day
-        while the refusals last; its first answer after them is logged too."""
-        key = (drive, poll.parameter, poll.index)
-        ctx = {"line": self.line, "drive": drive}
-        where = poll.parameter + (f"[{poll.index}]" if poll.index else "")
-        if isinstance(outcome, Rejected):
-            now = self._clock()
-            told = self._refused.get(key)
-            if told is None or now - told >= REFUSAL_RETELL:
-                again = "" if told is None else " (still, every poll)"
-                log.warning(
-                    "drive %s refuses the poll of %s%s: %s",
-                    drive, where, again, outcome.text or outcome.short, extra=ctx,
-                )  # fmt: skip
-                self._refused[key] = now
-        elif isinstance(outcome, Answered) and self._refused.pop(key, None) is not None:
-            log.info("drive %s answers the poll of %s again", drive, where, extra=ctx)
 
     def _result(self, event: Finished, work: Job | PollSpec) -> JobResult:
         try:

@@ -5,20 +5,57 @@ length learned or in conflict)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 from pkwbus.catalog.precedence import Disagreement, disagreements
 from pkwbus.master.planning.describing import ASK_AGAIN
+from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
 from pkwbus.master.planning.plan import (
     DescriptionSettled,
     HealthChanged,
     LeftUnanswered,
     PkwLengthTold,
+    PollSpec,
 )
 from pkwbus.protocol.pkw.length import AUTO, shown
 
-__all__ = ["described", "health", "pkw_length", "unanswered"]
+__all__ = ["REFUSAL_RETELL", "Refusals", "described", "health", "pkw_length", "unanswered"]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
+
+REFUSAL_RETELL = 24 * 3600.0  # seconds between log lines of a poll the drive keeps refusing
+
+
+class Refusals:
+    """A poll the drive refuses is logged once with the fault text, then once a day while
+    the refusals last; its first answer after them is logged too."""
+
+    def __init__(self, line: str, clock: Callable[[], float]) -> None:
+        self.line = line
+        self._clock = clock
+        # A poll the drive refuses, by (drive, parameter, index): when it was last told.
+        self._refused: dict[tuple[str, str, int], float] = {}
+
+    def forget(self, drive: str) -> None:
+        self._refused = {k: v for k, v in self._refused.items() if k[0] != drive}
+
+    def tell(self, drive: str, poll: PollSpec, outcome: Outcome) -> None:
+        if not self._refused and not isinstance(outcome, Rejected):
+            return  # the usual answer: no poll was refused, nothing to tell
+        key, ctx = (drive, poll.parameter, poll.index), {"line": self.line, "drive": drive}
+        where = poll.parameter + (f"[{poll.index}]" if poll.index else "")
+        if isinstance(outcome, Rejected):
+            now = self._clock()
+            told = self._refused.get(key)
+            if told is None or now - told >= REFUSAL_RETELL:
+                again = "" if told is None else " (still, every poll)"
+                log.warning(
+                    "drive %s refuses the poll of %s%s: %s",
+                    drive, where, again, outcome.text or outcome.short, extra=ctx,
+                )  # fmt: skip
+                self._refused[key] = now
+        elif isinstance(outcome, Answered) and self._refused.pop(key, None) is not None:
+            log.info("drive %s answers the poll of %s again", drive, where, extra=ctx)
 
 
 def unanswered(line: str, event: LeftUnanswered) -> None:

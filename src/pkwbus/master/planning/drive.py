@@ -5,6 +5,7 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from pkwbus.master.planning.agenda import Key
@@ -136,9 +137,10 @@ class DrivePlan:
         jobs past their deadline end first (their events into ``events``)."""
         if self.maintenance:
             return None, None
-        for queue in (self.writes, self.reads, self.background):
-            if queue:
-                events += expire(self, queue, now)
+        if self.writes or self.reads or self.background:  # most often none is queued
+            for queue in (self.writes, self.reads, self.background):
+                if queue:
+                    events += expire(self, queue, now)
         a, served, slot = self.active, self.served, self.slot
         if a is not None:
             return (a.priority, int(self.lagging), a.order, served, slot), None
@@ -158,7 +160,7 @@ class DrivePlan:
         return None, due
 
     def transaction(
-        self, items: list[Item], *, retries: int, deadline: float, stale: bytes | None = None
+        self, items: Sequence[Item], *, retries: int, deadline: float, stale: bytes | None = None
     ) -> Transaction:
         """One PKW job, or where its carrier takes several, one request of all ``items``;
         LocalProtocolError for what the drive's carrier cannot carry."""
@@ -242,7 +244,7 @@ class DrivePlan:
         poll.fresh = False
         # Long enough for the retries and a lagging answer; never the poll's whole
         # interval, which would hold the drive's parameter channel for minutes.
-        tx = self.transaction([Item(spec.request)], retries=retries, deadline=deadline)
+        tx = self.transaction(spec.items, retries=retries, deadline=deadline)
         return Active(tx, Priority.POLL, poll.due, poll, self.send_of(tx)), events
 
     def _start_batch(

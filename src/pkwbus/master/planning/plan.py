@@ -9,10 +9,11 @@ word arrived. All are small frozen values: the planner does no I/O.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
-from pkwbus.master.planning.carrier import Carrier
+from pkwbus.master.planning.carrier import Carrier, Item
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.outcomes import Outcome
@@ -59,6 +60,11 @@ class PollSpec:
     # Its type is known only from the drive's description (no vendor document types it):
     # it waits until the drive describes a type, and without one it is not polled.
     described_only: bool = False
+
+    @cached_property
+    def items(self) -> tuple[Item]:
+        """Its request as the one item of a transaction, made once."""
+        return (Item(self.request),)
 
 
 @dataclass(frozen=True)

@@ -331,8 +331,10 @@ class Planner:
                 return None
             d.busy = True
             return a.send
-        if d.claim(now, self.events)[0] is None:  # its queued jobs ended at their deadline
-            self._index(d, now)
+        # Taken off the ready heap at its version: only a queued job's deadline can have
+        # ended its claim since (a poll or probe due stays due).
+        if (d.writes or d.reads or d.background) and d.claim(now, self.events)[0] is None:
+            self._index(d, now)  # its queued jobs ended at their deadline
             return None
         d.busy = True
         due = d.first_due()

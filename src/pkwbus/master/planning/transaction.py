@@ -28,9 +28,9 @@ out.
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from operator import itemgetter
 
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.master.planning.outcomes import (
@@ -60,13 +60,14 @@ __all__ = [
 Decoder = Callable[[bytes, float], PkwAnswer]
 
 
-@dataclass
+@dataclass(slots=True)
 class Tally:
     """What a job's exchanges cost, for the metrics, and what its latest answer was."""
 
     telegrams: int = 0
     retries: int = 0
-    errors: Counter[ErrorKind] = field(default_factory=Counter)
+    # Exchanges without a usable answer, by kind (a dict: one Tally is made per job).
+    errors: dict[ErrorKind, int] = field(default_factory=dict)
     # The status word and main actual value of the latest reply; None when it carried
     # none or could not be split (never an earlier reply's, re-stamped as new).
     status_word: int | None = None
@@ -77,9 +78,19 @@ class Tally:
     response: pkw.PkwResponse | None = None
     answer_words: int | None = None
 
+    def count_error(self, kind: ErrorKind) -> None:
+        """One more exchange without a usable answer, of ``kind``."""
+        errors = self.errors
+        errors[kind] = errors.get(kind, 0) + 1
+
 
 class PkwTransaction:
     """Feed it exchange results; it says when the job is done and how."""
+
+    __slots__ = (
+        "_failures", "answer_pkw", "deadline", "decode", "dialect", "outcome", "request",
+        "response", "retries", "stale", "tally", "telegram", "waiting",
+    )  # fmt: skip
 
     def __init__(
         self,
@@ -132,7 +143,8 @@ class PkwTransaction:
     def _last_error(self) -> str:
         if not self.tally.errors:
             return ""
-        kinds = ", ".join(f"{n} {k.value}" for k, n in self.tally.errors.most_common())
+        most = sorted(self.tally.errors.items(), key=itemgetter(1), reverse=True)
+        kinds = ", ".join(f"{n} {k.value}" for k, n in most)
         return f" ({kinds})"
 
     def _on(self, came: PkwAnswer) -> Outcome | None:
@@ -141,7 +153,7 @@ class PkwTransaction:
             # The right drive, but an answer that cannot be read (a block too short for
             # the answer, another dialect's): a try of the job's retries, not "not yet"
             # forever.
-            self.tally.errors[ErrorKind.UNEXPECTED] += 1
+            self.tally.count_error(ErrorKind.UNEXPECTED)
             self.waiting = True
             self._failures += 1
             if self._failures > self.retries:
@@ -166,12 +178,12 @@ class PkwTransaction:
             self.waiting = False
             return Mismatch(self.request.value, response.raw, response)
         if not came.cyclic:
-            self.tally.errors[ErrorKind.UNEXPECTED] += 1
+            self.tally.count_error(ErrorKind.UNEXPECTED)
         self.waiting = True
         return None
 
     def _on_failure(self, failure: Failure) -> Outcome | None:
-        self.tally.errors[failure.kind] += 1
+        self.tally.count_error(failure.kind)
         self.waiting = False
         if failure.kind is ErrorKind.PORT:
             return LineFailed(failure.detail)
@@ -217,7 +229,7 @@ class ProbeTransaction:
         tally.telegrams += 1
         outcome: Outcome | None = None
         if isinstance(result, Failure):
-            tally.errors[result.kind] += 1
+            tally.count_error(result.kind)
             if result.kind is ErrorKind.PORT:
                 outcome = LineFailed(result.detail)
             else:
@@ -273,7 +285,7 @@ class BatchTransaction:
         tally = self.tally
         tally.telegrams += 1
         if isinstance(result, Failure):
-            tally.errors[result.kind] += 1
+            tally.count_error(result.kind)
             if result.kind is ErrorKind.PORT:
                 return self._end(LineFailed(result.detail))
             return self._try_again(f"no answer ({result.kind.value}: {result.detail})", now)
@@ -283,7 +295,7 @@ class BatchTransaction:
         try:
             outcomes = tuple(self.decode(result.data))
         except RemoteProtocolError as exc:
-            tally.errors[ErrorKind.UNEXPECTED] += 1
+            tally.count_error(ErrorKind.UNEXPECTED)
             return self._try_again(str(exc), now)
         return self._end(outcomes[0], outcomes)
 

@@ -161,9 +161,9 @@ def decode_response(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRespo
     if reply is Reply.TEXT:
         return TextResponse(ak, pnu, subindex, bytes(rest))
     value, low = decode_pwe(rest)
-    if reply in (Reply.WORD, Reply.ARRAY_WORD):
+    if reply in _WORD_REPLIES:
         return ValueResponse(ak, pnu, subindex, low, Width.WORD)
-    if reply in (Reply.DWORD, Reply.ARRAY_DWORD):
+    if reply in _DWORD_REPLIES:
         if len(rest) < 4:
             raise RemoteProtocolError("a double word answer in a PKW block of 3 words")
         return ValueResponse(ak, pnu, subindex, value, Width.DWORD)
@@ -179,6 +179,10 @@ def decode_response(pkw: bytes, dialect: Dialect, layout: IndLayout) -> PkwRespo
     if reply is Reply.ARRAY_COUNT:
         return ArrayCountResponse(ak, pnu, subindex, low)
     return SpontaneousResponse(ak, pnu, subindex, value)
+
+
+_WORD_REPLIES = (Reply.WORD, Reply.ARRAY_WORD)
+_DWORD_REPLIES = (Reply.DWORD, Reply.ARRAY_DWORD)
 
 
 def encode_response(

@@ -12,6 +12,7 @@ do not decode.
 from __future__ import annotations
 
 import enum
+import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
@@ -247,9 +248,10 @@ def split_block(data: bytes, shape: BlockShape) -> Block:
     if len(data) < pzd_len:
         raise RemoteProtocolError(f"telegram has {len(data)} data bytes, fewer than its PZD")
     cut = len(data) - pzd_len
-    tail = data[cut:]
-    pzd = tuple(int.from_bytes(tail[i : i + 2], "big") for i in range(0, pzd_len, 2))
-    return Block(data[:cut], pzd)
+    return Block(data[:cut], _PZD[shape.pzd_words].unpack_from(data, cut))
+
+
+_PZD = tuple(struct.Struct(f">{n}H") for n in range(17))  # 0-16 words, high byte first
 
 
 def fc_lengths() -> frozenset[int]:

@@ -319,15 +319,20 @@ def decode_value(
         number = struct.unpack(">f", raw.to_bytes(4, "big"))[0]
     elif vtype is ValueType.TEXT:
         raise RemoteProtocolError("a text parameter was answered with a number")
+    elif vtype in _SIGNED:
+        bits = 32 if width is Width.DWORD else 16
+        number = raw - (1 << bits) if raw >> (bits - 1) & 1 else raw
     else:
-        bits = width.value
-        number = raw - (1 << bits) if vtype in _SIGNED and raw >> (bits - 1) & 1 else raw
+        number = raw
     if scaling.factor == 1:
         return number
+    factor = scaling.factor
     if isinstance(number, float):
-        return number * float(scaling.factor)
-    scaled = number * scaling.factor
-    return int(scaled) if scaled.denominator == 1 else float(scaled)
+        return number * float(factor)
+    # number * factor as a Fraction would give, without making one: a whole number, else
+    # the quotient correctly rounded (as float() of the Fraction).
+    scaled, denominator = number * factor.numerator, factor.denominator
+    return scaled // denominator if scaled % denominator == 0 else scaled / denominator
 
 
 _SIGNED = frozenset({ValueType.I16, ValueType.I32})

@@ -290,10 +290,12 @@ class LineMetrics:
 
     def job_finished(self, drive: str, kind: JobKind, result: JobResult) -> None:
         outcome = result.outcome
-        key = (drive, kind.value, metric_label(outcome))
+        label = metric_label(outcome)
+        key = (drive, kind, label)  # a StrEnum is the same key as its text
         child = self._jobs.get(key)
         if child is None:
-            child = self._jobs[key] = self._m.jobs.labels(self._line, drive, key[1], key[2].value)
+            child = self._m.jobs.labels(self._line, drive, kind.value, label.value)
+            self._jobs[key] = child
         child.inc()
         tally = result.tally
         if tally is not None:

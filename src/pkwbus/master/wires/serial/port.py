@@ -181,7 +181,8 @@ class TelegramPort:
         self._timeout = timeout or self.timeout
         self._state = _State.PAUSE
         link = self.link
-        wait = link.pause_left(loop.time())
+        now = loop.time()
+        wait = link.pause_left(now)
         if wait <= 0:
             self._send()
         elif wait <= WAIT_IN_PLACE:
@@ -190,7 +191,7 @@ class TelegramPort:
                 pass
             self._send()
         elif link.fine_timers or not link.is_open:
-            self._send_timer = loop.call_later(wait, self._on_send_timer)
+            self._send_timer = loop.call_at(now + wait, self._on_send_timer)  # the pause's end
         else:  # a loop with millisecond timers: the link's thread-assisted pause
             self._send_timer = loop.call_later(0, self._pause_then_send)
 

@@ -131,6 +131,8 @@ class Dialect:
     danfoss_numbers: bool = False
     _ak_of: Mapping[Command, int] = field(init=False, repr=False)
     _reply_of: Mapping[int, Reply] = field(init=False, repr=False)
+    # Per request identifier, the response identifiers that acknowledge it (accepts()).
+    _acks: Mapping[int, frozenset[int]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         ak_of: dict[Command, int] = {}
@@ -139,6 +141,11 @@ class Dialect:
         object.__setattr__(self, "_ak_of", MappingProxyType(ak_of))
         reply_of = {ak: reply for ak, (reply, _) in self.responses.items()}
         object.__setattr__(self, "_reply_of", MappingProxyType(reply_of))
+        acks = {
+            ak: frozenset(r for r, reply in reply_of.items() if _acknowledges(command, reply))
+            for ak, (command, _) in self.requests.items()
+        }
+        object.__setattr__(self, "_acks", MappingProxyType(acks))
 
     @property
     def max_pnu(self) -> int:
@@ -189,16 +196,21 @@ class Dialect:
         return Fault(number, f"fault {number} (not in the {self.name} table)", f"fault {number}")
 
     def accepts(self, request_ak: int, response_ak: int) -> bool:
-        """Whether ``response_ak`` is a positive or negative acknowledgement of ``request_ak``."""
-        command = self.command(request_ak)
-        reply = self.reply(response_ak)
-        if reply is None:
-            return False
-        if command is Command.NONE:
-            return reply is Reply.NONE
-        if reply in NEGATIVE_REPLIES:
-            return True
-        return reply in _POSITIVE[command]
+        """Whether ``response_ak`` is a positive or negative acknowledgement of ``request_ak``
+        (LocalProtocolError: the dialect has no such request identifier)."""
+        acks = self._acks.get(request_ak)
+        if acks is None:
+            raise LocalProtocolError(
+                f"the {self.name} dialect has no request identifier {request_ak}"
+            )
+        return response_ak in acks
+
+
+def _acknowledges(command: Command, reply: Reply) -> bool:
+    """Whether a response carrying ``reply`` acknowledges a request for ``command``."""
+    if command is Command.NONE:
+        return reply is Reply.NONE
+    return reply in NEGATIVE_REPLIES or reply in _POSITIVE[command]
 
 
 # Positive acknowledgements per request (Hitachi SJ-PB(T) User Manual, chapter 5, widened where the
