@@ -25,7 +25,9 @@ import ds47
 import floor
 import line_efficiency
 import pkw_lag
+import plant_scale
 import scale
+import scrape
 import status_page
 import write_latency
 from _common import machine
@@ -113,9 +115,37 @@ def plan(quick: bool) -> Plan:
             "11. The status page at 126 drives",
             "126 simulated FC drives × 20 parameters on one line (115200 baud, wire timing), "
             "every value with 15 minutes of trend; headless Chromium opens the page. First "
-            "view against the goal of 2 s; the page's redraws timed in the page; CPU as it "
-            "is and slowed four times.",
+            "view of every drive's row against the goal of 2 s; a drive's detail opened; a "
+            "refresh's main-thread CPU (Chromium trace) against the goal of 100 ms; a sort "
+            "and a filter; CPU as it is and slowed four times (the plant: --lines 8).",
             lambda: status_page.run(126, (1.0, 4.0)),
+        ),
+        (
+            "12. Plant scale: 4 lines × 126 drives, the status page and Prometheus",
+            "4 simulated lines (one process each, 115200 baud, wire timing, 2 ms delay) × 126 "
+            "FC drives × 20 parameters each polled every 20 s (10,080 values), once the start's "
+            "backlog has drained. Telegrams/s per line with no HTTP client and while a client "
+            "in another process fetches what the status page fetches every 2 s (as it does "
+            "today, and with `?view=overview&changed_since=` and one drive's detail) and "
+            "another scrapes `GET /metrics` every 5 s; the service's event-loop lag (a 10 ms "
+            "sleep's lateness); `GET /api/v1/drives` and `GET /metrics` ms per 1,000 values.",
+            lambda: plant_scale.run(
+                10.0 if q else 20.0,
+                ("full",) if q else ("full", "overview"),
+                3 if q else 7,
+                settle=120.0 if q else 240.0,
+            ),
+        ),
+        (
+            "13. The /metrics scrape at plant scale, without a bus",
+            "The service's registry as `pkwbus run` builds it (with the history's families) "
+            "for 4 lines × 126 FC drives × 20 parameters (10,080 values), the readings landed "
+            "by hand as a line lands them, a quarter of them anew before each scrape (polls "
+            "every 20 s, Prometheus every 5 s). `exposition.render` (what `GET /metrics` "
+            "awaits) per 1,000 values, median of the scrapes (also its CPU time, with nothing "
+            "new and with every value new), and `GET /metrics` from a client in another "
+            "process through the app on uvicorn.",
+            lambda: scrape.run(4, 126, 7 if q else 15),
         ),
     ]
 

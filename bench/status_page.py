@@ -1,44 +1,56 @@
-"""The status page at 126 drives: how long Chromium takes to show it, and to redraw it.
+"""The status page at plant scale: how long Chromium takes to show it, and what a refresh
+costs the page's main thread.
 
-One simulated line (another process, pty, wire timing at 115200 baud, 2 ms
-response delay, 126 FC drives), 20 parameters polled on each drive (benchmark
-6's set), the service in this process. Once every polled parameter has a
-value, each value's trend ring is filled with 15 minutes of points, so every
-sparkline is drawn in full (the worst case). Then headless Chromium (Debian's
-``chromium``, driven by Playwright) opens ``/``:
+``--lines`` simulated lines (each another process, pty, wire timing at 115200 baud, 2 ms
+response delay, ``--drives`` FC drives), 20 parameters polled on each drive (benchmark 6's
+set), the service in this process. Once every polled parameter has a value, each value's
+trend ring is filled with 15 minutes of points (the worst case for a drive's sparklines).
+Then headless Chromium (Debian's ``chromium``, driven by Playwright) opens ``/``:
 
-- **first view**: from the navigation to the moment all 126 drives and all
-  their values are on the page (wall clock of this process, checked every
+- **first view**: from the navigation to the moment every drive's row of the overview and
+  the counts per line are on the page (wall clock of this process, checked every
   animation frame). The goal is 2 s.
-- **redraw**: the page's own redraw of the 126 drives (``refreshNow``) from the
-  service's data of the moment (fetched before, untimed), with the style and
-  layout it forces, timed in the page (``performance.now``) once the page's own
-  refresh is stopped; the median of ten. Three cases: the sections kept and
-  their cells filled in place, 2 s apart as the page refreshes; the same with
-  every sparkline drawn anew (after the trends' refresh, every 15 s); and every
-  section drawn anew (the first view, or when every drive's status changes at
-  once).
-- **GET /api/v1/drives** and **GET /api/v1/trends**: fetched and parsed by the
-  page, median of five, and their size.
-- the page's element count and JavaScript heap after the redraws.
+- **open a drive**: from the page's ``openDrive`` (a click on a row) to its detail shown
+  with every value and every sparkline (in the page, ``performance.now``), median of five.
+- **refresh**: the page's own refresh (``refresh()``: the overview's rows changed since
+  its last answer, the lines, /readyz, the open drive), called by this process once the
+  page's loop is stopped, 2 s apart as the page refreshes, with a drive's detail open.
+  Timed as the **main thread**'s work from the call until 150 ms after it ends (its frame
+  drawn): the CPU time of the renderer's main-thread tasks in that window, from a Chromium
+  trace (parsing, script, style, layout, paint, commit; unlike their wall time, not
+  lengthened by other processes on the machine), their wall time beside it, the part the
+  page spends applying the answers with the layout they force (in the page), and the bytes
+  it fetched; medians of ten. Twice: as the page refreshes (``changed_since``), and with
+  every drive's row sent again (the page's full overview, every 30 s). The goal is 100 ms.
+- **sort** and **filter**, as a click and a keystroke: the page sorts every row by name,
+  one way and the other (every row moves: the worst case), and filters them by a text
+  (two in three hidden) and back, measured as a refresh is (main-thread CPU from the call
+  until 150 ms after it); medians of six.
+- the answers the page fetches (the overview, all and changed; one drive; its trends)
+  and, for scale, the two it no longer fetches (every drive's full view, every drive's
+  trends): fetched and parsed by the page, median of five, and their size.
+- the page's element count and JavaScript heap at the end.
 
-Also the trends' memory at 8 lines x 126 drives x 20 parameters, every ring
-full: what ``tracemalloc`` counts for the rings and their index (the keys are
-the service's own and not counted).
+Also the trends' memory at 8 lines x 126 drives x 20 parameters, every ring full: what
+``tracemalloc`` counts for the rings and their index (the keys are the service's own and
+not counted).
 
-``--throttle 4`` also runs the page with its CPU slowed four times
-(Chromium's CPU throttling), for an old plant PC.
+``--throttle 4`` also runs the page with its CPU slowed four times (Chromium's CPU
+throttling), for an old plant PC.
 
-    .venv/bin/python bench/status_page.py [--drives 126] [--throttle 1 --throttle 4]
+    .venv/bin/python bench/status_page.py [--drives 126] [--lines 1] [--throttle 1 --throttle 4]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import json
 import logging
 import math
 import shutil
+import statistics
 import sys
 import tempfile
 import time
@@ -61,30 +73,88 @@ ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-net
         "--disable-component-update", "--disable-sync", "--no-first-run",
         "--enable-precise-memory-info"]  # fmt: skip
 GOAL_S = 2.0
-MODES = ("kept", "trends", "anew")
+REFRESH_GOAL_MS = 100.0
+GAP_S = 2.0  # between two timed refreshes, as the page refreshes
+MODES = ("changed", "full")
+TRACED = ["toplevel", "blink.user_timing"]  # the main thread's tasks; the page's marks
 
-# Timed in the page, once its own refresh is stopped: ten redraws of the drives, each
-# with the layout it forces, from the service's data as it is then (fetched, untimed).
-# "kept": the sections stay and their cells are filled, 2 s apart (the page's refresh);
-# "trends": so are all the sparklines (new trends, every 15 s); "anew": every section is
-# drawn anew (the first view, or every drive's status changed at once).
+SHOWN = """([drives]) => document.querySelectorAll("#drives tbody tr").length === drives &&
+  (document.querySelector("#lines tfoot td.drives") || {}).textContent === String(drives)"""
+# The page's loop ends at its next turn; the refresh under way is let finish. Each
+# application of the answers (the overview, the lines, the open drive) is timed with the
+# layout it forces.
 STOP = """async () => {
-  refresh = async () => {};  // the page's loop ends at its next turn
+  running = false;
   await new Promise((r) => setTimeout(r, 2500));
-}"""
-REDRAWS = """async (mode) => {
-  const times = [];
-  for (let i = 0; i < 10; i++) {
-    await new Promise((r) => setTimeout(r, mode === "kept" ? 2000 : 50));
-    lastDrives = await (await fetch("/api/v1/drives", { cache: "no-store" })).json();
-    if (mode === "anew") sections = new Map();
-    if (mode === "trends") trendsVersion += 1;
-    const t = performance.now();
-    refreshNow();
-    void document.body.offsetHeight;
-    times.push(performance.now() - t);
+  window.applied = 0;
+  for (const name of ["applyOverview", "drawLines", "fillDetail"]) {
+    const plain = window[name];
+    window[name] = (...args) => {
+      const t = performance.now();
+      plain(...args);
+      void document.body.offsetHeight;
+      window.applied += performance.now() - t;
+    };
   }
-  return times;
+  // Function declarations are the global object's: the page's calls take the timed ones.
+  applyOverview = window.applyOverview; drawLines = window.drawLines;
+  fillDetail = window.fillDetail;
+}"""
+OPEN = """async (name) => {
+  closeDrive();
+  const t = performance.now();
+  const trends = trendsVersion;
+  openDrive(name);
+  const frame = () => new Promise((r) => requestAnimationFrame(r));
+  const drawn = (points) => points.filter((v) => v !== null).length >= 2;
+  for (;;) {
+    const values = detail && detail.drive ? detail.drive.values.length : -1;
+    const sparks = Object.values(trendData).filter(drawn).length;
+    if (trendsVersion > trends && document.querySelectorAll("#detail td.value").length === values
+        && document.querySelectorAll("#detail svg.spark path[d]").length === sparks) break;
+    if (performance.now() - t > 60000) {
+      throw new Error(`${name}: ${values} values, ${sparks} sparklines not shown in 60 s`);
+    }
+    await frame();
+  }
+  return performance.now() - t;
+}"""
+# One operation of the page (a refresh, a sort, a filter), marked in the trace from the
+# call until 150 ms after it ends (its frame drawn): [applied ms, bytes fetched].
+MARKED = """async ([what, n]) => {
+  performance.clearResourceTimings();
+  window.applied = 0;
+  performance.mark(`${what}-${n}-start`);
+  if (what === "changed") {
+    await refresh();
+  } else if (what === "full") {
+    changesToken = "";
+    await refresh();
+  } else if (what === "sort") {
+    chosen.sort = "name";
+    chosen.descending = n % 2 === 0;
+    sortRows();
+    fillNear();
+  } else {
+    document.getElementById("filter-text").value = n % 2 ? "" : "d1";
+    filtersChanged();
+  }
+  await new Promise((r) => setTimeout(r, 150));
+  performance.mark(`${what}-${n}-end`);
+  const bytes = performance.getEntriesByType("resource")
+    .reduce((sum, e) => sum + e.encodedBodySize, 0);
+  return [window.applied, bytes];
+}"""
+# Every drive's row with its numbers, even scrolled to the end of the table (the page writes
+# them in the rows near the screen only).
+SCROLLED = """async () => {
+  window.scrollTo(0, document.body.scrollHeight);
+  await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
+  const last = shownRows[shownRows.length - 1];
+  const shown = last.age.textContent !== "" && last.faults.textContent !== "";
+  window.scrollTo(0, 0);
+  await new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(r)));
+  return shown;
 }"""
 FETCHES = """async (path) => {
   const times = [];
@@ -100,10 +170,6 @@ FETCHES = """async (path) => {
   times.sort((a, b) => a - b);
   return [times[2], size];
 }"""
-SHOWN = """([drives, values]) =>
-  document.querySelectorAll("#drives .drive").length === drives &&
-  document.querySelectorAll("#drives td.value").length === values &&
-  document.querySelectorAll("#drives svg.spark path[d]").length === values"""
 FIGURES = """() => [document.getElementsByTagName("*").length,
   performance.memory ? performance.memory.usedJSHeapSize : 0]"""
 
@@ -124,7 +190,30 @@ def _fill_trends(runtime: Any) -> int:
     return filled
 
 
-async def _page(base: str, drives: int, values: int, throttle: float) -> dict[str, Any]:
+def _main_thread(trace: bytes, what: str, marks: int) -> list[tuple[float, float]]:
+    """For each marked operation: the CPU and wall milliseconds of the renderer's
+    main-thread tasks that began in it."""
+    doc = json.loads(trace)
+    events = doc["traceEvents"] if isinstance(doc, dict) else doc
+    names = [e for e in events if e.get("name") == "thread_name"]
+    main = {(e["pid"], e["tid"]) for e in names if e["args"].get("name") == "CrRendererMain"}
+    at = {e["name"]: e["ts"] for e in events if "blink.user_timing" in e.get("cat", "")}
+    tasks = [e for e in events if e.get("name") == "ThreadControllerImpl::RunTask"
+             and e.get("ph") == "X" and (e.get("pid"), e.get("tid")) in main]  # fmt: skip
+    out = []
+    for n in range(marks):
+        start, end = at[f"{what}-{n}-start"], at[f"{what}-{n}-end"]
+        inside = [e for e in tasks if start <= e["ts"] <= end]
+        cpu = sum(e.get("tdur", e["dur"]) for e in inside) / 1000
+        out.append((cpu, sum(e["dur"] for e in inside) / 1000))
+    return out
+
+
+def _median(values: list[float]) -> float:
+    return statistics.median(values) if values else float("nan")
+
+
+async def _page(base: str, drives: int, name: str, throttle: float) -> dict[str, Any]:
     try:
         from playwright.async_api import async_playwright
     except ImportError as e:
@@ -134,59 +223,89 @@ async def _page(base: str, drives: int, values: int, throttle: float) -> dict[st
     async with async_playwright() as p:
         browser = await p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
-            page = await browser.new_page(viewport={"width": 1100, "height": 800})
+            page = await browser.new_page(viewport={"width": 1400, "height": 900})
             if throttle != 1:
                 cdp = await page.context.new_cdp_session(page)
                 await cdp.send("Emulation.setCPUThrottlingRate", {"rate": throttle})
             t0 = time.perf_counter()
             await page.goto(base + "/")
-            await page.wait_for_function(
-                SHOWN, arg=[drives, values], polling="raf", timeout=120_000
-            )
+            await page.wait_for_function(SHOWN, arg=[drives], polling="raf", timeout=120_000)
             first = time.perf_counter() - t0
+            if not await page.evaluate(SCROLLED):
+                raise BenchSetupError("the last row's numbers were not written when scrolled to")
+            opening = [await page.evaluate(OPEN, name) for _ in range(5)]
             await page.evaluate(STOP)
-            redraws = {m: sorted(await page.evaluate(REDRAWS, m)) for m in MODES}
-            drives_ms, drives_size = await page.evaluate(FETCHES, "/api/v1/drives")
-            trends_ms, trends_size = await page.evaluate(FETCHES, "/api/v1/trends")
+            timed: dict[str, list[tuple[float, float, float, float]]] = {}
+            for what, times in (("changed", 10), ("full", 10), ("sort", 6), ("filter", 6)):
+                await browser.start_tracing(page=page, categories=TRACED)
+                found = []
+                for n in range(times):
+                    await asyncio.sleep(GAP_S if what in MODES else 0.3)
+                    found.append(await page.evaluate(MARKED, [what, n]))
+                trace = await browser.stop_tracing()
+                tasks = _main_thread(trace, what, len(found))
+                pairs = zip(tasks, found, strict=True)
+                timed[what] = [(cpu, wall, done, size) for (cpu, wall), (done, size) in pairs]
+            fetched = {}
+            for key, path in (
+                ("overview", "/api/v1/drives?view=overview"),
+                ("drive", f"/api/v1/drives?drive={name}"),
+                ("trends_drive", f"/api/v1/trends?drive={name}"),
+                ("all_drives", "/api/v1/drives"),
+                ("all_trends", "/api/v1/trends"),
+            ):
+                fetched[key] = await page.evaluate(FETCHES, path)
             elements, heap = await page.evaluate(FIGURES)
         finally:
             await browser.close()
-    return {
+    row: dict[str, Any] = {
         "throttle": f"{throttle:g}x",
         "first_s": first,
         "goal_met": "yes" if first < GOAL_S else "no",
-        **{f"{m}_ms": (redraws[m][4] + redraws[m][5]) / 2 for m in MODES},
-        "drives_ms": drives_ms,
-        "drives_kb": drives_size / 1024,
-        "get_trends_ms": trends_ms,
-        "trends_kb": trends_size / 1024,
-        "elements": elements,
-        "heap_mb": heap / 2**20,
+        "open_ms": _median(opening),
     }
+    for mode in MODES:
+        cpu, wall, applied, size = zip(*timed[mode], strict=True)
+        row[f"{mode}_main_ms"] = _median(list(cpu))
+        row[f"{mode}_max_ms"] = max(cpu)
+        row[f"{mode}_wall_ms"] = _median(list(wall))
+        row[f"{mode}_apply_ms"] = _median(list(applied))
+        row[f"{mode}_kb"] = _median(list(size)) / 1024
+    row["refresh_met"] = "yes" if row["changed_main_ms"] < REFRESH_GOAL_MS else "no"
+    row["sort_ms"] = _median([cpu for cpu, *_ in timed["sort"]])
+    row["filter_ms"] = _median([cpu for cpu, *_ in timed["filter"]])
+    for key, (ms, size) in fetched.items():
+        row[f"{key}_ms"] = ms
+        row[f"{key}_kb"] = size / 1024
+    row["elements"] = elements
+    row["heap_mb"] = heap / 2**20
+    return row
 
 
 async def _measure(
-    port: str, drives: int, parameters: tuple[str, ...], throttles: tuple[float, ...]
+    ports: list[str], drives: int, parameters: tuple[str, ...], throttles: tuple[float, ...]
 ) -> list[dict[str, Any]]:
     with tempfile.TemporaryDirectory() as tmp:
         text = service_config(
-            [port], drives=drives, pnus=parameters, every="1s", baudrate=BAUD,
+            ports, drives=drives, pnus=parameters, every="1s", baudrate=BAUD,
             audit_db=f"{tmp}/audit.sqlite",
         )  # fmt: skip
         async with Service(text, nodelay=True) as service:
             runtime = service.runtime
-            polled = drives * len(parameters)
-            ready = time.perf_counter() + 120.0
+            polled = len(ports) * drives * len(parameters)
+            ready = time.perf_counter() + 120.0 + 15.0 * len(ports)
             while len(runtime.snapshot.readings) < polled:
                 if time.perf_counter() > ready:
                     got = len(runtime.snapshot.readings)
-                    raise BenchSetupError(f"only {got} of {polled} values read in 120 s")
+                    raise BenchSetupError(f"only {got} of {polled} values read in time")
                 await asyncio.sleep(0.5)
             shown = _fill_trends(runtime)
+            name = f"l0d{drives}"  # the detail open: the last drive of the first line
             rows = []
             for throttle in throttles:
-                row = await _page(service.base, drives, shown, throttle)
-                rows.append({"drives": drives, "values": shown, **row})
+                row = await _page(service.base, len(ports) * drives, name, throttle)
+                rows.append({"lines": len(ports), "drives": len(ports) * drives,
+                             "values": shown, **row})  # fmt: skip
             return rows
 
 
@@ -194,18 +313,29 @@ def measure(
     drives: int = 126,
     throttles: tuple[float, ...] = (1.0,),
     parameters: tuple[str, ...] = PARAMETERS,
+    lines: int = 1,
 ) -> list[dict[str, Any]]:
+    """``drives`` on each of ``lines`` lines."""
     # The simulated drives' alarms and warnings come and go: their log lines are not figures.
     logger = logging.getLogger("pkwbus")
     level = logger.level
     logger.setLevel(logging.ERROR)
     try:
-        simulated = sim_process(
-            "fc", f"1-{drives}", response_delay=DELAY, baudrate=BAUD, wire_timing=True,
-            catalog="danfoss-fc",
-        )  # fmt: skip
-        with simulated as port:
-            return link.run(_measure(port, drives, parameters, throttles))
+        with contextlib.ExitStack() as stack:
+            ports = [
+                stack.enter_context(
+                    sim_process(
+                        "fc",
+                        f"1-{drives}",
+                        response_delay=DELAY,
+                        baudrate=BAUD,
+                        wire_timing=True,
+                        catalog="danfoss-fc",
+                    )
+                )
+                for _ in range(lines)
+            ]
+            return link.run(_measure(ports, drives, parameters, throttles))
     finally:
         logger.setLevel(level)
 
@@ -231,28 +361,52 @@ def trend_memory(lines: int = 8, drives: int = 126, parameters: int = 20) -> dic
     }  # fmt: skip
 
 
-def run(drives: int = 126, throttles: tuple[float, ...] = (1.0, 4.0)) -> dict[str, Any]:
-    rows = measure(drives, throttles)
-    table = markdown_table(
-        rows,
-        {
-            "drives": "drives",
-            "values": "values (each with a full trend)",
-            "throttle": "CPU slowed",
-            "first_s": "first view s",
-            "goal_met": f"< {GOAL_S:g} s",
-            "kept_ms": "redraw ms",
-            "trends_ms": "with new trends ms",
-            "anew_ms": "drawn anew ms",
-            "drives_ms": "GET /api/v1/drives ms",
-            "drives_kb": "KiB",
-            "get_trends_ms": "GET /api/v1/trends ms",
-            "trends_kb": "KiB ",
-            "elements": "elements",
-            "heap_mb": "JS heap MB",
-        },
-        digits=2,
-    )
+PAGE_COLUMNS = {
+    "lines": "lines",
+    "drives": "drives",
+    "values": "values (each with a full trend)",
+    "throttle": "CPU slowed",
+    "first_s": "first view s",
+    "goal_met": f"< {GOAL_S:g} s",
+    "open_ms": "open a drive ms",
+    "changed_main_ms": "refresh: main thread CPU ms",
+    "refresh_met": f"< {REFRESH_GOAL_MS:g} ms",
+    "changed_max_ms": "max ms",
+    "changed_wall_ms": "wall ms",
+    "changed_apply_ms": "of it applying ms",
+    "changed_kb": "fetched KiB",
+    "full_main_ms": "all rows sent: main thread CPU ms",
+    "full_wall_ms": "wall ms ",
+    "full_apply_ms": "applying ms",
+    "full_kb": "fetched KiB ",
+    "sort_ms": "sort CPU ms",
+    "filter_ms": "filter CPU ms",
+    "elements": "elements",
+    "heap_mb": "JS heap MB",
+}
+FETCH_COLUMNS = {
+    "lines": "lines",
+    "drives": "drives",
+    "throttle": "CPU slowed",
+    "overview_ms": "overview ms",
+    "overview_kb": "KiB",
+    "drive_ms": "?drive= ms",
+    "drive_kb": "KiB ",
+    "trends_drive_ms": "trends?drive= ms",
+    "trends_drive_kb": "KiB  ",
+    "all_drives_ms": "not fetched: all drives ms",
+    "all_drives_kb": "KiB   ",
+    "all_trends_ms": "all trends ms",
+    "all_trends_kb": "KiB    ",
+}
+
+
+def run(
+    drives: int = 126, throttles: tuple[float, ...] = (1.0, 4.0), lines: int = 1
+) -> dict[str, Any]:
+    rows = measure(drives, throttles, lines=lines)
+    table = markdown_table(rows, PAGE_COLUMNS, digits=2)
+    table += "\n\n" + markdown_table(rows, FETCH_COLUMNS, digits=1)
     memory = trend_memory()
     table += "\n\n" + markdown_table(
         [memory],
@@ -267,11 +421,12 @@ def run(drives: int = 126, throttles: tuple[float, ...] = (1.0, 4.0)) -> dict[st
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--drives", type=int, default=126)
+    parser.add_argument("--drives", type=int, default=126, help="drives on each line")
+    parser.add_argument("--lines", type=int, default=1, help="simulated lines")
     parser.add_argument("--throttle", type=float, action="append")
     args = parser.parse_args()
     try:
-        print(run(args.drives, tuple(args.throttle or (1.0, 4.0)))["table"])
+        print(run(args.drives, tuple(args.throttle or (1.0, 4.0)), args.lines)["table"])
     except BenchSetupError as e:
         print(f"status_page: {e}", file=sys.stderr)
         return 2

@@ -144,6 +144,8 @@ def line_yaml(
         lines.append(f"        writable: [{writable}]")
         if "describe" in d:
             lines.append(f"        describe: {d['describe']}")
+        if "counters" in d:
+            lines.append(f"        counters: {d['counters']}")
     return "\n".join(lines)
 
 

@@ -142,15 +142,18 @@ def test_the_status_page_behind_a_reverse_proxy_at_a_prefix(tmp_path: Path) -> N
                     page.route("**/*", lambda route: _only(route, proxy))
                     page.on("response", lambda r: seen.append((r.url, r.status)))
                     page.goto(base)
-                    for name in ("fan1", "fan2"):
-                        ramp = page.locator(f'[data-drive="{name}"] [data-parameter="3-41"] .value')
+                    for name in ("fan1", "fan2"):  # each drive's row, then its detail
+                        page.locator(f'#drives tr[data-drive="{name}"]').click(timeout=30_000)
+                        detail = page.locator(f'#detail[data-drive="{name}"]')
+                        ramp = detail.locator('[data-parameter="3-41"] .value')
                         expect(ramp).to_have_text(re.compile(r"^\d+(\.\d+)? s$"), timeout=30_000)
                     line = page.locator('#lines [data-line="line1"]')
                     expect(line).to_contain_text("open", timeout=30_000)
                     # Everything the page fetched went through the prefix, and was found.
                     assert seen and all(url.startswith(base) for url, _ in seen), seen
                     assert all(status < 400 for _, status in seen), seen
-                    assert any(url.endswith("/api/v1/drives") for url, _ in seen)
+                    assert any("/api/v1/drives?view=overview" in url for url, _ in seen)
+                    assert any("/api/v1/drives?drive=fan2" in url for url, _ in seen)
                     # Its links: the API docs (with their schema) and the metrics.
                     page.click("nav a:text('API')")
                     assert page.url == base + "docs"
