@@ -10,13 +10,16 @@ drive's Danfoss alarm log is watched, its newest entry's code and time; on a USS
 (``--protocol uss``) each drive's SINAMICS fault buffer (r0944) and alarm buffer
 (r2121), one read each, each drive warning ``--warnings-per-hour`` times (default 12,
 the simulator's; each warning an alarm that comes and goes, two sweeps of the alarm
-buffer). The drives trip at random (the simulator's default rate), so a sweep of a
-fault log now and then is in the figure too. Every log is read whole once at start,
+buffer); on a USS line of MICROMASTER 4 drives (``--protocol mm4``, catalog
+``siemens-mm4``) each drive's fault buffer, P0952 and r0948[4], two reads
+(its polls read as raw numbers: the catalog has no actual values). The drives trip at
+random (the simulator's default rate), so a sweep of a fault log now and then is in the
+figure too. Every log is read whole once at start,
 before the window (how long that took is printed). Printed per run: the line's busy
 share (``pkwbus_line_busy_seconds_total`` over the window), the polls done against
 those due, and the overruns; the watch's share is the difference of the busy shares.
 
-    .venv/bin/python bench/events_share.py [--protocol fc|uss] [--warnings-per-hour 12]
+    .venv/bin/python bench/events_share.py [--protocol fc|uss|mm4] [--warnings-per-hour 12]
         [--seconds 60] [--repeat 3]
 """
 
@@ -42,8 +45,13 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import HistoryStore
 
 BAUDRATE = 19200
-POLLS = {"fc": ("16-13", "16-14", "16-10"), "uss": ("r0021", "r0027", "r0032")}
-CATALOGS = {"fc": "danfoss-fc", "uss": "siemens-g120"}
+POLLS = {
+    "fc": ("16-13", "16-14", "16-10"),
+    "uss": ("r0021", "r0027", "r0032"),
+    "mm4": ("r0021", "r0027", "r0032"),
+}
+CATALOGS = {"fc": "danfoss-fc", "uss": "siemens-g120", "mm4": "siemens-mm4"}
+LINES = {"fc": "fc", "uss": "uss", "mm4": "uss"}  # the line's protocol of each case
 EVERY = 0.3
 DRIVES = (1, 2, 3)
 SETTLE = 5.0  # seconds after the start before the window: the start-up sweep is over
@@ -55,7 +63,7 @@ def _config(port: str, events: str, folder: str, protocol: str = "fc") -> str:
     # USS: the simulator's variable PKW length (a SINAMICS drive's factory setting) given,
     # not learned: learned from a watch's word answer or a poll's double word first, the
     # requests' length would differ between the two runs, and so the line's busy share.
-    pkw = ", pkw_words: 127" if protocol == "uss" else ""
+    pkw = ", pkw_words: 127" if LINES[protocol] == "uss" else ""
     drives = "\n".join(
         f"      - {{name: d{a}, address: {a}, catalog: {catalog}, describe: off{pkw},"
         f" poll: [{polls}]}}"
@@ -67,7 +75,7 @@ audit_db: {folder}/audit.sqlite
 lines:
   - name: bench
     port: {port}
-    protocol: {protocol}
+    protocol: {LINES[protocol]}
     baudrate: {BAUDRATE}
     timeout: 200ms
     alarms: off
@@ -126,7 +134,7 @@ def measure(
 ) -> dict[str, float]:
     extra = ["--warnings-per-hour", str(warnings_per_hour)] if protocol == "uss" else []
     with sim_process(
-        protocol, "1-3", response_delay=0.002, baudrate=BAUDRATE, wire_timing=True,
+        LINES[protocol], "1-3", response_delay=0.002, baudrate=BAUDRATE, wire_timing=True,
         catalog=CATALOGS[protocol], extra=extra,
     ) as port:  # fmt: skip
         return link.run(_run(port, events, seconds, settle, protocol))

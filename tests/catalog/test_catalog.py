@@ -20,8 +20,9 @@ from pkwbus.catalog import (
 )
 from pkwbus.catalog.description import ParameterDescription, name_for_unit
 from pkwbus.catalog.loader import _parse_key
+from pkwbus.catalog.logs import logs_of_catalog
 
-BUILT_IN = ["danfoss-fc", "siemens-g120"]
+BUILT_IN = ["danfoss-fc", "siemens-g120", "siemens-mm4"]
 
 HEADER = """\
 name: test
@@ -83,6 +84,19 @@ def test_entries_are_consistent(name: str) -> None:
 def test_catalog_dialects() -> None:
     assert load_catalog("danfoss-fc").dialect == "fc"
     assert load_catalog("siemens-g120").dialect == "uss"
+    assert load_catalog("siemens-mm4").dialect == "uss"
+
+
+def test_the_micromaster_4_catalog_and_its_fault_buffer() -> None:
+    """Only what the MICROMASTER 440 Parameter List's reachable pages (r0948; r2114, P2115)
+    and the SED2 Operating Instructions (r0947) give; P2115, a clock, is no setting."""
+    mm4 = load_catalog("siemens-mm4")
+    assert sorted(mm4.parameters) == [947, 948, 2114, 2115]
+    assert [(s.type, s.array, s.verified) for s in mm4.parameters.values()] == [
+        ("u16", 8, False), ("u16", 12, True), ("u16", 2, True), ("u16", 3, True),
+    ]  # fmt: skip
+    assert not any(s.is_setting or s.writable or s.counter for s in mm4.parameters.values())
+    assert [log.name for log in logs_of_catalog("siemens-mm4")] == ["MICROMASTER 4 fault buffer"]
 
 
 def test_danfoss_sourced_scaling() -> None:

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus import fdl
+from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import (
     DpSlave,
@@ -20,6 +22,7 @@ from pkwbus.protocol.profibus.dpv1.transfer import RecordFailed, RecordRead
 from pkwbus.protocol.profidrive.parameters import (
     AXES,
     RECORD,
+    Attribute,
     Change,
     Format,
     ParameterAddress,
@@ -28,7 +31,11 @@ from pkwbus.protocol.profidrive.parameters import (
     Values,
     decode_response,
 )
+from pkwbus.sim import ModelConfig
+from pkwbus.sim.drives.profidrive_buffer import BufferKind
 from pkwbus.sim.profibus.line import DpSimulator
+from tests.sim.conftest import FakeClock
+from tests.sim.test_dp_line import Wire
 
 MASTER, ADDRESS = 2, 5
 
@@ -222,3 +229,110 @@ def test_a_transfer_ends_at_its_timeout_while_the_slave_keeps_its_diagnosis() ->
     ended = [e.end for e in events + slave.take_events() if isinstance(e, TransferEnded)]
     assert len(ended) == 1 and isinstance(ended[0], RecordFailed) and ended[0].timed_out
     assert slave.state is SlaveState.DATA_EXCHANGE
+
+
+# ------------------------------------------------- a PROFIdrive fault buffer, any make
+
+STEADY = ModelConfig(warning_rate=0.0, trip_rate=0.0, trip_reset_seconds=0.0)  # as told
+
+
+def buffered(kind: BufferKind, clock: FakeClock, *, ppo_number: int = 3) -> DpSimulator:
+    return DpSimulator(
+        [ADDRESS], ppo_number=ppo_number, dpv1=ppo_number == 3, clock=clock, model=STEADY,
+        fault_buffers={ADDRESS: kind},
+    )  # fmt: skip
+
+
+def test_an_8_x_8_buffer_with_time_differences_through_data_record_47() -> None:
+    clock = FakeClock(0.0)
+    line = buffered(BufferKind(8, 8, 53), clock)
+    drive = line.drives[ADDRESS]
+    clock.advance(100_000.25)  # a day and 13,600.25 s of runtime: ms past 16 bits
+    drive.trip(7, clock(), value=-5)
+    drive.trip(8, clock(), value=6)  # the same fault situation, its second message
+    drive.acknowledge(clock())
+    clock.advance(1.5)
+    drive.trip(9, clock(), value=7)
+    bus = Bus(line)
+    bus.start()
+    request = ParameterRequest.read(1, 1, [
+        ParameterAddress(944), ParameterAddress(950, 0, 2),
+        ParameterAddress(948, 1, 1, Attribute.DESCRIPTION),
+        ParameterAddress(947, 0, 10), ParameterAddress(948, 8, 2), ParameterAddress(949, 8, 2),
+        ParameterAddress(948, 0), ParameterAddress(947, 64),
+    ])  # fmt: skip
+    end = bus.transfer(request)
+    assert isinstance(end, RecordRead)
+    counter, shape, ident, numbers, times, values, now_time, beyond = decode_response(
+        end.data, request
+    ).results
+    assert counter == Values(Format.U16, (4,))  # three faults and an acknowledgement
+    assert shape == Values(Format.U16, (8, 8))
+    assert ident == Values(Format.U16, (53 | 1 << 14 | 1 << 9,))  # array, read-only
+    assert numbers == Values(Format.U16, (9, 0, 0, 0, 0, 0, 0, 0, 7, 8))
+    ms = 100_000_250 - 86_400_000
+    assert times == Values(Format.TIME_DIFFERENCE_WITH_DATE, (ms << 16 | 1, ms << 16 | 1))
+    assert values == Values(Format.I32, (-5, 6))
+    assert now_time == Values(Format.TIME_DIFFERENCE_WITH_DATE, ((ms + 1500) << 16 | 1,))
+    assert isinstance(beyond, ParameterError) and beyond.text == "Invalid subindex"
+
+
+def pkw_read(wire: Wire, clock: FakeClock, request: pkw.PkwRequest) -> pkw.PkwResponse:
+    """One PKW job through the PPO's words, the line's clock going on with the cycles."""
+    wire.events.clear()
+    wire.slot.submit(request)
+    for _ in range(30):
+        clock.advance(0.01)
+        wire.cycle(clock())
+        done = [e for e in wire.events if isinstance(e, ppo.SlotAnswer)]
+        if done:
+            return done[0].response
+    raise AssertionError("no answer")
+
+
+def test_an_8_x_1_buffer_with_seconds_since_through_the_ppo_pkw_words() -> None:
+    clock = FakeClock(0.0)
+    line = buffered(BufferKind(8, 1, 6), clock, ppo_number=1)
+    drive = line.drives[ADDRESS]
+    dialect = line.dialect
+    drive.trip(21, clock(), value=3)
+    drive.acknowledge(clock())
+    clock.advance(30.0)
+    drive.trip(22, clock(), value=4)
+    clock.advance(100.0)
+    wire = Wire(line, ADDRESS)
+    for _ in range(4):
+        clock.advance(0.01)
+        wire.cycle(clock())
+
+    def read(pnu: int, index: int) -> int:
+        answer = pkw_read(wire, clock, pkw.read(dialect, pnu, index))
+        assert isinstance(answer, pkw.ValueResponse), answer
+        return answer.raw
+
+    ident = pkw_read(wire, clock, pkw.read_description(dialect, 948, 1))
+    assert isinstance(ident, pkw.DescriptionResponse) and ident.raw == 6 | 1 << 14 | 1 << 9
+    assert (read(950, 0), read(950, 1)) == (8, 1)
+    assert [read(947, i) for i in range(3)] == [22, 21, 0]  # [0] active, [1] acknowledged
+    assert (read(948, 0), read(948, 1)) == (100, 130)  # seconds since each fault
+    assert read(949, 1) == 3 and read(944, 0) == 3
+
+
+def test_a_time_difference_with_date_does_not_fit_the_pkw_words() -> None:
+    clock = FakeClock(0.0)
+    line = buffered(BufferKind(8, 8, 53), clock, ppo_number=1)
+    line.drives[ADDRESS].trip(5, clock(), value=0)
+    wire = Wire(line, ADDRESS)
+    for _ in range(4):
+        clock.advance(0.01)
+        wire.cycle(clock())
+    assert isinstance(pkw_read(wire, clock, pkw.read(line.dialect, 948, 0)), pkw.Rejection)
+    number = pkw_read(wire, clock, pkw.read(line.dialect, 947, 0))
+    assert isinstance(number, pkw.ValueResponse) and number.raw == 5
+
+
+def test_a_buffer_kind_the_simulator_does_not_keep_is_refused() -> None:
+    with pytest.raises(ValueError, match="data type 12"):
+        BufferKind(8, 1, 12)
+    with pytest.raises(ValueError, match="not here"):
+        DpSimulator([5], fault_buffers={6: BufferKind()})

@@ -1,22 +1,28 @@
 """The simulated drives' own logs, checked against the documents' statements: the SINAMICS
 fault buffer (S200 Operating Instructions appendix A.3; r2114 after the CU240D-2 Operating
-Instructions section 8.2) and the Danfoss alarm log 15-30..15-32 (newest first, 10 entries:
-a secondary source, kept so by the simulator)."""
+Instructions section 8.2), the Danfoss alarm log 15-30..15-32 (newest first, 10 entries:
+a secondary source, kept so by the simulator) and the MICROMASTER 4 fault buffer (against
+the test's model of its documents, tests/protocol/logs/test_micromaster.py)."""
 
 from __future__ import annotations
 
 import dataclasses
 import random
+from collections.abc import Callable
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.logs import Read
 from pkwbus.protocol.pkw import ValueResponse
 from pkwbus.protocol.pkw.dialects import FC, USS
 from pkwbus.protocol.pzd import Profile
 from pkwbus.protocol.serial.telegram import BlockShape, split_block
 from pkwbus.sim import ModelConfig, SimDrive, Simulator
 from pkwbus.sim.drives.model import ALARMS, DriveModel, Limits
+from tests.protocol.logs.test_micromaster import Mm4Buffer
 from tests.sim.conftest import FakeClock, parse, request_telegram
 
 STILL = ModelConfig(noise=0.0, warning_rate=0.0, trip_rate=0.0, trip_reset_seconds=0.0)
@@ -285,6 +291,7 @@ def test_simulator_trip_refuses_what_no_drive_could_log() -> None:
     [
         ("uss", "siemens-g120", (944, 947, 948, 949, 2109, 2114, 2130, 2136)),
         ("fc", "danfoss-fc", (1503, 1530, 1531, 1532)),
+        ("uss", "siemens-mm4", (947, 948, 949, 952, 2114)),
     ],
 )
 def test_the_logs_are_served_with_the_default_catalogs(
@@ -318,3 +325,52 @@ def test_a_drive_made_with_a_past_has_its_trips_acknowledged_hours_ago() -> None
     fc = sim_of("fc", clock, past).drives[3]
     assert [fc.value(1530, i) for i in range(3)][2] == 0 and fc.value(1530, 1)
     assert fc.value(1532, 0) == 7 * 3600 and fc.value(1532, 1) == 3600  # newest first, seconds
+
+
+# ------------------------------------------------------- MICROMASTER 4 fault buffer
+
+MM4 = {947: 8, 948: 12, 949: 8, 952: 1, 2114: 2, 2115: 3}  # parameter: elements
+
+
+def mm4_values(read: Callable[[int, int], int | None]) -> dict[tuple[int, int], int | None]:
+    return {(pnu, i): read(pnu, i) for pnu, n in MM4.items() for i in range(n)}
+
+
+@settings(max_examples=100)
+@given(st.lists(st.tuples(st.sampled_from(["fault", "acknowledge"]), st.integers(0, 10**8))))
+def test_the_mm4_buffer_reads_as_its_documents_word_it(steps: list[tuple[str, int]]) -> None:
+    """Every value of the buffer, after any run the documents word (no third fault in a
+    trip, no acknowledgement without one), is what the test's model holds."""
+    clock = FakeClock()
+    sim = Simulator("uss", [3], seed=5, model=STILL, clock=clock, catalog="siemens-mm4")
+    drive, model, ms = sim.drives[3], Mm4Buffer(), 0
+    for code, (kind, dt) in enumerate(steps, 1):
+        clock.advance(dt / 1000)
+        ms += dt
+        model.now = ms / 1000
+        if kind == "fault" and model.fault(code, code * 7):
+            sim.trip(3, code, value=code * 7)
+        elif kind == "acknowledge" and model.acknowledge():
+            sim.acknowledge(3)
+    drive.tick(clock())
+    assert mm4_values(drive.value) == mm4_values(lambda pnu, i: model(Read(pnu, i)))
+
+
+def test_the_mm4_counter_is_kept_over_a_power_cycle_and_stands_still_while_off() -> None:
+    clock = FakeClock()
+    sim = Simulator("uss", [3], seed=5, model=STILL, clock=clock, catalog="siemens-mm4")
+    drive = sim.drives[3]
+    clock.advance(70_000)
+    sim.trip(3, 3)
+    assert [drive.value(948, i) for i in range(3)] == [1, 70_000 - 65_536, 0]
+    sim.power_cycle(3, off=600)
+    clock.advance(300)
+    assert sim.handle(request_telegram(3, pkw.read(USS, 2114, 1), USS)) is None  # off
+    clock.advance(400)
+    drive.tick(clock())
+    assert (drive.value(2114, 0), drive.value(2114, 1)) == (1, 70_100 - 65_536)
+    assert drive.value(947, 0) == 3  # kept, still waiting for its acknowledgement
+    sim.acknowledge(3)
+    drive.set_value(2115, 77, 1)  # the AOP's clock set: the next trip's words are its own
+    sim.trip(3, 4)
+    assert [drive.value(948, i) for i in range(6)] == [0, 77, 0, 1, 70_000 - 65_536, 0]

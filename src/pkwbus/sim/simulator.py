@@ -164,10 +164,12 @@ class Simulator:
         """The trip of drive ``address`` is acknowledged now (a local operator's reset)."""
         self._drive(address).acknowledge(self.clock())
 
-    def power_cycle(self, address: int) -> None:
-        """Drive ``address`` is switched off and on again now: its runtime (r2114) starts
-        again from 0 and it counts one more power-up (15-03); its logs are kept."""
-        self._drive(address).power_cycle(self.clock())
+    def power_cycle(self, address: int, off: float = 0.0) -> None:
+        """Drive ``address`` is switched off now and on again ``off`` seconds later (0: at
+        once), answering nothing meanwhile: a SINAMICS runtime (r2114) starts again from 0,
+        a MICROMASTER 4 run time counter (r2114) goes on from where it stood, neither
+        counting while it is off; it counts one more power-up (15-03); its logs are kept."""
+        self._drive(address).power_cycle(self.clock(), off)
 
     def keypad(self, address: int, pnu: int, raw: int, index: int = 0) -> None:
         """A person at the keypad (LCP) of drive ``address`` sets element ``index`` of
@@ -243,8 +245,8 @@ class Simulator:
         if drive is None:
             stats.count("ignored")
             return None
-        if self.is_dead(drive.address):
-            stats.inject("dead", drive.address)
+        if self.is_dead(drive.address) or drive.off(now):
+            stats.inject("dead", drive.address)  # switched off: as dead
             return None
         clean = telegram.encode() if adr.mirror else self._respond(drive, telegram, now)
         if clean is None:

@@ -20,6 +20,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.logs import (
     DANFOSS_ALARM_LOG,
+    MICROMASTER_FAULT_BUFFER,
     SINAMICS_ALARM_BUFFER,
     SINAMICS_FAULT_BUFFER,
     DriveLog,
@@ -28,9 +29,10 @@ from pkwbus.protocol.logs import (
 )
 from pkwbus.service.history.store import HistoryStore
 from pkwbus.service.history.stream import EventStream
-from pkwbus.service.history.watch import WHOLE_EVERY, LogWatcher, Watched
+from pkwbus.service.history.watch import WHOLE_EVERY, LogWatcher, Watched, was_off
 from tests.protocol.logs.test_alarm_buffer import AlarmBuffer
 from tests.protocol.logs.test_logs import AlarmLog, FaultBuffer
+from tests.protocol.logs.test_micromaster import Mm4Buffer
 
 EVERY = 0.02
 
@@ -288,3 +290,48 @@ async def test_the_alarm_buffer_is_read_whole_at_first_hourly_and_after_a_comeba
     assert len(store.known("d1")) == 13
     await watch.stop()
     store.close()
+
+
+async def test_a_micromaster_4_seen_off_since_the_last_sweep_gives_its_new_entries_seen(
+    tmp_path: Path,
+) -> None:
+    """Its run time counter (r2114) stands still while the drive is off and goes on from
+    there (MICROMASTER 440 Parameter List 01/06, r2114): an entry from before the drive
+    was off would look younger by the time it was off. Off since the last sweep (the
+    counter went on less than the wall clock): what came since gets ``seen``; with the
+    drive powered throughout, the counter's time."""
+    buffer = Mm4Buffer(now=1000.0)
+    line = FakeLine(buffer)
+    now = [50_000.0]
+    dialect = DriveTarget.create("uss", 1).dialect
+    w = Watched("l1", "d1", dialect, MICROMASTER_FAULT_BUFFER, EVERY)
+    store = HistoryStore(tmp_path / "history.sqlite")
+    watch = LogWatcher({"l1": line}, EventStream(store, CollectorRegistry()), [w],
+                       retention=3600.0, clock=lambda: now[0])  # fmt: skip
+    await watch.start()
+    buffer.fault(3, 1)  # powered throughout: the counter's time
+    buffer.now += 30
+    now[0] += 30
+    await settle(line)
+    buffer.acknowledge()
+    buffer.now += 20  # then off for ten minutes: the counter stands still
+    now[0] += 20 + 600
+    buffer.fault(4, 2)  # after it came back, or before it went: not known
+    await settle(line)
+    buffer.acknowledge()
+    buffer.now += 40
+    now[0] += 40
+    buffer.fault(5, 3)
+    await settle(line)
+    times = {e.number: (e.time_source, e.time) for e in store.latest()}
+    assert times == {3: ("runtime", 50_000.0), 4: ("seen", None), 5: ("runtime", 50_690.0)}
+    await watch.stop()
+    store.close()
+
+
+def test_off_is_the_counter_going_on_less_than_the_wall_clock() -> None:
+    assert not was_off(None, 100.0, Runtime(5000))
+    assert not was_off((0.0, Runtime(0)), 100.0, Runtime(98_500))  # a second's counter
+    assert was_off((0.0, Runtime(0)), 100.0, Runtime(97_000))
+    assert was_off((0.0, Runtime(90_000)), 100.0, Runtime(1000))  # SINAMICS: restarted
+    assert not was_off((0.0, Runtime(0)), 86_400.0, Runtime(86_320_000))  # drift in a day

@@ -117,7 +117,9 @@ class RecordCarrier(SlaveHealth):
         if isinstance(value, float):
             raw = int.from_bytes(struct.pack(">f", value), "big")
         elif isinstance(value, int):
-            raw = value & (0xFFFF if width is Width.WORD else 0xFFFFFFFF)
+            # A value wider than a double word (a TimeOfDay or TimeDifference with date: six
+            # bytes, ms then days) keeps all its bytes.
+            raw = value & ((1 << max(width.value, 8 * got.format.size)) - 1)
         else:
             raise RemoteProtocolError(f"a {got.format.name} value of parameter {request.pnu}")
         if request.command is Command.READ_DESCRIPTION:

@@ -12,10 +12,13 @@ drive time), never by their index, which shifts with every new entry.
 """
 
 from pkwbus.protocol.logs.danfoss import DANFOSS_ALARM_LOG
+from pkwbus.protocol.logs.micromaster import MICROMASTER_FAULT_BUFFER
 from pkwbus.protocol.logs.model import (
+    Age,
     DriveLog,
     Kind,
     LogEntry,
+    NoSuchLog,
     Opaque,
     Read,
     Runtime,
@@ -23,16 +26,21 @@ from pkwbus.protocol.logs.model import (
     SweepResult,
     TimeBase,
 )
+from pkwbus.protocol.logs.profidrive import PROFIDRIVE_FAULT_BUFFER
 from pkwbus.protocol.logs.sinamics import SINAMICS_FAULT_BUFFER
 from pkwbus.protocol.logs.sinamics_alarms import SINAMICS_ALARM_BUFFER
 
 __all__ = [
     "DANFOSS_ALARM_LOG",
+    "MICROMASTER_FAULT_BUFFER",
+    "PROFIDRIVE_FAULT_BUFFER",
     "SINAMICS_ALARM_BUFFER",
     "SINAMICS_FAULT_BUFFER",
+    "Age",
     "DriveLog",
     "Kind",
     "LogEntry",
+    "NoSuchLog",
     "Opaque",
     "Read",
     "Runtime",

@@ -7,11 +7,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
+from pkwbus.errors import PkwbusError
+
 __all__ = [
     "MS_PER_DAY",
+    "Age",
     "DriveLog",
     "Kind",
     "LogEntry",
+    "NoSuchLog",
     "Opaque",
     "Read",
     "Runtime",
@@ -36,24 +40,30 @@ class Kind(enum.StrEnum):
 class TimeBase(enum.StrEnum):
     """What a log's entry times count."""
 
-    RUNTIME = "runtime"  # the drive's runtime since power-up (SINAMICS r2114)
+    # the drive's runtime, r2114: SINAMICS since power-up, MICROMASTER 4 its powered time
+    RUNTIME = "runtime"
     NONE = "none"  # no time a document explains: when pkwbus first read it is all there is
+    DESCRIBED = "described"  # as the drive describes its time parameter (PROFIdrive P948)
 
 
 @dataclass(frozen=True, slots=True)
 class Read:
     """One value to read: a parameter number, its index (0 for a simple parameter), and
-    whether its document gives it a sign (the caller decodes the drive's raw value so)."""
+    whether its document gives it a sign (the caller decodes the drive's raw value so);
+    with ``element``, that element of the parameter's description instead (PKW AK 4, data
+    record 47's attribute 0x20: element 1 its identifier, which holds its data type)."""
 
     pnu: int
     index: int = 0
     signed: bool = False
+    element: int = 0
 
 
 @dataclass(frozen=True, slots=True, order=True)
 class Runtime:
     """A time in the drive's runtime base: milliseconds since its control unit was
-    powered up (SINAMICS: days x 86,400,000 + ms)."""
+    powered up (SINAMICS: days x 86,400,000 + ms), or of its powered time over all
+    power-ups (MICROMASTER 4: seconds x 1000)."""
 
     ms: int
 
@@ -86,6 +96,22 @@ class Opaque:
 
 
 @dataclass(frozen=True, slots=True)
+class Age:
+    """An entry's time as its age: whole ``seconds`` before the drive answered ``read``,
+    the read that gave them (``top``: the most its number holds; an age there may have
+    stopped counting). An age grows with every read, so it never tells entries apart: the
+    caller places the entry on its own clock, when ``read`` was answered, and knows it
+    again by where it placed it."""
+
+    seconds: int
+    read: Read
+    top: int
+
+    def __str__(self) -> str:
+        return f"{self.seconds} s before it was read"
+
+
+@dataclass(frozen=True, slots=True)
 class LogEntry:
     """One entry of a drive's log, by its content: what it is, its code (the drive's fault
     or alarm number), its value (None where the log keeps none), and its drive time."""
@@ -93,7 +119,7 @@ class LogEntry:
     kind: Kind
     code: int
     value: int | None
-    drive_time: Runtime | Opaque | None
+    drive_time: Runtime | Opaque | Age | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,6 +137,11 @@ class SweepResult:
 Values = Mapping[Read, int | None]  # what a round read; None: the drive refused that one
 
 
+class NoSuchLog(PkwbusError):
+    """The drive refuses what a sweep must know of its log (the buffer's shape): it keeps
+    no such log, and the log is not watched."""
+
+
 class Sweep(Protocol):
     """The reading of one whole log, in rounds, each decided by what the earlier said."""
 
@@ -119,7 +150,8 @@ class Sweep(Protocol):
         ...
 
     def feed(self, values: Values) -> None:
-        """What the round read."""
+        """What the round read (:class:`NoSuchLog` where it says the drive keeps no such
+        log)."""
         ...
 
     def result(self) -> SweepResult | None:

@@ -15,7 +15,8 @@ PROFIBUS DP MCA 101 manual, "PCA parameter access"), big-endian throughout:
   then per parameter (read) its values, or (change) nothing but, for a failed
   one, its error: format 0x44, number of values, the error number and an
   additional value where the drive gives one. Values of one byte are padded
-  with 0x00 to an even length.
+  with 0x00 to an even length. A value of a time type (TimeOfDay or
+  TimeDifference with date: 6 bytes, ms then days) is one number of its bytes.
 
 The worked example, the change of p1121 to 12.15 in the SINAMICS G120X
 operating instructions ("Parameter channel", example), is
@@ -96,6 +97,11 @@ class Format(enum.IntEnum):
     FLOAT = 0x08
     VISIBLE_STRING = 0x09
     OCTET_STRING = 0x0A
+    # The time types, each one number: ms (U32) then days (U16) since 1984-01-01; ms then
+    # days; ms (Siemens PROFIdrive application example PDRV V4.2, data types 12, 53, 54).
+    TIME_OF_DAY_WITH_DATE = 0x0C
+    TIME_DIFFERENCE_WITH_DATE = 0x35
+    TIME_DIFFERENCE_WITHOUT_DATE = 0x36
     ZERO = 0x40  # no values: the change was done
     BYTE = 0x41
     WORD = 0x42
@@ -113,6 +119,8 @@ _SIZES: Final = {
     Format.VISIBLE_STRING: 1, Format.OCTET_STRING: 1,
     Format.I16: 2, Format.U16: 2, Format.WORD: 2, Format.ERROR: 2,
     Format.I32: 4, Format.U32: 4, Format.DOUBLE_WORD: 4, Format.FLOAT: 4,
+    Format.TIME_DIFFERENCE_WITHOUT_DATE: 4,
+    Format.TIME_OF_DAY_WITH_DATE: 6, Format.TIME_DIFFERENCE_WITH_DATE: 6,
     Format.ZERO: 0,
 }  # fmt: skip
 _SIGNED: Final = frozenset({Format.I8, Format.I16, Format.I32})

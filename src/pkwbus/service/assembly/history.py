@@ -8,7 +8,7 @@ import logging
 from collections.abc import Callable
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
-from pkwbus.catalog.logs import logs_of_catalog
+from pkwbus.catalog.logs import logs_of_drive
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
 from pkwbus.protocol.values import ParameterRef
@@ -29,15 +29,16 @@ log = logging.getLogger("pkwbus.service.history")
 
 
 def logs_of(line: cfg.Line, drive: cfg.Drive) -> tuple[DriveLog, ...]:
-    """The logs a configured drive's events are read from (none: off, or none known)."""
+    """The logs a configured drive's events are read from (none: off, or none known): its
+    catalog's, or a DP drive's PROFIdrive fault buffer (:func:`logs_of_drive`)."""
     if (drive.events or line.events) == "off":
         return ()
-    return logs_of_catalog(drive.catalog)
+    return logs_of_drive(drive.catalog, drive.protocol, drive.pkw_dialect.name)
 
 
-def _codes(catalog: str, log: DriveLog) -> CodeTable | None:
+def _codes(catalog: str | None, log: DriveLog) -> CodeTable | None:
     """How the log's codes read in words: its catalog's table of the log's code parameter."""
-    table = alarm_table(catalog)
+    table = alarm_table(catalog) if catalog is not None else None
     sweep = log.sweep()
     codes = sweep.next()  # the first round reads the codes
     for read in codes:
@@ -53,7 +54,7 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
     watched = []
     for line, drive in config.drives():
         entry = runtime.drives.get(drive.name)
-        if entry is None or drive.catalog is None:
+        if entry is None:
             continue
         every = drive.events_every or line.events_every
         dialect = entry.target.dialect

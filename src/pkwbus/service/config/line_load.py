@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final
 
-from pkwbus.catalog.logs import logs_of_catalog
+from pkwbus.catalog.logs import logs_of_drive
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
@@ -152,7 +152,7 @@ def watch_rate(line: Line, drive: Drive) -> float:
     """The reads per second the watch of the drive's own logs asks for (``events``): each
     one's change counter or newest entry every ``events_every`` (the sweeps when it changed are
     rare, and not counted)."""
-    logs = logs_of_catalog(drive.catalog)
+    logs = logs_of_drive(drive.catalog, drive.protocol, drive.pkw_dialect.name)
     if (drive.events or line.events) == "off":
         return 0.0
     return sum(len(log.watch()) for log in logs) / (drive.events_every or line.events_every)

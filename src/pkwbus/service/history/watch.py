@@ -12,12 +12,20 @@ was down is found then. Each new entry is a log line and a step of
 ``pkwbus_drive_events_total``.
 
 Time: an entry's wall-clock ``time`` comes from the drive's own time base.
-A SINAMICS entry is in the runtime base (r2114), read in the same sweep, so
-its time is when the sweep read r2114 minus the runtime since the entry;
-exact while the drive stayed powered since the entry (a power cycle restarts
-the runtime: an entry whose runtime is ahead of the runtime now was logged
-before it, and only ``seen`` is known). Where the log has no time base that
-a document explains (Danfoss 15-32), ``time_source`` is ``seen``.
+A SINAMICS or MICROMASTER 4 entry is in the runtime base (r2114), read in the
+same sweep, so its time is when the sweep read r2114 minus the runtime since
+the entry; exact while the drive stayed powered since the entry. Neither
+runtime counts while the drive is off: SINAMICS's starts again from 0 at
+power-up (an entry whose runtime is ahead of the runtime now was logged before
+it, and only ``seen`` is known), MICROMASTER 4's goes on from where it stood
+(so an entry from before the drive was off looks younger by the time it was
+off). Whichever, a drive whose runtime went on less than the wall clock since
+the last sweep (beyond :data:`OFF_SLACK` and :data:`OFF_DRIFT`) was off
+meanwhile, at a time not known: the entries that came since that sweep get
+``seen``. Where the log has no time base that a document explains (Danfoss
+15-32), ``time_source`` is ``seen``. An entry timed by its age (a PROFIdrive
+P948 of Unsigned16) is placed when the drive answered the read of its age,
+minus the age, and known again by where it placed (:mod:`.ages`).
 """
 
 from __future__ import annotations
@@ -38,13 +46,31 @@ from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.master.planning.plan import HealthChanged
 from pkwbus.protocol import pkw
-from pkwbus.protocol.logs import DriveLog, LogEntry, Opaque, Read, Runtime, SweepResult
+from pkwbus.protocol.logs import (
+    Age,
+    DriveLog,
+    LogEntry,
+    NoSuchLog,
+    Opaque,
+    Read,
+    Runtime,
+    SweepResult,
+)
 from pkwbus.protocol.pkw.dialects import Dialect
+from pkwbus.service.history.ages import AgedKeys
 from pkwbus.service.history.store import DriveEvent, HistoryError
 from pkwbus.service.history.stream import EVENT_LABELS, EventStream
 from pkwbus.service.runtime import LineTask
 
-__all__ = ["EVENT_LABELS", "LogWatcher", "Watched", "entry_key"]
+__all__ = [
+    "EVENT_LABELS",
+    "OFF_DRIFT",
+    "OFF_SLACK",
+    "LogWatcher",
+    "Watched",
+    "entry_key",
+    "was_off",
+]
 
 log = logging.getLogger("pkwbus.service.history")
 
@@ -54,6 +80,11 @@ PRUNE_EVERY = 3600.0  # seconds between two prunings of a drive's old entries
 # by its first sweep this long after the last whole one, and after the drive or its line
 # came back; only a whole read says what the drive no longer holds (pruning).
 WHOLE_EVERY = 3600.0
+# A drive was off since the last sweep when its runtime went on less than the wall clock by
+# more than this (seconds: a runtime counted in whole seconds, MICROMASTER 4's r2114, and
+# the time an answer takes) and this share of the time between (its clock against ours).
+OFF_SLACK = 2.0
+OFF_DRIFT = 0.001
 
 
 @dataclass
@@ -71,7 +102,10 @@ class Watched:
     last_watch: tuple[int | None, ...] | None = None
     last_sweep: SweepResult | None = None  # what the last sweep found, for the next one
     whole_at: float | None = None  # when the log was last read whole
+    # When the last sweep read the drive's runtime, and what it read (None: not yet).
+    anchor: tuple[float, Runtime] | None = None
     pruned: float = 0.0
+    aged: AgedKeys | None = None  # the entries timed by their age kept (:mod:`.ages`)
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     answered: dict[Read, float] = field(default_factory=dict)  # the last round's answer times
 
@@ -95,6 +129,8 @@ def entry_key(entry: LogEntry) -> str:
 
 
 def _as_int(read: Read, response: pkw.PkwResponse) -> int | None:
+    if read.element:  # a description element: a number
+        return response.raw if isinstance(response, pkw.DescriptionResponse) else None
     if not isinstance(response, pkw.ValueResponse):
         return None
     raw, bits = response.raw, response.width.value
@@ -165,7 +201,7 @@ class LogWatcher:
                 await self._look(w)
             except _Unanswered:
                 pass  # tried again at the next watch
-            except _Refused as exc:
+            except (_Refused, NoSuchLog) as exc:
                 log.warning(
                     "drive %s: its %s is not watched: %s", w.drive, w.log.name, exc,
                     extra={"line": w.line, "drive": w.drive},
@@ -200,18 +236,31 @@ class LogWatcher:
         read_at = self.clock()
         whole = w.whole_at is None or read_at - w.whole_at >= WHOLE_EVERY
         sweep = w.log.sweep(None if whole else w.last_sweep)
+        answered: dict[Read, float] = {}  # when each read of the sweep was answered
         while reads := sweep.next():
             sweep.feed(await self._round(w, reads))
+            answered.update(w.answered)
             for r in w.log.runtime[:1]:  # when the drive's runtime now was answered
                 read_at = w.answered.get(r, read_at)
         found = sweep.result()
         if found is None:
             return False
+        before = set(w.last_sweep.entries) if w.last_sweep is not None else set()
+        off = was_off(w.anchor, read_at, found.runtime)  # since the last sweep
         w.last_sweep = found
+        if found.runtime is not None:
+            w.anchor = (read_at, found.runtime)
         seen = self.clock()
         if whole:
             w.whole_at = read_at
-        events = [self._event(w, e, found.runtime, read_at, seen) for e in found.entries]
+        events = [
+            self._event(w, e, found.runtime if not off or e in before else None, read_at, seen)
+            for e in found.entries
+        ]
+        if any(isinstance(e.drive_time, Age) for e in found.entries):
+            if w.aged is None:
+                w.aged = AgedKeys(await asyncio.to_thread(self.store.known, w.drive))
+            events = w.aged.place(found.entries, events, answered)
         new = await self.stream.record(events)
         for e in reversed(new):  # the oldest first
             self._tell(e)
@@ -268,7 +317,10 @@ class LogWatcher:
         for r in reads:
             future: asyncio.Future[JobResult] = loop.create_future()
             future.add_done_callback(functools.partial(self._answered, answered, r))
-            request = pkw.read(w.dialect, r.pnu, r.index)
+            if r.element:
+                request = pkw.read_description(w.dialect, r.pnu, r.element)
+            else:
+                request = pkw.read(w.dialect, r.pnu, r.index)
             runner.submit(Job(w.drive, request, JobKind.READ, Priority.BACKGROUND, deadline,
                               ParameterDescription(), future))  # fmt: skip
             futures.append(future)
@@ -284,6 +336,17 @@ class LogWatcher:
                     other.cancel()
                 raise _Unanswered()
         return values
+
+
+def was_off(anchor: tuple[float, Runtime] | None, read_at: float, runtime: Runtime | None) -> bool:
+    """Whether the drive was off between ``anchor`` (when the last sweep read its runtime,
+    and what it read) and ``read_at``, when it read ``runtime``: its runtime went on less
+    than the wall clock (a SINAMICS runtime restarted, a MICROMASTER 4 counter stood still)."""
+    if anchor is None or runtime is None:
+        return False
+    then, counted = anchor
+    wall = read_at - then
+    return wall - (runtime.ms - counted.ms) / 1000 > OFF_SLACK + OFF_DRIFT * wall
 
 
 class _Refused(PkwbusError):

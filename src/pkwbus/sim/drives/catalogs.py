@@ -1,4 +1,6 @@
-"""Parameters from a catalog (``pkwbus.catalog``), merged over the built-in table.
+"""Parameters from a catalog (``pkwbus.catalog``), merged over the built-in table (a
+catalog whose drives hold other parameters, ``siemens-mm4``, over its own:
+:data:`~pkwbus.sim.drives.table.CATALOG_TABLES`).
 
 A parameter both know keeps the built-in table's live reading (the drive
 model's quantity) but takes the catalog's type, scaling, unit and limits, so
@@ -23,7 +25,7 @@ import dataclasses
 from pkwbus.catalog import Catalog, CatalogError, ParameterSpec, load_catalog
 from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ValueType
-from pkwbus.sim.drives.table import FC_MOTOR_DATA, TABLES, ParamSpec
+from pkwbus.sim.drives.table import CATALOG_TABLES, FC_MOTOR_DATA, TABLES, ParamSpec
 
 # (model unit, catalog unit) -> factor. The simulated motor has two pole pairs.
 UNIT_FACTORS = {
@@ -42,7 +44,8 @@ __all__ = ["CatalogError", "specs_from_catalog"]
 
 def specs_from_catalog(protocol: Protocol, name: str) -> tuple[ParamSpec, ...]:
     catalog: Catalog = load_catalog(name)
-    merged = {spec.pnu: spec for spec in TABLES[protocol]}
+    base = CATALOG_TABLES.get((protocol, name), TABLES[protocol])
+    merged = {spec.pnu: spec for spec in base}
     for entry in catalog.parameters.values():
         known = merged.get(entry.pnu)
         merged[entry.pnu] = _merge(known, entry) if known is not None else _spec(entry, protocol)

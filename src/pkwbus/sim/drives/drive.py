@@ -28,6 +28,7 @@ from pkwbus.sim.drives.table import MODEL_PARAMS, ParamSpec
 __all__ = ["CTW_LOG", "SimDrive"]
 
 CTW_LOG = 10_000
+CLOCK_PNU = 2115  # MICROMASTER 4 P2115, the AOP real-time clock
 
 log = logging.getLogger("pkwbus.sim")
 
@@ -76,6 +77,8 @@ class SimDrive:
         self.model = DriveModel(self.profile, rng, config or ModelConfig(), log_length=log)
         self.params = ParameterStore(specs, dialect, self._live, described=described)
         self.params.running = lambda: self.running
+        if CLOCK_PNU in self.params.specs:  # a MICROMASTER 4: its fault times may be P2115's
+            self.model.mm4.clock = self._clock_words
         self._steering = MODEL_PARAMS[protocol]
         self._limits = self.limits()
         self.model.setpoint = self.model.frequency = self._limits.max_frequency * 0.8
@@ -156,10 +159,20 @@ class SimDrive:
         self.tick(now)
         self.model.reset()
 
-    def power_cycle(self, now: float) -> None:
-        """The drive is switched off and on again at ``now`` (:meth:`DriveModel.power_cycle`)."""
+    def power_cycle(self, now: float, off: float = 0.0) -> None:
+        """The drive is switched off at ``now`` and on again ``off`` seconds later
+        (:meth:`DriveModel.power_cycle`)."""
         self.tick(now)
-        self.model.power_cycle()
+        self.model.power_cycle(off)
+
+    def off(self, now: float) -> bool:
+        """Whether the drive is switched off at ``now`` (it answers nothing then)."""
+        return now < self.model.off_until
+
+    def _clock_words(self) -> tuple[int, int, int]:
+        """P2115[0..2], the AOP real-time clock, as the drive holds them now."""
+        raw = self.params.raw
+        return raw.get((CLOCK_PNU, 0), 0), raw.get((CLOCK_PNU, 1), 0), raw.get((CLOCK_PNU, 2), 0)
 
     def keypad(self, pnu: int, raw: int, index: int = 0) -> None:
         """A person at the drive's keypad (LCP) sets element ``index`` of ``pnu`` to ``raw``

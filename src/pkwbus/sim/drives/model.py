@@ -9,7 +9,10 @@ since the last power-up (SINAMICS r2114, which starts when the Control Unit is p
 and stops when it is switched off: SINAMICS CU240D-2 Operating Instructions 04/2018,
 section 8.2), and ``powered_ms`` over all power-ups (the operating time the Danfoss
 alarm log's 15-32 is counted in here, in seconds; its real unit and reference are not
-confirmed by a vendor document).
+confirmed by a vendor document; and MICROMASTER 4's run time counter r2114, in seconds,
+"the total time the drive has been powered up", kept over a power cycle: MICROMASTER 440
+Parameter List 01/06, r2114). Neither counts while the drive is off
+(:meth:`DriveModel.power_cycle` with ``off``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ from pkwbus.sim.drives.logs import (
     FaultBuffer,
     runtime_words,
 )
+from pkwbus.sim.drives.mm4 import FIELDS as MM4_FIELDS
+from pkwbus.sim.drives.mm4 import Mm4FaultBuffer, counter_words
+from pkwbus.sim.drives.profidrive_buffer import ProfidriveFaultBuffer
 
 __all__ = [
     "ALARMS",
@@ -109,6 +115,9 @@ class DriveModel:
     power_ups: int = 1  # Danfoss 15-03; the simulated drive's first is its creation
     faults: FaultBuffer = field(default_factory=FaultBuffer)  # SINAMICS r0947 and the rest
     alarms: AlarmBuffer = field(default_factory=AlarmBuffer)  # SINAMICS r2122 and the rest
+    mm4: Mm4FaultBuffer = field(default_factory=Mm4FaultBuffer)  # MICROMASTER 4 r0947, r0948
+    profidrive: ProfidriveFaultBuffer | None = None  # a DP slave's PROFIdrive P947, P948
+    off_until: float = 0.0  # switched off until then (the model's time): nothing counts
     log: AlarmLog = field(init=False)  # Danfoss 15-30..15-32, ``log_length`` entries
     _limits: Limits = field(default_factory=Limits)  # as at the last update
     _tripped_at: float = 0.0
@@ -130,6 +139,8 @@ class DriveModel:
             value = self.rng.randrange(1500, 3000)  # an output current in 0.01 A
             self.faults.enter(code, value, at)
             self.faults.acknowledge(at + 60_000)
+            self.mm4.enter(code, value, at // 1000)
+            self.mm4.acknowledge()
             alarm = BUFFERED_ALARMS[self.rng.choice(WARNING_BITS)]  # a warning before it
             self.alarms.come(alarm, value, at - 20_000)
             self.alarms.go(alarm, at - 5_000)
@@ -147,7 +158,7 @@ class DriveModel:
         dt = now - self.now
         if dt <= 0:
             return
-        elapsed = _ms(now) - _ms(self.now)
+        elapsed = _ms(now) - _ms(max(self.now, min(self.off_until, now)))  # powered
         self.runtime_ms += elapsed
         self.powered_ms += elapsed
         self._limits = limits
@@ -200,6 +211,9 @@ class DriveModel:
             value = round(self._current(self._limits) * 100)
         self.faults.enter(code, value, self.runtime_ms)
         self.log.enter(code, value, self.powered_ms // 1000)
+        self.mm4.enter(code, value, self.powered_ms // 1000)
+        if self.profidrive is not None:
+            self.profidrive.enter(code, value, self.runtime_ms, self.powered_ms)
         self.tripped = True
         self._tripped_at = self.now
         self.alarm_word |= 1 << bit
@@ -224,17 +238,22 @@ class DriveModel:
         self.tripped = False
         self.alarm_word = 0
         self.faults.acknowledge(self.runtime_ms)
+        self.mm4.acknowledge()
+        if self.profidrive is not None:
+            self.profidrive.acknowledge()
 
-    def power_cycle(self) -> None:
-        """The drive is switched off and on again, now (the time it was off is not
-        simulated: the model's own time just keeps going): the runtime starts again from 0,
-        one more power-up is counted, the motor has coasted to a stop. The fault buffer
-        and the alarm log are kept, and a trip still waits for its acknowledgement: whether
-        a real drive keeps its buffer over a power cycle is not confirmed by the documents
-        read."""
+    def power_cycle(self, off: float = 0.0) -> None:
+        """The drive is switched off now and on again ``off`` seconds later (of the
+        model's time, which keeps going; 0: at once): neither runtime counts those
+        seconds, the SINAMICS runtime starts again from 0, MICROMASTER 4's run time
+        counter goes on from where it stood, one more power-up is counted, the motor has
+        coasted to a stop. The logs are kept, and a trip still waits for its
+        acknowledgement: whether a real drive keeps its buffer over a power cycle is not
+        confirmed by the documents read."""
         self.runtime_ms = 0
         self.power_ups += 1
         self.frequency = 0.0
+        self.off_until = self.now + off
 
     def apply_control(self, ctw: int, ref: int | None, limits: Limits) -> None:
         """Process data from the master; acted on only with CTW bit 10 set."""
@@ -294,6 +313,10 @@ class DriveModel:
             return self.alarms.changes
         if name == "runtime":
             return runtime_words(self.runtime_ms)[index]
+        if name in MM4_FIELDS:
+            return self.mm4.read(name, index)
+        if name == "mm4_runtime":
+            return counter_words(self.powered_ms // 1000)[index]
         if name == "power_ups":
             return self.power_ups
         if name == "received_pzd":

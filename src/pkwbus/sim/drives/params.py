@@ -28,6 +28,7 @@ __all__ = [
     "ARRAY_COMMANDS",
     "EEPROM_COMMANDS",
     "TYPE_CODES",
+    "Ahead",
     "FaultNumbers",
     "Live",
     "ParameterStore",
@@ -35,6 +36,9 @@ __all__ = [
 ]
 
 Live = Callable[[str, int], float]
+# Parameters answered ahead of the store (a log the model keeps in types the table has not,
+# :mod:`pkwbus.sim.drives.profidrive_buffer`): the answer, None for one it does not hold.
+Ahead = Callable[[PkwRequest], PkwResponse | None]
 
 EEPROM_COMMANDS = frozenset(
     {
@@ -105,6 +109,7 @@ class ParameterStore:
         self.texts: dict[int, bytes] = {}
         self.eeprom: dict[tuple[int, int], int | bytes] = {}
         self.running: Callable[[], bool] = lambda: False
+        self.ahead: Ahead | None = None
         for spec in self.specs.values():
             self._initialise(spec)
 
@@ -180,6 +185,8 @@ class ParameterStore:
 
     def execute(self, req: PkwRequest) -> PkwResponse:
         """What the drive answers to ``req`` (a write is applied first)."""
+        if self.ahead is not None and (answer := self.ahead(req)) is not None:
+            return answer
         try:
             return self._execute(req)
         except Refused as refused:

@@ -33,6 +33,13 @@ we chose and say so:
   Counter alarm buffer changes u16, r2122 Alarm code u16, r2124 Alarm value i32
   (as listed there), r2123 and r2125 time received / removed in ms u32, r2145 and
   r2146 the same in days u16 (the days' type unconfirmed): arrays of 64.
+- USS MICROMASTER 4 (:data:`MM4_TABLE`, served with catalog ``siemens-mm4``): the USS
+  table's readings and settings without the SINAMICS buffers, with the MICROMASTER 4
+  fault buffer (:mod:`pkwbus.sim.drives.mm4`): r0947 u16 x 8, r0948 u16 x 12, r2114 u16 x 2
+  and P2115 u16 x 3 (MICROMASTER 440 Parameter List 01/06: the types of r0948, r2114 and
+  P2115; r0947's is not documented), r0949 u16 x 8 and P0952 u16 (neither's type or size
+  documented: the simulator's choice). Which of the USS table's readings a MICROMASTER 4
+  has under the same numbers is not confirmed (the simulator's choice).
 - The log parameters carry no unit here: a catalog's unit for them then needs no
   conversion (they are counts, codes and times the model gives as they are).
 - USS p0199 stands in for a text parameter (G120's p0199 is numeric).
@@ -59,8 +66,10 @@ from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import Scaling, ValueType
 
 __all__ = [
+    "CATALOG_TABLES",
     "FC_MOTOR_DATA",
     "FC_TABLE",
+    "MM4_TABLE",
     "MODEL_PARAMS",
     "TABLES",
     "USS_TABLE",
@@ -189,6 +198,21 @@ USS_TABLE: Final = (
     ParamSpec(2146, "r2146", U16, array=64, live="buffered_alarm_removed_days"),
 )
 
+# The SINAMICS buffers' parameters, which a MICROMASTER 4 does not have so.
+_SINAMICS_BUFFERS = frozenset(
+    (944, 947, 948, 949, 2109, 2114, 2130, 2136, 2121, 2122, 2123, 2124, 2125, 2145, 2146)
+)
+MM4_TABLE: Final = (
+    *(spec for spec in USS_TABLE if spec.pnu not in _SINAMICS_BUFFERS),
+    # The fault buffer: two faults per trip, four trips, [0]/[1] the recent trip.
+    ParamSpec(947, "r0947", U16, array=8, live="mm4_fault_number"),
+    ParamSpec(948, "r0948", U16, array=12, live="mm4_fault_time"),
+    ParamSpec(949, "r0949", U16, array=8, live="mm4_fault_value"),
+    ParamSpec(952, "P0952", U16, live="mm4_fault_count"),
+    ParamSpec(2114, "r2114", U16, array=2, live="mm4_runtime"),  # seconds: high, low word
+    ParamSpec(2115, "P2115", U16, 0, "", 0.0, 65535.0, True, array=3),  # the AOP's clock
+)
+
 # Which parameters steer the model: maximum frequency (MAV scale), ramp times.
 MODEL_PARAMS: Final = MappingProxyType(
     {
@@ -197,3 +221,6 @@ MODEL_PARAMS: Final = MappingProxyType(
     }
 )
 TABLES: Final = MappingProxyType({Protocol.FC: FC_TABLE, Protocol.USS: USS_TABLE})
+# A catalog whose drives hold other parameters than their protocol's table, by (protocol,
+# catalog): the table its entries are merged over.
+CATALOG_TABLES: Final = MappingProxyType({(Protocol.USS, "siemens-mm4"): MM4_TABLE})

@@ -15,6 +15,10 @@ Faults, drawn per answer as on FC and USS lines: ``drop`` (no answer),
 answers "SAP not activated", as one that fell out of data exchange) and
 ``restart`` (the slave power-cycles: parameters and configuration lost).
 
+A slave's drive may keep a PROFIdrive fault buffer of a given shape and P948 type
+(``fault_buffers``: :mod:`pkwbus.sim.drives.profidrive_buffer`), answered through its
+PPO's PKW words and data record 47 ahead of the dialect's parameters of those numbers.
+
 A person at a slave drive's keypad (LCP) may set a value with no telegram
 (:meth:`DpSimulator.keypad`), and with ``keypad_every`` one does so at random, as on
 FC and USS lines (:mod:`pkwbus.sim.drives.keypad`).
@@ -31,18 +35,20 @@ from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
+from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.fdl import BROADCAST, DataFrame, Status
-from pkwbus.protocol.profidrive.parameters import AXES
+from pkwbus.protocol.profidrive.parameters import AXES, ParameterAddress, ParameterError, Values
 from pkwbus.protocol.serial.telegram import BlockShape, Protocol
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drives.drive import SimDrive
 from pkwbus.sim.drives.faults import Answer
 from pkwbus.sim.drives.model import ModelConfig
+from pkwbus.sim.drives.profidrive_buffer import BufferKind, ProfidriveFaultBuffer
 from pkwbus.sim.drives.table import TABLES, ParamSpec
-from pkwbus.sim.profibus.records import RecordServer
+from pkwbus.sim.profibus.records import Own, RecordServer
 from pkwbus.sim.profibus.slave import SimDpSlave
 from pkwbus.sim.serving import ends
 from pkwbus.sim.serving.ends import PtyEnd, TcpEnd
@@ -129,6 +135,7 @@ class DpSimulator:
         dpv1: bool = False,
         not_ready: int = 0,
         keypad_every: float | None = None,
+        fault_buffers: Mapping[int, BufferKind] | None = None,
     ) -> None:
         """``dpv1``: the slaves whose dialect has parameter access (data record 47) run
         DP-V1 when parametrised so, answering ``not_ready`` reads of each response with
@@ -138,7 +145,9 @@ class DpSimulator:
         with the dialect's "description not available" fault (ValueError for an address
         that is not a slave here); ``keypad_every``: on average once per that many
         seconds one slave's drive that is not dead gets a setting changed at its keypad
-        (ValueError when it is not above 0)."""
+        (ValueError when it is not above 0); ``fault_buffers``: slaves whose drives keep
+        a PROFIdrive fault buffer of that kind (ValueError for one that is not a slave
+        here)."""
         if not_ready < 0:
             raise ValueError(f"not ready for {not_ready} reads: it cannot be negative")
         try:
@@ -163,6 +172,9 @@ class DpSimulator:
         line_kind = SlaveKind(dialect, self.ident, catalog)
         refusing = frozenset(refuse_descriptions)
         check_refusing(refusing, self.stats.drives)
+        buffers = dict(fault_buffers or {})
+        if not buffers.keys() <= set(self.stats.drives):
+            raise ValueError(f"fault buffers of slaves not here: {sorted(buffers)}")
         for address in self.stats.drives:
             if not 0 <= address <= MAX_ADDRESS:
                 raise ValueError(f"profibus slave address {address} is outside 0-{MAX_ADDRESS}")
@@ -182,7 +194,10 @@ class DpSimulator:
             self.drives[address] = drive
             ident_number = DEFAULT_IDENTS[name] if kind.ident is None else kind.ident
             axis = AXES.get(name)
-            records = RecordServer(drive.params, drive.dialect, axis) if axis is not None else None
+            own = _keep_buffer(drive, buffers[address]) if address in buffers else None
+            records = (
+                RecordServer(drive.params, drive.dialect, axis, own) if axis is not None else None
+            )
             self.records[address] = records
             self.slaves[address] = SimDpSlave(
                 address, ident_number, self.ppo.cfg, drive.respond,
@@ -342,3 +357,20 @@ def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:
 
         return specs_from_catalog(protocol, catalog)
     return TABLES[protocol]
+
+
+def _keep_buffer(drive: SimDrive, kind: BufferKind) -> Own:
+    """``drive`` keeps a PROFIdrive fault buffer of ``kind``, answered through its PKW
+    channel; what answers it through data record 47."""
+    buffer = ProfidriveFaultBuffer(kind)
+    drive.model.profidrive = buffer
+    params = drive.params
+
+    def pkw_answer(req: PkwRequest) -> PkwResponse | None:
+        return buffer.answer_pkw(req, params.dialect, params.faults, drive.model.powered_ms)
+
+    def record_answer(address: ParameterAddress) -> Values | ParameterError | None:
+        return buffer.answer_record(address, params.faults, drive.model.powered_ms)
+
+    params.ahead = pkw_answer
+    return record_answer
