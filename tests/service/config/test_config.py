@@ -13,7 +13,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pkwbus.catalog import ParameterSpec
+from pkwbus.catalog import ParameterSpec, available_catalogs
 from pkwbus.link import PortSettings
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol.pkw.dialects import IndLayout
@@ -190,8 +190,10 @@ def test_index_beyond_the_catalogs_array() -> None:
 def test_unknown_catalog_names_the_builtin_ones() -> None:
     with pytest.raises(ConfigError) as caught:
         parse_config(with_drive("{name: d, address: 1, catalog: abb}"), environ={})
+    builtin = ", ".join(sorted(available_catalogs()))
+    assert {"danfoss-fc", "siemens-g120", "siemens-mm4"} <= set(available_catalogs())
     assert caught.value.problems == [
-        "lines[0].drives[0].catalog: unknown catalog 'abb' (available: danfoss-fc, siemens-g120)"
+        f"lines[0].drives[0].catalog: unknown catalog 'abb' (available: {builtin})"
     ]
 
 
