@@ -33,6 +33,7 @@ import serial
 import serial.rs485
 
 from pkwbus.link.eventloop import has_fine_timers
+from pkwbus.link.fence import ALWAYS_OPEN, Fence, fence_closed, fenced_reason
 from pkwbus.link.ownership import PortBusy
 from pkwbus.link.reconnect import LinkState, Reconnect
 from pkwbus.link.serialport import (
@@ -86,8 +87,11 @@ class Link:
         *,
         receiver: Receiver | None = None,
         on_lost: LostListener | None = None,
+        fence: Fence | None = None,
     ) -> None:
         self.settings = settings
+        # Hot standby: no opening and no byte written once the fence closed (link.fence).
+        self.fence = fence if fence is not None else ALWAYS_OPEN
         self._receiver = receiver
         self._on_lost_cb = on_lost
         self._transport: SerialTransport | None = None
@@ -121,6 +125,11 @@ class Link:
         loop = asyncio.get_running_loop()
         s = self.settings
         error: PortError
+        if fence_closed(self.fence):
+            error = PortError(f"cannot open {s.url}: {fenced_reason(self.fence)}")
+            self._state = LinkState.FAILED
+            self.reconnect.failed(str(error), loop.time())
+            raise error
         try:
             instance = await loop.run_in_executor(None, open_port, s)
         except PortBusy as exc:
@@ -241,12 +250,18 @@ class Link:
         ``discard`` drops unread input first (read and dropped, never flushed
         behind a read already due: :mod:`pkwbus.link.transport`); the caller
         asks for it only when stray input must not be taken for the answer.
-        :class:`PortError` when the port is not open.
+        :class:`PortError` when the port is not open, and when its fence closed: then
+        nothing is written and the port is given up.
         """
         transport = self._transport
         loop = self._loop
         if transport is None or loop is None or self._state is not LinkState.OPEN:
             raise PortError(f"{self.settings.url} is not open")
+        if fence_closed(self.fence):
+            reason = f"{self.settings.url}: {fenced_reason(self.fence)}"
+            log.warning("%s", reason)
+            self.abort(reason)
+            raise PortError(reason)
         if discard:
             self._discard_input()
         if self._echo_on:
