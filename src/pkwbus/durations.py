@@ -31,6 +31,7 @@ __all__ = [
     "SIM_LAG",
     "SIM_LATE",
     "SIM_PORT_OUTAGE",
+    "STANDBY_LEASE",
     "STATS_INTERVAL",
     "TELEGRAM_TIMEOUT",
     "DurationRange",
@@ -85,6 +86,9 @@ DP_WATCHDOG: Final = DurationRange("a watchdog", 0.01, 650.25)
 EVENTS_EVERY: Final = DurationRange("a drive log's watch interval", 1.0, 3600.0)
 HISTORY_RETENTION: Final = DurationRange("a retention", 3600.0, 87600 * 3600.0)  # 10 years
 SETTINGS_EVERY: Final = DurationRange("a settings sweep interval", 1.0, 86400.0)
+# etcd grants no lease under 1.5 s (its default election timeout); above a minute a dead
+# master keeps its lines too long.
+STANDBY_LEASE: Final = DurationRange("a standby lease", 2.0, 60.0)
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -107,6 +111,7 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("line and drive `events_every`", EVENTS_EVERY),
     ("`history_retention`", HISTORY_RETENTION),
     ("line and drive `settings` `every`", SETTINGS_EVERY),
+    ("`standby` `lease`", STANDBY_LEASE),
 )
 
 

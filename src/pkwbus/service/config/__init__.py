@@ -57,7 +57,15 @@ from pkwbus.service.config.catalogs import CatalogLike, Catalogs, builtin_catalo
 from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.line import LineBase, Rs485
 from pkwbus.service.config.loading import load_config, parse_config
-from pkwbus.service.config.model import Api, Config, Drive, Line, Listen, parse_listen
+from pkwbus.service.config.model import (
+    Api,
+    Config,
+    Drive,
+    Line,
+    Listen,
+    StandbyConfig,
+    parse_listen,
+)
 from pkwbus.service.config.parameters import OVERRIDE_FIELDS, ParameterOverrides, Poll
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
@@ -92,6 +100,7 @@ __all__ = [
     "ProfibusLine",
     "Rs485",
     "SimPort",
+    "StandbyConfig",
     "UssDrive",
     "UssLine",
     "builtin_catalogs",

@@ -1,5 +1,5 @@
 """The whole file: where the API listens, its tokens, the audit log, the lines (each of
-its bus's class, picked by its ``protocol``).
+its bus's class, picked by its ``protocol``), hot standby (``standby:``).
 
 Raises :class:`~pkwbus.service.config.base.ConfigError` for a malformed ``--listen``.
 """
@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import os
 import re
+import socket
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Annotated, Final, Literal, Self, TypeAlias
+from urllib.parse import urlsplit
 
 from pydantic import (
+    BeforeValidator,
     Field,
     PlainValidator,
     StrictInt,
@@ -23,6 +26,7 @@ from pydantic import (
     model_validator,
 )
 
+from pkwbus.durations import STANDBY_LEASE, parse_duration
 from pkwbus.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
 from pkwbus.link import same_line
 from pkwbus.problems import plain, short
@@ -43,7 +47,19 @@ from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
 
-__all__ = ["LINES", "Api", "Config", "Drive", "Line", "Listen", "parse_listen"]
+__all__ = [
+    "INSTANCE_ENV",
+    "LINES",
+    "Api",
+    "Config",
+    "Drive",
+    "Line",
+    "Listen",
+    "StandbyConfig",
+    "StandbySection",
+    "default_instance_name",
+    "parse_listen",
+]
 
 # The class of each bus's lines, as the union below picks it by the line's ``protocol``.
 LINES: Final[Mapping[BusProtocol, type[FcLine | UssLine | ProfibusLine]]] = {
@@ -155,6 +171,112 @@ def _what(port: str) -> str:
     return "gateway port" if same_line(port).startswith("tcp:") else "device"
 
 
+INSTANCE_ENV: Final = "PKWBUS_INSTANCE"
+
+_INSTANCE_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+_PREFIX = re.compile(r"^(/[A-Za-z0-9_.-]+)+$")
+_MAX_ENDPOINTS = 16
+
+
+def default_instance_name() -> str:
+    """This instance's name when the section gives none: ``PKWBUS_INSTANCE``, else the
+    host name."""
+    return os.environ.get(INSTANCE_ENV) or socket.gethostname()
+
+
+def _url(value: object, what: str) -> str:
+    """An ``http://host:port`` or ``https://host:port`` address, as written (less a
+    trailing slash)."""
+    sample = "http://etcd-0:2379" if what == "an etcd endpoint" else "http://10.0.0.5:9725"
+    example = f"write {what} as http://host:port, e.g. {sample}"
+    if not isinstance(value, str):
+        raise ValueError(f"{short(value)} is not a URL: {example}")
+    text = value.strip().rstrip("/")
+    try:
+        parts = urlsplit(text)
+        port = parts.port
+    except ValueError:
+        raise ValueError(f"{short(value)} is not a URL: {example}") from None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError(f"{short(value)} is not a URL: {example}")
+    if parts.query or parts.fragment or parts.username or parts.password:
+        raise ValueError(f"{short(value)}: {what} takes no user, query or fragment")
+    if what == "an etcd endpoint" and (parts.path or port is None):
+        raise ValueError(f"{short(value)} is not an etcd endpoint: {example}")
+    return text
+
+
+def _endpoints(value: object) -> list[str]:
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not value:
+        raise ValueError(
+            "must list etcd's client URLs, e.g. [http://etcd-0:2379, http://etcd-1:2379]"
+        )
+    if len(value) > _MAX_ENDPOINTS:
+        raise ValueError(f"lists {len(value)} endpoints; at most {_MAX_ENDPOINTS}")
+    urls = [_url(v, "an etcd endpoint") for v in value]
+    if len(set(urls)) != len(urls):
+        raise ValueError("names an endpoint twice")
+    return urls
+
+
+def _lease(value: object) -> float:
+    return parse_duration(value, STANDBY_LEASE)
+
+
+def _advertise(value: object) -> str | None:
+    return None if value is None else _url(value, "advertise")
+
+
+# ---------------------------------------------------------------- standby:
+# Hot standby of the lines over etcd (interface "Hot standby"). Absent, ``off`` (which
+# YAML also reads as false) or empty: one instance, as before (``Config.standby`` None).
+
+
+class StandbyConfig(Model):
+    """Hot standby: the lines' leases in etcd, this instance's name and address."""
+
+    etcd: Annotated[list[str], PlainValidator(_endpoints)]
+    lease: Annotated[float, PlainValidator(_lease)]
+    prefix: str = "/pkwbus"
+    name: str = Field(default_factory=default_instance_name, validate_default=True)
+    advertise: Annotated[str | None, PlainValidator(_advertise)] = None
+
+    @field_validator("prefix", mode="plain")
+    @classmethod
+    def _prefix(cls, value: object) -> str:
+        if not isinstance(value, str) or not _PREFIX.match(value):
+            raise ValueError(
+                f"{short(value)} is not a key prefix: write /pkwbus or /site/hall-a"
+                " (a slash, then letters, digits, _ . -; no trailing slash)"
+            )
+        return value
+
+    @field_validator("name", mode="plain")
+    @classmethod
+    def _name(cls, value: object) -> str:
+        if not isinstance(value, str) or not _INSTANCE_NAME.match(value):
+            raise ValueError(
+                f"{short(value)} is not an instance name (1 to 64 letters, digits, _ . -);"
+                f" set `name` or {INSTANCE_ENV}"
+            )
+        return value
+
+
+def _off(value: object) -> object:
+    """``off`` (YAML 1.1 reads it as false), or nothing: no hot standby."""
+    if value is None or value is False or value == "off" or value == {}:
+        return None
+    if value is True or value == "on":
+        raise ValueError("needs its settings: etcd (the endpoints) and lease, e.g. 6s")
+    return value
+
+
+# The field of the whole file: None without hot standby.
+StandbySection: TypeAlias = Annotated[StandbyConfig | None, BeforeValidator(_off)]
+
+
 class Config(Model):
     """The whole file."""
 
@@ -166,6 +288,7 @@ class Config(Model):
     history_retention: Retention = 8760 * 3600.0  # a year
     log_format: Literal["text", "json"] = "text"
     lines: list[Line] = Field(min_length=1)
+    standby: StandbySection = None  # hot standby over etcd; None: one instance
 
     @model_validator(mode="after")
     def _unique_names(self) -> Self:

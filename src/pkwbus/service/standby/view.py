@@ -1,0 +1,200 @@
+"""What this instance knows of the group's keys in etcd: each line's holder (its key's
+value and lease) and the live instances, kept by one range and then one watch.
+
+Keys: ``{prefix}/lines/{line}`` (value ``{"name", "url"}``, the holder's lease) and
+``{prefix}/instances/{name}`` (the same value, the instance's registry lease).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Final
+
+from pkwbus.service.standby.etcd import Etcd, EtcdError, Event, KeyValue, b64, prefix_end, range_kvs
+
+__all__ = ["RESYNC_EVERY", "Holder", "Master", "View", "keep_watching", "master_value"]
+
+log = logging.getLogger("pkwbus.service.standby")
+
+# The keys are read again this often, whatever the watch said: a stream that hangs
+# without breaking (a connection dropped silently on the way) misses nothing longer.
+RESYNC_EVERY: Final = 30.0
+_WATCH_RETRY: Final = 0.5
+
+
+@dataclass(frozen=True)
+class Master:
+    """Who masters a line (from its key's value): an instance's name and where the others
+    send a user (its ``advertise``, None when not given)."""
+
+    name: str
+    url: str | None
+
+
+@dataclass(frozen=True)
+class Holder:
+    master: Master
+    lease: int
+    revision: int  # the key's create revision
+
+
+def master_value(name: str, url: str | None) -> bytes:
+    return json.dumps({"name": name, "url": url}, separators=(",", ":")).encode()
+
+
+def _master(value: bytes) -> Master:
+    try:
+        data = json.loads(value)
+    except ValueError:
+        data = None
+    if not isinstance(data, dict) or not isinstance(data.get("name"), str):
+        return Master(name="?", url=None)  # written by something else than pkwbus
+    url = data.get("url")
+    return Master(name=data["name"], url=url if isinstance(url, str) else None)
+
+
+class View:
+    """The lines' holders and the live instances under ``prefix``."""
+
+    def __init__(self, prefix: str, me: str, clock: Callable[[], float]) -> None:
+        self.prefix = prefix
+        self.me = me
+        self.lines_prefix = f"{prefix}/lines/"
+        self.instances_prefix = f"{prefix}/instances/"
+        self.clock = clock
+        self.holders: dict[str, Holder] = {}
+        self.changed_at: dict[str, int] = {}  # line -> revision of its key's last change seen
+        self.instances: dict[str, Master] = {}
+        self.free_since: dict[str, float] = {}
+        self.joined: float | None = None  # when an instance last registered anew
+        self.fresh = False  # read whole, and watched since
+        self.revision = 0
+
+    def line_key(self, line: str) -> str:
+        return self.lines_prefix + line
+
+    def instance_key(self, name: str) -> str:
+        return self.instances_prefix + name
+
+    def load(self, revision: int, lines: Iterable[KeyValue], instances: Iterable[KeyValue]) -> None:
+        """Everything as read at ``revision`` (the watch goes on from the next). A line
+        whose key we changed later than that keeps what we know."""
+        now = self.clock()
+        read = {kv.key.removeprefix(self.lines_prefix): kv for kv in lines}
+        for line in set(self.holders) | set(read):
+            if self.changed_at.get(line, 0) > revision:
+                continue
+            kv = read.get(line)
+            if kv is not None:
+                self._put_line(kv)
+            elif self.holders.pop(line, None) is not None:
+                self.free_since[line] = now
+        old = set(self.instances)
+        self.instances = {}
+        for kv in instances:
+            self.instances[kv.key.removeprefix(self.instances_prefix)] = _master(kv.value)
+        if old and set(self.instances) - old - {self.me}:
+            self.joined = now
+        self.revision = max(self.revision, revision)
+
+    def apply(self, events: Iterable[Event]) -> None:
+        """A watch's events, in order; one older than what we know of its key is passed."""
+        now = self.clock()
+        for event in events:
+            kv = event.kv
+            self.revision = max(self.revision, kv.mod_revision)
+            if kv.key.startswith(self.lines_prefix):
+                line = kv.key.removeprefix(self.lines_prefix)
+                if kv.mod_revision <= self.changed_at.get(line, 0):
+                    continue
+                if event.deleted:
+                    self.changed_at[line] = kv.mod_revision
+                    if self.holders.pop(line, None) is not None:
+                        self.free_since[line] = now
+                else:
+                    self._put_line(kv)
+            elif kv.key.startswith(self.instances_prefix):
+                name = kv.key.removeprefix(self.instances_prefix)
+                if event.deleted:
+                    self.instances.pop(name, None)
+                else:
+                    if name not in self.instances and name != self.me:
+                        self.joined = now
+                    self.instances[name] = _master(kv.value)
+
+    def apply_put(self, kv: KeyValue) -> None:
+        """A line's key as read now (a campaign lost: who won)."""
+        if kv.mod_revision > self.changed_at.get(kv.key.removeprefix(self.lines_prefix), 0):
+            self._put_line(kv)
+
+    def _put_line(self, kv: KeyValue) -> None:
+        line = kv.key.removeprefix(self.lines_prefix)
+        self.holders[line] = Holder(_master(kv.value), kv.lease, kv.create_revision)
+        self.changed_at[line] = max(self.changed_at.get(line, 0), kv.mod_revision)
+        self.free_since.pop(line, None)
+
+    def held_by(self, line: str, master: Master, lease: int, revision: int) -> None:
+        """We put the line's key (a campaign won) at ``revision``."""
+        self.holders[line] = Holder(master, lease, revision)
+        self.changed_at[line] = max(self.changed_at.get(line, 0), revision)
+        self.free_since.pop(line, None)
+
+    def freed(self, line: str, revision: int) -> None:
+        """We deleted the line's key at ``revision``."""
+        self.changed_at[line] = max(self.changed_at.get(line, 0), revision)
+        if self.holders.pop(line, None) is not None:
+            self.free_since[line] = self.clock()
+
+    def lease_of(self, line: str) -> int | None:
+        holder = self.holders.get(line)
+        return None if holder is None else holder.lease
+
+    def free(self, line: str) -> bool:
+        return line not in self.holders
+
+    def note_free(self, lines: Iterable[str]) -> None:
+        """Lines not seen held are free from now on, unless seen so before."""
+        now = self.clock()
+        for line in lines:
+            if line not in self.holders:
+                self.free_since.setdefault(line, now)
+
+
+async def keep_watching(etcd: Etcd, view: View, kick: Callable[[], None]) -> None:
+    """Keeps ``view`` as etcd has it, calling ``kick`` after each change; until cancelled.
+    The view is ``fresh`` while the watch runs."""
+    while True:
+        try:
+            await _watch(etcd, view, kick)
+            continue  # read anew after RESYNC_EVERY
+        except EtcdError as exc:
+            log.debug("hot standby: watch: %s", exc)
+        view.fresh = False
+        kick()
+        await asyncio.sleep(_WATCH_RETRY)
+
+
+async def _watch(etcd: Etcd, view: View, kick: Callable[[], None]) -> None:
+    """One read of the keys (both prefixes at one revision), then one watch from there."""
+    prefixes = [view.lines_prefix, view.instances_prefix]
+    ranges = [
+        {"request_range": {"key": b64(p), "range_end": b64(prefix_end(p.encode()))}}
+        for p in prefixes
+    ]
+    _, answers, revision = await etcd.txn([], ranges)
+    if len(answers) != 2:
+        raise EtcdError("etcd answered a read of the keys without its two ranges")
+    view.load(revision, range_kvs(answers[0]), range_kvs(answers[1]))
+    async with etcd.watch(prefixes, revision + 1) as stream:
+        view.fresh = True
+        kick()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(RESYNC_EVERY):
+                async for events in stream:
+                    view.apply(events)
+                    kick()

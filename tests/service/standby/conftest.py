@@ -1,0 +1,100 @@
+"""Fixtures of the hot standby engine's tests: a real etcd of one or three members on
+loopback (Debian's etcd-server; the tests skip, saying so, where it is missing), and
+engines made on it, each stopped at the end."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from pkwbus.service.config import StandbyConfig
+from pkwbus.service.standby import Standby
+from tests.service.standby_process.etcd import Etcd, etcd_binary
+
+# Short leases keep the tests short: the fence closes lease - 1 s after a renewal.
+LEASE = 2.0
+
+
+async def started_etcd(root: Path, size: int) -> Etcd:
+    if etcd_binary() is None:
+        pytest.skip("etcd is not installed (Debian package etcd-server)")
+    server = Etcd(root, size)
+    try:
+        await server.start()
+    except BaseException:
+        server.stop()
+        raise
+    return server
+
+
+@pytest.fixture
+async def etcd(tmp_path: Path) -> AsyncIterator[Etcd]:
+    server = await started_etcd(tmp_path / "etcd", 1)
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture
+async def etcd3(tmp_path: Path) -> AsyncIterator[Etcd]:
+    server = await started_etcd(tmp_path / "etcd3", 3)
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@dataclass
+class Engine:
+    """A Standby and what it told: (monotonic time, line, held) in order."""
+
+    standby: Standby
+    told: list[tuple[float, str, bool]] = field(default_factory=list)
+
+    def held(self) -> list[str]:
+        return [line for line in self.standby.lines if self.standby.holds(line)]
+
+    def lost(self) -> list[str]:
+        return [line for _, line, held in self.told if not held]
+
+
+Make = Callable[..., Engine]
+
+
+@pytest.fixture
+async def engines() -> AsyncIterator[Make]:
+    """``make(etcd, name, lines, lease=LEASE)``: an engine, not started."""
+    made: list[Engine] = []
+
+    def make(server: Etcd, name: str, lines: Sequence[str], lease: float = LEASE) -> Engine:
+        config = StandbyConfig(
+            etcd=server.endpoints, lease=lease, prefix="/test", name=name,
+            advertise=f"http://{name}.example:9725",
+        )  # fmt: skip
+        told: list[tuple[float, str, bool]] = []
+        standby = Standby(
+            config, lines, on_change=lambda line, held: told.append((time.monotonic(), line, held))
+        )
+        engine = Engine(standby, told)
+        made.append(engine)
+        return engine
+
+    yield make
+    for engine in made:
+        await engine.standby.stop()
+
+
+async def until(check: Callable[[], bool], timeout: float, what: str) -> None:
+    """Until ``check()``; fails saying ``what`` after ``timeout`` seconds (generous:
+    the tests wait for what etcd and the engine do, never for a speed)."""
+    end = time.monotonic() + timeout
+    while not check():
+        if time.monotonic() > end:
+            raise AssertionError(f"not within {timeout} s: {what}")
+        await asyncio.sleep(0.02)

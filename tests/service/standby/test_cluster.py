@@ -1,0 +1,40 @@
+"""The hot standby engine on a 3-member etcd: losing one member, the leader, keeps the
+lines mastered where they are."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+from tests.service.standby_process.etcd import Etcd
+
+from .conftest import Make, until
+
+# Longer than the other tests' lease: etcd elects a new leader within 1-2 s of its
+# default election timeout, and the renewals must reach it before the fence closes
+# (lease - margin after the last one sent: 3.75 s).
+LEASE = 5.0
+
+
+async def test_the_leader_member_killed_the_lines_stay_held(etcd3: Etcd, engines: Make) -> None:
+    a = engines(etcd3, "a", ["l0", "l1"], lease=LEASE)
+    b = engines(etcd3, "b", ["l0", "l1"], lease=LEASE)
+    await a.standby.start()
+    await until(lambda: a.held() == ["l0", "l1"], 15, "a holds both")
+    await b.standby.start()
+    await until(lambda: len(a.held()) == 1 and len(b.held()) == 1, 15, "one line each")
+    held = {"a": a.held(), "b": b.held()}
+    told = len(a.told), len(b.told)
+
+    leader = await etcd3.leader()
+    etcd3.kill(leader)
+    end = time.monotonic() + 2 * LEASE
+    while time.monotonic() < end:  # through the election and two leases after it
+        assert {"a": a.held(), "b": b.held()} == held
+        await asyncio.sleep(0.05)
+    assert (len(a.told), len(b.told)) == told  # no line lost, none won
+    assert a.standby.etcd_up and b.standby.etcd_up
+    new = await etcd3.leader()
+    assert new is not leader
+    keys = await etcd3.keys("/test/lines/")
+    assert sorted(keys) == ["/test/lines/l0", "/test/lines/l1"]
