@@ -124,7 +124,7 @@ def test_each_layer_imports_only_the_layers_below_it() -> None:
 
 
 # The rooms of service/, lowest first: each imports only rooms before it, and runtime.
-SERVICE_ROOMS = ["config", "metrics", "audit", "history", "http", "assembly"]
+SERVICE_ROOMS = ["config", "standby", "metrics", "audit", "history", "http", "assembly"]
 
 
 def service_room(name: str) -> str | None:

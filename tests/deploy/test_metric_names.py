@@ -37,6 +37,7 @@ from pkwbus.service.metrics.alarms import ALARM_LABELS
 from pkwbus.service.metrics.devices import MISMATCH, MISMATCH_LABELS
 from pkwbus.service.metrics.exposition import CounterFamily
 from pkwbus.service.metrics.instrumentation import ServiceMetrics
+from pkwbus.service.metrics.standby import MasterCollector
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.profibus.line import DpSimulator
 from tests.deploy.conftest import DP_DRIVES, DRIVES, service_config
@@ -150,7 +151,34 @@ def exported(tmp_path_factory: pytest.TempPathFactory) -> Exported:
             names[name] = declared[name]
     empty = [n for n in empty if n not in declared]
     assert not empty, f"no series (so no labels to check) for {empty}"
+    names.update(standby_series())
     return names
+
+
+class _Standby:
+    """An instance in hot standby that masters line1 of two and took it once."""
+
+    etcd_up = True
+
+    def lines(self) -> dict[str, list[str]]:
+        return {"line1": ["d1"], "line2": ["d2"]}
+
+    def here(self, line: str) -> bool:
+        return line == "line1"
+
+    def takeovers(self, line: str) -> int:
+        return int(line == "line1")
+
+
+def standby_series() -> Exported:
+    """The series only an instance in hot standby has (etcd, takeovers), and their labels:
+    the scrape above is of a single instance."""
+    registry = prometheus_client.CollectorRegistry()
+    registry.register(MasterCollector(lambda: [], lambda: cast(Any, _Standby())))
+    text = prometheus_client.generate_latest(registry).decode()
+    found = exported_metrics(text)
+    assert found["pkwbus_line_master"] == {"line"}
+    return {n: labels for n, labels in found.items() if n.startswith("pkwbus_standby_")}
 
 
 def declared_counters() -> Exported:

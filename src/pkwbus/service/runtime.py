@@ -38,7 +38,9 @@ __all__ = [
     "Alarms",
     "DriveEntry",
     "History",
+    "LineMaster",
     "LineTask",
+    "Masters",
     "Runtime",
     "Settings",
     "Trends",
@@ -153,6 +155,44 @@ class Settings(Protocol):
     ) -> None: ...
 
 
+class LineMaster(Protocol):
+    """Who masters a line (service.standby.Master): its instance's name and URL."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def url(self) -> str | None: ...
+
+
+class Masters(Protocol):
+    """Who masters each configured line, in hot standby
+    (service.assembly.standby_lines.StandbyLines)."""
+
+    @property
+    def etcd_up(self) -> bool: ...
+
+    def lines(self) -> Mapping[str, Sequence[str]]:
+        """Each configured line's drives, by line, in the configuration's order."""
+        ...
+
+    def line_of(self, drive: str) -> str | None:
+        """The configured line of ``drive`` (None: no such drive)."""
+        ...
+
+    def here(self, line: str) -> bool:
+        """Whether this instance masters ``line`` now."""
+        ...
+
+    def master_of(self, line: str) -> LineMaster | None:
+        """Who masters ``line`` (this instance included); None: nobody now."""
+        ...
+
+    def takeovers(self, line: str) -> int:
+        """How often this instance took ``line``."""
+        ...
+
+
 class Trends(Protocol):
     """The last minutes of each polled value (service.metrics.trends.Trends)."""
 
@@ -186,6 +226,9 @@ class Runtime:
         self.base = tuple(base)
         self.history: History | None = None  # the drives' own log entries (None: not kept)
         self.settings: Settings | None = None  # the sweep of the drives' settings (None: none)
+        # Hot standby: who masters each configured line (None: one instance masters all).
+        self.masters: Masters | None = None
+        self.stopping = False  # set by stop(): no line starts from then on
         self._tasks: dict[str, asyncio.Task[None]] = {}
         # What starts once the lines run (the watch of the drives' logs), and what ends
         # after they stopped.
@@ -245,6 +288,7 @@ class Runtime:
 
     async def stop(self, grace: float = 3.0) -> None:
         """Stop taking jobs, let each line finish its exchange in flight, close the ports."""
+        self.stopping = True
         for runner in self.runners.values():
             runner.stop()
         if self._tasks:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import prometheus_client
 
 from pkwbus import dp_settings
-from pkwbus.link import PortSettings
+from pkwbus.link import Fence, PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.events import Observer, Outputs
 from pkwbus.master.planning.identity import DescriptionBook
@@ -46,6 +46,7 @@ from pkwbus.service.metrics.forget import forget_series
 from pkwbus.service.metrics.instrumentation import LineMetrics, ServiceMetrics, api_metrics
 from pkwbus.service.metrics.maintenance import MaintenanceCollector
 from pkwbus.service.metrics.service_metrics import ConfigMetrics
+from pkwbus.service.metrics.standby import MasterCollector
 from pkwbus.service.metrics.trends import Trends
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -110,6 +111,10 @@ class Parts:
         self.base: tuple[Observer, ...] = (self.collector, self.board, self.trends,
                                            self.descriptions)  # fmt: skip
         self.outputs = Outputs(self.base)
+        # Hot standby: each line's fence, given to its port (None: always open).
+        self.fence_of: Callable[[str], Fence] | None = None
+        # The configured lines' names, in order (pkwbus_line_master; a reload sets them).
+        self.lines: list[str] = []
 
     def plan(self, line: cfg.Line) -> LinePlan:
         entries: list[DriveEntry] = []
@@ -164,6 +169,7 @@ class Parts:
                 port, close = await start_dp_sim(line, line.sim)
             else:
                 port, close = await start_sim(line, line.sim)
+        fence = self.fence_of(line.name) if self.fence_of is not None else None
         dialects = {d.name: d.pkw_dialect for d in line.drives}
         uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
         counts = self.metrics.for_line(line.name, dialects, uss=uss, dp=dp)
@@ -171,9 +177,9 @@ class Parts:
         try:
             if isinstance(line, cfg.ProfibusLine):
                 self.resolved[line.name] = tuple(d.dp.settings()[0] for d in line.drives)
-                runner = _dp_runner(line, port, specs, self.snapshot, [counts, self.outputs])
+                runner = _dp_runner(line, port, specs, self.snapshot, [counts, self.outputs], fence)
             else:
-                wire = ExchangeWire(port_for(line, port))
+                wire = ExchangeWire(port_for(line, port, fence))
                 runner = LineRunner(
                     line.name, wire, specs, retries=line.retries, snapshot=self.snapshot,
                     observers=[counts, self.outputs],
@@ -197,11 +203,15 @@ async def build_runtime(config: cfg.Config, kept: DescriptionFile | None = None)
 async def assemble(
     config: cfg.Config, kept: DescriptionFile | None = None
 ) -> tuple[Runtime, Parts]:
-    """The runtime of ``config`` and the parts its lines share (for a reload)."""
+    """The runtime of ``config`` and the parts its lines share (for a reload). In hot
+    standby no line is built here: each starts when this instance wins it
+    (:mod:`.standby_lines`)."""
     parts = Parts(kept)
+    parts.lines = [line.name for line in config.lines]
+    here = config.lines if config.standby is None else []
     # Each drive's polls first: the exposition of their values is made before any line,
     # so that every line's metrics are given it (a value is rendered as it lands).
-    plans = [parts.plan(line) for line in config.lines]
+    plans = [parts.plan(line) for line in here]
     for plan in plans:
         parts.show(config, plan)
     built = [await parts.build(plan) for plan in plans]
@@ -210,6 +220,7 @@ async def assemble(
         trends=parts.trends, outputs=parts.outputs, base=parts.base,
     )  # fmt: skip
     runtime.drives = parts.entries
+    parts.registry.register(MasterCollector(lambda: parts.lines, lambda: runtime.masters))
     for b in built:
         if b.close is not None:
             runtime.closers[b.runner.name] = b.close
@@ -222,6 +233,7 @@ def _dp_runner(
     specs: list[DriveSpec],
     snapshot: Snapshot,
     outputs: list[Observer],
+    fence: Fence | None = None,
 ) -> LineRunner:
     """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
     settings = PortSettings(
@@ -238,7 +250,7 @@ def _dp_runner(
             raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
         resolved.append(found)
     slot = dp_settings.slot_time(line.baudrate, line.slot_time, (s.gsd for s in resolved))
-    dp = FdlPort(settings, line.master_address, slot_time=slot)
+    dp = FdlPort(settings, line.master_address, slot_time=slot, fence=fence)
     watchdog = dp_settings.watchdog(slot, line.retries, len(specs), line.watchdog)
     slaves = []
     for drive, spec, found in zip(line.drives, specs, resolved, strict=True):

@@ -43,6 +43,7 @@ afresh.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -53,6 +54,7 @@ from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
 from pkwbus.service.assembly.line_changes import CONFIGURED, IN_PLACE, DriveChanges, fields
+from pkwbus.service.assembly.standby_lines import StandbyLines
 from pkwbus.service.config import ConfigError
 from pkwbus.service.http.reload import ReloadRefused
 from pkwbus.service.runtime import Runtime
@@ -67,6 +69,7 @@ RESTART_ONLY = {
     "audit_db": "the audit log is opened at the start",
     "history_db": "the history database is opened at the start",
     "log_format": "the log's format is set at the start",
+    "standby": "hot standby is set up at the start",
 }
 # A line's keys that are its drives' defaults, not its bus's settings.
 DRIVE_DEFAULTS = frozenset({"describe", "alarms", "counters", "events", "events_every", "settings"})
@@ -108,8 +111,12 @@ class Reloader:
         memory: Memory | None = None,
         *,
         api: Callable[[cfg.Config], None] | None = None,
+        gate: StandbyLines | None = None,
     ) -> None:
         self.config = config
+        # Hot standby: only the lines running here change here; the others start, with
+        # the new configuration, when this instance wins them.
+        self.gate = gate
         self._reread = reread
         self.runtime = runtime
         self.parts = parts
@@ -152,8 +159,12 @@ class Reloader:
                 await self.memory.stop(final=False)
             changes: list[str] = []
             failed: list[str] = []
+            gate = self.gate.lock if self.gate is not None else contextlib.nullcontext()
             try:
-                await self._apply(new, held, changes, failed)
+                async with gate:
+                    await self._apply(new, held, changes, failed)
+                    if self.gate is not None:
+                        changes += await self.gate.reloaded(new, watch=not touched)
             except Exception as exc:  # a defect: say so; the next reload opens them afresh
                 self._down.update(line.name for line in new.lines)
                 problem = f"the change could not be applied ({exc!r}): every line is opened" \
@@ -162,6 +173,7 @@ class Reloader:
                 failed.append(problem)
             finally:
                 self.config = new
+                self.parts.lines = [line.name for line in new.lines]
                 if touched and self.memory is not None:
                     self.memory.watch(new)
                     await self.memory.start()
@@ -180,8 +192,8 @@ class Reloader:
         kept: dict[str, Any] = {}
         refused = []
         for key, why in RESTART_ONLY.items():
-            if getattr(new, key) != getattr(self.config, key):
-                kept[key] = getattr(self.config, key)
+            if getattr(new, key, None) != getattr(self.config, key, None):
+                kept[key] = getattr(self.config, key, None)
                 refused.append(f"{key}: {why}; it changes at the next restart")
         return (new.model_copy(update=kept) if kept else new), refused
 
@@ -223,6 +235,8 @@ class Reloader:
         updates: list[tuple[cfg.Line, cfg.Line]] = []
         for name, line in new_lines.items():
             old = old_lines.get(name)
+            if self.gate is not None and name not in self.runtime.runners:
+                continue  # not mastered here now: started by the gate when it is
             if old is None or name in self._down:
                 if old is not None:
                     await self._stop_line(name)

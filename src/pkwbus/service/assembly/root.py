@@ -37,6 +37,7 @@ from pkwbus.service.assembly.serve import (
     raise_open_files_limit,
     serve,
 )
+from pkwbus.service.assembly.standby_lines import StandbyLines, etcd_engine
 from pkwbus.service.audit.log import AuditError, AuditLog, path_problem
 from pkwbus.service.config import Config
 from pkwbus.service.history.store import HistoryError, HistoryStore
@@ -124,9 +125,12 @@ async def _serve(
             limit.limit = new.api.max_connections
             raise_open_files_limit(limit.limit + SPARE_DESCRIPTORS)
 
+    gate = None  # hot standby: the lines start as this instance wins them
+    if config.standby is not None:
+        gate = StandbyLines(config, runtime, parts, etcd_engine, memory)
     reloader = None
     if reread is not None:
-        reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api)
+        reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api, gate=gate)
     api = build_api(
         runtime, audit=audit, write_token=token, read_token=config.read_token(), reloader=reloader
     )

@@ -27,7 +27,7 @@ from pkwbus.catalog.description import (
     ParameterTable,
 )
 from pkwbus.catalog.precedence import Layers
-from pkwbus.link import PortSettings
+from pkwbus.link import Fence, PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.planning.plan import DescribeTarget
 from pkwbus.master.target import DriveTarget, RecordAccess
@@ -187,8 +187,9 @@ def describe_targets(
     return tuple(targets)
 
 
-def port_for(line: cfg.Line, port: str) -> TelegramPort:
-    """The FC/USS line a configuration describes, on ``port``."""
+def port_for(line: cfg.Line, port: str, fence: Fence | None = None) -> TelegramPort:
+    """The FC/USS line a configuration describes, on ``port``; ``fence``: its lease's
+    (hot standby; None: always open)."""
     settings = PortSettings(
         port,
         baudrate=line.baudrate,
@@ -204,4 +205,5 @@ def port_for(line: cfg.Line, port: str) -> TelegramPort:
         Protocol(line.protocol),
         timeout=line.timeout,
         inter_char_timeout=line.inter_char_seconds,
+        fence=fence,
     )

@@ -336,7 +336,9 @@ def build_api(
         lines = dict(runtime.snapshot.lines)
         problem = await audit_writer.problem()
         reason = None if problem is None else f"the audit log cannot record: {problem}"
-        ready = bool(lines) and all(lines.values()) and problem is None
+        # In hot standby an instance that masters no line is ready: it stands by.
+        some = bool(lines) or runtime.masters is not None
+        ready = some and all(lines.values()) and problem is None
         body = Readiness(ready=ready, lines=lines, writes=problem is None, reason=reason)
         if ready:
             return body

@@ -26,6 +26,7 @@ from pkwbus.service.http.parameter_checks import (
     clip,
     identified,
     malformed,
+    mastered_elsewhere,
 )
 from pkwbus.service.runtime import Runtime
 
@@ -63,7 +64,11 @@ class Maintenance:
         runner = self.runtime.runners.get(entry.line) if entry is not None else None
         if entry is None or runner is None:
             audit.outcome = "invalid"
-            refusal = ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+            try:
+                mastered_elsewhere(self.runtime, drive)
+                refusal = ApiError(404, "unknown_drive", f"no drive named {drive!r}")
+            except ApiError as elsewhere:
+                audit.outcome, refusal = "not_sent", elsewhere
             refusal.audit_incomplete = not await self.audit_writer.note(audit)
             raise refusal
         row = await attempted(self.audit_writer, audit, "the drive stays as it was")

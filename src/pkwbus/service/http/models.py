@@ -22,6 +22,9 @@ __all__ = [
     "MaintenanceBody",
     "MaintenanceResult",
     "MaintenanceView",
+    "MasterView",
+    "NotMasterDetail",
+    "NotMasterError",
     "ParameterReading",
     "Readiness",
     "ReloadResult",
@@ -154,8 +157,35 @@ class DriveOverview(BaseModel):
     age: float | None = None  # seconds since then, at the answer
 
 
+class MasterView(BaseModel):
+    """The instance that masters a line (hot standby): its name and where to find it."""
+
+    name: str
+    url: str | None = Field(default=None, description="its advertised URL (null: none given)")
+
+
+class NotMasterDetail(BaseModel):
+    kind: str = Field(description="not_master")
+    message: str
+    master: str | None = Field(
+        description="the instance that masters the drive's line (null: none now)"
+    )
+    url: str | None = Field(description="that instance's advertised URL (null: none given)")
+
+
+class NotMasterError(BaseModel):
+    """409 for a drive whose line another instance masters (hot standby): ask there."""
+
+    error: NotMasterDetail
+
+
 class LineView(BaseModel):
     name: str
+    master: MasterView | None = Field(
+        default=None,
+        description="the instance that masters the line in hot standby (null: no hot"
+        " standby, or no instance masters it now)",
+    )
     open: bool
     drives: int
     drives_up: int
@@ -256,3 +286,5 @@ class ReloadResult(BaseModel):
 ERRORS: dict[int | str, dict[str, object]] = {
     code: {"model": ErrorBody} for code in (401, 403, 404, 409, 413, 422, 429, 503, 504)
 }
+# A drive's read, write or job: also 409 not_master, in hot standby.
+ERRORS[409] = {"model": ErrorBody | NotMasterError}

@@ -4,7 +4,8 @@
 kind and a message. The checks here raise it: :func:`check_names` (404, a name
 longer than any can be), :class:`TokenCheck` (403 when writes are disabled or
 the token is wrong, 401 without a bearer token; compared in constant time),
-:func:`locate` (404 unknown drive or parameter, 422 wrong notation or index),
+:func:`locate` (404 unknown drive or parameter, 422 wrong notation or index, 409 a
+drive whose line another instance masters: :func:`mastered_elsewhere`),
 :func:`fit_index` (422 index past the array) and :func:`raise_for` (the
 failure of a job's outcome).
 """
@@ -40,6 +41,7 @@ __all__ = [
     "identified",
     "locate",
     "malformed",
+    "mastered_elsewhere",
     "raise_for",
 ]
 
@@ -144,6 +146,7 @@ def locate(
     """The drive and the parameter by the drive's one name for it, with ``index`` applied."""
     entry = runtime.drives.get(drive)
     if entry is None:
+        mastered_elsewhere(runtime, drive)
         raise ApiError(404, "unknown_drive", f"no drive named {drive!r}")
     if (held := runtime.snapshot.maintenance.get(drive)) is not None:
         why = f" ({held.reason})" if held.reason else ""
@@ -168,6 +171,24 @@ def locate(
             raise ApiError(422, "invalid_index", f"index {index} is outside 0-255")
         ref = ParameterRef(ref.pnu, index, ref.name)
     return entry, ref
+
+
+def mastered_elsewhere(runtime: Runtime, drive: str) -> None:
+    """409 ``not_master`` for a configured drive whose line this instance does not master
+    now (hot standby), naming the instance that does and its URL (null: nobody now)."""
+    masters = runtime.masters
+    if masters is None or drive in runtime.drives:
+        return
+    line = masters.line_of(drive)
+    if line is None:
+        return
+    master = masters.master_of(line)
+    name, url = (master.name, master.url) if master is not None else (None, None)
+    where = f"instance {name}" if name is not None else "no instance now"
+    raise ApiError(
+        409, "not_master", f"{drive} is on line {line}, which {where} masters: ask there",
+        master=name, url=url,
+    )  # fmt: skip
 
 
 def fit_index(ref: ParameterRef, fmt: ParameterDescription) -> ParameterRef:

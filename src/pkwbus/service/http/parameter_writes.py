@@ -101,7 +101,7 @@ class Writes:
             audit.raw_value = request.value if not request.text else None
         except ApiError as exc:
             audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
-            if exc.kind in ("not_described", "in_maintenance"):  # refused for now: not sent
+            if exc.kind in ("not_described", "in_maintenance", "not_master"):  # not sent, for now
                 audit.outcome = "not_sent"
             audit.detail = str(exc)
             exc.audit_incomplete = not await self.audit_writer.note(audit)

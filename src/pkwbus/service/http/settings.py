@@ -51,6 +51,7 @@ from pkwbus.service.http.parameter_checks import (
     clip,
     described_format,
     identified,
+    mastered_elsewhere,
 )
 from pkwbus.service.http.parameter_reads import Reads
 from pkwbus.service.http.parameter_writes import WriteOrder, Writes
@@ -83,6 +84,7 @@ class DriveSettings:
     def _swept(self, drive: str) -> tuple[DriveEntry, Settings]:
         entry = self.runtime.drives.get(drive)
         if entry is None:
+            mastered_elsewhere(self.runtime, drive)
             raise ApiError(404, "unknown_drive", f"no drive named {drive!r}")
         settings = self.runtime.settings
         if settings is None or drive not in settings.swept:

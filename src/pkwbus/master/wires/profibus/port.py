@@ -19,7 +19,7 @@ import asyncio
 import contextlib
 from collections.abc import Callable
 
-from pkwbus.link import Link, PortError, PortSettings
+from pkwbus.link import Fence, Link, PortError, PortSettings
 from pkwbus.master.runner import Done, LineRefused
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.services import global_control_clear
@@ -84,6 +84,7 @@ class FdlPort:
         slot_time: float | None = None,
         trace: TraceHook | None = None,
         listen: float | None = None,
+        fence: Fence | None = None,
     ) -> None:
         baud = settings.baudrate
         self.master = master
@@ -107,7 +108,7 @@ class FdlPort:
         self.trace = trace
         self.listen_for = listen  # how long to listen before going active (None: TTO)
         self.clear_on_close = False  # Global_Control Clear to every slave before closing
-        self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost)
+        self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost, fence=fence)
         self.foreign: str | None = None  # another master heard, and how
         self.requests = 0
         self.sent_at = 0.0  # loop time the latest request was written (its idle time over)

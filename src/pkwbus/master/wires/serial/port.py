@@ -25,7 +25,7 @@ import logging
 import time
 from collections.abc import Callable
 
-from pkwbus.link import Link, LinkState, PortError, PortSettings
+from pkwbus.link import Fence, Link, LinkState, PortError, PortSettings
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.master.planning.plan import Send
 from pkwbus.protocol.serial.telegram import (
@@ -69,6 +69,7 @@ class TelegramPort:
         timeout: float = 0.1,
         inter_char_timeout: float | None = None,
         trace: TraceHook | None = None,
+        fence: Fence | None = None,
     ) -> None:
         self.protocol = protocol
         self.timeout = timeout
@@ -76,7 +77,7 @@ class TelegramPort:
             inter_char_timeout if inter_char_timeout is not None else settings.inter_char_gap
         )
         self.trace = trace
-        self.link = Link(settings, receiver=self._on_data, on_lost=self._on_lost)
+        self.link = Link(settings, receiver=self._on_data, on_lost=self._on_lost, fence=fence)
         self.link.reconnect.add_listener(self._on_port)
         lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
         self._deframer = Deframer(lengths)

@@ -408,12 +408,32 @@ function fillLine(r, c, line) {
     const bad = c[key] > 0 && (key === "down" || key === "alarm");
     setClass(r.cells[key], `count${bad ? " bad" : ""}${key === "warning" && c[key] ? " warn" : ""}`);
   }
-  if (line) {
+  if (line && !line.open && line.master) {  // hot standby: the instance that masters it
+    showMaster(r.cells.port, line.master);
+    setText(r.cells.busy, "-");
+  } else if (line) {
+    if (r.cells.port.dataset.master !== undefined) {
+      delete r.cells.port.dataset.master;
+      r.cells.port.removeAttribute("title");
+    }
     setText(r.cells.port, line.open ? "open" : "closed");
     setClass(r.cells.port, line.open ? "port" : "port bad");
     setText(r.cells.busy,
       line.utilisation === null ? "-" : `${Math.round(line.utilisation * 100)} %`);
   }
+}
+
+// A line another instance masters (hot standby): its name, a link to its page where it
+// advertises an http(s) URL.
+function showMaster(cell, master) {
+  const key = `${master.name}\n${master.url || ""}`;
+  if (cell.dataset.master === key) return;
+  cell.dataset.master = key;
+  const url = master.url && /^https?:\/\//i.test(master.url) ? master.url : null;
+  const name = url ? el("a", { href: url, class: "master" }, master.name) : master.name;
+  cell.replaceChildren("mastered by ", name);
+  setClass(cell, "port elsewhere");
+  cell.title = url ? `this line runs on ${master.name}: ${url}` : `this line runs on ${master.name}`;
 }
 
 function drawLines(lines) {
@@ -441,8 +461,11 @@ function drawLines(lines) {
   }
   fillLine(all, total, null);
   const up = lines.filter((l) => l.open).length;
-  setText(all.cells.port, `${up} of ${lines.length} open`);
-  setClass(all.cells.port, up < lines.length ? "port bad" : "port");
+  const elsewhere = lines.filter((l) => !l.open && l.master).length;  // hot standby
+  const here = lines.length - elsewhere;
+  setText(all.cells.port,
+    `${up} of ${here} open${elsewhere ? `, ${elsewhere} mastered elsewhere` : ""}`);
+  setClass(all.cells.port, up < here ? "port bad" : "port");
   const busy = lines.map((l) => l.utilisation).filter((u) => u !== null);
   setText(all.cells.busy,
     busy.length ? `${Math.round((busy.reduce((a, b) => a + b, 0) / busy.length) * 100)} %` : "-");

@@ -14,6 +14,7 @@ from pkwbus.service.http.models import (
     EventView,
     LineView,
     MaintenanceView,
+    MasterView,
     SlaveView,
     WritableView,
 )
@@ -38,12 +39,17 @@ def line_views(
     """Each line's port, drives and how busy it was since ``looks`` last saw it."""
     snap = runtime.snapshot
     views = []
+    masters = runtime.masters
     by_line: dict[str, list[str]] = {name: [] for name in runtime.runners}
     for d, e in runtime.drives.items():
         by_line.setdefault(e.line, []).append(d)
-    for name in runtime.runners:
-        mine = by_line[name]
+    # In hot standby every configured line, those mastered elsewhere too.
+    names = list(runtime.runners) if masters is None else list(masters.lines())
+    for name in names:
+        mine = by_line.get(name, [])
         up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)
+        if masters is not None and name not in runtime.runners:  # nothing of it runs here
+            mine, up = list(masters.lines()[name]), 0
         totals = snap.totals.get(name)
         busy = totals.busy if totals is not None else 0.0
         utilisation = None
@@ -51,9 +57,11 @@ def line_views(
         if seen is not None and now > seen[0]:
             utilisation = min(1.0, max(0.0, (busy - seen[1]) / (now - seen[0])))
         looks[name] = (now, busy)
+        master = masters.master_of(name) if masters is not None else None
         views.append(
             LineView(
                 name=name,
+                master=MasterView(name=master.name, url=master.url) if master else None,
                 open=bool(snap.lines.get(name)),
                 drives=len(mine),
                 drives_up=up,

@@ -1,0 +1,231 @@
+"""The lines of an instance in hot standby (interface "Hot standby"): a line runs here
+only while this instance holds its lease.
+
+The engine (:mod:`pkwbus.service.standby`) campaigns for the lines and tells each
+change on the loop (``on_change(line, held)``). Held: the line is planned, shown and
+built as at the start, its port given the lease's fence (no byte goes out once the
+lease may have passed to another instance), and started. Released: its runner stops at
+once, its port closes and nothing of it stays in the snapshot or ``/metrics``, as for a
+line a reload removed; held again later, it starts from a fresh runner. The changes are
+applied one after the other, and never while a reload applies (they share
+:attr:`StandbyLines.lock`).
+
+On the way out the lines stop with the runtime (their ports close), then
+:meth:`StandbyLines.close` revokes the leases. A reload hands the engine the new lines
+(:meth:`StandbyLines.reloaded`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, Protocol
+
+from pkwbus.link.fence import Fence, LineFence
+from pkwbus.service import config as cfg
+from pkwbus.service.assembly.build import Parts
+from pkwbus.service.assembly.history import Memory
+from pkwbus.service.config import StandbyConfig
+from pkwbus.service.runtime import LineMaster, Runtime
+from pkwbus.service.standby import Standby
+
+__all__ = ["STOP_GRACE", "Engine", "EngineFactory", "StandbyLines", "etcd_engine"]
+
+log = logging.getLogger("pkwbus.service.standby")
+
+# How long a released line's exchange in flight may take to end before it is cancelled:
+# its port's fence keeps it silent already.
+STOP_GRACE = 0.5
+
+
+class Engine(Protocol):
+    """The hot standby's engine as the lines use it (service.standby.Standby)."""
+
+    async def start(self) -> None: ...
+    async def stop(self) -> None: ...
+    def holds(self, line: str) -> bool: ...
+    def fence(self, line: str) -> Fence: ...
+    def master_of(self, line: str) -> LineMaster | None: ...
+    @property
+    def etcd_up(self) -> bool: ...
+    def takeovers(self, line: str) -> int: ...
+    def set_lines(self, lines: Sequence[str]) -> None: ...
+
+
+# (the standby section, the lines' names, on_change) -> the engine
+EngineFactory = Callable[[Any, Sequence[str], Callable[[str, bool], None]], Engine]
+
+
+def etcd_engine(
+    section: StandbyConfig, lines: Sequence[str], on_change: Callable[[str, bool], None]
+) -> Engine:
+    """The engine on etcd of the configuration's ``standby`` section."""
+    return Standby(section, lines, on_change=on_change)
+
+
+class StandbyLines:
+    """Starts and stops the lines of ``config`` as this instance wins and loses them; who
+    masters each line, for the API and the metrics (:class:`~pkwbus.service.runtime.Masters`)."""
+
+    def __init__(
+        self,
+        config: cfg.Config,
+        runtime: Runtime,
+        parts: Parts,
+        engine: EngineFactory,
+        memory: Memory | None = None,
+    ) -> None:
+        self.config = config
+        self.runtime = runtime
+        self.parts = parts
+        self.memory = memory
+        self.lock = asyncio.Lock()  # one change at a time, never during a reload
+        self._changes: set[asyncio.Task[None]] = set()
+        self._closed = False
+        self._lines: dict[str, cfg.Line] = {}
+        self._drives: dict[str, str] = {}
+        self._configure(config)
+        section = config.standby
+        self.engine = engine(section, list(self._lines), self.on_change)
+        parts.fence_of = self.fence_of
+        runtime.masters = self
+        runtime.starters.append(self.engine.start)
+        # After the lines stopped (their ports closed): the leases revoked.
+        runtime.cleanups.append(self.close)
+
+    def _configure(self, config: cfg.Config) -> None:
+        self.config = config
+        self._lines = {line.name: line for line in config.lines}
+        self._drives = {d.name: line.name for line in config.lines for d in line.drives}
+
+    def fence_of(self, line: str) -> Fence:
+        return LineFence(line, self.engine.fence(line))
+
+    # ------------------------------------------------------------ runtime.Masters
+
+    @property
+    def etcd_up(self) -> bool:
+        return self.engine.etcd_up
+
+    def lines(self) -> Mapping[str, Sequence[str]]:
+        return {name: [d.name for d in line.drives] for name, line in self._lines.items()}
+
+    def line_of(self, drive: str) -> str | None:
+        return self._drives.get(drive)
+
+    def here(self, line: str) -> bool:
+        return self.engine.holds(line)
+
+    def master_of(self, line: str) -> LineMaster | None:
+        return self.engine.master_of(line)
+
+    def takeovers(self, line: str) -> int:
+        return self.engine.takeovers(line)
+
+    # ------------------------------------------------------------ changes
+
+    def on_change(self, line: str, held: bool) -> None:
+        """The engine's word (on the loop): ``line`` held by this instance, or not."""
+        if not held:  # silent at once; the rest of the stop follows in order
+            runner = self.runtime.runners.get(line)
+            if runner is not None:
+                runner.stop()
+        elif self.runtime.stopping:
+            return
+        task = asyncio.create_task(self._change(line, held), name=f"standby {line}")
+        self._changes.add(task)
+        task.add_done_callback(self._changed)
+
+    def _changed(self, task: asyncio.Task[None]) -> None:
+        self._changes.discard(task)
+        if not task.cancelled() and (exc := task.exception()) is not None:
+            log.error("hot standby: a line's change failed: %r", exc)
+
+    async def _change(self, line: str, held: bool) -> None:
+        async with self.lock:
+            running = line in self.runtime.runners
+            if held and not running and self.engine.holds(line) and line in self._lines:
+                if not self.runtime.stopping:
+                    await self._start(self._lines[line])
+            elif not held and (running or line in self._shown()):
+                await self._stop(line)
+
+    def _shown(self) -> set[str]:
+        return set(self.parts.line_of.values())
+
+    async def _start(self, line: cfg.Line, watch: bool = True) -> bool:
+        """Start ``line`` here; False when it cannot start (shown down) or the service
+        stops. ``watch``: the drives' memory watched again over the lines then."""
+        parts = self.parts
+        plan = parts.plan(line)
+        parts.show(self.config, plan)
+        try:
+            built = await parts.build(plan)
+        except Exception as exc:  # a sim that cannot start, a GSD file gone since the check
+            log.error("line %s: mastered here but cannot start: %s", line.name, exc)
+            parts.down(plan)  # shown down until the line is released
+            return False
+        if self.runtime.stopping:
+            closed = built.close() if built.close is not None else None
+            if asyncio.iscoroutine(closed):
+                await closed
+            parts.forget(line.name)
+            return False
+        if built.close is not None:
+            self.runtime.closers[line.name] = built.close
+        self.runtime.start_line(built.runner)
+        log.info("line %s: mastered here (hot standby)", line.name, extra={"line": line.name})
+        if watch:
+            await self._watch_again()
+        return True
+
+    async def _stop(self, line: str) -> None:
+        if line in self.runtime.runners:
+            await self.runtime.stop_line(line, STOP_GRACE)
+        self.parts.counts.pop(line, None)
+        self.parts.forget(line)
+        log.info("line %s: no longer mastered here (hot standby)", line, extra={"line": line})
+        await self._watch_again()
+
+    async def _watch_again(self) -> None:
+        """The drives' memory watched again, on the lines that run here now."""
+        if self.memory is None or self.runtime.stopping:
+            return
+        await self.memory.stop(final=False)
+        self.memory.watch(self.config)
+        await self.memory.start()
+
+    # ------------------------------------------------------------ reload and stop
+
+    async def reloaded(self, config: cfg.Config, *, watch: bool) -> list[str]:
+        """A reload applied ``config`` (under :attr:`lock`): the engine campaigns for its
+        lines; a held line that does not run yet starts (those started, as the reload
+        says them). ``watch``: the drives' memory is watched again here (the reload does
+        not do it itself)."""
+        self._configure(config)
+        self.engine.set_lines(list(self._lines))
+        started = []
+        for name, line in self._lines.items():
+            if name not in self.runtime.runners and self.engine.holds(name):
+                if name in self._shown():  # shown down: it could not start before
+                    self.parts.forget(name)
+                if await self._start(line, watch=False):
+                    started.append(f"line {name} started (mastered here)")
+        if started and watch:
+            await self._watch_again()
+        return started
+
+    async def close(self) -> None:
+        """The service stops, its lines stopped: the changes under way end, then the
+        leases are revoked (once)."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._changes:
+            await asyncio.wait(list(self._changes), timeout=10.0)
+        for task in list(self._changes):
+            task.cancel()
+        with contextlib.suppress(Exception):
+            await self.engine.stop()
