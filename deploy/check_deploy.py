@@ -28,6 +28,7 @@ DASHBOARD = DEPLOY / "grafana" / "dashboards" / "pkwbus.json"
 RULES = DEPLOY / "prometheus" / "rules.yml"
 RULES_TEST = DEPLOY / "prometheus" / "rules_test.yml"
 COMPOSE = DEPLOY / "compose.yaml"
+COMPOSE_STANDBY = DEPLOY / "compose.standby.yaml"
 K8S = DEPLOY / "kubernetes"
 
 # The metric table of interface.md, for when the shared design folder is not
@@ -66,11 +67,7 @@ FALLBACK_METRICS = {
 
 # In the interface's table but not exported yet, each named in README.md's metric
 # section as open work: hot standby on etcd is a capability still to come.
-NOT_YET_EXPORTED: set[str] = {
-    "pkwbus_line_master",
-    "pkwbus_standby_etcd_up",
-    "pkwbus_standby_takeovers_total",
-}
+NOT_YET_EXPORTED: set[str] = set()
 HISTOGRAM_SUFFIXES = ("_bucket", "_sum", "_count")
 
 # Exported beyond the interface's table, each documented in README.md's metric
@@ -287,6 +284,42 @@ def check_compose() -> None:
         problem(f"{COMPOSE}: pkwbus must listen on 0.0.0.0:9725 in a container")
 
 
+def check_compose_standby() -> None:
+    """The hot standby stack: two or more pkwbus instances with names of their own on one
+    configuration, whose etcd members and gateway are services of the same file."""
+    compose = yaml.safe_load(COMPOSE_STANDBY.read_text())
+    services = compose.get("services", {})
+    instances = {
+        name: svc
+        for name, svc in services.items()
+        if "run" in svc.get("command", []) and "PKWBUS_INSTANCE" in svc.get("environment", {})
+    }
+    names = [svc["environment"]["PKWBUS_INSTANCE"] for svc in instances.values()]
+    if len(instances) < 2 or len(set(names)) != len(names):
+        problem(f"{COMPOSE_STANDBY}: not two instances with names of their own: {names}")
+    configs = {
+        vol.split(":")[0]
+        for svc in instances.values()
+        for vol in svc.get("volumes", [])
+        if vol.split(":")[1:2] == ["/etc/pkwbus/config.yaml"]
+    }
+    if len(configs) != 1:
+        problem(f"{COMPOSE_STANDBY}: the instances do not share one configuration: {configs}")
+        return
+    source = DEPLOY / configs.pop()
+    if not source.is_file():
+        problem(f"{COMPOSE_STANDBY}: mounted {source} does not exist")
+        return
+    config = yaml.safe_load(source.read_text())
+    hosts = [re.sub(r"^https?://", "", u).split(":")[0] for u in config["standby"]["etcd"]]
+    hosts += [re.sub(r"^\w+://", "", line["port"]).split(":")[0] for line in config["lines"]]
+    for host in hosts:
+        if host not in services:
+            problem(f"{source}: {host} is no service of {COMPOSE_STANDBY}")
+    if "0.0.0.0:9725" not in " ".join(next(iter(instances.values()))["command"]):
+        problem(f"{COMPOSE_STANDBY}: pkwbus must listen on 0.0.0.0:9725 in a container")
+
+
 def check_grafana() -> None:
     dash = json.loads(DASHBOARD.read_text())
     ids = [p["id"] for p in dash.get("panels", [])]
@@ -359,11 +392,15 @@ def check_kubernetes() -> None:
     for name, dep in deployments.items():
         where = f"Deployment {name}"
         spec = dep["spec"]
-        if spec.get("replicas") != 1:
-            problem(f"{where}: replicas must be 1 (one master per RS-485 line)")
-        if spec.get("strategy", {}).get("type") != "Recreate":
-            problem(f"{where}: strategy must be Recreate (no two masters during an update)")
         pod = spec["template"]["spec"]
+        standby = deployment_config(dep, configmaps).get("standby")
+        if standby:
+            check_standby_group(where, dep, standby, by_kind)
+        else:
+            if spec.get("replicas") != 1:
+                problem(f"{where}: replicas must be 1 (one master per RS-485 line)")
+            if spec.get("strategy", {}).get("type") != "Recreate":
+                problem(f"{where}: strategy must be Recreate (no two masters during an update)")
         if not pod.get("securityContext", {}).get("runAsNonRoot"):
             problem(f"{where}: pod securityContext.runAsNonRoot is not true")
         volumes = {v["name"]: v for v in pod.get("volumes", [])}
@@ -396,6 +433,11 @@ def check_kubernetes() -> None:
                 continue
             cm = configmaps[volumes[cfg_mount["name"]]["configMap"]["name"]]
             check_service_config(cw, cm, env, ports, mounts)
+    services = {  # pkwbus's own; etcd.yaml's Service is checked with its StatefulSet
+        name: svc
+        for name, svc in services.items()
+        if svc["metadata"].get("labels", {}).get("app.kubernetes.io/name") == "pkwbus"
+    }
     for name, svc in services.items():
         sel = svc["spec"].get("selector", {})
         pods = [
@@ -431,6 +473,72 @@ def check_kubernetes() -> None:
                 ' (rules select job="pkwbus")'
             )
     print(f"  {len(docs)} Kubernetes objects, {len(deployments)} Deployments wired up")
+
+
+def deployment_config(dep: dict[str, Any], configmaps: dict[str, Any]) -> dict[str, Any]:
+    """The pkwbus configuration a Deployment mounts at /etc/pkwbus ({} when none is found)."""
+    pod = dep["spec"]["template"]["spec"]
+    for v in pod.get("volumes", []):
+        cm = configmaps.get(v.get("configMap", {}).get("name"))
+        if cm is not None and "config.yaml" in cm.get("data", {}):
+            return dict(yaml.safe_load(cm["data"]["config.yaml"]) or {})
+    return {}
+
+
+def check_standby_group(
+    where: str, dep: dict[str, Any], standby: dict[str, Any], by_kind: dict[str, Any]
+) -> None:
+    """A hot standby group: two or more replicas, a PodDisruptionBudget that keeps one,
+    each pod named from its own pod name, and etcd endpoints that are members here."""
+    spec = dep["spec"]
+    replicas = spec.get("replicas", 1)
+    if replicas < 2:
+        problem(f"{where}: a hot standby group needs 2 replicas or more, not {replicas}")
+    labels = spec["template"]["metadata"]["labels"]
+    budgets = [
+        b
+        for b in by_kind.get("PodDisruptionBudget", {}).values()
+        if labels_match(b["spec"]["selector"].get("matchLabels", {}), labels)
+    ]
+    if not budgets:
+        problem(f"{where}: no PodDisruptionBudget keeps one of its pods through a drain")
+    for b in budgets:
+        keeps = b["spec"].get("minAvailable", replicas - b["spec"].get("maxUnavailable", 0))
+        if not 1 <= int(keeps) < replicas:
+            problem(f"PodDisruptionBudget {b['metadata']['name']}: keeps {keeps} of {replicas}")
+    for c in spec["template"]["spec"]["containers"]:
+        env = {e["name"]: e for e in c.get("env", [])}
+        field = env.get("PKWBUS_INSTANCE", {}).get("valueFrom", {}).get("fieldRef", {})
+        if field.get("fieldPath") != "metadata.name":
+            problem(f"{where} container {c['name']}: PKWBUS_INSTANCE is not the pod's name")
+    statefulsets = by_kind.get("StatefulSet", {})
+    members = {
+        f"{s['metadata']['name']}-{i}.{s['spec']['serviceName']}"
+        for s in statefulsets.values()
+        for i in range(s["spec"].get("replicas", 1))
+    }
+    endpoints = standby.get("etcd", [])
+    if len(endpoints) < 3:
+        problem(f"{where}: standby.etcd names {len(endpoints)} members: list all three")
+    for url in endpoints:
+        host = re.sub(r"^https?://", "", str(url)).split(":")[0]
+        if not any(host == m or host.startswith(m + ".") for m in members):
+            problem(f"{where}: standby.etcd {url} is no etcd member of these manifests")
+    for name, sts in statefulsets.items():
+        if sts["spec"]["serviceName"] not in by_kind.get("Service", {}):
+            problem(f"StatefulSet {name}: no Service {sts['spec']['serviceName']}")
+        if sts["spec"].get("replicas") != 3:
+            problem(f"StatefulSet {name}: etcd needs 3 members (one may be lost)")
+        budgets = [
+            b
+            for b in by_kind.get("PodDisruptionBudget", {}).values()
+            if labels_match(
+                b["spec"]["selector"].get("matchLabels", {}),
+                sts["spec"]["template"]["metadata"]["labels"],
+            )
+        ]
+        if [b["spec"].get("maxUnavailable") for b in budgets] != [1]:
+            problem(f"StatefulSet {name}: one PodDisruptionBudget with maxUnavailable 1")
 
 
 def check_service_config(
@@ -480,6 +588,7 @@ def main() -> int:
     try:
         if args.structure:
             check_compose()
+            check_compose_standby()
             check_grafana()
             check_kubernetes()
         if args.metrics:

@@ -40,6 +40,7 @@ from imagecheck.service import (
 )
 from imagecheck.settings import BASE_TAG, PREFIX
 from imagecheck.stack import stack_checks
+from imagecheck.standby import standby_checks
 
 
 def main() -> int:
@@ -99,6 +100,7 @@ def checks(state: Path, token: str) -> int:
         with step("serial device opened without --group-add; dead drive seen"):
             check_line(*line, token)
     stack_checks(state)
+    standby_checks(state)
     if prom is not None:
         with step("dashboard queries against Prometheus scraping the container"):
             check_dashboard_queries(prom)

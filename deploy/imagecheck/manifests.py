@@ -13,7 +13,7 @@ import yaml
 from .processes import run
 from .prometheus import panels
 from .report import expect, say, step
-from .settings import COMPOSE, DASHBOARD, K8S, RULES, SCHEMAS
+from .settings import COMPOSE, COMPOSE_STANDBY, DASHBOARD, K8S, RULES, SCHEMAS
 
 # --- the dashboard JSON against the Grafana SDK ---------------------------------------------
 
@@ -97,15 +97,16 @@ def kustomize() -> list[dict[str, Any]]:
 
 
 def static_checks() -> None:
-    with step("compose file valid against the compose-spec schema"):
+    with step("compose files valid against the compose-spec schema"):
         v = validator(json.loads((SCHEMAS / "compose-spec.json").read_text()))
-        compose = yaml.safe_load(COMPOSE.read_text())
-        errors = schema_errors(v, compose)
-        expect(not errors, "\n  ".join(errors))
-        damaged = json.loads(json.dumps(compose))
-        damaged["services"]["pkwbus"]["read_onyl"] = True
-        expect(bool(schema_errors(v, damaged)), "the schema does not catch a misspelt key")
-        say(f"    {COMPOSE}: valid; a misspelt key in a copy is caught")
+        for path in (COMPOSE, COMPOSE_STANDBY):
+            compose = yaml.safe_load(path.read_text())
+            errors = schema_errors(v, compose)
+            expect(not errors, f"{path}:\n  " + "\n  ".join(errors))
+            damaged = json.loads(json.dumps(compose))
+            next(iter(damaged["services"].values()))["read_onyl"] = True
+            expect(bool(schema_errors(v, damaged)), "the schema does not catch a misspelt key")
+            say(f"    {path}: valid; a misspelt key in a copy is caught")
     with step(
         "kubectl kustomize renders; ServiceMonitor and PrometheusRule valid against the CRDs"
     ):

@@ -44,6 +44,12 @@ DASHBOARD = Path("deploy/grafana/dashboards/pkwbus.json")
 DATASOURCE = Path("deploy/grafana/provisioning/datasources/prometheus.yaml")
 RULES = Path("deploy/prometheus/rules.yml")
 COMPOSE = Path("deploy/compose.yaml")
+COMPOSE_STANDBY = Path("deploy/compose.standby.yaml")
+# etcd for the hot standby stack, from Debian's etcd-server (no registry needed).
+ETCD_IMAGE = "localhost/pkwbus-check-etcd:debian"
+# The lease of deploy/compose.standby.config.yaml, and what a takeover may take (#47).
+STANDBY_LEASE_S = 4.0
+TAKEOVER_LIMIT_S = STANDBY_LEASE_S + 3.0
 K8S = Path("deploy/kubernetes")
 SCHEMAS = Path("deploy/schemas")
 DEMO = Path("config/demo.yaml")
