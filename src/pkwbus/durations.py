@@ -22,6 +22,8 @@ __all__ = [
     "HISTORY_RETENTION",
     "INTER_CHAR_TIMEOUT",
     "JOB_DEADLINE",
+    "MQTT_HEARTBEAT",
+    "MQTT_OUTBOX_AGE",
     "PAUSE",
     "POLL_INTERVAL",
     "RANGES",
@@ -85,6 +87,8 @@ DP_WATCHDOG: Final = DurationRange("a watchdog", 0.01, 650.25)
 EVENTS_EVERY: Final = DurationRange("a drive log's watch interval", 1.0, 3600.0)
 HISTORY_RETENTION: Final = DurationRange("a retention", 3600.0, 87600 * 3600.0)  # 10 years
 SETTINGS_EVERY: Final = DurationRange("a settings sweep interval", 1.0, 86400.0)
+MQTT_HEARTBEAT: Final = DurationRange("an MQTT heartbeat", 1.0, 86400.0)
+MQTT_OUTBOX_AGE: Final = DurationRange("an MQTT outbox age", 60.0, 720 * 3600.0)  # 30 days
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -107,6 +111,8 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("line and drive `events_every`", EVENTS_EVERY),
     ("`history_retention`", HISTORY_RETENTION),
     ("line and drive `settings` `every`", SETTINGS_EVERY),
+    ("`mqtt` `values` `heartbeat`", MQTT_HEARTBEAT),
+    ("`mqtt` `outbox` `max_age`", MQTT_OUTBOX_AGE),
 )
 
 

@@ -39,6 +39,7 @@ from pkwbus.service.config.base import (
 )
 from pkwbus.service.config.fields import Retention
 from pkwbus.service.config.line import LineBase
+from pkwbus.service.config.mqtt import Mqtt
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
@@ -166,6 +167,7 @@ class Config(Model):
     history_retention: Retention = 8760 * 3600.0  # a year
     log_format: Literal["text", "json"] = "text"
     lines: list[Line] = Field(min_length=1)
+    mqtt: Mqtt | None = None  # the plant's broker (absent: no MQTT)
 
     @model_validator(mode="after")
     def _unique_names(self) -> Self:
