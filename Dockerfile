@@ -36,7 +36,7 @@ WORKDIR /src
 COPY constraints.txt pyproject.toml README.md LICENSE ./
 COPY src ./src
 RUN python -m venv /opt/pkwbus \
-    && /opt/pkwbus/bin/pip install --no-cache-dir -c constraints.txt .
+    && /opt/pkwbus/bin/pip install --no-cache-dir -c constraints.txt ".[mqtt]"
 
 # --- final: the venv, no build tools -------------------------------------------
 FROM python:${PYTHON_VERSION}-slim-bookworm

@@ -22,6 +22,8 @@ __all__ = [
     "HISTORY_RETENTION",
     "INTER_CHAR_TIMEOUT",
     "JOB_DEADLINE",
+    "MQTT_HEARTBEAT",
+    "MQTT_OUTBOX_AGE",
     "PAUSE",
     "POLL_INTERVAL",
     "RANGES",
@@ -89,6 +91,8 @@ SETTINGS_EVERY: Final = DurationRange("a settings sweep interval", 1.0, 86400.0)
 # etcd grants no lease under 1.5 s (its default election timeout); above a minute a dead
 # master keeps its lines too long.
 STANDBY_LEASE: Final = DurationRange("a standby lease", 2.0, 60.0)
+MQTT_HEARTBEAT: Final = DurationRange("an MQTT heartbeat", 1.0, 86400.0)
+MQTT_OUTBOX_AGE: Final = DurationRange("an MQTT outbox age", 60.0, 720 * 3600.0)  # 30 days
 
 # Where each kind is given: the table of README.md, "Configuration", row by row.
 RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
@@ -112,6 +116,8 @@ RANGES: Final[tuple[tuple[str, DurationRange], ...]] = (
     ("`history_retention`", HISTORY_RETENTION),
     ("line and drive `settings` `every`", SETTINGS_EVERY),
     ("`standby` `lease`", STANDBY_LEASE),
+    ("`mqtt` `values` `heartbeat`", MQTT_HEARTBEAT),
+    ("`mqtt` `outbox` `max_age`", MQTT_OUTBOX_AGE),
 )
 
 

@@ -8,6 +8,7 @@ the drive is built (:meth:`pkwbus.master.target.DriveTarget.create`), with
 
 from __future__ import annotations
 
+import re
 from typing import Final
 
 from pkwbus.hostport import MAX_TCP_PORT, parse_host_port
@@ -24,6 +25,7 @@ __all__ = [
     "check_port_url",
     "parse_addresses",
     "parse_int",
+    "parse_size",
 ]
 
 # The standard RS-485 rates FC and USS drives are set to, 1200 baud up to 187.5 kbaud.
@@ -94,3 +96,25 @@ def check_port_url(url: str) -> str:
     address = rest.split("?", 1)[0].split("/", 1)[0]
     parse_host_port(f"{scheme}://{address}", lowest_port=1, scheme=f"{scheme}://")
     return url
+
+
+_SIZE = re.compile(r"^\s*([0-9]{1,15})\s*(B|KiB|MiB|GiB|kB|MB|GB)?\s*$")
+_SIZE_UNITS: Final = {None: 1, "B": 1, "kB": 1000, "MB": 1000**2, "GB": 1000**3,
+                      "KiB": 1024, "MiB": 1024**2, "GiB": 1024**3}  # fmt: skip
+
+
+def parse_size(value: object, low: int, high: int) -> int:
+    """Bytes written ``64MiB``, ``500kB``, ``1GiB`` or a plain whole number, ``low``-``high``;
+    ValueError with a plain message otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        raise ValueError(f"{str(value)[:40]!r} is not a size: write 64MiB, 500kB or bytes")
+    if isinstance(value, int):
+        size = value
+    else:
+        found = _SIZE.match(value)
+        if found is None:
+            raise ValueError(f"{value[:40]!r} is not a size: write 64MiB, 500kB or bytes")
+        size = int(found[1]) * _SIZE_UNITS[found[2]]
+    if not low <= size <= high:
+        raise ValueError(f"{value!s:.40} is outside {low}-{high} bytes")
+    return size

@@ -17,7 +17,8 @@ from typing import Any
 from pkwbus.commands.common import CommandError, Exit, int_option
 from pkwbus.limits import MAX_AUDIT_LIMIT
 from pkwbus.service.config import Config, ConfigError, load_config
-from pkwbus.service.config.line_load import check_config_report
+from pkwbus.service.config.line_load import check_config_report, poll_rates
+from pkwbus.service.config.mqtt import mqtt_report
 
 __all__ = ["add_parsers", "load", "run_audit", "run_check", "run_service"]
 
@@ -67,6 +68,10 @@ def run_check(args: argparse.Namespace) -> int:
         raise CommandError(f"invalid configuration:\n  audit_db: {problem}", Exit.BAD_INPUT)
     for line in check_config_report(config):
         print(line)
+    if config.mqtt is not None:
+        rates = [r for line, drive in config.drives() for r in poll_rates(line, drive)]
+        for line in mqtt_report(config.mqtt, rates, sum(1 for _ in config.drives())):
+            print(line)
     if args.probe:
         from pkwbus.commands.probe import run_probe
 

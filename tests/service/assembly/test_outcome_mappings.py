@@ -22,7 +22,7 @@ from pkwbus.master.planning.outcomes import (
     metric_label,
 )
 from pkwbus.protocol import pkw
-from pkwbus.service.http.outcome_answers import audit_outcome, http_failure
+from pkwbus.service.writes.outcomes import audit_outcome, http_failure
 
 ANSWERED = Answered(pkw.ValueResponse(1, 1613, 0, 5, pkw.Width.WORD))
 MISMATCH = Mismatch(1234, 0, pkw.ValueResponse(1, 1120, 0, 0, pkw.Width.WORD))

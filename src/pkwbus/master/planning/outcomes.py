@@ -4,7 +4,7 @@
 ``assert_never``, so a new kind of outcome cannot be forgotten by one of them.
 The ``outcome`` label of ``pkwbus_jobs_total`` is here; the HTTP API's error
 answer and the audit log's columns live with the service
-(:mod:`pkwbus.service.http.outcome_answers`), the exit code of ``pkwbus
+(:mod:`pkwbus.service.writes.outcomes`), the exit code of ``pkwbus
 read``/``write`` with the commands (:mod:`pkwbus.commands.answers`).
 """
 

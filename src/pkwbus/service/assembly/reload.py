@@ -28,7 +28,7 @@ new one, nothing else:
   start, lines removed stop; a line that cannot start is shown down and
   started by the next reload (the outcome ``partial``, the metric 0);
 - the API's tokens and connection limit apply at once; ``listen``,
-  ``audit_db``, ``history_db`` and ``log_format`` take a restart: a change of
+  ``audit_db``, ``history_db``, ``log_format`` and ``mqtt`` take a restart: a change of
   theirs is refused with that reason while the rest applies;
 - a drive the API put in maintenance stays so; ``maintenance: true`` added in
   the file puts a drive in maintenance, taken away takes it out.
@@ -70,6 +70,7 @@ RESTART_ONLY = {
     "history_db": "the history database is opened at the start",
     "log_format": "the log's format is set at the start",
     "standby": "hot standby is set up at the start",
+    "mqtt": "the MQTT connection is made at the start",
 }
 # A line's keys that are its drives' defaults, not its bus's settings.
 DRIVE_DEFAULTS = frozenset({"describe", "alarms", "counters", "events", "events_every", "settings"})
@@ -126,6 +127,7 @@ class Reloader:
         self._drives = DriveChanges(runtime, parts)
         self._lock = asyncio.Lock()
         self._down: set[str] = set()  # lines a reload could not start: started by the next
+        self.after: list[Callable[[], None]] = []  # told once a reload applied (MQTT)
         self.closing = False
 
     async def close(self) -> None:
@@ -177,6 +179,8 @@ class Reloader:
                 if touched and self.memory is not None:
                     self.memory.watch(new)
                     await self.memory.start()
+                for told in self.after:
+                    told()
             if failed:
                 self.metrics.failed()
             else:

@@ -22,6 +22,7 @@ import asyncio
 import logging
 import socket
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pkwbus import link
 from pkwbus.errors import PkwbusError
@@ -43,6 +44,12 @@ from pkwbus.service.config import Config
 from pkwbus.service.history.store import HistoryError, HistoryStore
 from pkwbus.service.http.api import build_api
 from pkwbus.service.http.connections import ConnectionLimit
+from pkwbus.service.runtime import Runtime
+
+if TYPE_CHECKING:
+    from pkwbus.service.history.stream import EventStream
+    from pkwbus.service.mqtt.output import MqttOutput
+    from pkwbus.service.writes.path import WritePath
 
 __all__ = ["StartError", "open_audit", "open_history", "run_service"]
 
@@ -63,6 +70,11 @@ def run_service(
     """Run the service of ``config`` until SIGTERM or SIGINT; ``reread`` reads its file
     again, for a reload (SIGHUP, POST /api/v1/reload; None: no reload)."""
     setup_logging(log_format, debug=debug)
+    if config.mqtt is not None:  # the broker account, before anything is opened
+        try:
+            config.mqtt.credentials()
+        except PkwbusError as exc:
+            raise StartError(str(exc)) from None
     audit = open_audit(config)
     history: HistoryStore | None = None
     try:
@@ -103,6 +115,42 @@ def open_history(config: Config) -> HistoryStore:
         raise StartError(f"history_db: {exc}") from None
 
 
+def _mqtt(config: Config, runtime: Runtime, stream: EventStream) -> MqttOutput | None:
+    """The MQTT output (None: no ``mqtt:``); imported only then (the ``mqtt`` extra)."""
+    if config.mqtt is None:
+        return None
+    from pkwbus.service.mqtt.output import attach
+
+    try:
+        return attach(config, runtime, stream)
+    except PkwbusError as exc:  # an account named but unset
+        raise StartError(str(exc)) from None
+
+
+def _mqtt_commands(
+    config: Config,
+    runtime: Runtime,
+    mqtt: MqttOutput,
+    path: WritePath,
+    reloader: Reloader | None,
+) -> None:
+    """MQTT's writes (``writes: allow_list``: the set topics) and Sparkplug B
+    (``sparkplug:``), both through the HTTP API's write path."""
+    from pkwbus.service.mqtt.sets import take_sets
+    from pkwbus.service.mqtt.sparkplug.attach import attach_sparkplug
+
+    settings = config.mqtt
+    assert settings is not None
+    if settings.writes == "allow_list":
+        take_sets(mqtt.connection, path, settings.prefix)
+    try:
+        node = attach_sparkplug(settings, runtime, path)
+    except PkwbusError as exc:  # an account named but unset
+        raise StartError(str(exc)) from None
+    if node is not None and reloader is not None:
+        reloader.after.append(node.rebirth)  # the drives' metrics change: births again
+
+
 async def _serve(
     config: Config,
     sock: socket.socket,
@@ -116,6 +164,7 @@ async def _serve(
     runtime, parts = await assemble(config, kept)
     runtime.cleanups.insert(0, kept.settled)  # the last: a write under way ends first
     memory = remember(config, runtime, history)
+    mqtt = _mqtt(config, runtime, memory.stream)
     token = config.write_token()
     limit = ConnectionLimit(config.api.max_connections)
 
@@ -131,9 +180,13 @@ async def _serve(
     reloader = None
     if reread is not None:
         reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api, gate=gate)
+        if mqtt is not None:
+            reloader.after.append(mqtt.drives_changed)
     api = build_api(
         runtime, audit=audit, write_token=token, read_token=config.read_token(), reloader=reloader
     )
+    if mqtt is not None:
+        _mqtt_commands(config, runtime, mqtt, api.writes, reloader)
     audit_writer = api.audit_writer
     interrupted = await audit_writer.close_interrupted()
     if interrupted:

@@ -33,8 +33,9 @@ The package's modules: :mod:`.base` (the error, the base model, constants),
 :mod:`.fields` (field types), :mod:`.catalogs`, :mod:`.parameters`
 (overrides and polls), :mod:`.drive` and :mod:`.line` (what every bus's
 drives and lines have), :mod:`.serial` (FC and USS), :mod:`.profibus` (a DP
-drive and its settings), :mod:`.dp_problems` and :mod:`.profibus_line` (the DP
-line), :mod:`.model` (the whole file), :mod:`.loading`; and
+drive and its settings), :mod:`.profibus_line` (the DP line and what stops its
+drives), :mod:`.mqtt` (the plant's broker), :mod:`.model` (the whole file),
+:mod:`.loading`; and
 :mod:`.line_load`, how busy each line of a valid configuration would be
 (``pkwbus check-config``'s estimate, not re-exported here). Problems are
 worded by :mod:`pkwbus.problems`, shared with the catalogs; ``sim://`` ports

@@ -43,6 +43,7 @@ from pkwbus.service.config.base import (
 )
 from pkwbus.service.config.fields import Retention
 from pkwbus.service.config.line import LineBase
+from pkwbus.service.config.mqtt import Mqtt
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
@@ -289,6 +290,7 @@ class Config(Model):
     log_format: Literal["text", "json"] = "text"
     lines: list[Line] = Field(min_length=1)
     standby: StandbySection = None  # hot standby over etcd; None: one instance
+    mqtt: Mqtt | None = None  # the plant's broker (absent: no MQTT)
 
     @model_validator(mode="after")
     def _unique_names(self) -> Self:

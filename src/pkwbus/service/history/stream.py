@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from prometheus_client import CollectorRegistry, Counter, Gauge
 
@@ -43,6 +43,8 @@ class EventStream:
         )
         self._newest: dict[tuple[str, str], tuple[str, ...]] = {}  # (drive, kind) -> labels
         self._started = False
+        # Who is told of each new event, the oldest first, as it is counted (MQTT).
+        self.listeners: list[Callable[[list[DriveEvent]], None]] = []
 
     def again(self) -> None:
         """Count afresh at the next start (a reload: the drives and lines may be others, and
@@ -84,6 +86,10 @@ class EventStream:
         for e in reversed(new):  # the oldest first
             self.counter.labels(e.line, e.drive, e.kind, e.code, e.text).inc()
             self._show_newest(e.line, e.drive, e.kind, e.code, e.text, e.seen)
+        if new and self.listeners:
+            oldest_first = list(reversed(new))
+            for listener in self.listeners:
+                listener(oldest_first)
 
     def _show_newest(
         self, line: str, drive: str, kind: str, code: str, text: str, seen: float

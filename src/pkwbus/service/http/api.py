@@ -4,7 +4,7 @@ Reading the audit log needs a token: the write token, or the read token named
 by ``api.read_token_env``. An error body quotes at most :data:`MAX_MESSAGE`
 characters of what it complains about.
 
-The endpoints answer every :class:`~pkwbus.service.http.parameter_checks.ApiError` as a JSON
+The endpoints answer every :class:`~pkwbus.service.writes.checks.ApiError` as a JSON
 error body with its status.
 """
 
@@ -42,7 +42,6 @@ from pkwbus.service.http.models import (
     WriteBody,
     WriteResult,
 )
-from pkwbus.service.http.parameter_checks import MAX_DRIVE_NAME
 from pkwbus.service.http.parameters import (
     INCOMPLETE,
     ApiError,
@@ -60,6 +59,8 @@ from pkwbus.service.http.views import (
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import MAX_DRIVE_NAME
+from pkwbus.service.writes.path import WritePath
 
 __all__ = [
     "BEARER",
@@ -148,12 +149,14 @@ class BodyLimit:
 @dataclass(frozen=True)
 class Api:
     """The HTTP app of a runtime and what the service holds of it: the audit log's writer,
-    how a reloaded configuration's tokens apply, and the reloads (SIGHUP's too)."""
+    how a reloaded configuration's tokens apply, the reloads (SIGHUP's too), and the one
+    write path, for other callers (MQTT) to write through as the API does."""
 
     app: FastAPI
     audit_writer: AuditWriter
     set_tokens: Callable[[str | None, str | None], None]
     reloads: Reloads | None
+    writes: WritePath
 
 
 def create_app(
@@ -367,7 +370,7 @@ def build_api(
 
     add_view_routes(app, runtime, ERRORS)
 
-    return Api(app, audit_writer, set_tokens, reloads)
+    return Api(app, audit_writer, set_tokens, reloads, service.write_path)
 
 
 def _client(request: Request) -> str:

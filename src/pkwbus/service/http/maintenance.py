@@ -16,7 +16,8 @@ from typing import Any
 
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditWriter
-from pkwbus.service.http.parameter_checks import (
+from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     ApiError,
@@ -28,7 +29,6 @@ from pkwbus.service.http.parameter_checks import (
     malformed,
     mastered_elsewhere,
 )
-from pkwbus.service.runtime import Runtime
 
 __all__ = ["MAINTENANCE", "Maintenance"]
 

@@ -1,70 +1,32 @@
 """Audited, validated writes of one parameter for the HTTP API.
 
-A write is refused before anything is sent unless the caller has the write
-token, the parameter is in the drive's ``writable`` list, and the value passes
-the type, range and limits of the catalog and the configuration (a value the
-raw number cannot represent exactly is refused, never rounded). Every attempt,
-refused ones included, lands in the audit log (callers without a valid token
-as a count per address and minute); a write is sent only once its row is
-stored, and once queued it runs to its end and its row is completed even if
-the HTTP client goes away.
+The HTTP API's part is the write token: a caller without it is refused (401/403,
+counted and audited per address and minute) before anything else; the rest is the one
+write path every caller shares (:mod:`pkwbus.service.writes.path`: ``writable``,
+limits, the audit row before the wire, the job, the read-back), whose rules hold here
+unchanged: a write is sent only once its row is stored, and once queued it runs to its
+end and its row is completed even if the HTTP client goes away.
 
-Raises :class:`~pkwbus.service.http.parameter_checks.ApiError`: 401/403 for the
-token, 403 for a parameter that is not writable, 422 for a value that does
-not fit, 503 when the audit log cannot store the row (nothing sent), those of
-the checks (:mod:`pkwbus.service.http.parameter_checks`) and of the job's outcome.
+Raises :class:`~pkwbus.service.writes.checks.ApiError`: 401/403 for the token, and
+those of the write path.
 """
 
 from __future__ import annotations
 
-import asyncio
-from dataclasses import dataclass
 from typing import Any
 
-from pkwbus.catalog.description import ParameterDescription, Value
-from pkwbus.master.planning.jobs import JobKind, JobResult
-from pkwbus.master.planning.outcomes import Answered, LineFailed, Mismatch, TimedOut
-from pkwbus.protocol import pkw
-from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.values import ParameterRef, encode_text
-from pkwbus.service.audit.log import AuditEntry
-from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
-from pkwbus.service.http.outcome_answers import audit_outcome
-from pkwbus.service.http.parameter_checks import (
-    INCOMPLETE,
-    MAX_DRIVE_NAME,
-    MAX_PARAMETER_TEXT,
-    ApiError,
-    Caller,
-    TokenCheck,
-    check_names,
-    clip,
-    described_format,
-    fit_index,
-    identified,
-    locate,
-    malformed,
-    raise_for,
-)
-from pkwbus.service.http.parameter_reads import Reads
-from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.audit.writer import AuditWriter
+from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import Caller, TokenCheck, identified
+from pkwbus.service.writes.path import WriteOrder, WritePath
+from pkwbus.service.writes.reads import Reads
 
 __all__ = ["WriteOrder", "Writes"]
 
 
-@dataclass(frozen=True)
-class WriteOrder:
-    value: float | int | str
-    index: int | None = None
-    store: pkw.Store = pkw.Store.RAM
-    verify: bool = False
-    dry_run: bool = False
-    # A restore's write: any parameter of the backup, the ``writable`` list aside.
-    restoring: bool = False
-
-
 class Writes:
-    """The writes of a runtime, each audited through ``audit_writer``."""
+    """The writes of a runtime by holders of the write token, each audited through
+    ``audit_writer``; :attr:`path` is the write path they share with other callers."""
 
     def __init__(
         self, runtime: Runtime, audit_writer: AuditWriter, tokens: TokenCheck, reads: Reads
@@ -72,59 +34,14 @@ class Writes:
         self.runtime = runtime
         self.audit_writer = audit_writer
         self._tokens = tokens
-        self._reads = reads
-        self._running: set[asyncio.Future[dict[str, Any]]] = set()
+        self.path = WritePath(runtime, audit_writer, reads)
 
     async def write(
         self, drive: str, parameter: str, order: WriteOrder, caller: Caller
     ) -> dict[str, Any]:
         identity = await self._identify(caller)
-        audit = AuditEntry(
-            client=caller.client,
-            drive=clip(drive, MAX_DRIVE_NAME),
-            parameter=clip(parameter, MAX_PARAMETER_TEXT),
-            index=order.index or 0,
-            outcome="pending",
-            token_id=identity,
-            store=order.store.value,
-            new_value=order.value,
-        )
-        try:
-            check_names(drive, parameter)
-            entry, ref = locate(self.runtime, drive, parameter, order.index)
-            audit.parameter, audit.index = ref.name, ref.index or 0
-            if not order.restoring and not entry.may_write(ref):
-                raise ApiError(403, "not_writable", f"{ref.name} is not writable on {drive}")
-            fmt = described_format(self.runtime, entry, ref)
-            ref = fit_index(ref, fmt)
-            request = self._write_request(entry, ref, fmt, order)
-            audit.raw_value = request.value if not request.text else None
-        except ApiError as exc:
-            audit.outcome = "refused" if exc.status in (401, 403) else "invalid"
-            if exc.kind in ("not_described", "in_maintenance", "not_master"):  # not sent, for now
-                audit.outcome = "not_sent"
-            audit.detail = str(exc)
-            exc.audit_incomplete = not await self.audit_writer.note(audit)
-            raise
-        telegram = entry.target.telegram(request, fmt.vtype).hex(" ")
-        if order.dry_run:
-            audit.outcome = "dry_run"
-            stored = await self.audit_writer.note(audit)
-            body = self._write_body(entry, ref, fmt, order, request, telegram, audit, None)
-            return body if stored else {**body, "audit": INCOMPLETE}
-        # Once its row is stored the write runs to its end and the row is completed even
-        # when the HTTP client goes away: the request may reach the drive regardless.
-        task = asyncio.ensure_future(
-            self._perform(entry, ref, fmt, order, request, telegram, audit)
-        )
-        self._running.add(task)
-        task.add_done_callback(self._finished)
-        return await asyncio.shield(task)
-
-    def _finished(self, task: asyncio.Future[dict[str, Any]]) -> None:
-        self._running.discard(task)
-        if not task.cancelled():
-            task.exception()  # collected: a client that left is not told, the audit row is
+        done = await self.path.write(drive, parameter, order, caller.client, identity)
+        return done.body
 
     async def refuse_malformed(
         self, drive: str, parameter: str, caller: Caller, problem: str
@@ -132,136 +49,7 @@ class Writes:
         """Audit a write whose body did not validate (nothing was sent); False when the
         audit log could not store it. A caller without a valid token gets its refusal."""
         identity = await self._identify(caller)
-        return await self.audit_writer.note(malformed(caller, identity, drive, parameter, problem))
+        return await self.path.refuse_malformed(drive, parameter, caller.client, identity, problem)
 
     async def _identify(self, caller: Caller) -> str | None:
         return await identified(self._tokens, self.audit_writer, caller)
-
-    async def _perform(
-        self,
-        entry: DriveEntry,
-        ref: ParameterRef,
-        fmt: ParameterDescription,
-        order: WriteOrder,
-        request: pkw.PkwRequest,
-        telegram: str,
-        audit: AuditEntry,
-    ) -> dict[str, Any]:
-        # The old value is the latest the drive confirmed (polled, read, or echoed by
-        # an earlier write): reading it first would cost an exchange and double the
-        # write's latency. Kept at once; the line then reports the latest one just
-        # before the write's answer, which a write queued behind another needs.
-        old = self._latest(entry, ref)
-        audit.old_value = old
-        try:
-            row = await self.audit_writer.attempt(audit)  # committed before anything is sent
-        except AuditUnavailable as exc:
-            raise ApiError(
-                503,
-                "audit_unavailable",
-                f"the audit log cannot record the write ({exc}): nothing was sent",
-            ) from None
-        result = await self.runtime.submit(
-            entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
-        )
-        await self._tell_settings(entry, ref, request, result, order)
-        if result.previous is not None and result.previous.value != old:
-            old = audit.old_value = result.previous.value  # stored with the outcome
-        audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)
-        outcome, fault, detail = audited.outcome, audited.fault, audited.detail
-        verified: bool | None = None
-        if outcome == "ok" and order.verify:
-            back = await self._reads.try_read(entry, ref, fmt)
-            if isinstance(back.outcome, Answered):
-                verified = back.value == result.value if request.text else back.raw == request.value
-                if not verified:
-                    outcome, detail = "mismatch", f"read back {back.value!r} (raw {back.raw})"
-            else:
-                verified = False
-                outcome, detail = "unverified", "the read-back had no answer"
-        stored = await self.audit_writer.outcome(
-            row, outcome=outcome, fault=fault, detail=detail, old_value=old
-        )
-        try:
-            raise_for(result)
-        except ApiError as exc:
-            exc.audit_incomplete = not stored
-            raise
-        body = self._write_body(entry, ref, fmt, order, request, telegram, audit, result)
-        body.update(old_value=old, verified=verified)
-        if not stored:
-            body["audit"] = INCOMPLETE
-        return body
-
-    async def _tell_settings(
-        self,
-        entry: DriveEntry,
-        ref: ParameterRef,
-        request: pkw.PkwRequest,
-        result: JobResult,
-        order: WriteOrder,
-    ) -> None:
-        """An audited write is the setting's baseline now, before any later sweep reads it:
-        the value the drive answered; one it acknowledged with another number, that one;
-        one whose answer got lost, the value written if a sweep finds it there."""
-        settings = self.runtime.settings
-        if settings is None or request.text:
-            return
-        index, outcome = ref.index or 0, result.outcome
-        if isinstance(outcome, Answered):
-            value = result.value if result.value is not None else order.value
-            await settings.written(entry.name, ref.pnu, index, request.value, value)
-        elif isinstance(outcome, Mismatch):
-            await settings.written(entry.name, ref.pnu, index, outcome.answered, None)
-        elif isinstance(outcome, TimedOut | LineFailed):
-            await settings.written(entry.name, ref.pnu, index, request.value, order.value,
-                                   answered=False)  # fmt: skip
-
-    def _latest(self, entry: DriveEntry, ref: ParameterRef) -> Value | None:
-        reading = self.runtime.snapshot.latest.get((entry.name, ref.pnu, ref.index or 0))
-        return reading.value if reading is not None else None
-
-    def _write_request(
-        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterDescription, order: WriteOrder
-    ) -> pkw.PkwRequest:
-        d = entry.target.dialect
-        try:
-            if fmt.is_text:
-                if not isinstance(order.value, str):
-                    raise LocalProtocolError(f"{ref.name} is a text parameter: send a string")
-                return pkw.write_text(d, ref.pnu, encode_text(order.value), ref.index or 0)
-            if isinstance(order.value, bool):
-                raise LocalProtocolError(f"{ref.name} takes a number, not true or false")
-            if isinstance(order.value, str):
-                raise LocalProtocolError(f"{ref.name} takes a number, not a string")
-            raw, width = fmt.encode(order.value, str(ref))
-            request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
-            entry.target.telegram(request, fmt.vtype)
-        except LocalProtocolError as exc:
-            raise ApiError(422, "invalid_value", str(exc)) from None
-        return request
-
-    def _write_body(
-        self,
-        entry: DriveEntry,
-        ref: ParameterRef,
-        fmt: ParameterDescription,
-        order: WriteOrder,
-        request: pkw.PkwRequest,
-        telegram: str,
-        audit: AuditEntry,
-        result: JobResult | None,
-    ) -> dict[str, Any]:
-        return {
-            "parameter": ref.name,
-            "pnu": ref.pnu,
-            "index": ref.index or 0,
-            "value": result.value if result is not None else order.value,
-            "raw": request.value if not request.text else None,
-            "unit": fmt.unit,
-            "store": order.store.value,
-            "dry_run": order.dry_run,
-            "telegram": telegram,
-            "audit_id": audit.id,
-            "access": entry.access,
-        }

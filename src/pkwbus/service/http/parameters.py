@@ -14,9 +14,9 @@ runs to its end and its row is completed even if the HTTP client goes away. A
 drive or parameter name longer than any can be is refused before it is looked
 up.
 
-The reads are in :mod:`pkwbus.service.http.parameter_reads`, the writes in
+The reads are in :mod:`pkwbus.service.writes.reads`, the writes in
 :mod:`pkwbus.service.http.parameter_writes`, the checks of names, token and index in
-:mod:`pkwbus.service.http.parameter_checks`; this module joins them in
+:mod:`pkwbus.service.writes.checks`; this module joins them in
 :class:`ParameterService` and re-exports their public names. Everything raises
 :class:`ApiError` (an HTTP status, a kind and a message), nothing else.
 """
@@ -26,7 +26,10 @@ from __future__ import annotations
 from typing import Any
 
 from pkwbus.service.audit.writer import AuditWriter
-from pkwbus.service.http.parameter_checks import (
+from pkwbus.service.http.parameter_writes import WriteOrder, Writes
+from pkwbus.service.http.settings import DriveSettings
+from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     MAX_PARAMETER_TEXT,
@@ -36,10 +39,8 @@ from pkwbus.service.http.parameter_checks import (
     check_names,
     clip,
 )
-from pkwbus.service.http.parameter_reads import MAX_READS_PER_DRIVE, Reads
-from pkwbus.service.http.parameter_writes import WriteOrder, Writes
-from pkwbus.service.http.settings import DriveSettings
-from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.path import WritePath
+from pkwbus.service.writes.reads import MAX_READS_PER_DRIVE, Reads
 
 __all__ = [
     "INCOMPLETE",
@@ -65,6 +66,11 @@ class ParameterService:
         self.tokens = tokens
         self._reads = Reads(runtime)
         self._writes = Writes(runtime, audit_writer, tokens, self._reads)
+
+    @property
+    def write_path(self) -> WritePath:
+        """The one write path these writes share with other callers (MQTT)."""
+        return self._writes.path
 
     def settings(self) -> DriveSettings:
         """The drives' settings through the same reads, writes and tokens."""

@@ -16,7 +16,7 @@ from typing import Any, Protocol
 from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.rows import AuditEntry
 from pkwbus.service.audit.writer import AuditWriter
-from pkwbus.service.http.parameter_checks import (
+from pkwbus.service.writes.checks import (
     INCOMPLETE,
     ApiError,
     Caller,

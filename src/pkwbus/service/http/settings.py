@@ -41,7 +41,9 @@ from pkwbus.service.history.backup import Backup, Planned, Present, plan_restore
 from pkwbus.service.history.restore import carry_out
 from pkwbus.service.history.store import HistoryError
 from pkwbus.service.history.times import iso_time
-from pkwbus.service.http.parameter_checks import (
+from pkwbus.service.http.parameter_writes import WriteOrder, Writes
+from pkwbus.service.runtime import DriveEntry, Runtime, Settings
+from pkwbus.service.writes.checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
     ApiError,
@@ -53,9 +55,7 @@ from pkwbus.service.http.parameter_checks import (
     identified,
     mastered_elsewhere,
 )
-from pkwbus.service.http.parameter_reads import Reads
-from pkwbus.service.http.parameter_writes import WriteOrder, Writes
-from pkwbus.service.runtime import DriveEntry, Runtime, Settings
+from pkwbus.service.writes.reads import Reads
 
 __all__ = ["BASELINE", "SETUP_PNU", "DriveSettings"]
 

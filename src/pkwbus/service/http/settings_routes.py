@@ -11,8 +11,8 @@ from fastapi import FastAPI, Query, Request, Response, Security
 from fastapi.security import HTTPBearer
 
 from pkwbus.service.http.models import RestoreBody
-from pkwbus.service.http.parameter_checks import Caller
 from pkwbus.service.http.settings import DriveSettings
+from pkwbus.service.writes.checks import Caller
 
 __all__ = ["add_settings_routes"]
 

@@ -10,10 +10,10 @@ from typing import Any, Literal
 from fastapi import FastAPI, Query, Response
 
 from pkwbus.service.http.models import DriveOverview, DriveView, LineView
-from pkwbus.service.http.parameter_checks import MAX_DRIVE_NAME, ApiError
 from pkwbus.service.http.views import line_views, trend_views
 from pkwbus.service.http.views.drives import TOKEN_HEADER, DriveViews, Selection
 from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import MAX_DRIVE_NAME, ApiError
 
 __all__ = ["add_view_routes"]
 

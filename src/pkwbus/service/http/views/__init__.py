@@ -18,8 +18,8 @@ from pkwbus.service.http.models import (
     SlaveView,
     WritableView,
 )
-from pkwbus.service.http.parameter_checks import ApiError
 from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import ApiError
 
 __all__ = [
     "alarm_views",

@@ -24,7 +24,6 @@ from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import Reading, ReadingKey
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReading
-from pkwbus.service.http.parameter_checks import ApiError
 from pkwbus.service.http.views import (
     alarm_views,
     maintenance_view,
@@ -33,6 +32,7 @@ from pkwbus.service.http.views import (
 )
 from pkwbus.service.http.views.readable import duration, readable, time_unit
 from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.writes.checks import ApiError
 
 __all__ = ["SLICE", "TOKEN_HEADER", "DriveViews", "Selection", "drive_view"]
 

@@ -1,9 +1,10 @@
 """What the parameter API checks before anything is sent: names, the caller's token, the index.
 
-:class:`ApiError` is the one error of the parameter API: an HTTP status, a
-kind and a message. The checks here raise it: :func:`check_names` (404, a name
-longer than any can be), :class:`TokenCheck` (403 when writes are disabled or
-the token is wrong, 401 without a bearer token; compared in constant time),
+:class:`ApiError` is the one error of the parameter API, over HTTP and MQTT alike: an
+HTTP status, a kind and a message (and, for a write, its audited outcome and row).
+The checks here raise it: :func:`check_names` (404, a name longer than any can be),
+:class:`TokenCheck` (the HTTP API's: 403 when writes are disabled or the token is
+wrong, 401 without a bearer token; compared in constant time),
 :func:`locate` (404 unknown drive or parameter, 422 wrong notation or index, 409 a
 drive whose line another instance masters: :func:`mastered_elsewhere`),
 :func:`fit_index` (422 index past the array) and :func:`raise_for` (the
@@ -23,8 +24,8 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
-from pkwbus.service.http.outcome_answers import http_failure
 from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.writes.outcomes import http_failure
 
 __all__ = [
     "INCOMPLETE",
@@ -57,6 +58,10 @@ class ApiError(PkwbusError):
         self.kind = kind
         self.extra = extra
         self.audit_incomplete = False
+        # A write's audit outcome (``refused``, ``timeout``, ...) and row id, once known:
+        # what an MQTT result says; never part of the HTTP body.
+        self.outcome: str | None = None
+        self.audit_id: int | None = None
 
     def body(self) -> dict[str, Any]:
         body: dict[str, Any] = {"error": {"kind": self.kind, "message": str(self), **self.extra}}

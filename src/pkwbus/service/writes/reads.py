@@ -1,11 +1,11 @@
-"""On-demand reads of one parameter for the HTTP API, bounded per drive.
+"""On-demand reads of one parameter, bounded per drive (and a write's read-back).
 
 They go ahead of polls and need no token: a bound of
 :data:`MAX_READS_PER_DRIVE` waiting reads per drive keeps a flood of them from
 starving the drive's polls. Raises
-:class:`~pkwbus.service.http.parameter_checks.ApiError`: 429 when the bound is
+:class:`~pkwbus.service.writes.checks.ApiError`: 429 when the bound is
 reached, 404 for a parameter the dialect cannot encode, and those of the
-checks (:mod:`pkwbus.service.http.parameter_checks`) and of the job's outcome.
+checks (:mod:`pkwbus.service.writes.checks`) and of the job's outcome.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from pkwbus.master.planning.outcomes import Answered
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterRef
-from pkwbus.service.http.parameter_checks import (
+from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.writes.checks import (
     ApiError,
     check_names,
     described_format,
@@ -27,7 +28,6 @@ from pkwbus.service.http.parameter_checks import (
     locate,
     raise_for,
 )
-from pkwbus.service.runtime import DriveEntry, Runtime
 
 __all__ = ["MAX_READS_PER_DRIVE", "Reads", "read_request"]
 

@@ -1,4 +1,5 @@
-"""What a job's outcome becomes in the HTTP API's answer and in the audit log.
+"""What a job's outcome becomes in the HTTP API's answer and in the audit log (whose
+outcome names an MQTT write's result uses too).
 
 Each is a ``match`` over the closed union :data:`pkwbus.master.planning.outcomes.Outcome`
 that ends in ``assert_never``: a new kind of outcome cannot be forgotten here.

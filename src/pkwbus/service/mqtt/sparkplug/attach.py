@@ -1,0 +1,49 @@
+"""The Sparkplug node as one of the service's outputs (``mqtt.sparkplug``)."""
+
+from __future__ import annotations
+
+import logging
+
+from pkwbus.service.config.mqtt import Mqtt
+from pkwbus.service.mqtt.sparkplug.node import SparkplugNode
+from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.path import WritePath
+
+__all__ = ["attach_sparkplug"]
+
+log = logging.getLogger("pkwbus.service.mqtt.sparkplug")
+
+
+def attach_sparkplug(
+    settings: Mqtt | None, runtime: Runtime, path: WritePath
+) -> SparkplugNode | None:
+    """The Sparkplug node of ``settings`` (None without ``mqtt.sparkplug``), one of the
+    runtime's outputs from now on (kept over reloads), started with the runtime and
+    stopped after everything else; DCMD taken only with ``mqtt.writes: allow_list``.
+    :class:`~pkwbus.service.config.mqtt.MqttSettingsError` for an account named but unset."""
+    if settings is None or settings.sparkplug is None:
+        return None
+    username, password = settings.credentials()
+    node = SparkplugNode(
+        runtime,
+        path if settings.writes == "allow_list" else None,
+        group_id=settings.sparkplug.group_id,
+        edge_node_id=settings.sparkplug.edge_node_id,
+        host=settings.host,
+        port=settings.port,
+        username=username,
+        password=password,
+        tls=settings.tls,
+        keepalive=settings.keepalive,
+    )
+    runtime.base = (*runtime.base, node)
+    runtime.outputs.swap([*runtime.outputs.items, node])
+
+    async def start() -> None:
+        node.start()
+
+    runtime.starters.insert(0, start)
+    runtime.cleanups.insert(0, node.stop)
+    log.info("Sparkplug B: edge node %s of group %s", settings.sparkplug.edge_node_id,
+             settings.sparkplug.group_id)  # fmt: skip
+    return node
