@@ -8,8 +8,7 @@ from typing import ClassVar, Final, Literal
 
 from pydantic import Field, StrictInt
 
-from pkwbus.protocol.buses import DP_MAX_ADDRESS
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
+from pkwbus.protocol.buses import DP_MAX_ADDRESS, Bus
 from pkwbus.service.config.base import Place, only
 from pkwbus.service.config.dp_problems import DpLineSettings, dp_drive_problems
 from pkwbus.service.config.fields import SlotTime, Watchdog
@@ -24,8 +23,8 @@ MAX_DP_RETRIES: Final = 8  # a DP slave's request is repeated at most 8 times (D
 class ProfibusLine(LineBase[ProfibusDrive]):
     """A PROFIBUS DP line with pkwbus its master: its characters always 8E1."""
 
-    protocol: Literal[BusProtocol.PROFIBUS]
-    refused_keys: ClassVar[Mapping[str, str]] = only(BusProtocol.FC, "fc_address_format")
+    protocol: Literal[Bus.PROFIBUS]
+    refused_keys: ClassVar[Mapping[str, str]] = only(Bus.FC, "fc_address_format")
 
     # pkwbus's own station, the slot time, the slaves' watchdog.
     master_address: StrictInt = Field(default=2, ge=0, le=DP_MAX_ADDRESS)
