@@ -22,7 +22,7 @@ from _measure import BenchSetupError, stop_process
 from pkwbus.link import PortSettings
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.wires.serial.port import TelegramPort
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 
 HERE = Path(__file__).resolve().parent
 FC_TELEGRAM = 16  # bytes of an FC parameter telegram (PKW 4 words + PCD 2 words), each way
@@ -116,7 +116,7 @@ def registry_sum(registry: object, name: str, **labels: str) -> float:
 def make_port(
     port: str, protocol: str = "fc", baudrate: int = 115200, **kw: object
 ) -> TelegramPort:
-    return TelegramPort(PortSettings(port, baudrate=baudrate), Protocol(protocol), **kw)  # type: ignore[arg-type]
+    return TelegramPort(PortSettings(port, baudrate=baudrate), Bus(protocol), **kw)  # type: ignore[arg-type]
 
 
 def exchange_time(baudrate: int, request: int, response: int, delay: float) -> float:

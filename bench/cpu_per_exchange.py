@@ -35,7 +35,7 @@ from _common import best_median, make_port, sim_process
 from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.carriers import carrier_for
+from pkwbus.master.carriers import SerialCarrier, carrier_for
 from pkwbus.master.events import Event, Exchanged, JobDone
 from pkwbus.master.planning.answers import Reply
 from pkwbus.master.planning.outcomes import Answered
@@ -54,15 +54,17 @@ BAUDRATE = 115200
 async def raw_loop(port: str, n: int, warmup: int = 200) -> dict[str, float]:
     line = make_port(port, "fc", BAUDRATE, timeout=0.5)
     target = DriveTarget.create("fc", 1)
-    telegram = target.telegram(pkw.read(target.dialect, 1613))
+    telegram = SerialCarrier(target).telegram(pkw.read(target.dialect, 1613))
     await line.open()
     bad = 0
     try:
         for _ in range(warmup):
-            await line.exchange(target.adr, telegram)
+            await line.exchange(SerialCarrier(target).address, telegram)
         with measure_cpu(ops=n) as t:
             for _ in range(n):
-                if not isinstance(await line.exchange(target.adr, telegram), Reply):
+                if not isinstance(
+                    await line.exchange(SerialCarrier(target).address, telegram), Reply
+                ):
                     bad += 1
     finally:
         await line.close()

@@ -58,6 +58,7 @@ from _measure import BenchSetupError, markdown_table, measure_cpu
 from cpu_per_exchange import raw_loop
 
 from pkwbus import link
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.answers import Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
@@ -69,7 +70,7 @@ WARMUP = 200
 
 def request() -> bytes:
     target = DriveTarget.create("fc", 1)
-    return target.telegram(pkw.read(target.dialect, 1613))
+    return SerialCarrier(target).telegram(pkw.read(target.dialect, 1613))
 
 
 class Bare:
@@ -164,9 +165,9 @@ async def line_chain(port: str, n: int, warmup: int = WARMUP) -> dict[str, float
             if count >= total:
                 finished.set_result(bad)
             else:
-                line.send(target.adr, telegram, done)
+                line.send(SerialCarrier(target).address, telegram, done)
 
-        line.send(target.adr, telegram, done)
+        line.send(SerialCarrier(target).address, telegram, done)
         return await asyncio.wait_for(finished, 120)
 
     await line.open()

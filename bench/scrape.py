@@ -50,7 +50,8 @@ from scale import PARAMETERS
 from pkwbus.master.events import Exchanged, JobDone, ValueLanded
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Heard
-from pkwbus.master.snapshot import DriveState, Reading
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import DriveState
 from pkwbus.service.assembly.build import Parts, assemble
 from pkwbus.service.config import parse_config
 from pkwbus.service.metrics.exposition import MetricsRegistry, render

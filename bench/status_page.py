@@ -65,7 +65,7 @@ from _measure import BenchSetupError, markdown_table
 from scale import BAUD, DELAY, PARAMETERS
 
 from pkwbus import link
-from pkwbus.master.snapshot import Reading
+from pkwbus.master.reading import Reading
 from pkwbus.service.metrics.trends import POINTS, Trends
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"

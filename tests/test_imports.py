@@ -13,12 +13,13 @@ MODULES = {module_name(path): path for path in PATHS}
 # What each layer may import from the others (its own modules always).
 MAY_IMPORT = {
     "protocol": {"errors"},
-    "catalog": {"protocol", "problems", "yamlfile", "errors"},
+    "notation": {"errors"},
+    "catalog": {"protocol", "notation", "errors"},
     "link": {"protocol", "errors"},
     # master knows neither HTTP nor the command line: their exit codes and answers
     # live with the commands and the service (commands.failures, service.writes.outcomes)
     "master": {"protocol", "catalog", "link", "errors"},
-    "sim": {"protocol", "catalog", "durations", "hostport", "limits", "pkwbus", "errors"},
+    "sim": {"protocol", "catalog", "notation", "pkwbus", "errors"},
 }
 
 
@@ -92,6 +93,26 @@ def test_the_planner_does_not_know_the_bus() -> None:
     assert not wrong
     planning = [n for n in GRAPH if n.startswith("pkwbus.master.planning.")]
     assert len(planning) >= 10
+
+
+def test_the_planner_does_not_reach_the_bus_through_another_module() -> None:
+    """Nor through what it imports: a job's result is a :class:`Reading` of
+    ``master.reading``, not of the read model, which knows the DP slaves' states."""
+
+    def reached(name: str, seen: set[str]) -> set[str]:
+        for dep in GRAPH[name] - seen:
+            seen.add(dep)
+            reached(dep, seen)
+        return seen
+
+    wrong = sorted(
+        f"{name} reaches {dep}"
+        for name in GRAPH
+        if name.startswith("pkwbus.master.planning")
+        for dep in reached(name, set())
+        if dep.startswith(NOT_FOR_PLANNING)
+    )
+    assert not wrong
 
 
 def test_no_import_cycle() -> None:
@@ -192,3 +213,30 @@ def test_the_commands_use_neither_the_api_nor_the_service_assembly() -> None:
     )
     assert not wrong
     assert all(dep in GRAPH[name] for name, dep in SERVICE_ENTRY), "the entry is seen"
+
+
+# What builds a request as it goes out: only master's carriers call these (the simulator
+# builds its own answers), so that nothing shows bytes that are not the ones sent.
+BUILDERS = {
+    "pkwbus.protocol.serial.telegram": {"frame", "encode_block"},
+    "pkwbus.protocol.pkw": {"encode_request"},
+    "pkwbus.protocol.pkw.requests": {"encode_request"},
+    "pkwbus.protocol.profibus.dp.ppo": {"encode_ppo_write"},
+    "pkwbus.protocol.profidrive.pkw": {"record_request"},
+}
+BUILT_BY = ("pkwbus.master", "pkwbus.protocol", "pkwbus.sim")
+
+
+def test_nothing_outside_master_builds_a_request() -> None:
+    names = set().union(*BUILDERS.values())
+    found = []
+    for name, path in MODULES.items():
+        if name.startswith(BUILT_BY):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module in BUILDERS:
+                built = BUILDERS[node.module]
+                found += [f"{name} imports {a.name}" for a in node.names if a.name in built]
+            elif isinstance(node, ast.Attribute) and node.attr in names:
+                found.append(f"{name} calls {ast.unparse(node)}")
+    assert found == []

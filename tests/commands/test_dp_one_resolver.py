@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.dp_settings import watchdog
+from pkwbus.catalog.dp_settings import watchdog
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config

@@ -16,10 +16,10 @@ import yaml
 
 from pkwbus.catalog import DEFAULT_CATALOGS, load_catalog
 from pkwbus.cli import main
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw import PkwRequest
 from pkwbus.protocol.pkw.dialects import WRITE_COMMANDS
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ValueType, danfoss_name, encode_value, siemens_name
 from pkwbus.service.history.backup import Backup
 from pkwbus.sim import ParamSpec, SimDrive, SimTiming, Simulator
@@ -59,7 +59,7 @@ class Served:
 def fc_simulator() -> Simulator:
     """FC drives of the default catalog, with 0-10 Active Set-up too."""
     setup = ParamSpec(10, "Active Set-up", ValueType.U16, writable=True, maximum=9, initial=1)
-    specs = (*specs_from_catalog(Protocol.FC, DEFAULT_CATALOGS["fc"]), setup)
+    specs = (*specs_from_catalog(Bus.FC, DEFAULT_CATALOGS["fc"]), setup)
     return Simulator("fc", [A, B], specs=specs, timing=SimTiming(response_delay=0.0))
 
 

@@ -19,7 +19,7 @@ from pkwbus.link import ALWAYS_OPEN, Link, LinkState, PortError, PortSettings
 from pkwbus.link.fence import LineFence, fence_closed, fenced_reason
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.serial.port import TelegramPort
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 
 
 class FakeFence:
@@ -172,6 +172,6 @@ async def test_a_link_without_a_fence_is_always_open(pty: tuple[int, str]) -> No
 def test_the_ports_of_both_buses_hand_their_fence_to_their_link() -> None:
     fence = FakeFence(0.0)
     settings = PortSettings("socket://127.0.0.1:1", baudrate=19200)
-    assert TelegramPort(settings, Protocol.FC, fence=fence).link.fence is fence
+    assert TelegramPort(settings, Bus.FC, fence=fence).link.fence is fence
     assert FdlPort(settings, 2, fence=fence).link.fence is fence
-    assert TelegramPort(settings, Protocol.FC).link.fence is ALWAYS_OPEN
+    assert TelegramPort(settings, Bus.FC).link.fence is ALWAYS_OPEN

@@ -12,6 +12,7 @@ from pkwbus.link import Link, PortSettings, new_event_loop
 from pkwbus.link import run as run_on_pkwbus_loop
 from pkwbus.link.eventloop import has_fine_timers
 from pkwbus.link.serialport import raw_fd as _raw_fd
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimTiming, Simulator
@@ -19,7 +20,7 @@ from pkwbus.sim import SimTiming, Simulator
 
 def _request() -> bytes:
     target = DriveTarget.create("fc", 1)
-    return target.telegram(pkw.read(target.dialect, 1613))
+    return SerialCarrier(target).telegram(pkw.read(target.dialect, 1613))
 
 
 async def test_an_answer_ends_the_wait_for_our_own_request_to_leave_the_wire() -> None:

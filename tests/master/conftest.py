@@ -20,7 +20,7 @@ from pkwbus.master.planning.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol import pkw
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.sim import SimFaults, SimTiming, Simulator
 
 
@@ -68,7 +68,7 @@ async def open_port(
 ) -> AsyncIterator[tuple[TelegramPort, Trace]]:
     trace = Trace()
     line = TelegramPort(
-        PortSettings(port, baudrate=115200, **kw), Protocol(protocol), timeout=timeout, trace=trace
+        PortSettings(port, baudrate=115200, **kw), Bus(protocol), timeout=timeout, trace=trace
     )
     await line.open()
     try:

@@ -26,7 +26,7 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.sim import SimTiming
 from tests.master.conftest import Trace, make_sim, serve, until
 
@@ -79,7 +79,7 @@ def runner(
 ) -> tuple[LineRunner, Recorder, Trace]:
     trace = Trace()
     line = TelegramPort(
-        PortSettings(port, baudrate=115200), Protocol(protocol), timeout=timeout, trace=trace
+        PortSettings(port, baudrate=115200), Bus(protocol), timeout=timeout, trace=trace
     )
     events = Recorder()
     return LineRunner("line1", ExchangeWire(line), specs, observers=[events], **kw), events, trace
@@ -111,9 +111,7 @@ async def test_two_lines_one_failing() -> None:
     sim = make_sim("fc", [1])
     async with serve(sim, "tcp") as port:
         good, good_events, _ = runner(port, "fc", drive_specs("fc", [1], [1613], 0.01))
-        bad_line = TelegramPort(
-            PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Protocol.FC
-        )
+        bad_line = TelegramPort(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Bus.FC)
         bad = LineRunner("line2", ExchangeWire(bad_line), drive_specs("fc", [1], [1613], 0.01))
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
         await until(
@@ -187,7 +185,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
     trace = Trace()
     line = TelegramPort(
         PortSettings(port, reopen_initial=0.1, reopen_cap=0.2),
-        Protocol.USS,
+        Bus.USS,
         timeout=0.05,
         trace=trace,
     )

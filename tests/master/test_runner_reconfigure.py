@@ -14,10 +14,10 @@ import dataclasses
 import itertools
 from collections.abc import Iterable
 
-from pkwbus.master.planning.drive import PollState
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.outcomes import Answered
-from pkwbus.master.planning.plan import PollSpec
+from pkwbus.master.planning.plan import PollSpec, PollState
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.snapshot import DriveState, ReadingKey, Snapshot
 from pkwbus.master.target import DriveTarget
@@ -46,7 +46,7 @@ def shown(snapshot: Snapshot, drive: str) -> list[object]:
 
 def to_address(sim: Simulator, sent: Iterable[bytes], protocol: str, address: int) -> int:
     """How many of the telegrams ``sent`` went to drive ``address``."""
-    adr = DriveTarget.create(protocol, address).adr
+    adr = SerialCarrier(DriveTarget.create(protocol, address)).address
     return sum(
         1
         for data in sent
@@ -281,7 +281,12 @@ async def test_a_removed_poll_leaves_the_readings_while_the_others_go_on() -> No
             await refreshed(s, [*others, ("d1", "341", 0)])
             assert gone not in s.snapshot.readings
             # One on the wire at the update, at most.
-            assert trace.tx[sent:].count(target.telegram(pkw.read(target.dialect, 1613))) <= 1
+            assert (
+                trace.tx[sent:].count(
+                    SerialCarrier(target).telegram(pkw.read(target.dialect, 1613))
+                )
+                <= 1
+            )
         finally:
             s.stop()
             await asyncio.wait_for(task, 2.0)

@@ -4,24 +4,25 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus import limits
 from pkwbus.master.target import DriveTarget
+from pkwbus.notation import limits
 from pkwbus.protocol import buses
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError
-from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol, fc_adr, uss_adr
+from pkwbus.protocol.serial.telegram import FcAddressFormat, fc_adr, uss_adr
 
 
 @pytest.mark.parametrize(
     ("protocol", "fmt"),
     [
-        (Protocol.FC, FcAddressFormat.RANGE_1_126),
-        (Protocol.FC, FcAddressFormat.RANGE_1_31),
-        (Protocol.USS, FcAddressFormat.RANGE_1_126),
+        (Bus.FC, FcAddressFormat.RANGE_1_126),
+        (Bus.FC, FcAddressFormat.RANGE_1_31),
+        (Bus.USS, FcAddressFormat.RANGE_1_126),
     ],
 )
-def test_the_range_is_what_the_adr_byte_encodes(protocol: Protocol, fmt: FcAddressFormat) -> None:
+def test_the_range_is_what_the_adr_byte_encodes(protocol: Bus, fmt: FcAddressFormat) -> None:
     low, high = buses.address_range(protocol, fmt)
-    encode = (lambda a: fc_adr(a, fmt)) if protocol is Protocol.FC else uss_adr
+    encode = (lambda a: fc_adr(a, fmt)) if protocol is Bus.FC else uss_adr
     for address in (low, high):
         encode(address)
         DriveTarget.create(protocol, address, fc_format=fmt)

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from pkwbus.catalog import CatalogError
 from pkwbus.catalog.loader import _parse_catalog
-from pkwbus.master.carriers import carrier_for
+from pkwbus.master.carriers import SerialCarrier, carrier_for
 from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.transaction import PkwTransaction
@@ -221,10 +221,10 @@ def replies(job: PkwTransaction, target: DriveTarget) -> st.SearchStrategy[Reply
             body = pkw.encode_response(resp, target.dialect, target.ind_layout, 4)
         except LocalProtocolError:
             body = b""
-        return Reply(target.adr, body + bytes(2 * target.shape.pzd_words), 0.01)
+        return Reply(SerialCarrier(target).address, body + bytes(2 * target.shape.pzd_words), 0.01)
 
     return st.one_of(
-        st.binary(max_size=30).map(lambda b: Reply(target.adr, b, 0.01)),
+        st.binary(max_size=30).map(lambda b: Reply(SerialCarrier(target).address, b, 0.01)),
         st.builds(answer, st.integers(0, 15), st.booleans(), st.integers(0, 0xFFFF)),
         st.builds(Failure, st.sampled_from(list(ErrorKind)), st.just("test")),
     )

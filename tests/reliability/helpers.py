@@ -18,9 +18,10 @@ from typing import Any
 import pytest
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import decode_adr
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Command
-from pkwbus.protocol.serial.telegram import Telegram, decode_adr, split_block
+from pkwbus.protocol.serial.telegram import Telegram, split_block
 from pkwbus.sim import Simulator
 from pkwbus.sim.drives.faults import Answer
 

@@ -24,7 +24,8 @@ from typing import Any
 import pytest
 from prometheus_client import CollectorRegistry
 
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime

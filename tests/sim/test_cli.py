@@ -18,8 +18,8 @@ import serial
 
 from pkwbus.catalog import DEFAULT_CATALOGS, load_catalog
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import USS
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.sim.cli import configure, main, parse_addresses, parse_host_port, plan
 from pkwbus.sim.drives.catalogs import UNIT_FACTORS
 from pkwbus.sim.drives.model import TRIPS_PER_HOUR, WARNINGS_PER_HOUR
@@ -167,7 +167,7 @@ def test_the_catalog_option(protocol: str) -> None:
     units = served()
     assert all(units[pnu] == spec.unit for pnu, spec in default.parameters.items() if spec.unit)
     assert served("--catalog", DEFAULT_CATALOGS[protocol]) == units
-    table = {s.pnu: s.unit for s in TABLES[Protocol(protocol)]}
+    table = {s.pnu: s.unit for s in TABLES[Bus(protocol)]}
     assert served("--catalog", "none") == table
 
 

@@ -12,6 +12,7 @@ import pytest
 
 from pkwbus.catalog import DEFAULT_CATALOGS
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.descriptions import (
     BASE_UNITS,
     DescriptionForm,
@@ -20,7 +21,7 @@ from pkwbus.protocol.pkw.descriptions import (
     read_elements,
 )
 from pkwbus.protocol.pkw.dialects import FC, USS, Dialect, IndLayout, dialect
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.serial.telegram import BlockShape, encode_block, split_block
 from pkwbus.protocol.values import ValueType
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.drives.drive import SimDrive
@@ -41,7 +42,7 @@ def line(protocol: str, *addresses: int, **kw: Any) -> Simulator:
 def asker(sim: Simulator, adr: int, pkw_words: int | None = None) -> Ask:
     """Element ``e`` of ``pnu`` asked of drive ``adr`` over the wire (variable PKW block)."""
     d = sim.dialect
-    words = 4 if sim.protocol is Protocol.FC else pkw_words
+    words = 4 if sim.protocol is Bus.FC else pkw_words
 
     def ask(pnu: int, e: int) -> pkw.PkwResponse:
         telegram = request_telegram(adr, pkw.read_description(d, pnu, e), d, pkw_words=words)
@@ -135,7 +136,7 @@ def test_fc_name_of_0_01_byte_for_byte_as_the_design_guide() -> None:
     02 0E 01 40 01 00 06 00 00 00 00 .. is answered 02 12 01 30 01 00 06
     4C41 4E47 5541 4745 (LANGUAGE) and PCD1, PCD2, BCC."""
     language = ParamSpec(1, "LANGUAGE", ValueType.U16, writable=True)
-    sim = line("fc", 1, specs=(*TABLES[Protocol.FC], language))
+    sim = line("fc", 1, specs=(*TABLES[Bus.FC], language))
     request = bytes.fromhex("02 0E 01 40 01 00 06 00 00 00 00 00 00 00 00")
     bcc = 0
     for byte in request:
@@ -175,7 +176,7 @@ def test_unit_index_by_each_forms_table(
     table (6.4.3) differ in two rows; the drive claims neither where they differ."""
     spec = ParamSpec(902, "temperature", ValueType.I16, conversion, unit)
     for protocol, word in (("fc", fc), ("uss", profidrive)):
-        sim = line(protocol, 1, specs=(*TABLES[Protocol(protocol)], spec))
+        sim = line(protocol, 1, specs=(*TABLES[Bus(protocol)], spec))
         answer = asker(sim, 1)(902, 4)
         assert isinstance(answer, pkw.DescriptionResponse) and answer.raw == word, protocol
 
@@ -194,7 +195,7 @@ def test_uss_variable_attribute_and_identifier_bytes() -> None:
 def test_a_parameter_scaled_by_scale_has_bit_8_and_no_variable_attribute() -> None:
     spec = ParamSpec(900, "scaled", ValueType.I16, unit="%", scale=0.5, writable=True)
     for protocol, not_relevant in (("uss", 0x0103), ("fc", 3)):
-        sim = line(protocol, 1, specs=(*TABLES[Protocol(protocol)], spec))
+        sim = line(protocol, 1, specs=(*TABLES[Bus(protocol)], spec))
         ask = asker(sim, 1)
         ident, attribute = ask(900, 1), ask(900, 4)
         assert isinstance(ident, pkw.DescriptionResponse) and ident.raw == not_relevant
@@ -205,7 +206,7 @@ def test_a_parameter_scaled_by_scale_has_bit_8_and_no_variable_attribute() -> No
 def test_profidrive_text_length_and_negative_limits() -> None:
     """Element 2 of a text is its length; an Int16 limit of -100 is 32 bit signed."""
     spec = ParamSpec(901, "offset", ValueType.I16, -1, "V", -10.0, 10.0, True)
-    sim = line("uss", 1, specs=(*TABLES[Protocol.USS], spec))
+    sim = line("uss", 1, specs=(*TABLES[Bus.USS], spec))
     ask = asker(sim, 1)
     length, low, high = ask(199, 2), ask(901, 7), ask(901, 8)
     assert isinstance(length, pkw.DescriptionResponse) and length.raw == len(b"PUMP")
@@ -259,7 +260,7 @@ def test_dp_slaves_that_refuse_descriptions() -> None:
 
 def test_a_parameter_without_description() -> None:
     specs = tuple(
-        dataclasses.replace(s, described=False) if s.pnu == 341 else s for s in TABLES[Protocol.FC]
+        dataclasses.replace(s, described=False) if s.pnu == 341 else s for s in TABLES[Bus.FC]
     )
     ask = asker(line("fc", 1, specs=specs), 1)
     assert all(refused(ask(341, e), FC) for e in ELEMENTS)

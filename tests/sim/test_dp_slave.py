@@ -5,12 +5,13 @@ from __future__ import annotations
 import random
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import DpSlave, Inputs, NoAnswer, SlaveSetup, SlaveState
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.serial.telegram import BlockShape
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.drives.drive import SimDrive
 from pkwbus.sim.drives.table import TABLES
@@ -23,8 +24,8 @@ DIALECT = ppo.dp_dialect("profidrive")
 
 def make_slave() -> tuple[SimDpSlave, SimDrive]:
     drive = SimDrive(
-        ADDRESS, Protocol.USS, DIALECT, IndLayout.PROFIDRIVE, BlockShape(4, 2),
-        TABLES[Protocol.USS], SimTiming(), random.Random(1),
+        ADDRESS, Bus.USS, DIALECT, IndLayout.PROFIDRIVE, BlockShape(4, 2),
+        TABLES[Bus.USS], SimTiming(), random.Random(1),
     )  # fmt: skip
     return SimDpSlave(ADDRESS, IDENT, PPO1.cfg, drive.respond), drive
 

@@ -9,8 +9,8 @@ import pytest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pzd import Profile
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ValueType, decode_value
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.drives.catalogs import UNIT_FACTORS, CatalogError
@@ -85,7 +85,7 @@ def test_unknown_catalog_is_a_clear_error() -> None:
 def test_catalog_settings_start_at_the_tables_value_in_the_catalogs_unit(
     protocol: str, catalog: str, pnu: int, model_unit: str
 ) -> None:
-    table = next(s for s in TABLES[Protocol(protocol)] if s.pnu == pnu)
+    table = next(s for s in TABLES[Bus(protocol)] if s.pnu == pnu)
     assert table.unit == model_unit and isinstance(table.initial, float)
     spec = load_catalog(catalog).get(pnu)
     assert spec is not None and spec.type is not None and spec.unit != model_unit

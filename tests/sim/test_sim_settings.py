@@ -13,9 +13,10 @@ from typing import Any
 import pytest
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw import Width
 from pkwbus.protocol.pkw.dialects import FC, USS, IndLayout
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.serial.telegram import BlockShape, encode_block, split_block
 from pkwbus.protocol.values import ValueType, encode_value
 from pkwbus.sim import ModelConfig, Simulator
 from pkwbus.sim.drives.keypad import nudged
@@ -39,7 +40,7 @@ def line(protocol: str, *addresses: int, clock: FakeClock | None = None, **kw: A
 
 def ask(sim: Simulator, adr: int, req: pkw.PkwRequest) -> pkw.PkwResponse:
     """``req`` to drive ``adr`` over the wire; its answer as a master decodes it."""
-    words = 4 if sim.protocol is Protocol.FC else None
+    words = 4 if sim.protocol is Bus.FC else None
     answer = parse(sim.handle(request_telegram(adr, req, sim.dialect, pkw_words=words)))
     block = split_block(answer.data, BlockShape(None, sim.shape.pzd_words))
     return pkw.decode_response(block.pkw, sim.dialect, sim.layout)
@@ -75,9 +76,7 @@ def stop(sim: Simulator, adr: int, clock: FakeClock) -> None:
 def test_fc_element_20_is_each_parameters_initial_value_in_its_own_type() -> None:
     sim = line("fc", 1)
     numbers = [
-        s
-        for s in TABLES[Protocol.FC]
-        if s.vtype not in (ValueType.TEXT, ValueType.F32) and not s.array
+        s for s in TABLES[Bus.FC] if s.vtype not in (ValueType.TEXT, ValueType.F32) and not s.array
     ]
     assert len(numbers) > 10
     for spec in numbers:
@@ -268,11 +267,11 @@ def test_a_dp_slaves_drive_has_a_keypad_too() -> None:
 
 def test_keypad_every_on_the_sim_port() -> None:
     assert parse_sim_port("sim://fc?drives=1,2&keypad_every=10m") == SimPort(
-        Protocol.FC, (1, 2), None, (), 600.0
+        Bus.FC, (1, 2), None, (), 600.0
     )
     assert parse_sim_port("sim://uss?drives=1&keypad_every=90").keypad_every == 90.0
     assert parse_sim_port("sim://uss?drives=1&keypad_every=1h&response_delay=2ms") == SimPort(
-        Protocol.USS, (1,), 0.002, (), 3600.0
+        Bus.USS, (1,), 0.002, (), 3600.0
     )
     assert parse_sim_port("sim://fc?drives=1").keypad_every is None
 
@@ -305,7 +304,7 @@ def poll(sim: Simulator, clock: FakeClock, seconds: int, adr: int = 1) -> None:
     """A master reading 16-13 of drive ``adr`` once a second for ``seconds``."""
     for _ in range(seconds):
         clock.advance(1.0)
-        ask(sim, adr, pkw.read(sim.dialect, 1613 if sim.protocol is Protocol.FC else 21))
+        ask(sim, adr, pkw.read(sim.dialect, 1613 if sim.protocol is Bus.FC else 21))
 
 
 def settings(sim: Simulator, adr: int) -> dict[int, int]:

@@ -14,10 +14,11 @@ from collections import defaultdict
 from typing import Any
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import decode_adr
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
-from pkwbus.protocol.serial.telegram import Telegram, decode_adr, split_block
+from pkwbus.protocol.serial.telegram import Telegram, split_block
 from pkwbus.protocol.values import decode_value
 from pkwbus.sim import Simulator
 from pkwbus.sim.drives.drive import SimDrive

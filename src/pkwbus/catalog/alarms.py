@@ -27,9 +27,9 @@ from typing import Literal, Self
 from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 from pkwbus.catalog.loader import CatalogError
-from pkwbus.problems import plain
+from pkwbus.notation.problems import plain
+from pkwbus.notation.yamlfile import YamlError, load_yaml
 from pkwbus.protocol.values.notation import parse_parameter
-from pkwbus.yamlfile import YamlError, load_yaml
 
 __all__ = ["ActiveAlarm", "Alarm", "AlarmTable", "CodeTable", "Kind", "WordTable", "alarm_table"]
 

@@ -21,11 +21,11 @@ from typing import Any, Literal, Self
 from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError, model_validator
 
 from pkwbus.errors import PkwbusError
-from pkwbus.problems import plain
+from pkwbus.notation.problems import plain
+from pkwbus.notation.yamlfile import YamlError, load_yaml
 from pkwbus.protocol.values import types as value_types
 from pkwbus.protocol.values.notation import MAX_PNU, ParameterRef, parse_parameter
 from pkwbus.protocol.values.types import CONVERSION_FACTORS, Scaling
-from pkwbus.yamlfile import YamlError, load_yaml
 
 __all__ = [
     "CONVERSION_INDEXES",

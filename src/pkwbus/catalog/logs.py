@@ -9,6 +9,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Final
 
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.logs import (
     DANFOSS_ALARM_LOG,
     MICROMASTER_FAULT_BUFFER,
@@ -17,7 +18,6 @@ from pkwbus.protocol.logs import (
     SINAMICS_FAULT_BUFFER,
     DriveLog,
 )
-from pkwbus.protocol.serial.telegram import Protocol
 
 __all__ = ["LOGS", "logs_of_catalog", "logs_of_drive"]
 
@@ -35,11 +35,11 @@ def logs_of_catalog(catalog: str | None) -> tuple[DriveLog, ...]:
     return LOGS.get(catalog, ()) if catalog is not None else ()
 
 
-def logs_of_drive(catalog: str | None, protocol: Protocol, dialect: str) -> tuple[DriveLog, ...]:
+def logs_of_drive(catalog: str | None, protocol: Bus, dialect: str) -> tuple[DriveLog, ...]:
     """The logs of a drive: its catalog's; where that keeps none, a PROFIBUS drive of the
     ``profidrive`` dialect has the PROFIdrive fault buffer (watched where it answers P944
     and P950: :mod:`pkwbus.protocol.logs.profidrive`)."""
     own = logs_of_catalog(catalog)
-    if own or protocol is not Protocol.PROFIBUS or dialect != "profidrive":
+    if own or protocol is not Bus.PROFIBUS or dialect != "profidrive":
         return own
     return (PROFIDRIVE_FAULT_BUFFER,)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from pkwbus import durations, link
+from pkwbus import link
 from pkwbus.commands.answers import finish, report_value, show_read
 from pkwbus.commands.common import (
     CommandError,
@@ -22,6 +22,7 @@ from pkwbus.commands.common import (
 from pkwbus.commands.drive_access import DriveAccess, checked, drive_access, resolve
 from pkwbus.commands.profibus.context import add_dp_options
 from pkwbus.master.planning.outcomes import Answered
+from pkwbus.notation import durations
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.values import ParameterRef, encode_text

@@ -12,19 +12,20 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from pkwbus import durations, limits
 from pkwbus.catalog import DEFAULT_CATALOGS
-from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.commands.exits import Exit
 from pkwbus.errors import PkwbusError
-from pkwbus.exits import Exit
 from pkwbus.link import PortSettings
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.port import TelegramPort
+from pkwbus.notation import durations, limits
+from pkwbus.notation.durations import DurationRange, parse_duration
 from pkwbus.protocol import buses
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
 from pkwbus.protocol.pkw.length import AUTO, PkwSetting
-from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol
+from pkwbus.protocol.serial.telegram import FcAddressFormat
 
 __all__ = [
     "DEFAULT_BAUDRATE",
@@ -59,7 +60,7 @@ class CommandError(PkwbusError):
 PROFIBUS = "profibus"  # --protocol profibus: pkwbus as DP-V0 master (commands.dp)
 DEFAULT_BAUDRATE = 9600
 
-DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in (Protocol.FC, Protocol.USS)}
+DEFAULT_CATALOG = {p: DEFAULT_CATALOGS[p.value] for p in (Bus.FC, Bus.USS)}
 
 
 def duration_option(within: DurationRange) -> Callable[[str], float]:
@@ -102,7 +103,7 @@ def add_line_options(
 ) -> None:
     g = parser.add_argument_group("line")
     g.add_argument("--port", required=True, help="device path or pyserial URL (socket://...)")
-    g.add_argument("--protocol", choices=[p.value for p in Protocol], default="fc")
+    g.add_argument("--protocol", choices=[p.value for p in Bus], default="fc")
     g.add_argument(
         "--baudrate",
         type=baudrate_option,
@@ -176,7 +177,7 @@ def build_port(args: argparse.Namespace) -> TelegramPort:
     except ValueError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
     trace = _print_trace if args.trace else None
-    return TelegramPort(settings, Protocol(args.protocol), timeout=args.timeout, trace=trace)
+    return TelegramPort(settings, Bus(args.protocol), timeout=args.timeout, trace=trace)
 
 
 def _print_trace(direction: str, data: bytes) -> None:

@@ -33,16 +33,15 @@ from pkwbus.commands.common import (
 from pkwbus.commands.profibus.context import DEFAULT_DEADLINE, DP_CATALOGS, build_context, session
 from pkwbus.link import PortError
 from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.carrier import Carrier, Item
 from pkwbus.master.planning.outcomes import Outcome
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.session import LineSession
-from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
-from pkwbus.protocol.profibus.dp import ppo
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import ParameterRef, parse_parameter, parse_type
 from pkwbus.protocol.values.types import ValueType
 
@@ -68,11 +67,10 @@ class DriveAccess:
 def drive_access(args: argparse.Namespace) -> DriveAccess:
     if args.protocol == PROFIBUS:
         ctx = build_context(args)
+        slave = carrier_for(ctx.target(args.address))  # its PKW slot, or data record 47
 
         def check_ppo(request: pkw.PkwRequest) -> object:
-            if ctx.record is not None:  # a parameter request of data record 47
-                return ctx.target(args.address).telegram(request)
-            return ppo.encode_ppo_write(ctx.ppo, ctx.dialect, request)
+            return slave.preview(Item(request))
 
         def run_dp(
             requests: Sequence[pkw.PkwRequest], vtype: ValueType | None
@@ -87,20 +85,25 @@ def drive_access(args: argparse.Namespace) -> DriveAccess:
     except LocalProtocolError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
 
+    carrier = carrier_for(target)
+
+    def check_line(request: pkw.PkwRequest) -> object:
+        return carrier.preview(Item(request))
+
     def run_line(
         requests: Sequence[pkw.PkwRequest], vtype: ValueType | None
     ) -> Coroutine[Any, Any, list[Outcome]]:
-        return _jobs(args, target, requests)
+        return _jobs(args, carrier, requests)
 
-    catalog = DEFAULT_CATALOG[Protocol(args.protocol)]
-    return DriveAccess(target.dialect, catalog, True, target.telegram, run_line)
+    catalog = DEFAULT_CATALOG[Bus(args.protocol)]
+    return DriveAccess(target.dialect, catalog, True, check_line, run_line)
 
 
 async def _jobs(
-    args: argparse.Namespace, target: DriveTarget, requests: Sequence[pkw.PkwRequest]
+    args: argparse.Namespace, carrier: Carrier, requests: Sequence[pkw.PkwRequest]
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
-    spec = DriveSpec("drive", carrier_for(target))
+    spec = DriveSpec("drive", carrier)
     session = LineSession(ExchangeWire(build_port(args)), [spec], retries=args.retries)
     try:
         await session.open()

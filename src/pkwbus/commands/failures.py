@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import assert_never
 
-from pkwbus.exits import Exit
+from pkwbus.commands.exits import Exit
 from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,

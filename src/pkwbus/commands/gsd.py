@@ -1,7 +1,7 @@
 """`pkwbus gsd FILE`: what pkwbus reads from a GSD file, to see it before configuring.
 
 The file is read as ``--gsd FILE`` and a configuration's ``gsd:`` read it
-(:func:`pkwbus.dp_settings.read_gsd_file`): the vendor, model and ident
+(:func:`pkwbus.catalog.dp_settings.read_gsd_file`): the vendor, model and ident
 number, DP-V1, the baud rates the slave supports with ``MaxTsdr`` at each,
 the default user parameter bytes, the modules in file order with their
 configuration identifiers and, for a drive, which module is which PPO; and
@@ -15,8 +15,8 @@ import argparse
 import json
 from typing import Any
 
+from pkwbus.catalog.dp_settings import GsdFileError, read_gsd_file
 from pkwbus.commands.common import CommandError, Exit
-from pkwbus.dp_settings import GsdFileError, read_gsd_file
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.profibus import gsd
 from pkwbus.protocol.profibus.dp import services as dp_services

@@ -30,9 +30,9 @@ from pkwbus.master.sessions.probe import NO_ANSWER, ask_description, ask_pkw_len
 from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.wire import ExchangeWire
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.pkw.length import AUTO, shown
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.config.resolved import (
     describe_targets,
@@ -57,7 +57,7 @@ async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
         if line.sim is not None:
             report.append(f"line {line.name}: simulated ({line.port}), not probed")
             continue
-        if line.protocol is Protocol.PROFIBUS:
+        if line.protocol is Bus.PROFIBUS:
             report.append(
                 f"line {line.name}: PROFIBUS, not probed here: "
                 f"pkwbus scan --protocol profibus --port {line.port} lists its stations"
@@ -110,7 +110,7 @@ def _asking_time(line: cfg.Line) -> float:
 
 async def _pkw_length(session: LineSession, line: cfg.Line, name: str, target: DriveTarget) -> str:
     """A USS drive's PKW length as its answer shows it, against the configured one."""
-    if line.protocol is not Protocol.USS or not target.has_pkw:
+    if line.protocol is not Bus.USS or not target.has_pkw:
         return ""
     deadline = asyncio.get_running_loop().time() + _asking_time(line)
     words = await ask_pkw_length(session, name, target, deadline=deadline)

@@ -19,7 +19,7 @@ import sys
 import time
 from typing import Any
 
-from pkwbus import durations, limits, link
+from pkwbus import link
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.commands.common import (
     DEFAULT_BAUDRATE,
@@ -35,7 +35,7 @@ from pkwbus.commands.profibus import scan as dp_scan
 from pkwbus.commands.profibus.context import add_dp_options
 from pkwbus.commands.scanning import Progress, parse_addresses, report
 from pkwbus.link import PortError
-from pkwbus.master.carriers import carrier_for
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.outcomes import Answered, Heard, LineFailed
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.sessions.probe import NO_ANSWER, ask_pkw_length
@@ -43,12 +43,13 @@ from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.master.wires.serial.wire import ExchangeWire
+from pkwbus.notation import durations, limits
 from pkwbus.protocol import pkw
-from pkwbus.protocol.buses import address_range
+from pkwbus.protocol.buses import Bus, address_range
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw.length import shown
 from pkwbus.protocol.pzd import status_bits
-from pkwbus.protocol.serial.telegram import FcAddressFormat, Protocol
+from pkwbus.protocol.serial.telegram import FcAddressFormat
 from pkwbus.protocol.values import ValueType
 
 __all__ = ["AUTO_BAUDRATES", "add_parsers", "run_scan"]
@@ -127,12 +128,13 @@ async def _scan(
         at = argparse.Namespace(**{**vars(args), "baudrate": baudrate, "parity": parity})
         line = build_port(at)
         # A slow rate needs the time an answer (as long as the probe) takes on the wire.
-        answer = len(build_target(at, remaining[0]).probe())
+        targets = {a: build_target(at, a) for a in remaining}
+        carriers = {a: SerialCarrier(t) for a, t in targets.items()}
+        answer = len(carriers[remaining[0]].probe_telegram())
         line.timeout = min(
             args.timeout + line.link.settings.wire_time(answer), durations.TELEGRAM_TIMEOUT.high
         )
-        targets = {a: build_target(at, a) for a in remaining}
-        specs = [DriveSpec(str(a), carrier_for(t)) for a, t in targets.items()]
+        specs = [DriveSpec(str(a), carrier) for a, carrier in carriers.items()]
         session = LineSession(ExchangeWire(line), specs, retries=args.retries)
         try:
             await session.open()
@@ -182,18 +184,17 @@ async def _probe(
     if word is not None:
         entry["status"] = status_bits(word, target.profile)
     entry["type"] = await _drive_type(session, line, target)
-    if target.protocol is Protocol.USS:
+    if target.protocol is Bus.USS:
         entry["pkw_words"] = await _pkw_words(args, session, line, target)
     return entry
 
 
 async def _drive_type(session: LineSession, line: TelegramPort, target: DriveTarget) -> str | None:
     """What an FC drive says its type is (15-40), None when it does not say."""
-    if target.protocol is not Protocol.FC:
+    if target.protocol is not Bus.FC:
         return None
     try:
         req = pkw.read_text(target.dialect, FC_TYPE_PNU, 0)
-        target.telegram(req)
     except LocalProtocolError:
         return None
     loop = asyncio.get_running_loop()
@@ -260,7 +261,7 @@ def summary(
 def run_scan(args: argparse.Namespace) -> int:
     if args.protocol == PROFIBUS:
         return dp_scan.run_scan(args)
-    protocol = Protocol(args.protocol)
+    protocol = Bus(args.protocol)
     low, high = address_range(protocol, FcAddressFormat(args.address_format))
     if args.addresses:
         addresses = parse_addresses(args.addresses, low, high)

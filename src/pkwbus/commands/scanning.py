@@ -9,8 +9,8 @@ from __future__ import annotations
 import sys
 from typing import Any, TextIO
 
-from pkwbus import limits
 from pkwbus.commands.common import CommandError, Exit, emit_json
+from pkwbus.notation import limits
 
 __all__ = ["Progress", "parse_addresses", "report"]
 

@@ -15,7 +15,7 @@ import sys
 from typing import Any
 
 from pkwbus.commands.common import CommandError, Exit, int_option
-from pkwbus.limits import MAX_AUDIT_LIMIT
+from pkwbus.notation.limits import MAX_AUDIT_LIMIT
 from pkwbus.service.config import Config, ConfigError, load_config
 from pkwbus.service.config.line_load import check_config_report, poll_rates
 from pkwbus.service.config.mqtt import mqtt_report

@@ -29,7 +29,8 @@ from pkwbus.master.planning.plan import (
     StatusWord,
 )
 from pkwbus.master.planning.plan import Event as PlanEvent
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.protocol.profibus.dp.services import Diagnosis
 from pkwbus.protocol.profibus.dp.slave_model import RestartReason, SlaveState
 from pkwbus.protocol.profibus.fdl import StationType

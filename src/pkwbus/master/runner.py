@@ -37,6 +37,7 @@ from typing import Any
 from pkwbus.link import Link, LinkState, PortError
 from pkwbus.master.bus import Done, LineRefused, Port, Wire
 from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer
+from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
@@ -114,6 +115,11 @@ class LineRunner:
         self.planner.submit(job, asyncio.get_running_loop().time())
         self.flush()
         self._wake.set()
+
+    def preview(self, drive: str, item: Item) -> Preview:
+        """``item``'s request as ``drive``'s carrier would send it now (a dry run's bytes);
+        LocalProtocolError for one it cannot carry, KeyError for a drive not here."""
+        return self.planner.drive(drive).carrier.preview(item)
 
     def maintenance(self, drive: str, on: bool, reason: str = "") -> None:
         """Put ``drive`` in maintenance (nothing goes out to it, not even a probe or a DP

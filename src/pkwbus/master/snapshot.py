@@ -10,7 +10,8 @@ import itertools
 import os
 from dataclasses import dataclass, field
 
-from pkwbus.catalog.description import ParameterDescription, Value
+from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.reading import Reading
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.profibus.dp.slave_model import SlaveState
 from pkwbus.protocol.values.types import ValueType
@@ -23,18 +24,10 @@ __all__ = [
     "LineTotals",
     "LiveSlave",
     "Maintained",
-    "Reading",
     "ReadingKey",
     "Snapshot",
     "ValueKey",
 ]
-
-
-@dataclass(frozen=True, slots=True)
-class Reading:
-    value: Value
-    raw: int | None
-    timestamp: float  # wall clock, seconds
 
 
 @dataclass(frozen=True, slots=True)

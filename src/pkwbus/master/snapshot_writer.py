@@ -50,6 +50,7 @@ from pkwbus.master.planning.plan import (
     StatusWord,
 )
 from pkwbus.master.planning.transaction import Tally
+from pkwbus.master.reading import Reading
 from pkwbus.master.snapshot import (
     Decoding,
     DriveCounts,
@@ -57,7 +58,6 @@ from pkwbus.master.snapshot import (
     LineTotals,
     LiveSlave,
     Maintained,
-    Reading,
     ReadingKey,
     Snapshot,
 )

@@ -24,7 +24,9 @@ from pkwbus.catalog.description import (
     ParameterTable,
 )
 from pkwbus.catalog.precedence import Layers, resolve
+from pkwbus.master.carriers import carrier_for
 from pkwbus.master.events import Observer, Outputs
+from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.snapshot import ReadingKey, Snapshot
@@ -118,6 +120,7 @@ class LineTask(Protocol):
     name: str
 
     def submit(self, job: Job) -> None: ...
+    def preview(self, drive: str, item: Item) -> Preview: ...
     def maintenance(self, drive: str, on: bool, reason: str = "") -> None: ...
     def stop(self) -> None: ...
     def forget(self) -> None: ...
@@ -299,6 +302,22 @@ class Runtime:
             result = cleanup()
             if asyncio.iscoroutine(result):
                 await result
+
+    def preview(
+        self, drive: str, request: pkw.PkwRequest, vtype: ValueType | None = None
+    ) -> Preview:
+        """``request`` as the drive's carrier would send it now, the bytes a dry run shows
+        (where its line is gone, as a new carrier would); LocalProtocolError for a request
+        its carrier cannot carry: the one check before anything is sent."""
+        entry = self.drives[drive]
+        item = Item(request, vtype)
+        runner = self.runners.get(entry.line)
+        if runner is not None:
+            try:
+                return runner.preview(drive, item)
+            except KeyError:
+                pass  # not on its line (yet): a reload under way
+        return carrier_for(entry.target).preview(item)
 
     def submit(
         self,

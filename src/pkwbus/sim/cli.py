@@ -10,9 +10,9 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
-from pkwbus import durations, hostport, limits
 from pkwbus.catalog import DEFAULT_CATALOGS, CatalogError
-from pkwbus.durations import DurationRange
+from pkwbus.notation import durations, hostport, limits
+from pkwbus.notation.durations import DurationRange
 from pkwbus.protocol import buses
 from pkwbus.protocol.errors import ProtocolError
 from pkwbus.protocol.pkw.dialects import DIALECTS, IndLayout
@@ -147,7 +147,7 @@ def parse_addresses(text: str) -> list[int]:
 
 def parse_host_port(text: str, scheme: str = "") -> tuple[str, int]:
     """``--listen`` (``tcp://HOST:PORT``) or ``--stats-listen`` (``HOST:PORT``); port 0:
-    any free port. ValueError otherwise (:func:`pkwbus.hostport.parse_host_port`)."""
+    any free port. ValueError otherwise (:func:`pkwbus.notation.hostport.parse_host_port`)."""
     return hostport.parse_host_port(text, lowest_port=hostport.ANY_FREE_PORT, scheme=scheme)
 
 

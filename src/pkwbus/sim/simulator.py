@@ -8,7 +8,7 @@ import random
 import time
 from collections.abc import Callable, Collection, Iterable
 
-from pkwbus.protocol.buses import address_range, default_dialect
+from pkwbus.protocol.buses import Bus, address_range, decode_adr, default_dialect
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pkw.dialects import dialect as get_dialect
@@ -16,9 +16,7 @@ from pkwbus.protocol.serial.telegram import (
     PCD_WORDS_FC,
     BlockShape,
     Deframer,
-    Protocol,
     Telegram,
-    decode_adr,
     fc_lengths,
     frame,
     uss_lengths,
@@ -76,10 +74,10 @@ class Simulator:
         refuse_descriptions: Collection[int] = (),
         keypad_every: float | None = None,
     ) -> None:
-        self.protocol = Protocol(protocol)
+        self.protocol = Bus(protocol)
         self.dialect = get_dialect(dialect or default_dialect(self.protocol))
         self.layout = ind_layout or self.dialect.default_ind_layout
-        if self.protocol is Protocol.FC:
+        if self.protocol is Bus.FC:
             self.shape = BlockShape(None, PCD_WORDS_FC)
             self.lengths = fc_lengths()
         else:
@@ -314,7 +312,7 @@ def random_keypad(every: float | None, seed: int | None, now: float) -> RandomKe
     return RandomKeypad(every, random.Random(None if seed is None else f"keypad {seed}"), now)
 
 
-def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:
+def _specs(protocol: Bus, catalog: str | None) -> tuple[ParamSpec, ...]:
     if catalog is not None:
         from pkwbus.sim.drives.catalogs import specs_from_catalog
 

@@ -53,11 +53,11 @@ def drives(protocol: str, addresses: list[int], pnus: list[int], every: float) -
     return specs
 
 
-def target_of(planner: Planner, drive: str) -> DriveTarget:
-    """A serial drive's target as its carrier builds requests with it now."""
+def target_of(planner: Planner, drive: str) -> SerialCarrier:
+    """A serial drive's carrier, which builds its requests as they go out now."""
     carrier = planner.drive(drive).carrier
     assert isinstance(carrier, SerialCarrier)
-    return carrier.target
+    return carrier
 
 
 @dataclass
@@ -205,9 +205,9 @@ def test_writes_then_reads_then_polls_after_the_exchange_in_flight() -> None:
     line.run(0.05)
     order = [s.telegram for s in line.sent[before : before + 3]]
     assert order == [  # a change goes out after a read of its parameter (write_gate)
-        line.planner.drives[1].carrier.target.telegram(pkw.read(dialect, 341)),
-        line.planner.drives[1].carrier.target.telegram(write.request),
-        line.planner.drives[2].carrier.target.telegram(read.request),
+        line.planner.drives[1].carrier.telegram(pkw.read(dialect, 341)),
+        line.planner.drives[1].carrier.telegram(write.request),
+        line.planner.drives[2].carrier.telegram(read.request),
     ]
     assert isinstance(line.finished(write)[0].outcome, Answered)
     assert line.sim.drives[2].value(341) == 777
@@ -299,8 +299,7 @@ def test_a_job_that_waits_past_its_deadline_ends_unsent() -> None:
     (ended,) = line.finished(second)
     assert isinstance(ended.outcome, TimedOut) and ended.tally is None  # never sent
     assert all(
-        s.telegram != line.planner.drives[0].carrier.target.telegram(second.request)
-        for s in line.sent
+        s.telegram != line.planner.drives[0].carrier.telegram(second.request) for s in line.sent
     )
     assert line.now - 0.5 < TIMEOUT and all(t < 0.3 for t in line.times)  # never past its deadline
 
@@ -325,7 +324,7 @@ def test_a_port_outage_fails_jobs_and_shows_drives_down() -> None:
     line.planner.line_up(line.now)
     line.run(0.3)
     assert write.request not in [s.telegram for s in line.sent[before:]]
-    telegram = line.planner.drives[0].carrier.target.telegram(write.request)
+    telegram = line.planner.drives[0].carrier.telegram(write.request)
     assert telegram not in [s.telegram for s in line.sent[before:]]
     assert line.shown("d1") and line.shown("d2")
 
@@ -355,17 +354,15 @@ def test_one_job_per_slot_on_a_cyclic_line() -> None:
     read = line.submit("d1", pkw.read(dialect, 1530))
     cycle: list[Send | None] = [planner.next_for(d, line.now) for d in ("d1", "d2")]
     assert [s.telegram if s else None for s in cycle] == [
-        planner.drives[0].carrier.target.telegram(write.request),
-        planner.drives[1].carrier.target.telegram(pkw.read(dialect, 1613)),
+        planner.drives[0].carrier.telegram(write.request),
+        planner.drives[1].carrier.telegram(pkw.read(dialect, 1613)),
     ]
     assert planner.next_for("d1", line.now) is None  # its slot is taken until the result
     for send in cycle:
         assert send is not None
         planner.exchanged(send, line.answer(send), line.now)
     nxt = planner.next_for("d1", line.now)
-    assert nxt is not None and nxt.telegram == planner.drives[0].carrier.target.telegram(
-        read.request
-    )
+    assert nxt is not None and nxt.telegram == planner.drives[0].carrier.telegram(read.request)
 
 
 def test_an_exchange_costs_the_same_with_thousands_of_drives(

@@ -3,7 +3,7 @@ configuration check's question), by the planner like every job."""
 
 from __future__ import annotations
 
-from pkwbus.master.carriers import carrier_for
+from pkwbus.master.carriers import SerialCarrier, carrier_for
 from pkwbus.master.planning.answers import ErrorKind, Failure
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import JobKind, ProbeJob
@@ -12,7 +12,8 @@ from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Send
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd
-from pkwbus.protocol.serial.telegram import Protocol, Telegram, split_block
+from pkwbus.protocol.buses import Bus
+from pkwbus.protocol.serial.telegram import Telegram, split_block
 from pkwbus.sim import SimTiming, Simulator
 from tests.master.planning.test_planner import FakeLine
 
@@ -52,10 +53,10 @@ def test_a_drive_that_answers_is_heard_with_its_status_word() -> None:
         if protocol == "fc":
             # The FC probe is the process data alone: no parameter channel is asked (Danfoss
             # FC protocol, the telegram's PCD block), the control word never takes control.
-            shape = DriveTarget.create("fc", 3).response_shape(len(request.data))
+            shape = SerialCarrier(DriveTarget.create("fc", 3)).response_shape(len(request.data))
             block = split_block(request.data, shape)
             assert block.pkw == b"" and not pzd.takes_control(block.pzd[0])
-        assert request.adr == DriveTarget.create(protocol, 3).adr
+        assert request.adr == SerialCarrier(DriveTarget.create(protocol, 3)).address
 
 
 def test_an_empty_address_is_asked_retries_plus_one_times_then_left_alone() -> None:
@@ -83,7 +84,7 @@ def test_a_probe_ends_at_once_when_the_port_is_gone() -> None:
 
 
 def test_a_drive_whose_bus_tells_its_presence_is_not_probed() -> None:
-    target = DriveTarget.create(Protocol.PROFIBUS, 8)
+    target = DriveTarget.create(Bus.PROFIBUS, 8)
     planner = Planner([DriveSpec("s8", carrier_for(target))], poll_deadline=1.0, policy=ASKED_ONLY)
     planner.line_up(0.0)
     planner.submit(ProbeJob("s8", 5.0), 0.0)

@@ -19,6 +19,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, Priority
 from pkwbus.master.planning.outcomes import Answered
@@ -65,7 +66,7 @@ def poll(address: int, pnu: int, every: float, *, protocol: str = "fc") -> PollS
 
 def read_telegram(address: int, pnu: int) -> bytes:
     target = DriveTarget.create("fc", address)
-    return target.telegram(pkw.read(target.dialect, pnu))
+    return SerialCarrier(target).telegram(pkw.read(target.dialect, pnu))
 
 
 def dialect_of(address: int) -> pkw.Dialect:
@@ -130,7 +131,7 @@ def answer(line: FakeLine, send: Send, result: ExchangeResult | None = None) -> 
 def to_drive(line: FakeLine, address: int, since: int, protocol: str = "fc") -> list[Send]:
     """What went to drive ``address`` (by its name or its address) from the ``since``-th
     exchange on."""
-    adr = DriveTarget.create(protocol, address).adr
+    adr = SerialCarrier(DriveTarget.create(protocol, address)).address
     return [s for s in line.sent[since:] if s.drive == f"d{address}" or s.address == adr]
 
 
@@ -291,7 +292,7 @@ def test_a_removed_drives_acknowledged_write_on_the_wire_still_counts() -> None:
     dialect = dialect_of(2)
     write = job(line, "d2", pkw.write(dialect, 341, 777, pkw.Width.DWORD), Priority.WRITE)
     target = DriveTarget.create("fc", 2)
-    send = hold(line, "d2", target.telegram(write.request))  # after its read first
+    send = hold(line, "d2", SerialCarrier(target).telegram(write.request))  # after its read first
     before = len(line.sent)
     line.planner.remove_drive("d2", REASON, line.now)
     line._collect()
@@ -358,7 +359,11 @@ def test_a_drive_removed_and_added_again_while_its_exchange_is_out() -> None:
     answer(line, send)
     line.run(1.0)
     assert len(line.finished(read)) == 1, "the old drive's job ends"
-    assert [s for s in line.sent[before:] if s.address == DriveTarget.create("fc", 2).adr] == []
+    assert [
+        s
+        for s in line.sent[before:]
+        if s.address == SerialCarrier(DriveTarget.create("fc", 2)).address
+    ] == []
     assert sent_at(line, "d2", read_telegram(3, 1613), before), "the new one is polled"
     assert line.planner._roster.leaving == {}
 
@@ -552,7 +557,7 @@ class CheckedLine(FakeLine):
 
     def check(self, send: Send) -> None:
         assert send.drive in self.polled, f"{send.drive} is not on the line"
-        assert send.address == DriveTarget.create("fc", int(send.drive[1:])).adr
+        assert send.address == SerialCarrier(DriveTarget.create("fc", int(send.drive[1:]))).address
         pnu = TELEGRAMS.get(send.telegram)
         assert pnu is None or pnu in self.polled[send.drive], f"{pnu} is not polled"
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import pytest
 
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command, IndLayout, dialect
@@ -65,7 +66,7 @@ def test_the_nord_word_change_in_four_fixed_words() -> None:
     printed = words("02 0E 03 20 66 00 01 00 00 03 E8 00 00 00 00")
     target = DriveTarget.create("uss", 3, pkw_words=4)
     assert target.ind_layout is LAYOUT
-    ours = target.telegram(word_change(102, 1000, subindex=1))
+    ours = SerialCarrier(target).telegram(word_change(102, 1000, subindex=1))
     assert ours[3:11] == printed[3:11]  # PKE 2066, IND 0001, PWE1 0000, PWE2 03E8
     assert bcc(printed) == 0xA3  # recomputed: the printed 80 is a misprint
     assert ours[:11] == printed[:11] and ours[-1] == bcc(ours[:-1])
@@ -195,17 +196,19 @@ def test_a_configured_3_agrees_again_once_the_drive_answers_with_3_words() -> No
 def test_a_learned_target_splits_answers_by_their_length() -> None:
     target = DriveTarget.create("uss", 1)
     assert target.learn and target.shape == BlockShape(4, 2)
-    assert target.response_shape(10) == BlockShape(None, 2)
+    assert SerialCarrier(target).response_shape(10) == BlockShape(None, 2)
     fixed = DriveTarget.create("uss", 1, pkw_words=4)
-    assert fixed.response_shape(12) == BlockShape(4, 2)
-    assert fixed.response_shape(10) == BlockShape(3, 2)  # the other fixed length: told apart
-    assert fixed.response_shape(16) == BlockShape(4, 2)  # anything else fails there
+    assert SerialCarrier(fixed).response_shape(12) == BlockShape(4, 2)
+    assert SerialCarrier(fixed).response_shape(10) == BlockShape(
+        3, 2
+    )  # the other fixed length: told apart
+    assert SerialCarrier(fixed).response_shape(16) == BlockShape(4, 2)  # anything else fails there
     learned = target.with_pkw_words(VARIABLE)
-    request = learned.telegram(word_change(700, 5))
-    assert request == frame(learned.adr, words("22BC 0000 0005") + bytes(4))
-    assert learned.pkw_words_of(request) == 3
+    request = SerialCarrier(learned).telegram(word_change(700, 5))
+    assert request == frame(SerialCarrier(learned).address, words("22BC 0000 0005") + bytes(4))
+    assert SerialCarrier(learned).pkw_words_of(request) == 3
     # a text checks and shows as the variable block it needs, before the length is known
-    text = target.telegram(pkw.write_text(USS, 199, b"FAN-12"))
+    text = SerialCarrier(target).telegram(pkw.write_text(USS, 199, b"FAN-12"))
     assert text[3:13] == words("F0C7 0000") + b"FAN-12"
 
 

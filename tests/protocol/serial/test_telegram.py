@@ -170,7 +170,7 @@ def test_lengths() -> None:
 
 
 def test_decode_adr_by_protocol() -> None:
-    from pkwbus.protocol.serial.telegram import Protocol, decode_adr
+    from pkwbus.protocol.buses import Bus, decode_adr
 
-    assert decode_adr(Protocol.FC, 0x81) == Address(1)
-    assert decode_adr(Protocol.USS, 0x41) == Address(1, mirror=True)
+    assert decode_adr(Bus.FC, 0x81) == Address(1)
+    assert decode_adr(Bus.USS, 0x41) == Address(1, mirror=True)

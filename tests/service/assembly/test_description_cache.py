@@ -12,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.values import Scaling

@@ -14,8 +14,9 @@ from typing import Any
 import pytest
 
 from pkwbus.catalog import load_catalog
-from pkwbus.master.snapshot import Reading, ReadingKey
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.values import Scaling, ValueType
 from pkwbus.service.http.views.drives import drive_view
 from pkwbus.service.metrics.devices import SnapshotCollector
@@ -34,7 +35,7 @@ STRANGER = ParamSpec(1699, "TEST VALUE", ValueType.I32, -1, "A", live="current")
 def fc_specs(conversion_of_16_14: int) -> tuple[ParamSpec, ...]:
     """The catalog's parameters as a drive has them, except 16-14's conversion index."""
     specs = []
-    for spec in specs_from_catalog(Protocol.FC, "danfoss-fc"):
+    for spec in specs_from_catalog(Bus.FC, "danfoss-fc"):
         if spec.pnu == 1614:
             spec = dataclasses.replace(spec, conversion=conversion_of_16_14)
         specs.append(spec)
@@ -164,7 +165,7 @@ def uss_specs() -> tuple[ParamSpec, ...]:
     """The Siemens catalog's parameters, except that this drive keeps r0027 as an Integer32
     in hundredths of an ampere (the catalog says FloatingPoint32)."""
     specs = []
-    for spec in specs_from_catalog(Protocol.USS, "siemens-g120"):
+    for spec in specs_from_catalog(Bus.USS, "siemens-g120"):
         if spec.pnu == 27:
             spec = dataclasses.replace(spec, vtype=ValueType.I32, conversion=-2, scale=None)
         specs.append(spec)

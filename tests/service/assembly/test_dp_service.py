@@ -14,16 +14,19 @@ from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
+from typing import Any
 
 import httpx
+import pytest
 from prometheus_client import generate_latest
 
 from pkwbus.catalog import load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.events import Event, Exchanged
-from pkwbus.master.planning.answers import ExchangeResult, PkwAnswer, Reply
+from pkwbus.master.planning.answers import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.master.planning.jobs import JobKind
 from pkwbus.master.planning.outcomes import Rejected
+from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.wires.profibus.wire import CycleWire
 from pkwbus.protocol import pkw, pzd
@@ -620,29 +623,45 @@ async def test_every_request_a_slave_received_is_one_telegram_of_the_line(tmp_pa
 
 
 async def test_a_job_answer_reaches_the_planner_decoded_once_with_its_exchange(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Every answer of the PKW slot goes to the planner as it is, decoded once, with the
-    time its exchange took, for the job's transaction to judge (the one rule of every bus):
-    no made-up telegram to split and decode again. The PPO-read's status word goes out with
-    every cycle's Inputs, once."""
+    """Every PPO-read that answers a job goes to the planner as it came, with the time its
+    exchange took, for the job's transaction to judge (the one rule of every bus): the
+    wire builds no answer, and the job's carrier takes what the slot decoded of those
+    bytes, never decoding them again. The PPO-read's status word goes out with every
+    cycle's Inputs, once."""
+    decoded: list[bytes] = []
+    decode = ppo.decode_ppo_read
+
+    def counted(kind: ppo.PpoType, dia: Any, data: bytes, profile: Any = None) -> ppo.PpoRead:
+        decoded.append(data)
+        return decode(kind, dia, data, profile)
+
+    monkeypatch.setattr(ppo, "decode_ppo_read", counted)
     async with dp_service(tmp_path) as svc:
         (runner,) = svc.runtime.runners.values()
         assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
         seen: list[ExchangeResult] = []
+        answers: list[PkwAnswer] = []
         planner = runner.planner
         exchanged = planner.exchanged
 
         def spy(send: object, result: ExchangeResult, now: float) -> None:
             seen.append(result)
+            tx = planner.active(send.drive)  # type: ignore[attr-defined]
+            if isinstance(tx, PkwTransaction) and isinstance(result, Reply):
+                answers.append(tx.decode(result.data, result.duration))
             exchanged(send, result, now)  # type: ignore[arg-type]
 
         planner.exchanged = spy  # type: ignore[method-assign]
         await until(lambda: len(seen) >= 6)
-    answers = [r for r in seen if isinstance(r, PkwAnswer)]
-    assert answers and not [r for r in seen if isinstance(r, Reply)]
+    replies = [r for r in seen if isinstance(r, Reply)]
+    assert replies and all(isinstance(r, Reply | Failure) for r in seen)
+    for reply in replies:
+        assert reply.duration > 0
+        # Decoded once, by the slot: the carrier took the slot's reading of these bytes.
+        assert sum(data is reply.data for data in decoded) == 1
     for answer in answers:
-        assert answer.duration > 0 and answer.cyclic
         assert answer.status_word is None  # told by the cycle's Inputs, not twice
         assert isinstance(answer.response, pkw.PkwResponse)
     assert svc.sample("pkwbus_drive_status_word", drive="mixer") is not None

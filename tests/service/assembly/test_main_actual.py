@@ -18,9 +18,10 @@ from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pzd
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import FC, IndLayout
 from pkwbus.protocol.pzd import Profile
-from pkwbus.protocol.serial.telegram import FC_PROCESS, BlockShape, Protocol, split_block
+from pkwbus.protocol.serial.telegram import FC_PROCESS, BlockShape, split_block
 from pkwbus.service.metrics.devices import DriveInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry, render
 
@@ -44,7 +45,7 @@ def plant(drives: list[str]) -> tuple[MetricsRegistry, SnapshotWriter]:
     registry = MetricsRegistry()
     snapshot = Snapshot()
     specs = [
-        DriveSpec(d, carrier_for(DriveTarget(Protocol.FC, i + 1, FC, IndLayout.USS, FC_PROCESS)))
+        DriveSpec(d, carrier_for(DriveTarget(Bus.FC, i + 1, FC, IndLayout.USS, FC_PROCESS)))
         for i, d in enumerate(drives)
     ]
     record = SnapshotWriter("l1", specs, snapshot)

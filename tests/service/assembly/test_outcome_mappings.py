@@ -6,8 +6,8 @@ from typing import get_args
 
 import pytest
 
+from pkwbus.commands.exits import Exit
 from pkwbus.commands.failures import command_failure
-from pkwbus.exits import Exit
 from pkwbus.master.planning.outcomes import (
     Answered,
     Cancelled,

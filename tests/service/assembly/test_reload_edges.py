@@ -15,7 +15,8 @@ from typing import Any
 
 import pytest
 
-from pkwbus.protocol.serial.telegram import Telegram, decode_adr
+from pkwbus.protocol.buses import decode_adr
+from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.reload import Reloader, ReloadRefused
 from pkwbus.service.config import parse_config

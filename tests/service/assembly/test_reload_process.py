@@ -18,7 +18,8 @@ from typing import Any
 
 import httpx
 
-from pkwbus.protocol.serial.telegram import Telegram, decode_adr
+from pkwbus.protocol.buses import decode_adr
+from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.sim import SimTiming, Simulator
 from tests.reliability.service import start_run
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus.dp_settings import DpSettings
+from pkwbus.catalog.dp_settings import DpSettings
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
-from pkwbus.protocol.serial.telegram import BlockShape, FcAddressFormat, Protocol
+from pkwbus.protocol.serial.telegram import BlockShape, FcAddressFormat
 from pkwbus.service.config import (
     DriveBase,
     FcDrive,
@@ -101,12 +102,12 @@ def test_each_line_and_its_drives_are_of_its_bus() -> None:
         assert isinstance(line, LineBase) and line.drive_class() is type(line.drives[0])
         assert all(isinstance(d, DriveBase) and d.protocol is line.protocol for d in line.drives)
     assert (fc.protocol, uss.protocol, dp.protocol) == (
-        Protocol.FC,
-        Protocol.USS,
-        Protocol.PROFIBUS,
+        Bus.FC,
+        Bus.USS,
+        Bus.PROFIBUS,
     )
     assert {p: c.__name__ for p, c in LINES.items()} == {
-        Protocol.FC: "FcLine", Protocol.USS: "UssLine", Protocol.PROFIBUS: "ProfibusLine",
+        Bus.FC: "FcLine", Bus.USS: "UssLine", Bus.PROFIBUS: "ProfibusLine",
     }  # fmt: skip
 
 

@@ -16,8 +16,9 @@ from hypothesis import strategies as st
 from pkwbus.catalog import ParameterSpec, available_catalogs
 from pkwbus.link import PortSettings
 from pkwbus.master.wires.serial.port import TelegramPort
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
-from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat, Protocol
+from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat
 from pkwbus.protocol.values import ParameterRef, Scaling, ValueType
 from pkwbus.service.config import (
     Catalogs,
@@ -111,9 +112,9 @@ def test_demo_loads_with_its_defaults() -> None:
     assert [line.name for line in config.lines] == ["fc_line", "uss_line", "dp_line"]
     fc_line, uss_line, dp_line = config.lines
     # 3 refuses AK 4; a setting changed at a keypad about every five minutes
-    assert fc_line.sim == SimPort(Protocol.FC, (1, 2, 3), 0.003, (3,), keypad_every=300.0)
-    assert uss_line.sim == SimPort(Protocol.USS, (1, 2), 0.005)
-    assert dp_line.sim == SimPort(Protocol.PROFIBUS, (8, 9, 10))
+    assert fc_line.sim == SimPort(Bus.FC, (1, 2, 3), 0.003, (3,), keypad_every=300.0)
+    assert uss_line.sim == SimPort(Bus.USS, (1, 2), 0.005)
+    assert dp_line.sim == SimPort(Bus.PROFIBUS, (8, 9, 10))
     assert [d.pkw_dialect.name for d in dp_line.drives] == [
         "danfoss-pcv", "profidrive", "hitachi-sjpb",
     ]  # fmt: skip
@@ -210,12 +211,12 @@ def test_defaults_are_filled_in() -> None:
     assert line.bits_per_character == 11
     assert line.pause_seconds == pytest.approx(3.5 * 11 / 19200)
     # What the line's receiver really waits for a gap, not the start pause.
-    receiver = TelegramPort(PortSettings("loop://", baudrate=line.baudrate), Protocol.FC)
+    receiver = TelegramPort(PortSettings("loop://", baudrate=line.baudrate), Bus.FC)
     assert line.inter_char_seconds == receiver.inter_char_timeout
     assert line.inter_char_seconds > line.pause_seconds
     assert line.response_delay_seconds is None
     (drive,) = line.drives
-    assert drive.protocol is Protocol.FC
+    assert drive.protocol is Bus.FC
     assert drive.pkw_dialect.name == "fc"
     assert drive.layout is IndLayout.USS
     assert drive.shape == FC_PARAMETER
@@ -234,7 +235,7 @@ def test_defaults_are_filled_in() -> None:
 def test_uss_dialects_and_their_ind_layouts(dialect: str, layout: IndLayout) -> None:
     config = parse(with_drive(f"{{name: d, address: 0, dialect: {dialect}}}", "uss"))
     drive = config.lines[0].drives[0]
-    assert (drive.protocol, drive.pkw_dialect.name, drive.layout) == (Protocol.USS, dialect, layout)
+    assert (drive.protocol, drive.pkw_dialect.name, drive.layout) == (Bus.USS, dialect, layout)
     assert drive.shape == BlockShape(4, 2)
 
 
@@ -538,12 +539,10 @@ def test_bad_listen(text: str) -> None:
 
 
 def test_sim_ports() -> None:
-    assert parse_sim_port("sim://fc?drives=1,2,5-7") == SimPort(Protocol.FC, (1, 2, 5, 6, 7))
-    assert parse_sim_port("sim://USS?drives=0&response_delay=3ms") == SimPort(
-        Protocol.USS, (0,), 0.003
-    )
+    assert parse_sim_port("sim://fc?drives=1,2,5-7") == SimPort(Bus.FC, (1, 2, 5, 6, 7))
+    assert parse_sim_port("sim://USS?drives=0&response_delay=3ms") == SimPort(Bus.USS, (0,), 0.003)
     assert parse_sim_port("sim://fc?drives=1-3&refuse_descriptions=3") == SimPort(
-        Protocol.FC, (1, 2, 3), None, (3,)
+        Bus.FC, (1, 2, 3), None, (3,)
     )
 
 

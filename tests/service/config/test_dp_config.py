@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from pkwbus.cli import main
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.service.config import ConfigError, load_config, parse_config
 
 BAD = Path(__file__).parent / "bad_dp_configs"
@@ -99,7 +99,7 @@ def test_a_good_dp_line(tmp_path: Path) -> None:
     path.write_text(GOOD.format(gsd="drive.gsd"))  # relative to the configuration's folder
     config = load_config(path, environ={})
     line = config.lines[0]
-    assert line.protocol is Protocol.PROFIBUS
+    assert line.protocol is Bus.PROFIBUS
     assert (line.master_address, line.slot_time, line.watchdog) == (2, 0.008, 2.0)
     mixer, pump = line.drives
     settings, problems = mixer.dp.settings()

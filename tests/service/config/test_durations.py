@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus import durations
-from pkwbus.durations import DurationRange, parse_duration
+from pkwbus.notation import durations
+from pkwbus.notation.durations import DurationRange, parse_duration
 from pkwbus.service.config import ConfigError, parse_config, parse_sim_port
 
 README = Path(__file__).resolve().parents[3] / "README.md"

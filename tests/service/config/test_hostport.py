@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from pkwbus.hostport import ANY_FREE_PORT, parse_host_port
-from pkwbus.limits import check_port_url
+from pkwbus.notation.hostport import ANY_FREE_PORT, parse_host_port
+from pkwbus.notation.limits import check_port_url
 from pkwbus.service.config import parse_listen
 from pkwbus.sim.cli import parse_host_port as parse_sim_listen
 

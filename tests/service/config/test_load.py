@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.service.config import Config, load_config
 from pkwbus.service.config.line_load import (
     check_config_report,
@@ -74,7 +74,7 @@ def test_fc_line_against_a_hand_computed_figure() -> None:
     polls_per_second = 1 / 1 + 1 / 1 + 1 / 0.5
     load = line_load(config.lines[0])
     assert load.line == "l1"
-    assert (load.protocol, load.baudrate, load.drives) == (Protocol.FC, 9600, 1)
+    assert (load.protocol, load.baudrate, load.drives) == (Bus.FC, 9600, 1)
     assert load.exchange_seconds == {"fan": pytest.approx(exchange)}
     assert load.exchanges_per_second == pytest.approx(polls_per_second)
     assert load.utilisation == pytest.approx(exchange * polls_per_second)

@@ -7,7 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.service.http.views.drives import TOKEN_HEADER, drive_view
 from tests.service.http.conftest import AUTH, fc_drives, service
 

@@ -13,8 +13,8 @@ from typing import Any
 
 from prometheus_client import generate_latest
 
+from pkwbus.protocol.buses import decode_adr
 from pkwbus.protocol.profibus.dp.services import Service as DpService
-from pkwbus.protocol.serial.telegram import decode_adr
 from pkwbus.sim import Simulator
 from tests.master.conftest import until as until_within
 from tests.service.assembly.test_ds47_service import TOKEN as DP_TOKEN

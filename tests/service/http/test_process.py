@@ -11,7 +11,7 @@ from pathlib import Path
 
 import httpx
 
-from pkwbus.protocol.serial.telegram import decode_adr
+from pkwbus.protocol.buses import decode_adr
 from pkwbus.sim import SimTiming, Simulator
 from tests.reliability.service import start_run
 from tests.service.http.conftest import TOKEN, line_yaml

@@ -15,7 +15,7 @@ from typing import Any
 
 import uvicorn
 
-from pkwbus.master.snapshot import Reading
+from pkwbus.master.reading import Reading
 from pkwbus.service.http.api import create_app
 from tests.service.http.conftest import service
 

@@ -10,7 +10,7 @@ import pytest
 from prometheus_client import CollectorRegistry, generate_latest
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
-from pkwbus.master.snapshot import Reading
+from pkwbus.master.reading import Reading
 from pkwbus.service.http.api import create_app
 from pkwbus.service.metrics.alarms import AlarmBoard, Watched
 from pkwbus.sim import SimTiming, Simulator

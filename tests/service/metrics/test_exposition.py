@@ -19,7 +19,8 @@ from pkwbus.master.events import Exchanged, Outputs, Overrun, ValueLanded
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Rejected, TimedOut
-from pkwbus.master.snapshot import DriveState, Reading, Snapshot
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import DriveState, Snapshot
 from pkwbus.protocol.pkw.dialects import FC
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service.metrics import devices, exposition

@@ -6,7 +6,7 @@ import math
 
 import httpx
 
-from pkwbus.master.snapshot import Reading
+from pkwbus.master.reading import Reading
 from pkwbus.service.metrics.trends import POINTS, Trends
 
 KEY = ("fan1", "16-13", 0)

@@ -8,7 +8,8 @@ import asyncio
 import pytest
 from prometheus_client import generate_latest
 
-from pkwbus.master.snapshot import DriveState, Reading, Snapshot
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import DriveState, Snapshot
 from pkwbus.protocol.pzd import Profile
 from pkwbus.service.metrics import devices
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector

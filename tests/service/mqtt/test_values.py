@@ -12,7 +12,8 @@ import pytest
 from prometheus_client import CollectorRegistry
 
 from pkwbus.master.events import HealthChanged, MaintenanceChanged, ValueLanded
-from pkwbus.master.snapshot import DriveState, Maintained, Reading
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import DriveState, Maintained
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
 from pkwbus.service.config.mqtt import Mqtt

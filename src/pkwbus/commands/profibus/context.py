@@ -22,9 +22,9 @@ import asyncio
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from pkwbus import dp_settings, durations, limits
+from pkwbus.catalog import dp_settings
+from pkwbus.catalog.dp_settings import DpGiven
 from pkwbus.commands.common import CommandError, Exit, duration_option, int_option, print_trace
-from pkwbus.dp_settings import DpGiven
 from pkwbus.link import PortError, PortSettings
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.events import (
@@ -41,7 +41,9 @@ from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.wires.profibus.cycle import SlaveLocked
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
+from pkwbus.notation import durations, limits
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.profibus.dp import ppo
@@ -52,7 +54,7 @@ from pkwbus.protocol.profibus.dpv1.msac import Dpv1Setup
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profibus.gsd import Gsd
 from pkwbus.protocol.profidrive.parameters import AXES
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.serial.telegram import BlockShape
 from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
@@ -135,7 +137,7 @@ class DpContext:
         shape = BlockShape(self.ppo.pkw_words, self.ppo.pzd_words)
         try:
             return DriveTarget(
-                Protocol.PROFIBUS, address, self.dialect, ppo.LAYOUT, shape, record=self.record
+                Bus.PROFIBUS, address, self.dialect, ppo.LAYOUT, shape, record=self.record
             )
         except LocalProtocolError as exc:
             raise CommandError(str(exc), Exit.BAD_INPUT) from None

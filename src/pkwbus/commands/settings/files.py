@@ -17,8 +17,8 @@ import yaml
 from pydantic import ValidationError
 
 from pkwbus.commands.common import CommandError, Exit
+from pkwbus.notation.yamlfile import YamlError, load_yaml
 from pkwbus.service.history.backup import Backup
-from pkwbus.yamlfile import YamlError, load_yaml
 
 __all__ = ["MAX_BYTES", "check_output", "document_text", "load_backup", "write_document"]
 

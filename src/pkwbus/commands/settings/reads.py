@@ -18,7 +18,7 @@ import argparse
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
-from pkwbus import durations, link
+from pkwbus import link
 from pkwbus.catalog import CatalogError, load_catalog
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers, resolve
@@ -28,6 +28,7 @@ from pkwbus.commands.drive_access import DriveAccess, checked
 from pkwbus.commands.failures import command_failure
 from pkwbus.master.planning.identity import identity_of, identity_requests
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
+from pkwbus.notation import durations
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import (
     CHARACTERISTICS,

@@ -11,16 +11,16 @@ from pkwbus.master.carriers.serial import SerialCarrier
 from pkwbus.master.carriers.slot import SlotCarrier
 from pkwbus.master.planning.carrier import Carrier
 from pkwbus.master.target import DriveTarget
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp.ppo import PPO_TYPES
-from pkwbus.protocol.serial.telegram import Protocol
 
 __all__ = ["RecordCarrier", "SerialCarrier", "SlotCarrier", "carrier_for"]
 
 
 def carrier_for(target: DriveTarget) -> Carrier:
     """The carrier of a drive as the line addresses it."""
-    if target.protocol is not Protocol.PROFIBUS:
+    if target.protocol is not Bus.PROFIBUS:
         return SerialCarrier(target)
     record = target.record
     if record is not None:

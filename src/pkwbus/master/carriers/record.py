@@ -11,16 +11,15 @@ has a reference of its own (1-255, round), which its response must mirror.
 
 from __future__ import annotations
 
-import itertools
 import struct
 from collections.abc import Sequence
 
 from pkwbus.master.carriers.slave import SlaveHealth
-from pkwbus.master.planning.carrier import Item
+from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
 from pkwbus.master.planning.transaction import BatchTransaction
 from pkwbus.protocol import pkw
-from pkwbus.protocol.errors import RemoteProtocolError
+from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Command, Dialect, Reply
 from pkwbus.protocol.profidrive import parameters as profidrive
 from pkwbus.protocol.profidrive.errors import error_text
@@ -61,7 +60,7 @@ class RecordCarrier(SlaveHealth):
         self.axis = axis  # the drive object the requests address
         self.max_data = max_data  # C1_Max_Data_Len: the largest record the slave takes
         self.slot = slot  # the MSAC_C1 slot of data record 47
-        self._references = itertools.count(first_reference - 1)
+        self._reference = (first_reference - 1) % 255 + 1  # the next request's
 
     def room(self, count: int) -> bool:
         return fits(count, self.max_data)
@@ -69,14 +68,32 @@ class RecordCarrier(SlaveHealth):
     def refuses(self, request: pkw.PkwRequest) -> str:
         return carried(request)
 
+    def preview(self, item: Item) -> Preview:
+        """The request of ``item`` alone, with the reference the next request gets: each
+        request takes its reference as it is sent, so polls sent first take this one."""
+        why = self.refuses(item.request)
+        if why:
+            raise LocalProtocolError(why)
+        request = self._request([RecordItem(item.request, item.vtype)], self._reference)
+        note = (
+            f"request reference {self._reference} (the first byte) is the next one; each"
+            " request takes its own as it is sent (1-255, round), so a request sent"
+            " before this one takes it"
+        )
+        return Preview(request.encode(), note)
+
+    def _request(self, records: Sequence[RecordItem], reference: int) -> ParameterRequest:
+        return record_request(
+            records, reference=reference, axis=self.axis, dialect=self.dialect.name
+        )
+
     def transaction(
         self, items: Sequence[Item], *, retries: int, deadline: float, stale: bytes | None = None
     ) -> BatchTransaction:
-        reference = next(self._references) % 255 + 1
+        reference = self._reference
+        self._reference = reference % 255 + 1
         records = [RecordItem(item.request, item.vtype) for item in items]
-        request = record_request(
-            records, reference=reference, axis=self.axis, dialect=self.dialect.name
-        )
+        request = self._request(records, reference)
 
         def decode(data: bytes) -> list[Outcome]:
             return self._outcomes(records, request, data)

@@ -21,15 +21,26 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 from pkwbus.master.planning.answers import ExchangeResult, PkwAnswer, Reply
-from pkwbus.master.planning.carrier import Item, Probe
+from pkwbus.master.planning.carrier import Item, Preview, Probe
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.pkw.fields import Width
 from pkwbus.protocol.pkw.length import Gate, PkwLength, shown
-from pkwbus.protocol.serial.telegram import Protocol, split_block
+from pkwbus.protocol.pzd import MONITORING_CTW
+from pkwbus.protocol.serial.telegram import (
+    FC_PARAMETER,
+    FC_PROCESS,
+    BlockShape,
+    encode_block,
+    fc_adr,
+    frame,
+    split_block,
+    uss_adr,
+)
 
 __all__ = ["SerialCarrier"]
 
@@ -46,14 +57,15 @@ class SerialCarrier:
 
     def __init__(self, target: DriveTarget) -> None:
         self.target = target
-        uss = target.protocol is Protocol.USS and target.has_pkw
+        self.fc = target.protocol is Bus.FC
+        uss = target.protocol is Bus.USS and target.has_pkw
         self.length = PkwLength(target.pkw_setting) if uss else None
+        # The ADR byte of its telegrams.
+        self.address = (
+            fc_adr(target.address, target.fc_format) if self.fc else uss_adr(target.address)
+        )
         self._telegrams: dict[pkw.PkwRequest, bytes] = {}  # requests as they go out now
         self._probes = 0
-
-    @property
-    def address(self) -> int:
-        return self.target.adr
 
     @property
     def dialect(self) -> Dialect:
@@ -66,13 +78,61 @@ class SerialCarrier:
         return ""
 
     def telegram(self, request: pkw.PkwRequest) -> bytes:
-        """``request``'s telegram as it goes out now (built once while the shape stands)."""
+        """``request``'s telegram as it goes out now (built once while the shape stands);
+        LocalProtocolError for one that cannot."""
         built = self._telegrams.get(request)
         if built is None:
             if len(self._telegrams) >= _KEPT:
                 self._telegrams.clear()
-            built = self._telegrams[request] = self.target.telegram(request)
+            built = self._telegrams[request] = self._build(self.target, request)
         return built
+
+    def preview(self, item: Item) -> Preview:
+        return Preview(self.telegram(item.request))
+
+    def _build(self, target: DriveTarget, request: pkw.PkwRequest) -> bytes:
+        """The whole request telegram: PKW, control word with bit 10 = 0, reference 0."""
+        words = target.shape.pkw_words
+        if request.text and (self.fc or target.learn):
+            words = None  # a text travels in a block as long as it is
+        data = pkw.encode_request(request, target.dialect, target.ind_layout, words)
+        return frame(self.address, encode_block(data, _idle(target.shape)))
+
+    def probe_telegram(self, target: DriveTarget | None = None) -> bytes:
+        """The shortest telegram the drive answers: process data only (FC) or PKW AK 0
+        (of ``target``: the drive with another PKW length)."""
+        target = target or self.target
+        if self.fc:
+            return frame(self.address, encode_block(b"", (MONITORING_CTW, 0)))
+        if not target.has_pkw:
+            return frame(self.address, encode_block(b"", _idle(target.shape)))
+        return self._build(target, pkw.none_request(target.dialect))
+
+    def response_shape(self, data_len: int) -> BlockShape:
+        """The shape to split a response of ``data_len`` bytes by.
+
+        USS: a drive whose length is learned, or variable, is split by its
+        process data alone (the PKW part is the rest, by LGE). A fixed length
+        also takes an answer of the other fixed length, 3 or 4 words: that is
+        the drive's own length telling against the configured one, which the
+        planner reports (its value placed by its LGE); anything else is split
+        by the configured shape, and fails there.
+        """
+        shape = self.target.shape
+        if self.fc:
+            if data_len == 4:
+                return FC_PROCESS
+            return BlockShape(None, 2) if data_len != 12 else FC_PARAMETER
+        pzd = shape.pzd_words
+        if self.target.learn or shape.pkw_words is None:
+            return BlockShape(None, pzd)
+        if shape.pkw_words and data_len in (2 * (3 + pzd), 2 * (4 + pzd)):
+            return BlockShape(data_len // 2 - pzd, pzd)
+        return shape
+
+    def pkw_words_of(self, telegram: bytes) -> int:
+        """The PKW words of one of this drive's request telegrams (STX to BCC)."""
+        return (len(telegram) - 4) // 2 - self.target.shape.pzd_words
 
     def transaction(
         self, items: Sequence[Item], *, retries: int, deadline: float, stale: bytes | None = None
@@ -88,7 +148,7 @@ class SerialCarrier:
         """A reply's data: its block split by the drive's shape, its PKW part decoded."""
         target = self.target
         try:
-            block = split_block(data, target.response_shape(len(data)))
+            block = split_block(data, self.response_shape(len(data)))
         except RemoteProtocolError as exc:
             return PkwAnswer(None, b"", None, None, duration, why=str(exc))
         try:
@@ -105,16 +165,16 @@ class SerialCarrier:
         self._probes += 1
         length, target = self.length, self.target
         if length is None or length.known or not target.learn or self._probes % 2:
-            return Probe(target.probe())
+            return Probe(self.probe_telegram(target))
         short = target.with_pkw_words(_PROBE_SHORT)
-        return Probe(short.probe(), _PROBE_SHORT)
+        return Probe(self.probe_telegram(short), _PROBE_SHORT)
 
     def status(self, result: ExchangeResult) -> tuple[int, int | None] | None:
         if not isinstance(result, Reply):
             return None
         data = result.data
         try:
-            block = split_block(data, self.target.response_shape(len(data)))
+            block = split_block(data, self.response_shape(len(data)))
         except RemoteProtocolError:
             return None
         return (block.pzd[0], block.main_actual) if block.pzd else None
@@ -141,7 +201,7 @@ class SerialCarrier:
         length = self.length
         if answer is None or response is None or length is None:
             return None
-        sent = self.target.pkw_words_of(tx.telegram)
+        sent = self.pkw_words_of(tx.telegram)
         if not length.observe(sent, len(answer) // 2, response):
             return None
         return self._retarget()
@@ -178,3 +238,8 @@ class SerialCarrier:
                 f" {shown(length.configured)}: no change until they agree (pkw_words)"
             )
         return gate, why
+
+
+def _idle(shape: BlockShape) -> tuple[int, ...]:
+    """The PZD of a request: control word with bit 10 = 0 (never take control), reference 0."""
+    return (MONITORING_CTW,) + (0,) * (shape.pzd_words - 1) if shape.pzd_words else ()

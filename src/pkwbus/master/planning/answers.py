@@ -1,6 +1,6 @@
 """What comes back of one exchange, as the planner is given it: the drive's reply as it came
-(its bytes, decoded once by the job's carrier), a PKW answer already decoded where it came
-in (a PPO's PKW slot), or why there was none."""
+(its bytes, decoded once by the job's carrier), or why there was none; a PKW answer is what
+a carrier decodes a reply into."""
 
 from __future__ import annotations
 
@@ -46,9 +46,6 @@ class PkwAnswer:
     status_word: int | None
     main_actual: int | None
     duration: float
-    # A cyclic channel (a PPO) answers every cycle: "not yet" is its way of working, not
-    # an unexpected answer nor a repeat of the request.
-    cyclic: bool = False
     # No AK 0 was seen since the request went in: it may still answer an earlier one.
     earlier: bool = False
     why: str = ""
@@ -60,4 +57,4 @@ class Failure:
     detail: str = ""
 
 
-ExchangeResult = Reply | PkwAnswer | Failure
+ExchangeResult = Reply | Failure

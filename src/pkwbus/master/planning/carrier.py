@@ -23,7 +23,7 @@ from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.pkw.length import Gate, PkwLength
 from pkwbus.protocol.values.types import ValueType
 
-__all__ = ["Carrier", "Item", "Probe", "Transaction"]
+__all__ = ["Carrier", "Item", "Preview", "Probe", "Transaction"]
 
 Transaction = PkwTransaction | BatchTransaction | ProbeTransaction
 
@@ -35,6 +35,15 @@ class Item:
 
     request: pkw.PkwRequest
     vtype: ValueType | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Preview:
+    """A request as its carrier would send it now (a dry run shows these bytes); ``note``
+    says what of them is decided only when it is sent (empty: nothing)."""
+
+    telegram: bytes
+    note: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +89,12 @@ class Carrier(Protocol):
 
     def refuses(self, request: pkw.PkwRequest) -> str:
         """Why ``request`` cannot travel this way; empty when it can."""
+        ...
+
+    def preview(self, item: Item) -> Preview:
+        """``item``'s request as it would go out now, built as :meth:`transaction` builds
+        it; LocalProtocolError for what this way cannot carry (what :meth:`refuses`
+        says, or what does not encode)."""
         ...
 
     def transaction(

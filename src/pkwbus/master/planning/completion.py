@@ -10,10 +10,10 @@ job is finished.
 from __future__ import annotations
 
 from pkwbus.master.planning.describing import DescribeStep
-from pkwbus.master.planning.drive import Active, DrivePlan, PollState
+from pkwbus.master.planning.drive import Active, DrivePlan
 from pkwbus.master.planning.jobs import Job
 from pkwbus.master.planning.outcomes import Outcome
-from pkwbus.master.planning.plan import Event, Finished
+from pkwbus.master.planning.plan import Event, Finished, PollBatch, PollState
 from pkwbus.master.planning.transaction import BatchTransaction
 from pkwbus.master.planning.write_gate import after_read
 
@@ -35,12 +35,12 @@ def complete(
         return []
     if isinstance(work, DescribeStep):
         return list(d.described(work, outcome, now))
-    if isinstance(work, tuple):  # polls in one record: each with its own outcome
+    if isinstance(work, PollBatch):  # polls in one request: each with its own outcome
         tx, each = active.tx, [outcome] * len(work)
         if isinstance(tx, BatchTransaction) and tx.outcome is outcome:
             each = list(tx.outcomes)
         events: list[Event] = []
-        for i, (poll, result) in enumerate(zip(work, each, strict=True)):
+        for i, (poll, result) in enumerate(zip(work.polls, each, strict=True)):
             # The request's cost counted once; due again from the request's first due,
             # so that polls of one interval go out together (none later than due).
             tally = tx.tally if i == 0 else None

@@ -28,32 +28,21 @@ from pkwbus.master.planning.plan import (
     LeftUnanswered,
     Overrun,
     PkwLengthTold,
-    PollSpec,
+    PollBatch,
+    PollState,
     Send,
     StatusWord,
+    polls_of,
 )
 from pkwbus.master.planning.transaction import PkwTransaction, ProbeTransaction
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.length import PkwLength
 
-__all__ = ["Active", "DrivePlan", "PollState", "Work", "expire"]
+__all__ = ["Active", "DrivePlan", "Work", "expire"]
 
 
-class PollState:
-    """A poll and when it is due."""
-
-    __slots__ = ("due", "fresh", "retired", "spec")
-
-    def __init__(self, spec: PollSpec, due: float) -> None:
-        self.spec = spec
-        self.due = due
-        # Waited for its parameter's description: its first start is never an overrun.
-        self.fresh = False
-        self.retired = False  # no longer configured (a reload): never due again
-
-
-# A queued job, a poll, a description's element, or polls in one record (a tuple).
-Work = Job | ProbeJob | PollState | DescribeStep | tuple[PollState, ...]
+# A queued job, a poll, a description's element, or polls in one request.
+Work = Job | ProbeJob | PollState | DescribeStep | PollBatch
 
 
 @dataclass(eq=False, slots=True)
@@ -273,7 +262,8 @@ class DrivePlan:
             return None, events
         items = [Item(p.spec.request, p.spec.fmt.vtype) for p in due]
         tx = self.transaction(items, retries=retries, deadline=deadline)
-        return Active(tx, Priority.POLL, due[0].due, tuple(due), self.send_of(tx)), events
+        batch = PollBatch(tuple(due))
+        return Active(tx, Priority.POLL, due[0].due, batch, self.send_of(tx)), events
 
     @property
     def describing(self) -> bool:
@@ -328,9 +318,7 @@ class DrivePlan:
             waiting = {id(p) for p in polls}
             polls += [e[2] for e in self.polls if e[2].spec.request.pnu == done.pnu]
             work = self.active.work if self.active is not None else None
-            for active in work if isinstance(work, tuple) else (work,):
-                if isinstance(active, PollState) and active.spec.request.pnu == done.pnu:
-                    polls.append(active)
+            polls += [p for p in polls_of(work) if p.spec.request.pnu == done.pnu]
             for poll in polls:
                 poll.spec = described_poll(poll.spec, done, self.carrier.dialect)
             untyped = done.description is None or done.description.vtype is None

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.planning.outcomes import Cancelled, JobOutcome, Outcome
 from pkwbus.master.planning.transaction import Tally
-from pkwbus.master.snapshot import Reading
+from pkwbus.master.reading import Reading
 from pkwbus.protocol import pkw
 
 __all__ = ["Cancelled", "Job", "JobKind", "JobOutcome", "JobResult", "Priority", "ProbeJob"]

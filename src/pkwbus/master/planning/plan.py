@@ -38,10 +38,13 @@ __all__ = [
     "LeftUnanswered",
     "Overrun",
     "PkwLengthTold",
+    "PollBatch",
     "PollSpec",
+    "PollState",
     "Redecoded",
     "Send",
     "StatusWord",
+    "polls_of",
 ]
 
 
@@ -65,6 +68,37 @@ class PollSpec:
     def items(self) -> tuple[Item]:
         """Its request as the one item of a transaction, made once."""
         return (Item(self.request),)
+
+
+class PollState:
+    """A poll and when it is due."""
+
+    __slots__ = ("due", "fresh", "retired", "spec")
+
+    def __init__(self, spec: PollSpec, due: float) -> None:
+        self.spec = spec
+        self.due = due
+        # Waited for its parameter's description: its first start is never an overrun.
+        self.fresh = False
+        self.retired = False  # no longer configured (a reload): never due again
+
+
+@dataclass(frozen=True, slots=True)
+class PollBatch:
+    """Polls due together in one request, where the drive's carrier takes many parameters
+    in one (PROFIdrive data record 47): each ends with its own outcome."""
+
+    polls: tuple[PollState, ...]
+
+    def __len__(self) -> int:
+        return len(self.polls)
+
+
+def polls_of(work: object) -> tuple[PollState, ...]:
+    """The polls a transaction's work carries: a poll, a batch's, or none."""
+    if isinstance(work, PollBatch):
+        return work.polls
+    return (work,) if isinstance(work, PollState) else ()
 
 
 @dataclass(frozen=True)

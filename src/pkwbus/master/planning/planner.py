@@ -34,7 +34,7 @@ from pkwbus.master.planning.agenda import Agenda
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure
 from pkwbus.master.planning.carrier import Transaction
 from pkwbus.master.planning.completion import complete, drain, withdraw
-from pkwbus.master.planning.drive import Active, DrivePlan, PollState, expire
+from pkwbus.master.planning.drive import Active, DrivePlan, expire
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Cancelled, Job, Priority, ProbeJob
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
@@ -46,7 +46,9 @@ from pkwbus.master.planning.plan import (
     HealthChanged,
     Idle,
     PkwLengthTold,
+    PollBatch,
     PollSpec,
+    PollState,
     Send,
     StatusWord,
 )
@@ -389,7 +391,7 @@ class Planner:
             self._show(d, False, result.kind.value)
             self._tell(d.went_down())  # its PKW length and identity are asked again
             active = d.active
-            if active is not None and isinstance(active.work, PollState | tuple):
+            if active is not None and isinstance(active.work, PollState | PollBatch):
                 self._complete(d, active, TimedOut("drive is down"), now)
 
     def _show(self, d: DrivePlan, up: bool, reason: str) -> None:

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 from pkwbus.master.planning.describing import Settled, described_poll
-from pkwbus.master.planning.drive import DrivePlan, PollState
+from pkwbus.master.planning.drive import DrivePlan
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.plan import (
     Described,
@@ -33,8 +33,10 @@ from pkwbus.master.planning.plan import (
     Event,
     Finished,
     PollSpec,
+    PollState,
     Redecoded,
     Send,
+    polls_of,
 )
 
 __all__ = ["Roster", "only_callers", "update_polls"]
@@ -124,9 +126,8 @@ def update_polls(
         if not held:
             del d.held[pnu]
     work = d.active.work if d.active is not None else None
-    for poll in work if isinstance(work, tuple) else (work,):
-        if isinstance(poll, PollState):
-            keep(poll)
+    for poll in polls_of(work):
+        keep(poll)
     d.spec = replace(d.spec, polls=tuple(polls))
     described: dict[int, list[PollSpec]] = {}
     specs = []

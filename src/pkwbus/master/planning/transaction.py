@@ -77,6 +77,8 @@ class Tally:
     # that exchange brought none): what it tells of the drive's PKW length.
     response: pkw.PkwResponse | None = None
     answer_words: int | None = None
+    # The request as it went out (empty where its carrier builds it in the wire).
+    sent: bytes = b""
 
     def count_error(self, kind: ErrorKind) -> None:
         """One more exchange without a usable answer, of ``kind``."""
@@ -88,8 +90,8 @@ class PkwTransaction:
     """Feed it exchange results; it says when the job is done and how."""
 
     __slots__ = (
-        "_failures", "answer_pkw", "deadline", "decode", "dialect", "outcome", "request",
-        "response", "retries", "stale", "tally", "telegram", "waiting",
+        "_failures", "answer_pkw", "deadline", "decode", "dialect", "every_cycle", "outcome",
+        "request", "response", "retries", "stale", "tally", "telegram", "waiting",
     )  # fmt: skip
 
     def __init__(
@@ -102,8 +104,12 @@ class PkwTransaction:
         retries: int,
         deadline: float,
         stale: bytes | None = None,  # the PKW bytes of the drive's answer before this job
+        every_cycle: bool = False,
     ) -> None:
         self.dialect = dialect
+        # Its channel answers every cycle (a PPO's PKW slot): "not yet" is its way of
+        # working, neither an unexpected answer nor a try (its carrier's to say).
+        self.every_cycle = every_cycle
         self.request = request
         self.telegram = telegram  # the request as it goes out (empty: its carrier builds it)
         self.decode = decode
@@ -113,7 +119,7 @@ class PkwTransaction:
         self.response: pkw.PkwResponse | None = None
         self.retries = retries
         self.deadline = deadline
-        self.tally = Tally()
+        self.tally = Tally(sent=telegram)
         self._failures = 0
         self.outcome: Outcome | None = None
         self.waiting = False  # last answer was "not yet"
@@ -126,9 +132,7 @@ class PkwTransaction:
         if isinstance(result, Failure):
             outcome = self._on_failure(result)
         else:
-            answer = (
-                self.decode(result.data, result.duration) if isinstance(result, Reply) else result
-            )
+            answer = self.decode(result.data, result.duration)
             tally.busy += answer.duration
             tally.status_word, tally.main_actual = answer.status_word, answer.main_actual
             outcome = self._on(answer)
@@ -136,7 +140,7 @@ class PkwTransaction:
             outcome = TimedOut("deadline passed" + self._last_error())
         if outcome is not None:
             self.outcome = outcome
-        elif not (isinstance(result, PkwAnswer) and result.cyclic and result.response):
+        elif not (self.every_cycle and self.response is not None):
             tally.retries += 1
         return outcome
 
@@ -177,7 +181,7 @@ class PkwTransaction:
         if mismatch and isinstance(response, pkw.ValueResponse):
             self.waiting = False
             return Mismatch(self.request.value, response.raw, response)
-        if not came.cyclic:
+        if not self.every_cycle:
             self.tally.count_error(ErrorKind.UNEXPECTED)
         self.waiting = True
         return None

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 from typing import Final, Literal
 
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.outcomes import Answered, Rejected
 from pkwbus.master.sessions.session import LineSession
 from pkwbus.master.target import DriveTarget
@@ -46,7 +47,7 @@ async def ask_pkw_length(
     tally = (await session.job(drive, request, deadline)).tally
     if tally is None or tally.response is None or tally.answer_words is None:
         return NO_ANSWER
-    sent = target.pkw_words_of(target.telegram(request))
+    sent = SerialCarrier(target).pkw_words_of(tally.sent)
     return told(sent, tally.answer_words, tally.response)
 
 

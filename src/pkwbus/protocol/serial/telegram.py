@@ -41,12 +41,10 @@ __all__ = [
     "DeframerEvent",
     "FcAddressFormat",
     "FramingError",
-    "Protocol",
     "Skipped",
     "Telegram",
     "Truncated",
     "bcc",
-    "decode_adr",
     "decode_fc_adr",
     "decode_uss_adr",
     "encode_block",
@@ -62,12 +60,6 @@ STX: Final = 0x02
 MAX_TELEGRAM: Final = 256  # bytes, STX to BCC
 MAX_LGE: Final = MAX_TELEGRAM - 2
 PCD_WORDS_FC: Final = 2
-
-
-class Protocol(enum.StrEnum):
-    FC = "fc"
-    USS = "uss"
-    PROFIBUS = "profibus"  # DP-V0: FDL frames (protocol.fdl), the PKW channel inside PPOs
 
 
 def bcc(data: bytes | bytearray | memoryview) -> int:
@@ -170,10 +162,6 @@ def decode_uss_adr(adr: int) -> Address:
         mirror=bool(adr & USS_MIRROR),
         special=bool(adr & USS_SPECIAL),
     )
-
-
-def decode_adr(protocol: Protocol, adr: int) -> Address:
-    return decode_fc_adr(adr) if protocol is Protocol.FC else decode_uss_adr(adr)
 
 
 # ---------------------------------------------------------------- data blocks

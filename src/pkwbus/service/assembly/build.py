@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import prometheus_client
 
-from pkwbus import dp_settings
+from pkwbus.catalog import dp_settings
 from pkwbus.link import Fence, PortSettings
 from pkwbus.link.port import Rs485Mode
 from pkwbus.master.events import Observer, Outputs
@@ -29,9 +29,9 @@ from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.master.wires.serial.wire import ExchangeWire
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.slave import SlaveSetup
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
@@ -171,7 +171,7 @@ class Parts:
                 port, close = await start_sim(line, line.sim)
         fence = self.fence_of(line.name) if self.fence_of is not None else None
         dialects = {d.name: d.pkw_dialect for d in line.drives}
-        uss, dp = line.protocol is Protocol.USS, line.protocol is Protocol.PROFIBUS
+        uss, dp = line.protocol is Bus.USS, line.protocol is Bus.PROFIBUS
         counts = self.metrics.for_line(line.name, dialects, uss=uss, dp=dp)
         self.counts[line.name] = counts
         try:

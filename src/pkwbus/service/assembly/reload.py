@@ -49,7 +49,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
@@ -265,7 +265,7 @@ class Reloader:
         """Whether ``new`` can apply to ``old``'s running line without closing its port."""
         if fields(old, {"drives", *DRIVE_DEFAULTS}) != fields(new, {"drives", *DRIVE_DEFAULTS}):
             return False  # its bus settings changed
-        if new.protocol is not Protocol.PROFIBUS:
+        if new.protocol is not Bus.PROFIBUS:
             return True
         # A DP slave added, removed or changed (its address, its DP settings, its GSD
         # file's content) changes the cycle and the slaves' parameters.

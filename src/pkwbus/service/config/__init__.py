@@ -38,11 +38,11 @@ drives), :mod:`.mqtt` (the plant's broker), :mod:`.model` (the whole file),
 :mod:`.loading`; and
 :mod:`.line_load`, how busy each line of a valid configuration would be
 (``pkwbus check-config``'s estimate, not re-exported here). Problems are
-worded by :mod:`pkwbus.problems`, shared with the catalogs; ``sim://`` ports
+worded by :mod:`pkwbus.notation.problems`, shared with the catalogs; ``sim://`` ports
 are parsed by :mod:`pkwbus.sim.serving.url`.
 """
 
-from pkwbus.durations import parse_duration
+from pkwbus.notation.durations import parse_duration
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
     DEFAULT_TOKEN_ENV,

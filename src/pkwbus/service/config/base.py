@@ -15,9 +15,8 @@ from pydantic import (
 from pydantic_core import ErrorDetails, PydanticCustomError
 
 from pkwbus.errors import PkwbusError
-from pkwbus.problems import place, plain
-from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
+from pkwbus.notation.problems import place, plain
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, USS_MAX_ADDRESS, Bus
 
 __all__ = [
     "DEFAULT_LISTEN",
@@ -83,7 +82,7 @@ def placed(errors: Iterable[ErrorDetails], root: type[BaseModel]) -> list[Place]
     return out
 
 
-def only(protocol: BusProtocol, *keys: str, why: str = "") -> dict[str, str]:
+def only(protocol: Bus, *keys: str, why: str = "") -> dict[str, str]:
     """What a user who gives one of ``keys``, settings of ``protocol``'s lines or drives,
     on another bus's is told."""
     told = f"applies to protocol {protocol} only" + (f": {why}" if why else "")

@@ -18,10 +18,9 @@ from pydantic import (
 )
 
 from pkwbus.catalog import ParameterSpec
-from pkwbus.protocol.buses import default_dialect
+from pkwbus.protocol.buses import Bus, default_dialect
 from pkwbus.protocol.pkw.dialects import Dialect, IndLayout, dialect
 from pkwbus.protocol.serial.telegram import BlockShape
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.protocol.values import (
     ParameterRef,
     canonical,
@@ -48,7 +47,7 @@ class DriveBase(Model):
     """One drive (follower) on a line: what drives of every bus have."""
 
     # The bus of the drive's line: each bus's drive is its own class.
-    protocol: ClassVar[BusProtocol]
+    protocol: ClassVar[Bus]
     # Keys the drive does not take, each with what a user who gives one is told (its line
     # takes them out and tells them with its own problems: :class:`~.line.LineBase`).
     refused_keys: ClassVar[Mapping[str, str]] = {

@@ -13,9 +13,9 @@ from pydantic import (
     PlainValidator,
 )
 
-from pkwbus import durations
-from pkwbus.durations import DurationRange, parse_duration
-from pkwbus.problems import short
+from pkwbus.notation import durations
+from pkwbus.notation.durations import DurationRange, parse_duration
+from pkwbus.notation.problems import short
 from pkwbus.protocol import buses
 from pkwbus.protocol.pkw.length import PkwSetting
 from pkwbus.protocol.values import (
@@ -87,7 +87,7 @@ def upper(value: object) -> object:
 
 
 def _duration(within: DurationRange) -> PlainValidator:
-    """A duration of one kind: its range is in :mod:`pkwbus.durations`' table."""
+    """A duration of one kind: its range is in :mod:`pkwbus.notation.durations`' table."""
     return PlainValidator(lambda value: parse_duration(value, within))
 
 

@@ -20,14 +20,13 @@ from pydantic import (
     model_validator,
 )
 
-from pkwbus.limits import MAX_RETRIES, check_baudrate, check_port_url
-from pkwbus.problems import short
-from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, address_range
+from pkwbus.notation.limits import MAX_RETRIES, check_baudrate, check_port_url
+from pkwbus.notation.problems import short
+from pkwbus.protocol.buses import DIALECTS_BY_PROTOCOL, Bus, address_range
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Dialect
 from pkwbus.protocol.serial import timing
 from pkwbus.protocol.serial.telegram import FcAddressFormat
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.protocol.values import (
     ParameterRef,
     canonical,
@@ -90,7 +89,7 @@ class LineBase(Model, Generic[DriveT]):
 
     name: Name
     port: Annotated[str, Field(strict=True)]
-    protocol: BusProtocol
+    protocol: Bus
     baudrate: StrictInt
     parity: Annotated[Literal["E", "O", "N"], BeforeValidator(upper)] = "E"
     stopbits: Literal[1, 2] = 1

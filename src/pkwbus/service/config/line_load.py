@@ -42,12 +42,13 @@ from typing import Final
 
 from pkwbus.catalog.logs import logs_of_drive
 from pkwbus.link.adapters import DEV, by_id_names, unstable_name
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profidrive.parameters import MAX_PARAMETERS
 from pkwbus.protocol.serial import timing
-from pkwbus.protocol.serial.telegram import MAX_TELEGRAM, Protocol
+from pkwbus.protocol.serial.telegram import MAX_TELEGRAM
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.default_polls import (
     ALARM_EVERY,
@@ -98,7 +99,7 @@ class LineLoad:
     """The estimate for one line."""
 
     line: str
-    protocol: Protocol
+    protocol: Bus
     baudrate: int
     drives: int
     exchanges_per_second: float  # demanded by the polls
@@ -232,7 +233,7 @@ def dp_line_load(line: ProfibusLine) -> LineLoad:
 
 def line_load(line: Line) -> LineLoad:
     """Utilisation, demand and capacity of one line."""
-    if line.protocol is Protocol.PROFIBUS:
+    if line.protocol is Bus.PROFIBUS:
         return dp_line_load(line)
     times = {d.name: exchange_seconds(line, d) for d in line.drives}
     rate = 0.0

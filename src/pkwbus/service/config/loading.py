@@ -11,11 +11,11 @@ from pydantic import (
     ValidationError,
 )
 
-from pkwbus.problems import kind
+from pkwbus.notation.problems import kind
+from pkwbus.notation.yamlfile import YamlError, load_yaml
 from pkwbus.service.config.base import LISTEN_ENV, MAX_CONFIG_BYTES, ConfigError, placed
 from pkwbus.service.config.catalogs import Catalogs, builtin_catalogs
 from pkwbus.service.config.model import Config
-from pkwbus.yamlfile import YamlError, load_yaml
 
 __all__ = ["load_config", "parse_config"]
 

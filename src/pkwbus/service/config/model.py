@@ -26,11 +26,11 @@ from pydantic import (
     model_validator,
 )
 
-from pkwbus.durations import STANDBY_LEASE, parse_duration
-from pkwbus.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
 from pkwbus.link import same_line
-from pkwbus.problems import plain, short
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
+from pkwbus.notation.durations import STANDBY_LEASE, parse_duration
+from pkwbus.notation.hostport import ANY_FREE_PORT, MAX_TCP_PORT, check_host, parse_host_port
+from pkwbus.notation.problems import plain, short
+from pkwbus.protocol.buses import Bus
 from pkwbus.service.config.base import (
     DEFAULT_LISTEN,
     DEFAULT_TOKEN_ENV,
@@ -63,14 +63,14 @@ __all__ = [
 ]
 
 # The class of each bus's lines, as the union below picks it by the line's ``protocol``.
-LINES: Final[Mapping[BusProtocol, type[FcLine | UssLine | ProfibusLine]]] = {
-    BusProtocol.FC: FcLine,
-    BusProtocol.USS: UssLine,
-    BusProtocol.PROFIBUS: ProfibusLine,
+LINES: Final[Mapping[Bus, type[FcLine | UssLine | ProfibusLine]]] = {
+    Bus.FC: FcLine,
+    Bus.USS: UssLine,
+    Bus.PROFIBUS: ProfibusLine,
 }
 
 
-def _bus(data: dict[object, object]) -> BusProtocol:
+def _bus(data: dict[object, object]) -> Bus:
     """The line's bus; its ``protocol`` told as the one place of a problem otherwise."""
     if "protocol" not in data:
         raise fail([("protocol", "is required")])
@@ -79,7 +79,7 @@ def _bus(data: dict[object, object]) -> BusProtocol:
         names = [repr(p.value) for p in LINES]
         known = f"{', '.join(names[:-1])} or {names[-1]}"
         raise fail([("protocol", f"must be {known}, not {short(given)}")])
-    return BusProtocol(given)
+    return Bus(given)
 
 
 def _bus_line(data: object, handler: ValidatorFunctionWrapHandler) -> object:
@@ -137,7 +137,7 @@ class Listen(Model):
 def parse_listen(text: str) -> tuple[str, int]:
     """``HOST:PORT`` or ``[IPv6]:PORT`` as (host, port), port 0-65535 (0: any free port,
     which the service's log line "metrics on" names); ValueError otherwise
-    (:func:`pkwbus.hostport.parse_host_port`)."""
+    (:func:`pkwbus.notation.hostport.parse_host_port`)."""
     return parse_host_port(text, lowest_port=ANY_FREE_PORT)
 
 

@@ -19,12 +19,12 @@ from urllib.parse import urlsplit
 
 from pydantic import Field, PlainValidator, model_validator
 
-from pkwbus import durations
-from pkwbus.durations import parse_duration
 from pkwbus.errors import PkwbusError
-from pkwbus.hostport import MAX_TCP_PORT, check_host
-from pkwbus.limits import parse_size
-from pkwbus.problems import short
+from pkwbus.notation import durations
+from pkwbus.notation.durations import parse_duration
+from pkwbus.notation.hostport import MAX_TCP_PORT, check_host
+from pkwbus.notation.limits import parse_size
+from pkwbus.notation.problems import short
 from pkwbus.service.config.base import Model
 
 __all__ = [

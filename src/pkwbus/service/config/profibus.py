@@ -19,14 +19,14 @@ from pydantic import (
     field_validator,
 )
 
-from pkwbus import dp_settings
-from pkwbus.dp_settings import DpGiven, DpSettings
-from pkwbus.problems import short
+from pkwbus.catalog import dp_settings
+from pkwbus.catalog.dp_settings import DpGiven, DpSettings
+from pkwbus.notation.problems import short
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.profibus.dp.ppo import LAYOUT as PPO_LAYOUT
 from pkwbus.protocol.profibus.dp.ppo import ppo_type
 from pkwbus.protocol.serial.telegram import BlockShape
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Place
 from pkwbus.service.config.drive import DriveBase
 
@@ -56,7 +56,7 @@ class DpDrive:
 
     def settings(self) -> tuple[DpSettings | None, list[Place]]:
         """The slave's settings, or the problems (each with its place) that stop them
-        (:func:`pkwbus.dp_settings.resolve`, as the command line's)."""
+        (:func:`pkwbus.catalog.dp_settings.resolve`, as the command line's)."""
         given = DpGiven(
             self.ppo, self.ident, self.gsd, self.cfg, self.user_prm, self.dpv1, self.gsd_given
         )
@@ -109,7 +109,7 @@ class ProfibusDrive(DriveBase):
     """A slave on a PROFIBUS DP line: its PPO, and the ident number or the GSD file
     (+ cfg, user_prm); its parameters through the PPO's PKW words or data record 47."""
 
-    protocol: ClassVar[Literal[BusProtocol.PROFIBUS]] = BusProtocol.PROFIBUS
+    protocol: ClassVar[Literal[Bus.PROFIBUS]] = Bus.PROFIBUS
     refused_keys: ClassVar[Mapping[str, str]] = {
         **DriveBase.refused_keys,
         **dict.fromkeys(("pkw_words", "pzd_words", "ind_layout"), _BY_PPO),

@@ -11,12 +11,11 @@ from typing import ClassVar, Final, Literal
 
 from pydantic import Field, StrictInt
 
-from pkwbus.protocol.buses import DP_MAX_ADDRESS
+from pkwbus.protocol.buses import DP_MAX_ADDRESS, Bus
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.fdl import timing as dp_timing
 from pkwbus.protocol.profibus.gsd import Gsd
 from pkwbus.protocol.profidrive.parameters import AXES
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Place, only
 from pkwbus.service.config.fields import SlotTime, Watchdog
 from pkwbus.service.config.line import LineBase
@@ -30,8 +29,8 @@ MAX_DP_RETRIES: Final = 8  # a DP slave's request is repeated at most 8 times (D
 class ProfibusLine(LineBase[ProfibusDrive]):
     """A PROFIBUS DP line with pkwbus its master: its characters always 8E1."""
 
-    protocol: Literal[BusProtocol.PROFIBUS]
-    refused_keys: ClassVar[Mapping[str, str]] = only(BusProtocol.FC, "fc_address_format")
+    protocol: Literal[Bus.PROFIBUS]
+    refused_keys: ClassVar[Mapping[str, str]] = only(Bus.FC, "fc_address_format")
 
     # pkwbus's own station, the slot time, the slaves' watchdog.
     master_address: StrictInt = Field(default=2, ge=0, le=DP_MAX_ADDRESS)

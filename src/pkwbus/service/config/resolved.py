@@ -32,10 +32,10 @@ from pkwbus.link.port import Rs485Mode
 from pkwbus.master.planning.plan import DescribeTarget
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.wires.serial.port import TelegramPort
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.descriptions import NAME, DescriptionForm, elements_to_read, form_of
 from pkwbus.protocol.pkw.length import AUTO
 from pkwbus.protocol.profidrive.parameters import AXES
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import MAX_INDEX, UNSCALED, ParameterRef, ValueType
 from pkwbus.service import config as cfg
 
@@ -137,7 +137,7 @@ def target_for(line: cfg.Line, drive: cfg.Drive) -> DriveTarget:
         dpv1 = settings.dpv1 if settings is not None else None
         record = RecordAccess(axis, max_data=dpv1.max_data if dpv1 is not None else 240)
     return DriveTarget(
-        Protocol(line.protocol),
+        Bus(line.protocol),
         drive.address,
         drive.pkw_dialect,
         drive.layout,
@@ -176,7 +176,7 @@ def describe_targets(
     writable = {table.canonical(ref).pnu for ref in drive.writable}
     # A name of 16 characters fits neither a PPO's four PKW words nor a fixed USS block
     # (data record 47 carries it).
-    short = (target.protocol is Protocol.PROFIBUS and target.record is None) or (
+    short = (target.protocol is Bus.PROFIBUS and target.record is None) or (
         isinstance(drive, cfg.UssDrive) and drive.pkw_words in (3, 4)
     )
     targets = []
@@ -202,7 +202,7 @@ def port_for(line: cfg.Line, port: str, fence: Fence | None = None) -> TelegramP
     )
     return TelegramPort(
         settings,
-        Protocol(line.protocol),
+        Bus(line.protocol),
         timeout=line.timeout,
         inter_char_timeout=line.inter_char_seconds,
         fence=fence,

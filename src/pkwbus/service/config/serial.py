@@ -8,10 +8,10 @@ from typing import ClassVar, Final, Literal
 
 from pydantic import Field, StrictInt
 
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pkw.length import AUTO, UNKNOWN_SEND_WORDS
 from pkwbus.protocol.serial.telegram import FC_PARAMETER, BlockShape, FcAddressFormat
-from pkwbus.protocol.serial.telegram import Protocol as BusProtocol
 from pkwbus.service.config.base import Place, only
 from pkwbus.service.config.drive import DriveBase
 from pkwbus.service.config.fields import PkwWords
@@ -30,11 +30,11 @@ DP_DRIVE_KEYS: Final = (
 class FcDrive(DriveBase):
     """A drive on a Danfoss FC line: its parameter telegrams have one fixed shape."""
 
-    protocol: ClassVar[Literal[BusProtocol.FC]] = BusProtocol.FC
+    protocol: ClassVar[Literal[Bus.FC]] = Bus.FC
     refused_keys: ClassVar[Mapping[str, str]] = {
         **DriveBase.refused_keys,
-        **only(BusProtocol.PROFIBUS, *DP_DRIVE_KEYS),
-        **only(BusProtocol.USS, "pkw_words", "pzd_words", why="FC telegrams have a fixed shape"),
+        **only(Bus.PROFIBUS, *DP_DRIVE_KEYS),
+        **only(Bus.USS, "pkw_words", "pzd_words", why="FC telegrams have a fixed shape"),
     }
 
     ind_layout: IndLayout | None = None
@@ -57,10 +57,10 @@ class FcDrive(DriveBase):
 class UssDrive(DriveBase):
     """A drive on a Siemens USS line, with the PKW and PZD lengths of its telegrams."""
 
-    protocol: ClassVar[Literal[BusProtocol.USS]] = BusProtocol.USS
+    protocol: ClassVar[Literal[Bus.USS]] = Bus.USS
     refused_keys: ClassVar[Mapping[str, str]] = {
         **DriveBase.refused_keys,
-        **only(BusProtocol.PROFIBUS, *DP_DRIVE_KEYS),
+        **only(Bus.PROFIBUS, *DP_DRIVE_KEYS),
     }
 
     ind_layout: IndLayout | None = None
@@ -92,8 +92,8 @@ class UssDrive(DriveBase):
 class FcLine(LineBase[FcDrive]):
     """A Danfoss FC line: its drives at 1-126, or 1-31 with ``fc_address_format: 1-31``."""
 
-    protocol: Literal[BusProtocol.FC]
-    refused_keys: ClassVar[Mapping[str, str]] = only(BusProtocol.PROFIBUS, *DP_LINE_KEYS)
+    protocol: Literal[Bus.FC]
+    refused_keys: ClassVar[Mapping[str, str]] = only(Bus.PROFIBUS, *DP_LINE_KEYS)
 
     fc_address_format: FcAddressFormat | None = None
 
@@ -105,10 +105,10 @@ class FcLine(LineBase[FcDrive]):
 class UssLine(LineBase[UssDrive]):
     """A Siemens USS line: its drives at 0-30."""
 
-    protocol: Literal[BusProtocol.USS]
+    protocol: Literal[Bus.USS]
     refused_keys: ClassVar[Mapping[str, str]] = {
-        **only(BusProtocol.FC, "fc_address_format"),
-        **only(BusProtocol.PROFIBUS, *DP_LINE_KEYS),
+        **only(Bus.FC, "fc_address_format"),
+        **only(Bus.PROFIBUS, *DP_LINE_KEYS),
     }
 
     def _bus_drive_problems(self, drive: UssDrive) -> list[Place]:

@@ -236,7 +236,16 @@ class ValueBody(BaseModel):
 class WriteResult(ValueBody):
     store: str
     dry_run: bool
-    telegram: str
+    telegram: str = Field(
+        description="the request as the drive's carrier sends it (hex): the whole telegram on"
+        " FC and USS, the PPO-write on a PROFIBUS PKW slot, the parameter request of data"
+        " record 47"
+    )
+    telegram_note: str | None = Field(
+        default=None,
+        description="what of the telegram is decided only when it is sent (data record 47:"
+        " its request reference); null: nothing",
+    )
     audit_id: int | None
     old_value: float | int | str | None = None
     verified: bool | None = None

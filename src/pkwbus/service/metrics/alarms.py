@@ -21,7 +21,8 @@ from prometheus_client import CollectorRegistry, Gauge
 
 from pkwbus.catalog.alarms import ActiveAlarm, Alarm, CodeTable, WordTable
 from pkwbus.master.events import Event, ValueLanded
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 
 __all__ = ["ALARM_LABELS", "AlarmBoard", "Watched"]
 

@@ -22,7 +22,8 @@ from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
 from pkwbus.master.events import Event, ValueLanded
-from pkwbus.master.snapshot import DriveState, Reading, ReadingKey, Snapshot
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import DriveState, ReadingKey, Snapshot
 from pkwbus.protocol.pzd import STATUS_BITS, Profile, ref_to_percent
 from pkwbus.service.metrics.exposition import CHUNK
 from pkwbus.service.metrics.rows import Made, Rows

@@ -17,7 +17,8 @@ from collections.abc import Collection, Sequence
 from typing import Final
 
 from pkwbus.master.events import Event, ValueLanded
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 
 __all__ = ["PERIOD", "POINTS", "Trends"]
 

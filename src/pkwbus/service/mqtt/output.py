@@ -29,7 +29,8 @@ from typing import Any
 import aiomqtt
 
 from pkwbus.master.events import Event, HealthChanged, MaintenanceChanged, ValueLanded
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.service.config import Config
 from pkwbus.service.config.mqtt import Mqtt
 from pkwbus.service.history.store import DriveEvent

@@ -16,7 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from pkwbus.catalog.description import Value
-from pkwbus.master.snapshot import Reading, ReadingKey, Snapshot
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey, Snapshot
 from pkwbus.service.mqtt.connection import publish_head
 from pkwbus.service.runtime import DriveEntry
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription, Value
+from pkwbus.master.planning.carrier import Preview
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Answered, LineFailed, Mismatch, TimedOut
 from pkwbus.protocol import pkw
@@ -116,6 +117,7 @@ class WritePath:
             fmt = described_format(self.runtime, entry, ref)
             ref = fit_index(ref, fmt)
             request = self._write_request(entry, ref, fmt, order)
+            preview = self._preview(entry, ref, fmt, request)
             audit.raw_value = request.value if not request.text else None
         except ApiError as exc:
             audit.outcome = exc.outcome = refusal_outcome(exc)
@@ -123,11 +125,13 @@ class WritePath:
             exc.audit_incomplete = not await self.audit_writer.note(audit)
             exc.audit_id = audit.id
             raise
-        telegram = entry.target.telegram(request, fmt.vtype).hex(" ")
+        telegram = preview.telegram.hex(" ")
         if order.dry_run:
             audit.outcome = "dry_run"
             stored = await self.audit_writer.note(audit)
             body = self._write_body(entry, ref, fmt, order, request, telegram, audit, None)
+            if preview.note:
+                body["telegram_note"] = preview.note
             return WriteDone(body if stored else {**body, "audit": INCOMPLETE}, "dry_run")
         # Once its row is stored the write runs to its end and the row is completed even
         # when the caller goes away: the request may reach the drive regardless.
@@ -271,11 +275,20 @@ class WritePath:
             if isinstance(order.value, str):
                 raise LocalProtocolError(f"{ref.name} takes a number, not a string")
             raw, width = fmt.encode(order.value, str(ref))
-            request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
-            entry.target.telegram(request, fmt.vtype)
+            return pkw.write(d, ref.pnu, raw, width, index=ref.index, store=order.store)
         except LocalProtocolError as exc:
             raise ApiError(422, "invalid_value", str(exc)) from None
-        return request
+
+    def _preview(
+        self, entry: DriveEntry, ref: ParameterRef, fmt: ParameterDescription,
+        request: pkw.PkwRequest,
+    ) -> Preview:  # fmt: skip
+        """The request as the drive's carrier would send it now: its check, and the bytes
+        a dry run shows."""
+        try:
+            return self.runtime.preview(entry.name, request, fmt.vtype)
+        except LocalProtocolError as exc:
+            raise ApiError(422, "invalid_value", str(exc)) from None
 
     def _write_body(
         self,

@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 
 from pkwbus.catalog import Catalog, CatalogError, ParameterSpec, load_catalog
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.values import ValueType
 from pkwbus.sim.drives.table import CATALOG_TABLES, FC_MOTOR_DATA, TABLES, ParamSpec
 
@@ -42,7 +42,7 @@ UNIT_FACTORS = {
 __all__ = ["CatalogError", "specs_from_catalog"]
 
 
-def specs_from_catalog(protocol: Protocol, name: str) -> tuple[ParamSpec, ...]:
+def specs_from_catalog(protocol: Bus, name: str) -> tuple[ParamSpec, ...]:
     catalog: Catalog = load_catalog(name)
     base = CATALOG_TABLES.get((protocol, name), TABLES[protocol])
     merged = {spec.pnu: spec for spec in base}
@@ -106,8 +106,8 @@ def _initial_number(entry: ParameterSpec, number: float) -> float:
     return number
 
 
-def _spec(entry: ParameterSpec, protocol: Protocol) -> ParamSpec:
-    motor_data = protocol is Protocol.FC and entry.pnu in FC_MOTOR_DATA
+def _spec(entry: ParameterSpec, protocol: Bus) -> ParamSpec:
+    motor_data = protocol is Bus.FC and entry.pnu in FC_MOTOR_DATA
     vtype = ValueType(entry.type) if entry.type else ValueType.U16
     low, high = entry.min, entry.max
     initial: float | str = 0.0

@@ -14,11 +14,12 @@ from collections import deque
 from dataclasses import dataclass, replace
 
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.pkw import PkwResponse, Rejection, TextResponse, ValueResponse, Width
 from pkwbus.protocol.pkw.dialects import Command, Dialect, IndLayout, Reply
 from pkwbus.protocol.pzd import Profile, takes_control
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol, encode_block, split_block
+from pkwbus.protocol.serial.telegram import BlockShape, encode_block, split_block
 from pkwbus.protocol.values import decode_value
 from pkwbus.sim.config import SimTiming
 from pkwbus.sim.drives.model import DriveModel, Limits, ModelConfig
@@ -49,7 +50,7 @@ class SimDrive:
     def __init__(
         self,
         address: int,
-        protocol: Protocol,
+        protocol: Bus,
         dialect: Dialect,
         layout: IndLayout,
         shape: BlockShape,
@@ -66,12 +67,12 @@ class SimDrive:
         self.layout = layout
         self.shape = shape
         self.timing = timing
-        self.profile = Profile.FC if protocol is Protocol.FC else Profile.PROFIDRIVE
+        self.profile = Profile.FC if protocol is Bus.FC else Profile.PROFIDRIVE
         # Where a value sits: FC always in 4 PKW words (a text, and a description's
         # name, in a block as long as it is: Danfoss FC protocol, "Read parameter
         # description"); USS by the drive's PKW length (USS specification, part C, 4.1.2).
         # (A PROFIBUS slave of the FC profile carries the PPO's 4 fixed words.)
-        self.fc = protocol is Protocol.FC and shape.pkw_words is None
+        self.fc = protocol is Bus.FC and shape.pkw_words is None
         self.pkw_words = 4 if self.fc else shape.pkw_words
         log = max((s.array for s in specs if s.live == "alarm_code"), default=10)
         self.model = DriveModel(self.profile, rng, config or ModelConfig(), log_length=log)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 
-from pkwbus.protocol.serial.telegram import STX, Protocol, frame
+from pkwbus.protocol.buses import Bus
+from pkwbus.protocol.serial.telegram import STX, frame
 from pkwbus.sim.config import SimFaults
 
 __all__ = ["Answer", "apply", "other_adr", "pick"]
@@ -37,7 +38,7 @@ def apply(
     *,
     stale: bytes | None,
     faults: SimFaults,
-    protocol: Protocol,
+    protocol: Bus,
     rng: random.Random,
 ) -> Answer | None:
     """``telegram`` with fault ``kind`` applied; None when nothing is sent."""
@@ -60,9 +61,9 @@ def apply(
     raise ValueError(f"unknown fault {kind!r}")
 
 
-def other_adr(protocol: Protocol, adr: int) -> int:
+def other_adr(protocol: Bus, adr: int) -> int:
     """The ADR byte of a neighbouring address, in the same format and with the same flags."""
-    mask = 0x7F if protocol is Protocol.FC and adr & 0x80 else 0x1F
+    mask = 0x7F if protocol is Bus.FC and adr & 0x80 else 0x1F
     address = adr & mask
     neighbour = address + 1 if address < 30 else address - 1
     return (adr & ~mask & 0xFF) | neighbour

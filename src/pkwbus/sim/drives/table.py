@@ -62,7 +62,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Final
 
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.values import Scaling, ValueType
 
 __all__ = [
@@ -216,11 +216,11 @@ MM4_TABLE: Final = (
 # Which parameters steer the model: maximum frequency (MAV scale), ramp times.
 MODEL_PARAMS: Final = MappingProxyType(
     {
-        Protocol.FC: {"max_frequency": 414, "ramp_up": 341, "ramp_down": 342},
-        Protocol.USS: {"max_frequency": 2000, "ramp_up": 1120, "ramp_down": 1121},
+        Bus.FC: {"max_frequency": 414, "ramp_up": 341, "ramp_down": 342},
+        Bus.USS: {"max_frequency": 2000, "ramp_up": 1120, "ramp_down": 1121},
     }
 )
-TABLES: Final = MappingProxyType({Protocol.FC: FC_TABLE, Protocol.USS: USS_TABLE})
+TABLES: Final = MappingProxyType({Bus.FC: FC_TABLE, Bus.USS: USS_TABLE})
 # A catalog whose drives hold other parameters than their protocol's table, by (protocol,
 # catalog): the table its entries are merged over.
-CATALOG_TABLES: Final = MappingProxyType({(Protocol.USS, "siemens-mm4"): MM4_TABLE})
+CATALOG_TABLES: Final = MappingProxyType({(Bus.USS, "siemens-mm4"): MM4_TABLE})

@@ -34,6 +34,7 @@ import time
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.errors import LocalProtocolError, RemoteProtocolError
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
 from pkwbus.protocol.pkw.dialects import IndLayout
@@ -41,7 +42,7 @@ from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import ppo
 from pkwbus.protocol.profibus.fdl import BROADCAST, DataFrame, Status
 from pkwbus.protocol.profidrive.parameters import AXES, ParameterAddress, ParameterError, Values
-from pkwbus.protocol.serial.telegram import BlockShape, Protocol
+from pkwbus.protocol.serial.telegram import BlockShape
 from pkwbus.sim.config import SimFaults, SimTiming
 from pkwbus.sim.drives.drive import SimDrive
 from pkwbus.sim.drives.faults import Answer
@@ -63,9 +64,9 @@ MAX_ADDRESS = 125  # DP slave addresses 0-125 (126 is for commissioning, 127 bro
 
 # The parameters each dialect's drive holds, and its catalog by default.
 DRIVE_PROTOCOL = {
-    "danfoss-pcv": Protocol.FC,
-    "profidrive": Protocol.USS,
-    "hitachi-sjpb": Protocol.USS,
+    "danfoss-pcv": Bus.FC,
+    "profidrive": Bus.USS,
+    "hitachi-sjpb": Bus.USS,
 }
 DEFAULT_CATALOGS = {"danfoss-pcv": "danfoss-fc", "profidrive": "siemens-g120", "hitachi-sjpb": None}
 # Ident numbers the simulated slaves report (a real drive's is in its GSD file).
@@ -351,7 +352,7 @@ def _with_dead(faults: DpFaults, dead: frozenset[int]) -> DpFaults:
     return replace(faults, dead=frozenset(dead))
 
 
-def _specs(protocol: Protocol, catalog: str | None) -> tuple[ParamSpec, ...]:
+def _specs(protocol: Bus, catalog: str | None) -> tuple[ParamSpec, ...]:
     if catalog is not None:
         from pkwbus.sim.drives.catalogs import specs_from_catalog
 

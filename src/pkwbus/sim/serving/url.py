@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from typing import Final
 from urllib.parse import parse_qsl, urlsplit
 
-from pkwbus import durations, limits
-from pkwbus.durations import DurationRange, parse_duration
-from pkwbus.protocol.serial.telegram import Protocol
+from pkwbus.notation import durations, limits
+from pkwbus.notation.durations import DurationRange, parse_duration
+from pkwbus.protocol.buses import Bus
 
 __all__ = ["KEYPAD_EVERY", "SimPort", "parse_sim_port"]
 
@@ -31,7 +31,7 @@ class SimPort:
     a setting changed at its keypad (None: never).
     """
 
-    protocol: Protocol
+    protocol: Bus
     drives: tuple[int, ...]
     response_delay: float | None = None
     refuse_descriptions: tuple[int, ...] = ()
@@ -44,7 +44,7 @@ def parse_sim_port(url: str) -> SimPort:
     if parts.scheme != "sim" or parts.path not in ("", "/") or parts.fragment:
         raise ValueError(f"{url!r} is not sim://fc?drives=1,2 or sim://uss?drives=...")
     try:
-        protocol = Protocol(parts.netloc.lower())
+        protocol = Bus(parts.netloc.lower())
     except ValueError:
         raise ValueError(f"{url!r}: simulated protocol must be fc or uss") from None
     options = _sim_options(url, parts.query)

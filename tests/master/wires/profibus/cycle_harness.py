@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 
 from pkwbus.link import PortError
 from pkwbus.master.carriers import SlotCarrier
-from pkwbus.master.planning.answers import PkwAnswer
+from pkwbus.master.planning.answers import Reply
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import LineFailed, Outcome, TimedOut
 from pkwbus.master.wires.profibus.cycle import IDLE_STEP, CycleEvent, SlaveCycle, SlaveLocked
@@ -111,6 +111,7 @@ async def run_dp_job(
     loop = asyncio.get_running_loop()
     # The job judged by the one rule of every bus: the master's PKW transaction.
     carrier = SlotCarrier(address, slot.ppo, slot.dialect)
+    carrier.slot = slot  # the slot the harness cycles: the carrier takes what it read
     tx = carrier.transaction([Item(request)], retries=0, deadline=deadline)
     slot.submit(request)
     result: list[Outcome] = []
@@ -123,8 +124,8 @@ async def run_dp_job(
         if addr != address:
             return
         if isinstance(event, SlotAnswer):
-            answer = PkwAnswer(event.response, b"", None, None, 0.0, cyclic=True,
-                               earlier=event.earlier)  # fmt: skip
+            assert slot.update is not None
+            answer = Reply(address, slot.update.inputs, 0.0)  # as the DP wire hands it over
             if (outcome := tx.feed(answer, loop.time())) is not None:
                 result.append(outcome)
         elif isinstance(event, StateChanged) and event.new is SlaveState.LOCKED:

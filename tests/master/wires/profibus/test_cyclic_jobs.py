@@ -9,8 +9,8 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pkwbus.master.carriers import carrier_for
-from pkwbus.master.planning.answers import PkwAnswer
+from pkwbus.master.carriers import SlotCarrier, carrier_for
+from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.transaction import PkwTransaction
@@ -18,7 +18,6 @@ from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.profibus.dp import ppo
-from pkwbus.protocol.profibus.dp.ppo import PkwSlot
 from tests.protocol.profibus.test_ppo import IDLE, PCV, PPO1, pkw_of, ppo_read, value
 
 TARGET = DriveTarget.create("profibus", 8, dialect_name="danfoss-pcv")
@@ -28,25 +27,25 @@ class Job:
     """A slot and the transaction of its job, fed one PPO-read a cycle."""
 
     def __init__(self, request: pkw.PkwRequest, deadline: float = 10.0) -> None:
-        self.slot = PkwSlot(PPO1, PCV)
-        tx = carrier_for(TARGET).transaction([Item(request)], retries=2, deadline=deadline)
+        carrier = carrier_for(TARGET)
+        assert isinstance(carrier, SlotCarrier) and carrier.ppo is PPO1
+        self.slot = carrier.new_slot()
+        tx = carrier.transaction([Item(request)], retries=2, deadline=deadline)
         assert isinstance(tx, PkwTransaction)
         self.tx = tx
         self.slot.submit(request)
 
     def cycle(self, data: bytes, now: float) -> Outcome | None:
         update = self.slot.feed(data)
-        if update.answer is None:
-            return self.tx.feed(TimedOutAnswer, now) if now >= self.tx.deadline else None
-        answer = PkwAnswer(update.answer.response, b"", None, None, 0.001, cyclic=True,
-                           earlier=update.answer.earlier)  # fmt: skip
-        outcome = self.tx.feed(answer, now)
+        if update.answer is None:  # the wire ends a job whose deadline passed
+            return self.tx.feed(PAST_DEADLINE, now) if now >= self.tx.deadline else None
+        outcome = self.tx.feed(Reply(8, data, 0.001), now)  # as the DP wire hands it over
         if outcome is not None:
             self.slot.finish()
         return outcome
 
 
-TimedOutAnswer = PkwAnswer(pkw.NoResponse(0, 0, 0), b"", None, None, 0.0, cyclic=True)
+PAST_DEADLINE = Failure(ErrorKind.TIMEOUT, "no matching answer within the deadline")
 
 
 def test_the_request_goes_on_until_the_matching_answer_and_no_retry_is_counted() -> None:

@@ -10,14 +10,15 @@ from typing import Any
 import pytest
 
 from pkwbus.link import PortSettings
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.answers import ErrorKind, Failure
 from pkwbus.master.planning.outcomes import Answered, LineFailed, Rejected, TimedOut
 from pkwbus.master.target import DriveTarget
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol import pkw
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.pkw.dialects import IndLayout
 from pkwbus.protocol.pzd import takes_control
-from pkwbus.protocol.serial.telegram import Protocol
 from pkwbus.protocol.values import Scaling, ValueType, encode_value
 from pkwbus.sim import SimFaults, SimTiming
 from tests.master.conftest import make_sim, open_port, run_job, serve
@@ -207,7 +208,7 @@ async def test_the_port_vanishes_mid_exchange_and_comes_back(end: str, tmp_path:
     )
     port = server.url if end == "tcp" else server.path
     settings = PortSettings(port, reopen_initial=0.05, reopen_cap=0.2)
-    line = TelegramPort(settings, Protocol.FC, timeout=1.0)
+    line = TelegramPort(settings, Bus.FC, timeout=1.0)
     await line.open()
     try:
         job = asyncio.create_task(run_job(line, target, pkw.read(target.dialect, 341)))
@@ -235,7 +236,7 @@ async def test_a_foreign_telegram_before_the_answer_is_not_taken_for_it() -> Non
     sim = make_sim("fc", [1, 2])
     target = DriveTarget.create("fc", 1)
     other = DriveTarget.create("fc", 2)
-    stray = sim.handle(other.telegram(pkw.read(other.dialect, 341)))
+    stray = sim.handle(SerialCarrier(other).telegram(pkw.read(other.dialect, 341)))
     assert stray is not None
 
     async def relay(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -262,7 +263,10 @@ async def test_only_foreign_answers_end_as_an_address_error() -> None:
     sim = make_sim("fc", [1], faults=SimFaults(wrong_address=1.0))
     target = DriveTarget.create("fc", 1)
     async with serve(sim, "tcp") as port, open_port(port, "fc", timeout=0.05) as (line, _):
-        result = await line.exchange(target.adr, target.telegram(pkw.read(target.dialect, 341)))
+        result = await line.exchange(
+            SerialCarrier(target).address,
+            SerialCarrier(target).telegram(pkw.read(target.dialect, 341)),
+        )
     assert isinstance(result, Failure) and result.kind is ErrorKind.ADDRESS
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
+from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.answers import ExchangeResult, Reply
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
@@ -11,7 +12,7 @@ from tests.master.conftest import make_sim, open_port, serve
 
 
 def _telegram(target: DriveTarget) -> bytes:
-    return target.telegram(pkw.read(target.dialect, 1613))
+    return SerialCarrier(target).telegram(pkw.read(target.dialect, 1613))
 
 
 async def test_an_exchange_runs_in_callbacks_and_hands_its_result_over() -> None:
@@ -19,10 +20,10 @@ async def test_an_exchange_runs_in_callbacks_and_hands_its_result_over() -> None
     target = DriveTarget.create("fc", 1)
     async with serve(sim, "pty") as port, open_port(port, "fc") as (line, trace):
         got: asyncio.Future[ExchangeResult] = asyncio.get_running_loop().create_future()
-        line.send(target.adr, _telegram(target), got.set_result)
+        line.send(SerialCarrier(target).address, _telegram(target), got.set_result)
         assert line.busy
         result = await asyncio.wait_for(got, 2.0)
-        assert isinstance(result, Reply) and result.adr == target.adr
+        assert isinstance(result, Reply) and result.adr == SerialCarrier(target).address
         assert not line.busy
         assert trace.tx == [_telegram(target)]
 
@@ -36,11 +37,11 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
     async with serve(sim, "pty") as port, open_port(port, "fc", pause=0.004) as (line, trace):
         loop = asyncio.get_running_loop()
         pause = line.link.settings.start_pause
-        assert isinstance(await line.exchange(target.adr, telegram), Reply)
+        assert isinstance(await line.exchange(SerialCarrier(target).address, telegram), Reply)
         answered = loop.time()
         # at once after the answer: the request waits for the pause
         got: asyncio.Future[ExchangeResult] = loop.create_future()
-        line.send(target.adr, telegram, got.set_result)
+        line.send(SerialCarrier(target).address, telegram, got.set_result)
         assert len(trace.tx) == 1
         sent_at: list[float] = []
         real_trace = line.trace
@@ -57,7 +58,7 @@ async def test_the_pause_counts_from_the_last_byte_and_preparation_uses_it_up() 
         # preparation longer than the pause: no wait is left, the request goes out at once
         await asyncio.sleep(2 * pause)
         got = loop.create_future()
-        line.send(target.adr, telegram, got.set_result)
+        line.send(SerialCarrier(target).address, telegram, got.set_result)
         assert len(trace.tx) == 3
         assert isinstance(await asyncio.wait_for(got, 2.0), Reply)
 
@@ -77,10 +78,10 @@ async def test_input_is_discarded_only_when_stray_bytes_arrived() -> None:
 
         line.link._discard_input = count  # type: ignore[method-assign]
         for _ in range(5):
-            assert isinstance(await line.exchange(target.adr, telegram), Reply)
+            assert isinstance(await line.exchange(SerialCarrier(target).address, telegram), Reply)
         clean = flushes
         line._on_data(b"\x00\x01")  # bytes nobody asked for, between exchanges
-        assert isinstance(await line.exchange(target.adr, telegram), Reply)
-        assert isinstance(await line.exchange(target.adr, telegram), Reply)
+        assert isinstance(await line.exchange(SerialCarrier(target).address, telegram), Reply)
+        assert isinstance(await line.exchange(SerialCarrier(target).address, telegram), Reply)
     assert clean <= 1  # at most the first request after opening
     assert flushes == clean + 1

@@ -6,10 +6,12 @@ Every cycle sends one Data_Exchange (or start-up request) to each slave
 slot is idle gets the next job the planner gives it alone
 (:meth:`Planner.next_for`: writes, on-demand reads, due polls), so the jobs of
 different slaves run in parallel and a lagging slave delays only itself.
-Every answer the slot gets while it carries the job goes to the planner
-decoded once (a :class:`~pkwbus.master.planning.answers.PkwAnswer`,
-``cyclic``): the job's transaction judges it, as on every bus; a job whose
-deadline passes ends as timed out. A job that ended leaves the slot to AK 0.
+Every PPO-read that comes while the slot carries the job goes to the planner
+as it came (a :class:`~pkwbus.master.planning.answers.Reply`), its PKW words
+decoded once by the slot and taken by the job's carrier
+(:class:`~pkwbus.master.carriers.SlotCarrier`): the job's transaction judges
+it, as on every bus; a job whose deadline passes ends as timed out. A job
+that ended leaves the slot to AK 0.
 
 A DP-V1 slave whose parameters go through PROFIdrive data record 47 (its
 carrier a :class:`~pkwbus.master.carriers.RecordCarrier`) has no PKW slot:
@@ -34,7 +36,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from pkwbus.master.carriers import RecordCarrier
+from pkwbus.master.carriers import RecordCarrier, SlotCarrier
 from pkwbus.master.events import (
     Event,
     Exchanged,
@@ -43,7 +45,7 @@ from pkwbus.master.events import (
     SlaveSilent,
     SlaveStateChanged,
 )
-from pkwbus.master.planning.answers import ErrorKind, Failure, PkwAnswer, Reply
+from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
 from pkwbus.master.planning.plan import DriveSpec, Idle, StatusWord
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.planning.transaction import PkwTransaction
@@ -105,11 +107,12 @@ class SlaveSpec:
         return carrier if isinstance(carrier, RecordCarrier) else None
 
     def slot(self) -> PkwSlot | None:
-        """Its PKW slot: none on a PPO without PKW, or where parameters go through
-        data record 47 (the PKW words then stay at AK 0)."""
-        if not self.ppo.has_pkw or self.record is not None:
+        """Its PKW slot afresh, its carrier's: none on a PPO without PKW, or where
+        parameters go through data record 47 (the PKW words then stay at AK 0)."""
+        carrier = self.spec.carrier
+        if not self.ppo.has_pkw or not isinstance(carrier, SlotCarrier):
             return None
-        return PkwSlot(self.ppo, self.spec.carrier.dialect)
+        return carrier.new_slot()
 
 
 class CycleWire:
@@ -164,7 +167,7 @@ class CycleWire:
         run = self.cycle.runs.get(spec.setup.address)
         if out and run is not None and run.slave.state is not SlaveState.OFFLINE:
             self._events.append(SlaveStateChanged(drive, SlaveState.OFFLINE))  # sent nothing
-        self.cycle.leave_out(spec.setup, spec.slot(), out)
+        self.cycle.leave_out(spec.setup, None if out else spec.slot(), out)
         send = planner.sending(drive)
         if out and send is not None and planner.drive(drive).busy:
             planner.exchanged(send, Failure(ErrorKind.TIMEOUT, "left out: in maintenance"), now)
@@ -246,15 +249,17 @@ class CycleWire:
                 error = ErrorKind.UNEXPECTED
             events.append(Exchanged(name, error, busy, answered))
             self._readable(name, garbled)
-            words = pzd_words(self._specs[address].ppo, event.data)
+            slot = run.slot  # a slot cut the PZD as it read the PPO; else they are cut here
+            if slot is None:
+                words = pzd_words(self._specs[address].ppo, event.data)
+            else:
+                words = slot.update.pzd if slot.update is not None else ()
             if words:
                 events.append(StatusWord(name, words[0], words[1] if len(words) > 1 else None))
         elif isinstance(event, SlotGarbled):
             self._garbled[name] = event
             if event.request is not None and planner.sending(name) is not None:
-                unreadable = PkwAnswer(None, b"", None, None, answered, cyclic=True,
-                                       why=event.why)  # fmt: skip
-                self._done(planner, run, unreadable, now)
+                self._read(planner, run, now, answered)
         elif isinstance(event, StartupAnswered):
             events.append(Exchanged(name, None, busy, answered))
         elif isinstance(event, Failed):
@@ -275,9 +280,7 @@ class CycleWire:
             events.append(SlaveDiagnosed(name, event.diagnosis))
         elif isinstance(event, SlotAnswer):
             if planner.sending(name) is not None:
-                answer = PkwAnswer(event.response, b"", None, None, answered, cyclic=True,
-                                   earlier=event.earlier)  # fmt: skip
-                self._done(planner, run, answer, now)
+                self._read(planner, run, now, answered)
         elif isinstance(event, TransferEnded):
             self._transfer_ended(planner, name, address, event, now, answered)
 
@@ -298,9 +301,12 @@ class CycleWire:
             result = Failure(kind, end.why)
         planner.exchanged(send, result, now)
 
-    def _done(
-        self, planner: Planner, run: SlaveRun, result: PkwAnswer | Failure, now: float
-    ) -> None:
+    def _read(self, planner: Planner, run: SlaveRun, now: float, answered: float) -> None:
+        """The PPO-read the slot just took, as it came, to the job it carries."""
+        assert run.slot is not None and run.slot.update is not None
+        self._done(planner, run, Reply(run.address, run.slot.update.inputs, answered), now)
+
+    def _done(self, planner: Planner, run: SlaveRun, result: Reply | Failure, now: float) -> None:
         """Give ``result`` to the job in the slave's slot; an ended job leaves the slot."""
         name = self._names[run.address]
         send, tx = planner.sending(name), planner.active(name)

@@ -28,12 +28,12 @@ from collections.abc import Callable
 from pkwbus.link import Fence, Link, LinkState, PortError, PortSettings
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.master.planning.plan import Send
+from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.serial.telegram import (
     BadChecksum,
     BadLength,
     Deframer,
     DeframerEvent,
-    Protocol,
     Telegram,
     Truncated,
     fc_lengths,
@@ -64,7 +64,7 @@ class TelegramPort:
     def __init__(
         self,
         settings: PortSettings,
-        protocol: Protocol,
+        protocol: Bus,
         *,
         timeout: float = 0.1,
         inter_char_timeout: float | None = None,
@@ -79,7 +79,7 @@ class TelegramPort:
         self.trace = trace
         self.link = Link(settings, receiver=self._on_data, on_lost=self._on_lost, fence=fence)
         self.link.reconnect.add_listener(self._on_port)
-        lengths = fc_lengths() if protocol is Protocol.FC else uss_lengths()
+        lengths = fc_lengths() if protocol is Bus.FC else uss_lengths()
         self._deframer = Deframer(lengths)
         self._lock = asyncio.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None

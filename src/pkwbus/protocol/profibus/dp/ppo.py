@@ -214,13 +214,16 @@ class SlotGarbled:
 
 @dataclass(frozen=True, slots=True)
 class SlotUpdate:
-    """What one PPO-read brought: the decoded read (None when undecodable), the answer to
-    the request the slot carries (None: none went out, or it was AK 0 waiting), and why
-    the read could not be decoded."""
+    """What one PPO-read brought: its bytes, the decoded read (None when undecodable), the
+    answer to the request the slot carries (None: none went out, or it was AK 0 waiting),
+    why the read could not be decoded, and its PZD words (cut once, here; empty when the
+    read is not of the PPO's length)."""
 
+    inputs: bytes
     read: PpoRead | None
     answer: SlotAnswer | None
     garbled: SlotGarbled | None = None
+    pzd: tuple[int, ...] = ()
 
     @property
     def error(self) -> str:
@@ -245,6 +248,7 @@ class PkwSlot:
         self.dialect = dia
         self.profile = profile or DEFAULT_PROFILES[dia.name]
         self.request: pkw.PkwRequest | None = None
+        self.update: SlotUpdate | None = None  # what the latest PPO-read brought
         self.cycles = 0  # PPO-reads since the request was submitted
         self._idle_seen = False
         self._idle_cycles = 0
@@ -282,7 +286,12 @@ class PkwSlot:
         return encode_ppo_write(self.ppo, self.dialect, self._sending())
 
     def feed(self, inputs: bytes) -> SlotUpdate:
-        """Take the PPO-read answering the last :meth:`outputs`."""
+        """Take the PPO-read answering the last :meth:`outputs`, decoded once: what it
+        brought is also kept as :attr:`update` until the next."""
+        self.update = update = self._feed(inputs)
+        return update
+
+    def _feed(self, inputs: bytes) -> SlotUpdate:
         sent = self._sending()
         if self.request is not None:
             self.cycles += 1
@@ -292,14 +301,17 @@ class PkwSlot:
             if sent is None and self.request is not None:
                 self._idle_cycles += 1  # not AK 0: the wait for it runs out as for any other
             why = f"its PPO-read is no PPO {self.ppo.number} answer of the {self.dialect.name}"
-            return SlotUpdate(None, None, SlotGarbled(sent, f"{why} dialect ({exc})"))
-        response = read.pkw
+            garbled = SlotGarbled(sent, f"{why} dialect ({exc})")
+            words = pzd_words(self.ppo, inputs) if len(inputs) == self.ppo.length else ()
+            return SlotUpdate(inputs, None, None, garbled, words)
+        response, words = read.pkw, read.pzd
         if sent is None:
             if isinstance(response, pkw.NoResponse):
                 self._idle_seen = True
             else:
                 self._idle_cycles += 1
-            return SlotUpdate(read, None)
+            return SlotUpdate(inputs, read, None, pzd=words)
         if response is None:
-            return SlotUpdate(read, None)
-        return SlotUpdate(read, SlotAnswer(sent, response, not self._idle_seen, read))
+            return SlotUpdate(inputs, read, None, pzd=words)
+        answer = SlotAnswer(sent, response, not self._idle_seen, read)
+        return SlotUpdate(inputs, read, answer, pzd=words)

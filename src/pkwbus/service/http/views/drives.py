@@ -21,7 +21,8 @@ from pydantic_core import to_json
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.planning.plan import PollSpec
-from pkwbus.master.snapshot import Reading, ReadingKey
+from pkwbus.master.reading import Reading
+from pkwbus.master.snapshot import ReadingKey
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReading
 from pkwbus.service.http.views import (

@@ -17,7 +17,7 @@ import ipaddress
 import re
 from typing import Final
 
-from pkwbus.problems import short
+from pkwbus.notation.problems import short
 
 __all__ = ["ANY_FREE_PORT", "MAX_TCP_PORT", "check_host", "parse_host_port"]
 

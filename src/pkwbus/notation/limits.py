@@ -1,6 +1,6 @@
 """The ranges of the whole numbers a user gives: command line, configuration, simulator.
 
-Durations have their own table in :mod:`pkwbus.durations`. Bus addresses and
+Durations have their own table in :mod:`pkwbus.notation.durations`. Bus addresses and
 PKW/PZD lengths depend on the protocol and dialect; they are checked where
 the drive is built (:meth:`pkwbus.master.target.DriveTarget.create`), with
 :data:`MAX_ADDRESS` only as the bound no protocol goes beyond.
@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from typing import Final
 
-from pkwbus.hostport import MAX_TCP_PORT, parse_host_port
+from pkwbus.notation.hostport import MAX_TCP_PORT, parse_host_port
 
 __all__ = [
     "BAUDRATES",
@@ -86,7 +86,7 @@ def check_baudrate(value: int) -> int:
 
 def check_port_url(url: str) -> str:
     """A ``socket://`` or ``rfc2217://`` port needs HOST:PORT with a TCP port 1-65535
-    (:func:`pkwbus.hostport.parse_host_port`); ValueError otherwise.
+    (:func:`pkwbus.notation.hostport.parse_host_port`); ValueError otherwise.
 
     Other ports (device paths, ``loop://``, ...) pass unchanged.
     """
