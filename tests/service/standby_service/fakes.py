@@ -14,7 +14,8 @@ from typing import Any
 
 import httpx
 
-from pkwbus.protocol.serial.telegram import Telegram, decode_adr
+from pkwbus.protocol.buses import decode_adr
+from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.service.assembly.build import Parts, assemble
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.assembly.standby_lines import StandbyLines
