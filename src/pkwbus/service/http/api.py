@@ -50,6 +50,7 @@ from pkwbus.service.http.parameters import (
     WriteOrder,
 )
 from pkwbus.service.http.reload import Reloading, Reloads
+from pkwbus.service.http.scrape import ScrapePath
 from pkwbus.service.http.settings_routes import add_settings_routes
 from pkwbus.service.http.view_routes import add_view_routes
 from pkwbus.service.http.views import (
@@ -258,6 +259,7 @@ def build_api(
         raise refusal
 
     app.add_middleware(BodyLimit, limit=MAX_BODY, large=("/restore", MAX_BACKUP_BODY))
+    app.add_middleware(ScrapePath, registry=runtime.registry)  # GET /metrics, before routing
 
     @app.get(
         "/api/v1/drives/{drive}/parameters/{parameter}",

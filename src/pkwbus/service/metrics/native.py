@@ -25,6 +25,7 @@ from typing import Any
 from prometheus_client import Counter, Gauge, Histogram
 from prometheus_client import metrics as client_metrics
 from prometheus_client.registry import Collector
+from prometheus_client.values import MutexValue
 
 from pkwbus.service.metrics.textformat import format_value, head, header
 
@@ -47,6 +48,12 @@ class _Shown:
         self.heads = heads
         self.values: tuple[float, ...] | None = None  # a histogram's: its buckets and sum
         self.text = b""
+
+
+def _given_a_function(item: tuple[tuple[str, ...], Any]) -> bool:
+    """Whether a gauge's series was given a function (``set_function``): its samples are
+    the function's."""
+    return "_child_samples" in vars(item[1])
 
 
 def _same(old: tuple[float, ...] | None, new: tuple[float, ...]) -> bool:
@@ -99,15 +106,24 @@ class NativeFamily:
                 items = list(metric._metrics.items())
         else:
             items = [((), metric)]
-        if self._kind == "gauge" and any("_child_samples" in vars(c) for _, c in items):
+        if self._kind == "gauge" and any(map(_given_a_function, items)):
             return None  # a gauge given a function: its samples are the function's
         if self._kind == "histogram":
             numbers = [(*(b.get() for b in c._buckets), c._sum.get()) for _, c in items]
             now = array("d", [v for n in numbers for v in n]).tobytes()
         else:
-            numbers = [(c._value.get(),) for _, c in items]
-            now = array("d", [n[0] for n in numbers]).tobytes()
-        # The same series with the same values, bit for bit: the same text.
+            # Each series' value as its ``get()`` reads it (a float read whole), without a
+            # lock taken and released per series.
+            plain = [c._value for _, c in items]
+            if all(type(v) is MutexValue for v in plain):
+                singles = [v._value for v in plain]
+            else:
+                singles = [v.get() for v in plain]
+            now = array("d", singles).tobytes()
+            # The same series with the same values, bit for bit: the same text.
+            if self._text is not None and now == self._values and items == self._items:
+                return self._text
+            numbers = [(v,) for v in singles]
         if self._text is not None and now == self._values and items == self._items:
             return self._text
         before = self._shown

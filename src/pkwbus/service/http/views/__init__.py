@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime
 
+from pkwbus.catalog.description import ParameterKey
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.history.store import DriveEvent
 from pkwbus.service.history.times import iso_time
@@ -18,7 +19,7 @@ from pkwbus.service.http.models import (
     SlaveView,
     WritableView,
 )
-from pkwbus.service.runtime import Runtime
+from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.service.writes.checks import ApiError
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "parse_since",
     "slave_view",
     "trend_views",
+    "writable_refs",
     "writable_views",
 ]
 
@@ -86,12 +88,8 @@ def alarm_views(runtime: Runtime, name: str) -> list[AlarmView]:
 def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
     """The drive's writable parameters, their limits as described now and the latest value
     the drive confirmed."""
-    entry = runtime.drives[name]
     views = []
-    for (pnu, index), known in sorted(entry.parameters.configured.items(), key=str):
-        if not known.writable or (index is not None and index < 0):
-            continue
-        ref = entry.canonical(ParameterRef(pnu, index, ""))
+    for pnu, index, ref in writable_refs(runtime.drives[name]):
         fmt = runtime.format_of(name, ref)
         latest = runtime.snapshot.latest.get((name, pnu, index or 0))
         views.append(
@@ -103,6 +101,35 @@ def writable_views(runtime: Runtime, name: str) -> list[WritableView]:
             )
         )  # fmt: skip
     return views
+
+
+def writable_refs(entry: DriveEntry) -> tuple[tuple[int, int | None, ParameterRef], ...]:
+    """The drive's writable parameters as (PNU, index, its one name), in the order of their
+    keys' text; worked out once per entry (an entry never changes: a reload makes a new
+    one)."""
+    kept = _writable.get(entry.name)
+    if kept is not None and kept[0] is entry:
+        return kept[1]
+    found = tuple(
+        (pnu, index, entry.canonical(ParameterRef(pnu, index, "")))
+        for (pnu, index), known in sorted(entry.parameters.configured.items(), key=_key_text)
+        if known.writable and (index is None or index >= 0)
+    )
+    if len(_writable) > _WRITABLE_KEPT:
+        _writable.clear()
+    _writable[entry.name] = (entry, found)
+    return found
+
+
+def _key_text(item: tuple[ParameterKey, object]) -> str:
+    """The sort key of a configured parameter: its key's text (the order ``str`` of the
+    whole item gave, without writing out the description each time)."""
+    return str(item[0])
+
+
+# Each drive's writable parameters, by name: (the entry they are of, the parameters).
+_writable: dict[str, tuple[DriveEntry, tuple[tuple[int, int | None, ParameterRef], ...]]] = {}
+_WRITABLE_KEPT = 100_000  # drives: more only after many reloads that renamed drives
 
 
 def slave_view(runtime: Runtime, name: str) -> SlaveView | None:

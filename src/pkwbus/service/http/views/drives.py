@@ -3,8 +3,11 @@
 A drive's view is made from the read model (the snapshot) by walking that
 drive's own polls, never all readings, and kept as JSON until something of the
 drive changes (:class:`~pkwbus.master.snapshot.Changes`): an answer joins the
-kept pieces and makes only those of the drives that changed. A large answer
-is made in slices, the event loop free between them. ``changed_since`` gives
+kept pieces and makes only those of the drives that changed. A changed drive's
+view is made again from three kept parts (its values, each value's piece made
+again only when its reading or decoding changed; its head; its tail), each part
+made again only when what it shows changed. A large answer is made in slices,
+the event loop free between them, and joined in one copy. ``changed_since`` gives
 only the drives changed after the token of an earlier answer; ``view=overview``
 one short row per drive, made afresh at each answer (its age moves).
 """
@@ -15,6 +18,8 @@ import asyncio
 import time
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from itertools import compress
+from operator import is_not
 from typing import Any, Literal
 
 from pydantic_core import to_json
@@ -22,15 +27,16 @@ from pydantic_core import to_json
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.reading import Reading
-from pkwbus.master.snapshot import ReadingKey
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReading
 from pkwbus.service.http.views import (
     alarm_views,
     maintenance_view,
     slave_view,
+    writable_refs,
     writable_views,
 )
+from pkwbus.service.http.views.pieces import ValuesMade, head_json, json_list
 from pkwbus.service.http.views.readable import duration, readable, time_unit
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.service.writes.checks import ApiError
@@ -165,10 +171,13 @@ class DriveViews:
         # drive -> (its change number, its entry, swept, the JSON of its view)
         self._kept: dict[str, tuple[int, DriveEntry, bool, bytes]] = {}
         self.made = 0  # views made (not taken from what was kept): for tests and benches
-        # Each value's JSON piece: (its reading, its decoding, the entry, its source, piece).
-        self._values: dict[ReadingKey, tuple[Reading, ParameterDescription, DriveEntry, str,
-                                             bytes]] = {}  # fmt: skip
+        # Each drive's values as they were last made.
+        self._plans: dict[str, ValuesMade] = {}
         self._places: dict[str, int] = {}
+        # Each drive's head: (its entry, up, status word, JSON); its tail: (its entry, what
+        # it shows, JSON).
+        self._heads: dict[str, tuple[DriveEntry, bool, int | None, bytes]] = {}
+        self._tails: dict[str, tuple[DriveEntry, tuple[object, ...], bytes]] = {}
 
     def select(self, chosen: Selection) -> tuple[list[str], str]:
         """The drives the answer is of, in the configuration's order, and the token that
@@ -207,7 +216,7 @@ class DriveViews:
                 if name in self.runtime.drives:  # a reload between slices may remove one
                     pieces.append(self._json(name))
         self._drop_gone()
-        return b"[" + b",".join(pieces) + b"]"
+        return json_list(pieces)
 
     async def overview(self, names: Sequence[str]) -> bytes:
         """The JSON list of the drives' overview rows."""
@@ -219,7 +228,7 @@ class DriveViews:
             for name in names[start : start + 4 * SLICE]:
                 if name in self.runtime.drives:
                     pieces.append(_ROW.to_json(overview_row(self.runtime, name, now)))
-        return b"[" + b",".join(pieces) + b"]"
+        return json_list(pieces)
 
     def _order(self, needed: Iterable[str]) -> dict[str, int]:
         """Each drive's place in the configuration (made again when a drive is not in it:
@@ -243,39 +252,108 @@ class DriveViews:
         return made
 
     def _render(self, name: str, entry: DriveEntry, swept: bool) -> bytes:
-        """The JSON of the drive's view, as :func:`drive_view` gives it, each value's piece
-        kept until its reading, its decoding or the drive's entry changes."""
-        runtime, snap, kept = self.runtime, self.runtime.snapshot, self._values
-        pieces = []
-        for polled in _polled(runtime, entry):
-            poll, reading, fmt, source, _ = polled
-            key = (name, poll.parameter, poll.index)
-            was = kept.get(key)
-            if was is not None and was[:3] == (reading, fmt, entry) and was[3] == source:
-                pieces.append(was[4])
-                continue
-            piece = to_json(_reading_fields(runtime, *polled), inf_nan_mode="null")
-            kept[key] = (reading, fmt, entry, source, piece)
-            pieces.append(piece)
+        """The JSON of the drive's view, as :func:`drive_view` gives it, in three kept parts:
+        each value's piece until its reading, its decoding or the drive's entry changes; the
+        head (where the drive is, up, its status word) until one of them changes; the tail
+        (counts, alarms, writable parameters, DP, maintenance, settings) until what it
+        shows changes."""
+        runtime, snap = self.runtime, self.runtime.snapshot
+        values = self._values_json(name, entry)
         state, counts = snap.drives.get(name), snap.counts.get(name)
-        word = state.status_word if state else None
-        head = {
-            "name": name, "line": entry.line, "protocol": entry.target.protocol.value,
-            "address": entry.target.address, "dialect": entry.target.dialect.name,
-            "up": state.up if state else True, "status_word": word,
-            "status": status_bits(word, entry.target.profile) if word is not None else {},
-        }  # fmt: skip
+        up, word = (state.up, state.status_word) if state is not None else (True, None)
+        head = self._heads.get(name)
+        if head is None or head[0] is not entry or head[1] != up or head[2] != word:
+            head = (entry, up, word, head_json(name, entry, up, word))
+            self._heads[name] = head
+        faults, errors = (counts.faults, counts.errors) if counts is not None else (0, 0)
+        board = runtime.alarms
+        active = tuple(board.active(name)) if board is not None else ()
+        shown = (faults, errors, active, self._writable_now(name, entry),
+                 snap.slaves.get(name), snap.maintenance.get(name), swept)  # fmt: skip
+        tail = self._tails.get(name)
+        if tail is None or tail[0] is not entry or tail[1] != shown:
+            tail = (entry, shown, self._tail_json(name, faults, errors, swept))
+            self._tails[name] = tail
+        return b"".join((head[3], b'"values":[', values, b"],", tail[2]))
+
+    def _values_json(self, name: str, entry: DriveEntry) -> bytes:
+        """The JSON of the drive's polled values that landed (comma-separated), in the order
+        of its polls: kept whole while none of its readings and decodings changed (each
+        reading looked at once), a value's piece made again only when its reading, its
+        decoding or the entry changed."""
+        snap = self.runtime.snapshot
+        plan = self._plans.get(name)
+        if plan is None or plan.entry is not entry:
+            plan = self._plans[name] = ValuesMade(entry)
+        decoding = snap.decoding.get(name)
+        formats = decoding.formats if decoding is not None else {}
+        sources = decoding.sources if decoding is not None else {}
+        readings = list(map(snap.readings.get, plan.keys))
+        fmts = list(map(formats.get, plan.ats))
+        told = list(map(sources.get, plan.parameters))
+        if fmts == plan.fmts and told == plan.told:
+            if readings == plan.readings:
+                return plan.json
+            # only the readings that are other objects than before
+            changed: Iterable[int] = compress(
+                range(len(readings)), map(is_not, readings, plan.readings)
+            )
+        else:
+            changed = range(len(readings))
+        runtime, kept, texts = self.runtime, plan.pieces, plan.texts
+        for i in changed:
+            reading = readings[i]
+            if reading is None:
+                texts[i] = b""
+                continue
+            fmt = fmts[i]
+            if fmt is None:
+                fmt = _NO_FORMAT
+            source = told[i] or plan.fallback[i]
+            was = kept[i]
+            if (
+                was is not None
+                and was[0] is reading
+                and (was[1] is fmt or was[1] == fmt)  # a decoding made again, the same
+                and was[2] == source
+            ):
+                texts[i] = was[3]
+                continue
+            fields = _reading_fields(runtime, entry.polls[i], reading, fmt, source, name)
+            piece = to_json(fields, inf_nan_mode="null")
+            kept[i] = (reading, fmt, source, piece)
+            texts[i] = piece
+        plan.readings, plan.fmts, plan.told = readings, fmts, told
+        plan.json = b",".join(filter(None, texts))
+        return plan.json
+
+    def _writable_now(self, name: str, entry: DriveEntry) -> tuple[object, ...]:
+        """What the drive's writable parameters show depends on: what the drive described
+        and stated of each, and the latest reading it confirmed."""
+        snap = self.runtime.snapshot
+        decoding = snap.decoding.get(name)
+        described = decoding.described if decoding is not None else {}
+        stated, latest = snap.stated, snap.latest
+        now: list[object] = []
+        for pnu, index, _ in writable_refs(entry):
+            reading = latest.get((name, pnu, index or 0))
+            now += (described.get(pnu), stated.get((name, pnu)), reading)
+        return tuple(now)
+
+    def _tail_json(self, name: str, faults: int, errors: int, swept: bool) -> bytes:
+        runtime = self.runtime
         tail = {
-            "faults": counts.faults if counts is not None else 0,
-            "telegram_errors": counts.errors if counts is not None else 0,
+            "faults": faults, "telegram_errors": errors,
             "alarms": alarm_views(runtime, name), "writable": writable_views(runtime, name),
             "dp": slave_view(runtime, name), "maintenance": maintenance_view(runtime, name),
             "settings": swept,
         }  # fmt: skip
-        values = b'"values":[' + b",".join(pieces) + b"],"
-        return to_json(head)[:-1] + b"," + values + to_json(tail, inf_nan_mode="null")[1:]
+        return to_json(tail, inf_nan_mode="null")[1:]
 
     def _drop_gone(self) -> None:
         if len(self._kept) > len(self.runtime.drives):
             for name in [n for n in self._kept if n not in self.runtime.drives]:
                 del self._kept[name]
+                self._heads.pop(name, None)
+                self._plans.pop(name, None)
+                self._tails.pop(name, None)

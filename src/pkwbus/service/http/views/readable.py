@@ -18,6 +18,7 @@ a day, hours to a tenth). That text names its unit: the unit beside the value
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from fractions import Fraction
@@ -42,8 +43,9 @@ _HOUR: Final = 3600
 _DAY: Final = 86400
 
 
+@functools.lru_cache(maxsize=256)
 def _decimals_of(factor: Fraction) -> int | None:
-    """k when ``factor`` is 10**-k (k >= 0), else None."""
+    """k when ``factor`` is 10**-k (k >= 0), else None (kept: a catalog has few scalings)."""
     k = 0
     while factor < 1 and k < 9:
         factor *= 10
