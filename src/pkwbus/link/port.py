@@ -47,6 +47,7 @@ from pkwbus.link.serialport import (
 )
 from pkwbus.link.settings import PARITIES, PortError, PortSettings, Rs485Mode
 from pkwbus.link.transport import SerialTransport, wrap_transport
+from pkwbus.waiting import wait_event
 
 __all__ = [
     "PARITIES", "Link", "LinkState", "PortError", "PortSettings", "Rs485Mode",
@@ -172,11 +173,7 @@ class Link:
                 await asyncio.sleep(wait)
             else:
                 wake.clear()
-                try:
-                    await asyncio.wait_for(wake.wait(), wait)
-                except TimeoutError:
-                    pass
-                else:
+                if await wait_event(wake, wait):
                     return False
         try:
             await self.open()

@@ -44,6 +44,7 @@ from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
+from pkwbus.waiting import wait_event
 
 __all__ = ["BATCH_EVERY", "Done", "LineRefused", "LineRunner", "Port", "Wire"]
 
@@ -290,8 +291,7 @@ class LineRunner:
         if delay <= 0:
             return
         self._wake.clear()
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._wake.wait(), delay)
+        await wait_event(self._wake, delay)
 
     # ------------------------------------------------------------ the stream
 

@@ -61,6 +61,7 @@ from pkwbus.service.history.ages import AgedKeys
 from pkwbus.service.history.store import DriveEvent, HistoryError
 from pkwbus.service.history.stream import EVENT_LABELS, EventStream
 from pkwbus.service.runtime import LineTask
+from pkwbus.waiting import wait_event
 
 __all__ = [
     "EVENT_LABELS",
@@ -210,8 +211,7 @@ class LogWatcher:
             except HistoryError as exc:
                 log.error("drive %s: %s", w.drive, exc, extra={"line": w.line, "drive": w.drive})
             w.wake.clear()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(w.wake.wait(), w.every)
+            await wait_event(w.wake, w.every)
 
     async def _look(self, w: Watched) -> None:
         reads = w.log.watch()

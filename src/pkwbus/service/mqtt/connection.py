@@ -38,6 +38,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from pkwbus.errors import PkwbusError
 from pkwbus.service.mqtt.metrics import MqttMetrics
+from pkwbus.waiting import wait_event
 
 __all__ = ["Connection", "NotConnected", "Subscription", "publish_head"]
 
@@ -262,8 +263,7 @@ class Connection:
             # Back-off with a little jitter, so a plant's services do not come back at once.
             delay = backoff * random.uniform(0.8, 1.2)
             backoff = min(backoff * 2, MAX_BACKOFF)
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._stopping.wait(), delay)
+            await wait_event(self._stopping, delay)
 
     async def _session(self, client: aiomqtt.Client) -> None:
         await client.publish(self.status_topic, "online", 1, True)

@@ -29,7 +29,6 @@ otherwise they are campaigned for anew.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import time
 from collections import Counter
@@ -43,6 +42,7 @@ from pkwbus.service.standby.keeper import LeaseKeeper
 from pkwbus.service.standby.marks import Marks
 from pkwbus.service.standby.share import Policy, Situation, share
 from pkwbus.service.standby.view import Master, View, keep_watching, master_value
+from pkwbus.waiting import wait_event
 
 __all__ = ["ORPHAN_GRACE", "RELEASE_GRACE", "Standby"]
 
@@ -56,6 +56,7 @@ RELEASE_GRACE: Final = 0.5
 ORPHAN_GRACE: Final = 0.5
 # The engine looks at its state at least this often (orphans, releases due).
 _TICK: Final = 0.2
+_STOP_WAIT: Final = 5.0  # seconds stop() waits for its tasks to end
 
 
 class Standby:
@@ -130,9 +131,10 @@ class Standby:
         self._stopped = True
         for task in self._tasks:
             task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+        if self._tasks:
+            _, stuck = await asyncio.wait(self._tasks, timeout=_STOP_WAIT)
+            for task in stuck:  # never expected: told, and the revocations go on
+                log.error("hot standby: %s did not stop within %g s", task.get_name(), _STOP_WAIT)
         self._tasks = []
         self._held.clear()
         self._held_lease.clear()
@@ -256,9 +258,8 @@ class Standby:
     # ------------------------------------------------------------------ campaigns
 
     async def _campaigning(self) -> None:
-        while True:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), _TICK)
+        while not self._stopped:
+            await wait_event(self._wake, _TICK)
             self._wake.clear()
             try:
                 await self._step()

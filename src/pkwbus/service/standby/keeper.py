@@ -17,6 +17,7 @@ from typing import Final
 
 from pkwbus.service.standby.etcd import Etcd, EtcdError, EtcdRefused
 from pkwbus.service.standby.fence import LeaseClock, renew_every, retry_every
+from pkwbus.waiting import wait_event
 
 __all__ = ["LeaseKeeper"]
 
@@ -137,8 +138,7 @@ class LeaseKeeper:
 
     async def _sleep(self, seconds: float) -> None:
         self._wake.clear()
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(self._wake.wait(), max(0.0, seconds))
+        await wait_event(self._wake, seconds)
 
     async def revoke(self) -> None:
         """The lease revoked (its keys deleted at once), best effort; forgotten here."""
