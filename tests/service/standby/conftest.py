@@ -1,6 +1,5 @@
-"""Fixtures of the hot standby engine's tests: a real etcd of one or three members on
-loopback (Debian's etcd-server; the tests skip, saying so, where it is missing), and
-engines made on it, each stopped at the end."""
+"""Fixtures of the hot standby engine's tests: engines made on the real etcd of
+tests/service/conftest.py, each stopped at the end."""
 
 from __future__ import annotations
 
@@ -8,46 +7,15 @@ import asyncio
 import time
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import pytest
 
 from pkwbus.service.config import StandbyConfig
 from pkwbus.service.standby import Standby
-from tests.service.standby_process.etcd import Etcd, etcd_binary
+from tests.service.standby_process.etcd import Etcd
 
 # Short leases keep the tests short: the fence closes lease - 1 s after a renewal.
 LEASE = 2.0
-
-
-async def started_etcd(root: Path, size: int) -> Etcd:
-    if etcd_binary() is None:
-        pytest.skip("etcd is not installed (Debian package etcd-server)")
-    server = Etcd(root, size)
-    try:
-        await server.start()
-    except BaseException:
-        server.stop()
-        raise
-    return server
-
-
-@pytest.fixture
-async def etcd(tmp_path: Path) -> AsyncIterator[Etcd]:
-    server = await started_etcd(tmp_path / "etcd", 1)
-    try:
-        yield server
-    finally:
-        server.stop()
-
-
-@pytest.fixture
-async def etcd3(tmp_path: Path) -> AsyncIterator[Etcd]:
-    server = await started_etcd(tmp_path / "etcd3", 3)
-    try:
-        yield server
-    finally:
-        server.stop()
 
 
 @dataclass

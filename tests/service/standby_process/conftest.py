@@ -1,5 +1,5 @@
-"""Fixtures of the hot standby's process tests: a real etcd (Debian's etcd-server; the tests
-skip, saying so, where it is missing), the follower line, and the group of instances."""
+"""Fixtures of the hot standby's process tests: the follower line and the group of instances
+(on the real etcd of tests/service/conftest.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from .etcd import Etcd, EtcdError, etcd_binary
+from .etcd import Etcd
 from .follower import Follower
 from .group import Group
 
@@ -25,46 +25,6 @@ async def follower() -> AsyncIterator[Follower]:
         yield line
     finally:
         await line.close()
-
-
-async def started_etcd(root: Path, size: int) -> Etcd:
-    """A running etcd of ``size`` members. Its ports are picked free before etcd binds them:
-    another test worker may take one meanwhile, so a start that fails is tried again (three
-    times in all) on new ports."""
-    if etcd_binary() is None:
-        pytest.skip("etcd is not installed (Debian package etcd-server)")
-    for attempt in range(3):
-        etcd = Etcd(root / str(attempt), size)
-        try:
-            await etcd.start()
-        except EtcdError:
-            etcd.stop()
-            if attempt == 2:
-                raise
-        except BaseException:
-            etcd.stop()
-            raise
-        else:
-            return etcd
-    raise AssertionError("unreachable")
-
-
-@pytest.fixture
-async def etcd(tmp_path: Path) -> AsyncIterator[Etcd]:
-    server = await started_etcd(tmp_path / "etcd", 1)
-    try:
-        yield server
-    finally:
-        server.stop()
-
-
-@pytest.fixture
-async def etcd3(tmp_path: Path) -> AsyncIterator[Etcd]:
-    server = await started_etcd(tmp_path / "etcd3", 3)
-    try:
-        yield server
-    finally:
-        server.stop()
 
 
 @pytest.fixture

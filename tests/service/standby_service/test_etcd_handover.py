@@ -9,13 +9,9 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import AsyncIterator
 from contextlib import AsyncExitStack
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
-
-import pytest
 
 from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.service.assembly.build import Parts, assemble
@@ -24,7 +20,7 @@ from pkwbus.service.config import parse_config
 from pkwbus.service.runtime import Runtime
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.serving.ends import TcpEnd
-from tests.service.standby_process.etcd import Etcd, etcd_binary
+from tests.service.standby_process.etcd import Etcd
 
 # Long enough that a handover by the lease's expiry (lease, then a campaign) could not pass
 # for one by the revoke: the handover must come well within it.
@@ -45,19 +41,6 @@ class Instance:
         """A value of d1 read at or after ``since`` (Unix time)."""
         reading = self.runtime.snapshot.readings.get(("d1", "16-13", 0))
         return reading is not None and reading.timestamp >= since
-
-
-@pytest.fixture
-async def etcd(tmp_path: Path) -> AsyncIterator[Etcd]:
-    """One etcd member on loopback ports, in a temp folder, killed at the end."""
-    if etcd_binary() is None:
-        pytest.skip("etcd is not installed (Debian package etcd-server)")
-    server = Etcd(tmp_path / "etcd", 1)
-    try:
-        await server.start()
-        yield server
-    finally:
-        server.stop()
 
 
 def config_text(url: str, endpoints: list[str], name: str) -> str:
