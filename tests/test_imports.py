@@ -15,10 +15,11 @@ MAY_IMPORT = {
     "protocol": {"errors"},
     "notation": {"errors"},
     "catalog": {"protocol", "notation", "errors"},
-    "link": {"protocol", "errors"},
+    # waiting: a timed wait that never loses a cancellation, under every layer like errors
+    "link": {"protocol", "errors", "waiting"},
     # master knows neither HTTP nor the command line: their exit codes and answers
     # live with the commands and the service (commands.failures, service.writes.outcomes)
-    "master": {"protocol", "catalog", "link", "errors"},
+    "master": {"protocol", "catalog", "link", "errors", "waiting"},
     "sim": {"protocol", "catalog", "notation", "pkwbus", "errors"},
 }
 
