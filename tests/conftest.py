@@ -25,3 +25,9 @@ settings.load_profile("pkwbus-ci" if os.environ.get("CI") else "pkwbus")
 
 def pytest_asyncio_loop_factories(config: pytest.Config, item: pytest.Item) -> Mapping[str, Any]:
     return {"pkwbus": new_event_loop}
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The three-minute soak (tests/soak) first: ``make test-long`` runs on two workers,
+    and the longest test started last would leave one worker idle for minutes."""
+    items.sort(key=lambda item: not item.nodeid.startswith("tests/soak/"))
