@@ -120,6 +120,10 @@ async def test_a_drive_mastered_elsewhere_answers_409_not_master() -> None:
             ("PUT", "/api/v1/drives/b1/parameters/3-41", {"value": 1}),
             ("PUT", "/api/v1/drives/b1/maintenance", {"on": True, "reason": "x"}),
             ("GET", "/api/v1/drives/b1/settings", None),
+            ("GET", "/api/v1/drives?drive=b1", None),
+            ("GET", "/api/v1/drives?line=l2", None),
+            ("GET", "/api/v1/events?drive=b1", None),
+            ("GET", "/api/v1/trends?drive=b1", None),
         ):
             r = await client.request(method, path, json=body, headers=AUTH)
             assert r.status_code == 409, (path, r.text)
@@ -138,6 +142,16 @@ async def test_a_drive_mastered_elsewhere_answers_409_not_master() -> None:
         assert r.status_code == 200, r.text
         r = await client.get("/api/v1/drives/zz/parameters/16-13")
         assert r.status_code == 404 and r.json()["error"]["kind"] == "unknown_drive"
+        for path, kind in (
+            ("/api/v1/drives?drive=zz", "unknown_drive"),
+            ("/api/v1/drives?line=zz", "unknown_line"),
+            ("/api/v1/events?drive=zz", "unknown_drive"),
+            ("/api/v1/trends?drive=zz", "unknown_drive"),
+        ):
+            r = await client.get(path)
+            assert r.status_code == 404 and r.json()["error"]["kind"] == kind, (path, r.text)
+        r = await client.get("/api/v1/drives?drive=a1")
+        assert r.status_code == 200 and [d["name"] for d in r.json()] == ["a1"], r.text
 
 
 async def test_a_standby_is_ready_with_the_lines_it_masters_up() -> None:

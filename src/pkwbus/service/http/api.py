@@ -60,7 +60,7 @@ from pkwbus.service.http.views import (
 from pkwbus.service.metrics import exposition
 from pkwbus.service.metrics.instrumentation import api_metrics
 from pkwbus.service.runtime import Runtime
-from pkwbus.service.writes.checks import MAX_DRIVE_NAME
+from pkwbus.service.writes.checks import MAX_DRIVE_NAME, mastered_elsewhere
 from pkwbus.service.writes.path import WritePath
 
 __all__ = [
@@ -320,6 +320,7 @@ def build_api(
     ) -> EventsBody:
         """The drives' own log entries, newest first."""
         if drive is not None and drive not in runtime.drives:
+            mastered_elsewhere(runtime, drive)  # its log is read by its line's master
             raise ApiError(404, "unknown_drive", f"no drive is named {drive!r}")
         after = parse_since(since)
         if runtime.history is None:

@@ -13,7 +13,7 @@ from pkwbus.service.http.models import DriveOverview, DriveView, LineView
 from pkwbus.service.http.views import line_views, trend_views
 from pkwbus.service.http.views.drives import TOKEN_HEADER, DriveViews, Selection
 from pkwbus.service.runtime import Runtime
-from pkwbus.service.writes.checks import MAX_DRIVE_NAME, ApiError
+from pkwbus.service.writes.checks import MAX_DRIVE_NAME, ApiError, mastered_elsewhere
 
 __all__ = ["add_view_routes"]
 
@@ -52,6 +52,7 @@ def add_view_routes(
         if drive is None:
             return {name: trend_views(runtime, name, now) for name in runtime.drives}
         if drive not in runtime.drives:
+            mastered_elsewhere(runtime, drive)
             raise ApiError(404, "unknown_drive", f"no drive is named {drive!r}")
         return {drive: trend_views(runtime, drive, now)}
 

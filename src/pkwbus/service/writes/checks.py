@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import hmac
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NoReturn
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.errors import PkwbusError
@@ -24,7 +24,7 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
-from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.runtime import DriveEntry, Masters, Runtime
 from pkwbus.service.writes.outcomes import http_failure
 
 __all__ = [
@@ -40,6 +40,7 @@ __all__ = [
     "described_format",
     "fit_index",
     "identified",
+    "line_mastered_elsewhere",
     "locate",
     "malformed",
     "mastered_elsewhere",
@@ -185,13 +186,25 @@ def mastered_elsewhere(runtime: Runtime, drive: str) -> None:
     if masters is None or drive in runtime.drives:
         return
     line = masters.line_of(drive)
-    if line is None:
+    if line is not None:
+        _not_master(masters, line, f"{drive} is on line {line}")
+
+
+def line_mastered_elsewhere(runtime: Runtime, line: str) -> None:
+    """409 ``not_master`` for a configured line this instance does not master now (hot
+    standby), as :func:`mastered_elsewhere` for a drive."""
+    masters = runtime.masters
+    if masters is None or line in runtime.runners or line not in masters.lines():
         return
+    _not_master(masters, line, f"line {line}")
+
+
+def _not_master(masters: Masters, line: str, what: str) -> NoReturn:
     master = masters.master_of(line)
     name, url = (master.name, master.url) if master is not None else (None, None)
     where = f"instance {name}" if name is not None else "no instance now"
     raise ApiError(
-        409, "not_master", f"{drive} is on line {line}, which {where} masters: ask there",
+        409, "not_master", f"{what}, which {where} masters: ask there",
         master=name, url=url,
     )  # fmt: skip
 

@@ -39,7 +39,7 @@ from pkwbus.service.http.views import (
 from pkwbus.service.http.views.pieces import ValuesMade, head_json, json_list
 from pkwbus.service.http.views.readable import duration, readable, time_unit
 from pkwbus.service.runtime import DriveEntry, Runtime
-from pkwbus.service.writes.checks import ApiError
+from pkwbus.service.writes.checks import ApiError, line_mastered_elsewhere, mastered_elsewhere
 
 __all__ = ["SLICE", "TOKEN_HEADER", "DriveViews", "Selection", "drive_view"]
 
@@ -181,16 +181,19 @@ class DriveViews:
 
     def select(self, chosen: Selection) -> tuple[list[str], str]:
         """The drives the answer is of, in the configuration's order, and the token that
-        marks this moment; ApiError 404 for an unknown line or drive."""
+        marks this moment; ApiError 404 for an unknown line or drive, 409 for one another
+        instance masters (hot standby)."""
         runtime = self.runtime
         changes = runtime.snapshot.changes
         token = changes.token()
         if chosen.drive is not None:
             entry = runtime.drives.get(chosen.drive)
             if entry is None:
+                mastered_elsewhere(runtime, chosen.drive)
                 raise ApiError(404, "unknown_drive", f"no drive is named {chosen.drive!r}")
             names: Iterable[str] = (chosen.drive,)
         elif chosen.line is not None and chosen.line not in runtime.runners:
+            line_mastered_elsewhere(runtime, chosen.line)
             raise ApiError(404, "unknown_line", f"no line is named {chosen.line!r}")
         else:
             names = runtime.drives
