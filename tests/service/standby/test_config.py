@@ -48,6 +48,27 @@ def test_the_name_comes_from_the_environment_else_the_host(
     assert config is not None and config.name == "node-3"
 
 
+def test_instances_sharing_one_file_advertise_each_its_own_address(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``{name}`` in ``advertise`` is the instance's name; ``PKWBUS_ADVERTISE`` gives the
+    address where the file has none (the file's wins)."""
+    section = "standby: {etcd: [http://e:2379], lease: 4s, advertise: 'http://{name}:9725'}\n"
+    for name in ("pkwbus-a", "pkwbus-b"):
+        monkeypatch.setenv("PKWBUS_INSTANCE", name)
+        config = parse_config(LINE + section).standby
+        assert config is not None and config.advertise == f"http://{name}:9725"
+    monkeypatch.setenv("PKWBUS_INSTANCE", "pod-7")
+    monkeypatch.setenv("PKWBUS_ADVERTISE", "http://{name}.pkwbus.plant:9725/")
+    config = parse_config(LINE + "standby: {etcd: [http://e:2379], lease: 4s}\n").standby
+    assert config is not None and config.advertise == "http://pod-7.pkwbus.plant:9725"
+    config = parse_config(LINE + section).standby
+    assert config is not None and config.advertise == "http://pod-7:9725"
+    monkeypatch.setenv("PKWBUS_ADVERTISE", "somewhere")
+    found = problems("standby: {etcd: [http://e:2379], lease: 4s}\n")
+    assert found == [found[0]] and found[0].startswith("standby.advertise: 'somewhere' is not")
+
+
 E = "standby: {etcd: [http://e:2379]"  # the start of a section; each case ends it
 
 
@@ -67,6 +88,12 @@ E = "standby: {etcd: [http://e:2379]"  # the start of a section; each case ends 
         (E + ", lease: 6s, prefix: /a/}", "standby.prefix: '/a/' is not a key prefix"),
         (E + ", lease: 6s, name: a/b}", "standby.name: 'a/b' is not an instance name"),
         (E + ", lease: 6s, advertise: here}", "standby.advertise: 'here' is not a URL"),
+        (
+            E + ", lease: 6s, advertise: 'http://{host}:9725'}",
+            "standby.advertise: 'http://{host}:9725' is not an address to advertise: the one"
+            " placeholder is {name}",
+        ),
+        (E + ", lease: 6s, advertise: 'http://{name:9725'}", "standby.advertise: 'http://{name:"),
         (E + ", lease: 6s, leases: 6s}", "standby.leases: is not a known setting"),
         ("standby: on", "standby: needs its settings"),
     ],

@@ -6,6 +6,7 @@ Raises :class:`~pkwbus.service.config.base.ConfigError` for a malformed ``--list
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import socket
@@ -49,6 +50,7 @@ from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
 
 __all__ = [
+    "ADVERTISE_ENV",
     "INSTANCE_ENV",
     "LINES",
     "Api",
@@ -173,6 +175,7 @@ def _what(port: str) -> str:
 
 
 INSTANCE_ENV: Final = "PKWBUS_INSTANCE"
+ADVERTISE_ENV: Final = "PKWBUS_ADVERTISE"
 
 _INSTANCE_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 _PREFIX = re.compile(r"^(/[A-Za-z0-9_.-]+)+$")
@@ -226,7 +229,17 @@ def _lease(value: object) -> float:
     return parse_duration(value, STANDBY_LEASE)
 
 
+def default_advertise() -> str | None:
+    """This instance's URL when the section gives none: ``PKWBUS_ADVERTISE``, else none."""
+    return os.environ.get(ADVERTISE_ENV) or None
+
+
 def _advertise(value: object) -> str | None:
+    if isinstance(value, str) and ("{" in value or "}" in value):
+        raise ValueError(
+            f"{short(value)} is not an address to advertise: the one placeholder is {{name}},"
+            " the instance's name (write http://{name}:9725 or http://10.0.0.5:9725)"
+        )
     return None if value is None else _url(value, "advertise")
 
 
@@ -242,7 +255,9 @@ class StandbyConfig(Model):
     lease: Annotated[float, PlainValidator(_lease)]
     prefix: str = "/pkwbus"
     name: str = Field(default_factory=default_instance_name, validate_default=True)
-    advertise: Annotated[str | None, PlainValidator(_advertise)] = None
+    advertise: Annotated[str | None, PlainValidator(_advertise)] = Field(
+        default_factory=default_advertise, validate_default=True
+    )
 
     @field_validator("prefix", mode="plain")
     @classmethod
@@ -263,6 +278,21 @@ class StandbyConfig(Model):
                 f" set `name` or {INSTANCE_ENV}"
             )
         return value
+
+    @model_validator(mode="before")
+    @classmethod
+    def _advertised(cls, data: object) -> object:
+        """``{name}`` in ``advertise`` (or ``PKWBUS_ADVERTISE``) replaced by the instance's
+        name, so that instances sharing one file each advertise their own address; any
+        other placeholder is left for the field's check to refuse."""
+        if not isinstance(data, dict):
+            return data
+        address = data.get("advertise", default_advertise())
+        name = data.get("name") or default_instance_name()
+        if isinstance(address, str) and isinstance(name, str):
+            with contextlib.suppress(KeyError, IndexError, ValueError):
+                data = {**data, "advertise": address.format(name=name)}
+        return data
 
 
 def _off(value: object) -> object:
