@@ -11,9 +11,9 @@ from tests.service.standby_process.etcd import Etcd
 from .conftest import Make, until
 
 # Longer than the other tests' lease: etcd elects a new leader within 1-2 s of its
-# default election timeout, and the renewals must reach it before the fence closes
-# (lease - margin after the last one sent: 3.75 s).
-LEASE = 5.0
+# default election timeout (longer on a loaded machine), and the renewals must reach it
+# before the fence closes (lease - margin after the last one sent: 6 s).
+LEASE = 8.0
 
 
 async def test_the_leader_member_killed_the_lines_stay_held(etcd3: Etcd, engines: Make) -> None:
@@ -28,12 +28,13 @@ async def test_the_leader_member_killed_the_lines_stay_held(etcd3: Etcd, engines
 
     leader = await etcd3.leader()
     etcd3.kill(leader)
-    end = time.monotonic() + 2 * LEASE
-    while time.monotonic() < end:  # through the election and two leases after it
+    end = time.monotonic() + LEASE + 4.0
+    while time.monotonic() < end:  # through the election and a whole lease after it
         assert {"a": a.held(), "b": b.held()} == held
         await asyncio.sleep(0.05)
     assert (len(a.told), len(b.told)) == told  # no line lost, none won
-    assert a.standby.etcd_up and b.standby.etcd_up
+    # a request may have just met the dead member or the election: up again soon
+    await until(lambda: a.standby.etcd_up and b.standby.etcd_up, 15, "etcd answers both")
     new = await etcd3.leader()
     assert new is not leader
     keys = await etcd3.keys("/test/lines/")
