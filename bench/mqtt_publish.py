@@ -34,11 +34,14 @@ import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _measure import markdown_table
 from scrape import SHARE, Plant, build
 
+from pkwbus import link
 from pkwbus.service.config.mqtt import Mqtt
 from pkwbus.service.metrics.exposition import render
 from pkwbus.service.mqtt.connection import Connection
@@ -87,7 +90,7 @@ async def drained(output: MqttOutput) -> None:
         await asyncio.sleep(0)
 
 
-async def measure(lines: int, drives: int, repeat: int) -> None:
+async def measure(lines: int, drives: int, repeat: int) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp, mosquitto(Path(tmp)) as port:
         plant: Plant = await build(lines, drives, False, tmp)
         runtime = plant.runtime
@@ -147,24 +150,26 @@ async def measure(lines: int, drives: int, repeat: int) -> None:
             per_scrape.append((time.process_time() - t0) / values)
         await output.stop()
 
-    def us(xs: list[float]) -> str:
-        xs = xs[1:]  # the first made the caches
-        return f"{statistics.median(xs) * 1e6:.2f} us (min {min(xs) * 1e6:.2f})"
+    def med(xs: list[float]) -> float:
+        return statistics.median(xs[1:]) * 1e6  # the first made the caches
 
-    print(
-        f"values: {values} ({lines} lines x {drives} drives), a landing publishes "
-        f"{published} (a third changes), a heartbeat {beat}; scrape {len(text)} bytes"
-    )
     extra = statistics.median(with_mqtt[1:]) - statistics.median(without[1:])
-    per_change = extra / statistics.median(changes[1:]) * 1e6
-    print(f"MQTT on change, CPU per value published (landing with - without): {per_change:.2f} us")
-    print(f"MQTT heartbeat, CPU per value published:                          {us(per_beat)}")
-    print(f"scrape, CPU per value in GET /metrics' render:                    {us(per_scrape)}")
-    print(
-        f"landing every value, whole outputs list, without MQTT: "
-        f"{statistics.median(without[1:]) * 1e3:.1f} ms; with: "
-        f"{statistics.median(with_mqtt[1:]) * 1e3:.1f} ms"
+    rows = [
+        {"what": "MQTT on change (landing with - without, per value published)",
+         "us": extra / statistics.median(changes[1:]) * 1e6},
+        {"what": "MQTT heartbeat, per value published", "us": med(per_beat)},
+        {"what": "scrape render, per value in GET /metrics", "us": med(per_scrape)},
+    ]  # fmt: skip
+    table = markdown_table(rows, {"what": "CPU per value", "us": "µs (median)"}, digits=2)
+    note = (
+        f"\n{values} values ({lines} lines x {drives} drives); a landing publishes "
+        f"{published} (a third changes), a heartbeat {beat}; the scrape {len(text)} bytes."
     )
+    return {"rows": rows, "table": table + note}
+
+
+def run(lines: int = 4, drives: int = 126, repeat: int = 7) -> dict[str, Any]:
+    return link.run(measure(lines, drives, repeat))
 
 
 def main() -> None:
@@ -173,7 +178,7 @@ def main() -> None:
     parser.add_argument("--drives", type=int, default=126)
     parser.add_argument("--repeat", type=int, default=7)
     args = parser.parse_args()
-    asyncio.run(measure(args.lines, args.drives, args.repeat))
+    print(run(args.lines, args.drives, args.repeat)["table"])
 
 
 if __name__ == "__main__":

@@ -24,6 +24,8 @@ import dead_drive
 import ds47
 import floor
 import line_efficiency
+import mqtt_publish
+import mqtt_throughput
 import pkw_lag
 import plant_scale
 import scale
@@ -146,6 +148,23 @@ def plan(quick: bool) -> Plan:
             "new and with every value new), and `GET /metrics` from a client in another "
             "process through the app on uvicorn.",
             lambda: scrape.run(4, 126, 7 if q else 15),
+        ),
+        (
+            "14. MQTT: CPU per value published, beside the scrape's",
+            "The service's runtime as benchmark 13 builds it (10,080 values), its outputs list "
+            "with the MQTT output `pkwbus run` adds, connected to a local mosquitto; CPU of "
+            "this process per value published on change and at a heartbeat, and per value "
+            "in the scrape's render.",
+            lambda: mqtt_publish.run(4, 126, 3 if q else 7),
+        ),
+        (
+            "15. MQTT: the lines' throughput with MQTT on",
+            "`pkwbus run` in its own process on 4 simulated lines (115200 baud, wire timing, "
+            "2 ms delay) × 126 FC drives × 20 parameters each polled every second (full "
+            "load), without `mqtt:` and with it (a local mosquitto; every value on change, "
+            "deadband 0, and every 10 s; Home Assistant discovery) in turn, a fresh process "
+            "each; telegrams/s of all lines once every value has landed. Goal: >= 0.98.",
+            lambda: mqtt_throughput.run(1 if q else 3, 10.0 if q else 20.0),
         ),
     ]
 
