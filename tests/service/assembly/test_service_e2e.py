@@ -85,7 +85,19 @@ async def test_metrics_carry_the_simulators_values_scaled() -> None:
         poll: [{parameter: "3-41", every: 50ms}, {parameter: "16-30", every: 50ms}]"""
     try:
         async with running("lines:" + fc_line("l1", server.url, drives)) as runtime:
-            await asyncio.sleep(0.6)
+            # every polled value in, and the status word of fan_b (waited for, not timed:
+            # the machine may be loaded)
+            wanted = (("fan_a", "3-41"), ("fan_b", "3-41"), ("fan_a", "16-13"), ("fan_b", "16-30"))
+            await until(
+                lambda: (
+                    all(
+                        sample(runtime, "pkwbus_parameter_value", drive=d, parameter=p) is not None
+                        for d, p in wanted
+                    )
+                    and sample(runtime, "pkwbus_drive_status_word", drive="fan_b") is not None
+                ),
+                timeout=30.0,
+            )
             got_a = sample(runtime, "pkwbus_parameter_value", drive="fan_a", parameter="3-41")
             got_b = sample(runtime, "pkwbus_parameter_value", drive="fan_b", parameter="3-41")
             freq = sample(runtime, "pkwbus_parameter_value", drive="fan_a", parameter="16-13")
