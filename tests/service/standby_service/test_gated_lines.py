@@ -5,10 +5,14 @@ line held again starts afresh; its series and the API follow who masters it."""
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
+from typing import Any
 
+import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
+from pkwbus.service.assembly import standby_lines
 from pkwbus.service.metrics.exposition import render
 from tests.service.standby_service.fakes import (
     AUTH,
@@ -246,3 +250,37 @@ async def test_a_single_instance_masters_every_line_and_names_no_master() -> Non
         assert [(x["name"], x["master"]) for x in r.json()] == [("l1", None), ("l2", None)]
         r = await client.get("/api/v1/drives/zz/parameters/16-13")
         assert r.status_code == 404
+
+
+async def test_a_won_line_that_cannot_start_is_tried_again_while_held(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    monkeypatch.setattr(standby_lines, "RETRY_FIRST", 0.05)
+    monkeypatch.setattr(standby_lines, "RETRY_MAX", 0.1)
+    async with service() as svc:
+        build = svc.parts.build
+        tried: list[str] = []
+
+        async def failing(plan: Any) -> Any:
+            tried.append(plan.line.name)
+            if plan.line.name == "l2" or len(tried) <= 2:
+                raise RuntimeError("the gateway's simulator did not come up")
+            return await build(plan)
+
+        monkeypatch.setattr(svc.parts, "build", failing)
+        with caplog.at_level(logging.DEBUG, logger="pkwbus.service.standby"):
+            svc.engine.grant("l1")
+            await until(lambda: "l1" in svc.runtime.runners)
+            await until(lambda: polled(svc, ("a1", "a2")))
+        assert tried == ["l1", "l1", "l1"]
+        errors = [r for r in caplog.records if r.levelno == logging.ERROR]
+        assert len(errors) == 1 and "cannot start" in errors[0].getMessage()
+        assert any("started at last" in r.getMessage() for r in caplog.records)
+        # Lost while it cannot start: never tried again.
+        svc.engine.grant("l2")
+        await until(lambda: tried.count("l2") >= 2)
+        svc.engine.lose("l2")
+        await asyncio.sleep(0.1)  # let a retry already due run its course
+        count = tried.count("l2")
+        await asyncio.sleep(0.5)  # five times the longest delay
+        assert tried.count("l2") == count and "l2" not in svc.runtime.runners

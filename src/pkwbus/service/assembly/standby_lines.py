@@ -31,13 +31,26 @@ from pkwbus.service.config import StandbyConfig
 from pkwbus.service.runtime import LineMaster, Runtime
 from pkwbus.service.standby import Standby
 
-__all__ = ["STOP_GRACE", "Engine", "EngineFactory", "StandbyLines", "etcd_engine"]
+__all__ = [
+    "RETRY_FIRST",
+    "RETRY_MAX",
+    "STOP_GRACE",
+    "Engine",
+    "EngineFactory",
+    "StandbyLines",
+    "etcd_engine",
+]
 
 log = logging.getLogger("pkwbus.service.standby")
 
 # How long a released line's exchange in flight may take to end before it is cancelled:
 # its port's fence keeps it silent already.
 STOP_GRACE = 0.5
+
+# A line won that cannot start (a simulator that does not come up, a GSD file gone) is
+# tried again while it is held: after RETRY_FIRST seconds, doubling up to RETRY_MAX.
+RETRY_FIRST = 5.0
+RETRY_MAX = 300.0
 
 
 class Engine(Protocol):
@@ -86,6 +99,7 @@ class StandbyLines:
         self._closed = False
         self._lines: dict[str, cfg.Line] = {}
         self._drives: dict[str, str] = {}
+        self._retries: dict[str, tuple[float, asyncio.TimerHandle | None]] = {}
         self._configure(config)
         section = config.standby
         self.engine = engine(section, list(self._lines), self.on_change)
@@ -129,6 +143,7 @@ class StandbyLines:
     def on_change(self, line: str, held: bool) -> None:
         """The engine's word (on the loop): ``line`` held by this instance, or not."""
         if not held:  # silent at once; the rest of the stop follows in order
+            self._no_retry(line)
             runner = self.runtime.runners.get(line)
             if runner is not None:
                 runner.stop()
@@ -148,6 +163,8 @@ class StandbyLines:
             running = line in self.runtime.runners
             if held and not running and self.engine.holds(line) and line in self._lines:
                 if not self.runtime.stopping:
+                    if line in self._shown():  # shown down: it could not start before
+                        self.parts.forget(line)
                     await self._start(self._lines[line])
             elif not held and (running or line in self._shown()):
                 await self._stop(line)
@@ -164,9 +181,18 @@ class StandbyLines:
         try:
             built = await parts.build(plan)
         except Exception as exc:  # a sim that cannot start, a GSD file gone since the check
-            log.error("line %s: mastered here but cannot start: %s", line.name, exc)
-            parts.down(plan)  # shown down until the line is released
+            delay = self._retry_later(line.name)
+            told = log.error if delay == RETRY_FIRST else log.debug  # once an outage
+            told(
+                "line %s: mastered here but cannot start: %s (tried again in %g s, and"
+                " later, while this instance holds it)", line.name, exc, delay,
+                extra={"line": line.name},
+            )  # fmt: skip
+            parts.down(plan)  # shown down until it starts or is released
             return False
+        if line.name in self._retries:
+            self._no_retry(line.name)
+            log.warning("line %s: started at last", line.name, extra={"line": line.name})
         if self.runtime.stopping:
             closed = built.close() if built.close is not None else None
             if asyncio.iscoroutine(closed):
@@ -180,6 +206,27 @@ class StandbyLines:
         if watch:
             await self._watch_again()
         return True
+
+    def _retry_later(self, line: str) -> float:
+        """A start of ``line`` tried again later, while held; the delay."""
+        delay, handle = self._retries.get(line, (0.0, None))
+        if handle is not None:
+            handle.cancel()
+        delay = RETRY_FIRST if delay == 0.0 else min(delay * 2, RETRY_MAX)
+        again = asyncio.get_running_loop().call_later(delay, self._retry, line)
+        self._retries[line] = (delay, again)
+        return delay
+
+    def _retry(self, line: str) -> None:
+        delay, _ = self._retries.get(line, (0.0, None))
+        self._retries[line] = (delay, None)
+        if self.engine.holds(line) and line not in self.runtime.runners:
+            self.on_change(line, True)
+
+    def _no_retry(self, line: str) -> None:
+        _, handle = self._retries.pop(line, (0.0, None))
+        if handle is not None:
+            handle.cancel()
 
     async def _stop(self, line: str) -> None:
         if line in self.runtime.runners:
@@ -223,6 +270,8 @@ class StandbyLines:
         if self._closed:
             return
         self._closed = True
+        for line in list(self._retries):
+            self._no_retry(line)
         if self._changes:
             await asyncio.wait(list(self._changes), timeout=10.0)
         for task in list(self._changes):
