@@ -89,7 +89,18 @@ lines:
 """
 
 
-def _telegrams(registry: CollectorRegistry) -> float:
+def _telegrams(runtime: Any) -> float:
+    """The lines' telegrams so far: the snapshot's plain counts (the figures the page shows),
+    not ``registry.collect()``, which costs about 0.2 ms a call (2-3 µs per exchange at 20
+    calls a second) and would be counted as the service's; the registry where a tree has no
+    such counts."""
+    totals = getattr(getattr(runtime, "snapshot", None), "totals", None)
+    if totals is not None:
+        return float(sum(t.telegrams for t in totals.values()))
+    return _registry_telegrams(runtime.registry)
+
+
+def _registry_telegrams(registry: CollectorRegistry) -> float:
     total = 0.0
     for family in registry.collect():
         if family.name == "pkwbus_telegrams":
@@ -104,17 +115,17 @@ async def _measure(config_text: str, n: int | None, seconds: float | None) -> di
     try:
         loop = asyncio.get_running_loop()
         end = loop.time() + 30
-        while _telegrams(runtime.registry) < 300:
+        while _telegrams(runtime) < 300:
             if loop.time() > end:
                 raise RuntimeError("the line did not start exchanging")
             await asyncio.sleep(0.02)
-        t0, c0, w0 = _telegrams(runtime.registry), time.process_time(), time.perf_counter()
+        t0, c0, w0 = _telegrams(runtime), time.process_time(), time.perf_counter()
         if n is not None:
-            while _telegrams(runtime.registry) - t0 < n:
+            while _telegrams(runtime) - t0 < n:
                 await asyncio.sleep(0.05)
         else:
             await asyncio.sleep(seconds or 5.0)
-        t1, c1, w1 = _telegrams(runtime.registry), time.process_time(), time.perf_counter()
+        t1, c1, w1 = _telegrams(runtime), time.process_time(), time.perf_counter()
     finally:
         await runtime.stop()
     count = t1 - t0

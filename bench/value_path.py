@@ -65,16 +65,16 @@ async def _trace(config_text: str, n: int) -> dict[str, float]:
     await runtime.start()
     tracer = Tracer()
     try:
-        while service_path._telegrams(runtime.registry) < 300:
+        while service_path._telegrams(runtime) < 300:
             await asyncio.sleep(0.02)
-        t0 = service_path._telegrams(runtime.registry)
+        t0 = service_path._telegrams(runtime)
         sys.setprofile(tracer)
         try:
-            while service_path._telegrams(runtime.registry) - t0 < n:
+            while service_path._telegrams(runtime) - t0 < n:
                 await asyncio.sleep(0.01)
         finally:
             sys.setprofile(None)
-        count = service_path._telegrams(runtime.registry) - t0
+        count = service_path._telegrams(runtime) - t0
     finally:
         await runtime.stop()
     every = {m for m, c in tracer.modules.items() if c >= count * 0.5}  # in most exchanges

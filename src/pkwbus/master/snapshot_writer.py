@@ -17,9 +17,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
-from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import resolve
 from pkwbus.master import told
+from pkwbus.master.decoded import DecodedValues, job_result
 from pkwbus.master.events import (
     DescriptionChecked,
     Event,
@@ -33,7 +33,7 @@ from pkwbus.master.events import (
 )
 from pkwbus.master.planning.answers import ErrorKind
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, ProbeJob
-from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected, TimedOut
+from pkwbus.master.planning.outcomes import Answered, Rejected, TimedOut
 from pkwbus.master.planning.plan import (
     DescribedAnew,
     DescribedFromBook,
@@ -49,7 +49,6 @@ from pkwbus.master.planning.plan import (
     Redecoded,
     StatusWord,
 )
-from pkwbus.master.planning.transaction import Tally
 from pkwbus.master.reading import Reading
 from pkwbus.master.snapshot import (
     Decoding,
@@ -68,21 +67,6 @@ from pkwbus.protocol.errors import RemoteProtocolError
 __all__ = ["REFUSAL_RETELL", "SnapshotWriter", "job_result"]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
-
-
-def job_result(
-    outcome: Outcome, tally: Tally | None, request: pkw.PkwRequest, fmt: ParameterDescription
-) -> JobResult:
-    """The result of a finished job: its value when the answer carries one.
-
-    RemoteProtocolError when the answer carries a value that cannot be decoded.
-    """
-    if not isinstance(outcome, Answered):
-        return JobResult(outcome, tally=tally)
-    if not isinstance(outcome.response, pkw.ValueResponse | pkw.TextResponse):
-        return JobResult(outcome, tally=tally)  # a description element, a count: no value
-    raw, value = fmt.value_of(outcome.response)
-    return JobResult(outcome, raw, value, tally)
 
 
 class SnapshotWriter:
@@ -106,6 +90,7 @@ class SnapshotWriter:
         self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
         self._targets: dict[str, tuple[DescribeTarget, ...]] = {}
         self._totals = snapshot.totals.setdefault(line, LineTotals())
+        self._values = DecodedValues()  # a value that holds is decoded once
         self._on: dict[type, Callable[[Any, float], None]] = {
             Exchanged: self._exchanged,
             Finished: self._finished,
@@ -151,6 +136,7 @@ class SnapshotWriter:
         self._targets.pop(drive, None)
         self._silent.discard(drive)
         self._refusals.forget(drive)
+        self._values.forget(drive)
         self.snapshot.forget(drive)
 
     def forget_line(self) -> None:
@@ -352,7 +338,9 @@ class SnapshotWriter:
 
     def _result(self, event: Finished, work: Job | PollSpec) -> JobResult:
         try:
-            return job_result(event.outcome, event.tally, work.request, work.fmt)
+            return self._values.result(
+                event.drive, event.outcome, event.tally, work.request, work.fmt
+            )
         except RemoteProtocolError as exc:
             ctx = {"line": self.line, "drive": event.drive}
             log.warning("%s/%s: %s", self.line, event.drive, exc, extra=ctx)

@@ -46,6 +46,9 @@ __all__ = ["SerialCarrier"]
 
 _PROBE_SHORT = 3  # PKW words of every other probe while a learned length is not known
 _KEPT = 512  # telegrams kept built (a drive's polls); more, and they are built afresh
+# PKW answers kept decoded (a parameter that holds its value answers the same bytes at every
+# poll); more, and they are decoded afresh.
+_KEPT_ANSWERS = 256
 
 
 class SerialCarrier:
@@ -65,6 +68,9 @@ class SerialCarrier:
             fc_adr(target.address, target.fc_format) if self.fc else uss_adr(target.address)
         )
         self._telegrams: dict[pkw.PkwRequest, bytes] = {}  # requests as they go out now
+        # PKW answers as decoded by the target now (a response is immutable: one serves
+        # every answer of the same bytes).
+        self._decoded: dict[bytes, pkw.PkwResponse] = {}
         self._probes = 0
 
     @property
@@ -151,13 +157,19 @@ class SerialCarrier:
             block = split_block(data, self.response_shape(len(data)))
         except RemoteProtocolError as exc:
             return PkwAnswer(None, b"", None, None, duration, why=str(exc))
-        try:
-            response = pkw.decode_response(block.pkw, target.dialect, target.ind_layout)
-        except RemoteProtocolError as exc:
-            return PkwAnswer(
-                None, block.pkw, block.status_word, block.main_actual, duration, why=str(exc)
-            )
-        return PkwAnswer(response, block.pkw, block.status_word, block.main_actual, duration)
+        answer = block.pkw
+        response = self._decoded.get(answer)
+        if response is None:
+            try:
+                response = pkw.decode_response(answer, target.dialect, target.ind_layout)
+            except RemoteProtocolError as exc:
+                return PkwAnswer(
+                    None, answer, block.status_word, block.main_actual, duration, why=str(exc)
+                )
+            if len(self._decoded) >= _KEPT_ANSWERS:
+                self._decoded.clear()
+            self._decoded[answer] = response
+        return PkwAnswer(response, answer, block.status_word, block.main_actual, duration)
 
     # ------------------------------------------------------------ probes
 
@@ -222,6 +234,7 @@ class SerialCarrier:
         if self.target.learn and length.words != self.target.shape.pkw_words:
             self.target = self.target.with_pkw_words(length.words)
             self._telegrams.clear()
+            self._decoded.clear()
         return replace(length)
 
     def gate(self, request: pkw.PkwRequest) -> tuple[Gate, str]:
