@@ -97,6 +97,11 @@ def test_the_micromaster_4_catalog_and_its_fault_buffer() -> None:
     ]  # fmt: skip
     assert not any(s.is_setting or s.writable or s.counter for s in mm4.parameters.values())
     assert [log.name for log in logs_of_catalog("siemens-mm4")] == ["MICROMASTER 4 fault buffer"]
+    clock = mm4.get(2115)
+    assert clock is not None
+    assert (clock.min, clock.max, clock.unit) == (0, 65535, "")  # p. 209: Min 0, Max 65535, Unit -
+    for spec in mm4.parameters.values():  # each names the document it comes from
+        assert "6SE6400-5BB00-0BP0" in mm4.sources[spec.source] or not spec.verified
 
 
 def test_danfoss_sourced_scaling() -> None:
