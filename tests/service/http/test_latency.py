@@ -3,8 +3,10 @@
 Design goal: a write waits at most for the exchange in flight. A write over
 the API is one exchange of its own (its old value is the latest polled one),
 ahead of every poll, so the expected figure is under 2 exchange times
-whatever the poll load. The bound asserted is loose (the
-machine is shared); the figures are printed (pytest -s).
+whatever the poll load. What is asserted is counted on the line, not timed: the
+telegrams the line sent while each write's job was queued (a loaded machine slows the
+service and the drives alike, not that count); the wall-clock figures are printed
+(pytest -s) and measured by bench/write_latency.py.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import statistics
 from pathlib import Path
+from typing import Any
 
 from pkwbus.sim import SimTiming
 from tests.service.http.conftest import fc_drives, service
@@ -36,11 +39,25 @@ async def test_write_latency_under_saturated_polling(tmp_path: Path) -> None:
         busy_before = _sum(registry, "pkwbus_line_busy_seconds_total")
         started = loop.time()
         latencies = []
+        telegrams: list[float] = []  # sent on the line while each write's job was queued
+        submit = runtime.submit
+
+        def counted(*args: Any, **kwargs: Any) -> asyncio.Future[Any]:
+            sent = _sum(registry, "pkwbus_telegrams_total")
+            future = submit(*args, **kwargs)
+            future.add_done_callback(
+                lambda _: telegrams.append(_sum(registry, "pkwbus_telegrams_total") - sent)
+            )
+            return future
+
+        runtime.submit = counted  # type: ignore[method-assign]
         for i in range(WRITES):
             t0 = loop.time()
             r = await svc.put(f"fan{i % 3 + 1}", "3-41", {"value": 10 + i})
             latencies.append(loop.time() - t0)
             assert r.status_code == 200, r.text
+        runtime.submit = submit  # type: ignore[method-assign]
+        assert len(telegrams) == WRITES  # one job each: the old value is the polled one
         elapsed = loop.time() - started
         busy = _sum(registry, "pkwbus_line_busy_seconds_total") - busy_before
         overruns = _sum(registry, "pkwbus_poll_overruns_total") - overruns_before
@@ -60,10 +77,12 @@ async def test_write_latency_under_saturated_polling(tmp_path: Path) -> None:
             f" line busy {busy / elapsed:.0%}; poll overruns {overruns:.0f};"
             f" median {median * 1e3:.1f} ms = {median / exchange:.1f} exchanges;"
             f" p99 {p99 * 1e3:.1f} ms = {p99 / exchange:.1f} exchanges;"
-            f" max {max(latencies) * 1e3:.1f} ms"
+            f" max {max(latencies) * 1e3:.1f} ms;"
+            f" telegrams while a write was queued: median {statistics.median(telegrams):.0f},"
+            f" max {max(telegrams):.0f}"
         )
         assert overruns > 0, "the polls did not saturate the line"
-        assert p99 < max(10 * exchange, 0.5), (p99, exchange)
+        assert max(telegrams) <= 10, telegrams
 
 
 def _sum(registry: object, name: str) -> float:

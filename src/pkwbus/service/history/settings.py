@@ -329,7 +329,8 @@ class SettingsWatcher:
         sweep tries again (HistoryError)."""
         now = self.clock()
         key = (ref.pnu, ref.index or 0)
-        kept = s.rows.get(key) or SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
+        found = s.rows.get(key)
+        kept = found or SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
         row = replace(kept, raw=raw, value=shown(value), seen=now)
         events: list[DriveEvent] = []
         written = s.expected.get(key) == raw  # a write pkwbus made whose answer got lost
@@ -348,9 +349,14 @@ class SettingsWatcher:
                 ref.name, ref.pnu, fmt.name, raw, None, "seen", "", now,
             ))  # fmt: skip
         new = await asyncio.shield(asyncio.to_thread(self.store.save, [row], events))
+        self.stream.count(new)
+        moved = s.rows.get(key)
+        if moved is not found:  # a write pkwbus made meanwhile (written): newer than this read
+            if moved is not None:
+                await asyncio.shield(asyncio.to_thread(self.store.save, [moved]))
+            return
         s.rows[key] = row
         s.expected.pop(key, None)
-        self.stream.count(new)
         labels = (s.line, s.drive, row.parameter, str(row.index))
         ctx = {"line": s.line, "drive": s.drive}
         if back:
