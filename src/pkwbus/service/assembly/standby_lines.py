@@ -27,6 +27,7 @@ from pkwbus.link.fence import Fence, LineFence
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
+from pkwbus.service.assembly.line_marks import LineMarks
 from pkwbus.service.config import StandbyConfig
 from pkwbus.service.runtime import LineMaster, Runtime
 from pkwbus.service.standby import Standby
@@ -103,6 +104,7 @@ class StandbyLines:
         self._configure(config)
         section = config.standby
         self.engine = engine(section, list(self._lines), self.on_change)
+        self.marks = _line_marks(self.engine, runtime, memory, self.lines, parts)
         parts.fence_of = self.fence_of
         runtime.masters = self
         runtime.starters.append(self.engine.start)
@@ -176,6 +178,8 @@ class StandbyLines:
         """Start ``line`` here; False when it cannot start (shown down) or the service
         stops. ``watch``: the drives' memory watched again over the lines then."""
         parts = self.parts
+        # The line's marks merged before it is planned (the describe book) and watched.
+        kept = await self.marks.load(line.name) if self.marks is not None else {}
         plan = parts.plan(line)
         parts.show(self.config, plan)
         try:
@@ -202,6 +206,9 @@ class StandbyLines:
         if built.close is not None:
             self.runtime.closers[line.name] = built.close
         self.runtime.start_line(built.runner)
+        if self.marks is not None:  # the line's marks: maintenance kept, written while held
+            self.marks.maintained(line.name, kept)
+            self.marks.hold(line.name)
         log.info("line %s: mastered here (hot standby)", line.name, extra={"line": line.name})
         if watch:
             await self._watch_again()
@@ -229,6 +236,8 @@ class StandbyLines:
             handle.cancel()
 
     async def _stop(self, line: str) -> None:
+        if self.marks is not None:  # the lease is gone: no more marks from here
+            await self.marks.release(line, flush=False)
         if line in self.runtime.runners:
             await self.runtime.stop_line(line, STOP_GRACE)
         self.parts.counts.pop(line, None)
@@ -253,6 +262,8 @@ class StandbyLines:
         not do it itself)."""
         self._configure(config)
         self.engine.set_lines(list(self._lines))
+        if self.marks is not None:
+            await self.marks.keep_only(self._lines)
         started = []
         for name, line in self._lines.items():
             if name not in self.runtime.runners and self.engine.holds(name):
@@ -276,5 +287,26 @@ class StandbyLines:
             await asyncio.wait(list(self._changes), timeout=10.0)
         for task in list(self._changes):
             task.cancel()
+        if self.marks is not None:  # the leases still held: the marks written last
+            with contextlib.suppress(Exception):
+                await self.marks.close()
         with contextlib.suppress(Exception):
             await self.engine.stop()
+
+
+def _line_marks(
+    engine: Engine,
+    runtime: Runtime,
+    memory: Memory | None,
+    lines: Callable[[], Mapping[str, Sequence[str]]],
+    parts: Parts,
+) -> LineMarks | None:
+    """The lines' drive-memory marks in etcd (:mod:`.line_marks`); None for an engine
+    without marks (a test's)."""
+    marks = getattr(engine, "marks", None)
+    if marks is None:
+        return None
+    path = memory.stream.store.path if memory is not None else None
+    history = None if path is None or str(path) == ":memory:" else path
+    return LineMarks(marks, runtime, history, lambda line: lines().get(line, ()),
+                     book=parts.book, saved=parts.kept)  # fmt: skip
