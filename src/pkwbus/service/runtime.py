@@ -199,6 +199,9 @@ class Masters(Protocol):
 class Trends(Protocol):
     """The last minutes of each polled value (service.metrics.trends.Trends)."""
 
+    step: float  # seconds a point
+    stamps: dict[str, int]  # per drive: changed each time a point changed but by time
+
     def points(self, key: ReadingKey, now: float) -> list[float | None]: ...
 
 

@@ -7,7 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from pkwbus.catalog import load_catalog
+from pkwbus.service.http.views import drives as drives_module
+from pkwbus.service.http.views import readable as readable_module
+from pkwbus.service.http.views.drives import _polled, _reading_fields
+from pkwbus.service.http.views.readable import duration, time_unit
 from tests.service.http.conftest import USS_DRIVES, fc_drives, service
 
 
@@ -50,3 +56,32 @@ def test_the_catalogs_name_the_counters_they_mark() -> None:
         assert marked and all(s.name for s in marked)
         # What a counter's entry could not source is said (then only the drive types it).
         assert all(s.verified or "recalled" in s.note for s in marked)
+
+
+async def test_a_durations_value_is_worked_out_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A counter of time is read out as a duration once per value made (the drives' view
+    makes about 1,000 values an answer at plant scale), and says what it said before."""
+    fc = fc_drives(polls=[("16-13", "50ms")])[:1]
+    async with service(tmp_path, fc=fc, uss=USS_DRIVES) as svc:
+        before = {d["name"]: values(d) for d in (await svc.client.get("/api/v1/drives")).json()}
+        runtime = svc.runtime
+        items = [x for name in runtime.drives for x in _polled(runtime, runtime.drives[name])]
+        durations = [x for x in items if time_unit(x[2]) and not isinstance(x[1].value, str)]
+        assert durations, "the drives' counters are polled"
+        calls = 0
+
+        def counted(*args: Any) -> str | None:
+            nonlocal calls
+            calls += 1
+            return duration(*args)
+
+        monkeypatch.setattr(drives_module, "duration", counted)
+        monkeypatch.setattr(readable_module, "duration", counted)
+        for poll, reading, fmt, source, name in items:
+            fields = _reading_fields(runtime, poll, reading, fmt, source, name)
+            was = before[name][poll.parameter, poll.index]
+            if was["value"] == fields["value"]:
+                assert (fields["shown"], fields["shown_unit"]) == (was["shown"], was["shown_unit"])
+        assert calls == len(durations)

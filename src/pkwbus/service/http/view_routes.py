@@ -10,8 +10,9 @@ from typing import Any, Literal
 from fastapi import FastAPI, Query, Response
 
 from pkwbus.service.http.models import DriveOverview, DriveView, LineView
-from pkwbus.service.http.views import line_views, trend_views
+from pkwbus.service.http.views import line_views
 from pkwbus.service.http.views.drives import TOKEN_HEADER, DriveViews, Selection
+from pkwbus.service.http.views.trend_pieces import TrendPieces
 from pkwbus.service.runtime import Runtime
 from pkwbus.service.writes.checks import MAX_DRIVE_NAME, ApiError, mastered_elsewhere
 
@@ -23,6 +24,7 @@ def add_view_routes(
 ) -> None:
     """Add the views' routes to ``app``."""
     views = DriveViews(runtime)
+    trend_pieces = TrendPieces(runtime)
 
     @app.get("/api/v1/drives", response_model=list[DriveView] | list[DriveOverview],
              responses=errors)  # fmt: skip
@@ -44,17 +46,20 @@ def add_view_routes(
              responses=errors)  # fmt: skip
     async def trends(
         drive: str | None = Query(default=None, max_length=MAX_DRIVE_NAME),
-    ) -> dict[str, dict[str, list[float | None]]]:
+    ) -> Response:
         """Each drive's values over the last 15 minutes, a point a 15 s (the page's
         sparklines; /metrics and the drives' views keep full precision); ``drive``: of that
-        drive alone."""
+        drive alone. Each drive's part is kept until its points change; every drive's
+        answer is made a few drives at a time, the loop free in between."""
         now = time.time()
         if drive is None:
-            return {name: trend_views(runtime, name, now) for name in runtime.drives}
-        if drive not in runtime.drives:
+            body = await trend_pieces.every(now)
+        elif drive not in runtime.drives:
             mastered_elsewhere(runtime, drive)
             raise ApiError(404, "unknown_drive", f"no drive is named {drive!r}")
-        return {drive: trend_views(runtime, drive, now)}
+        else:
+            body = trend_pieces.one(drive, now)
+        return Response(body, media_type="application/json")
 
     looks: dict[str, tuple[float, float]] = {}  # line -> (monotonic time, busy seconds)
 

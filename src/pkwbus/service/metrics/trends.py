@@ -40,6 +40,10 @@ class Trends:
     def __init__(self, period: float = PERIOD) -> None:
         self.step = period / POINTS
         self._rings: dict[ReadingKey, _Ring] = {}
+        # Per drive, how often its points changed other than by time going on (a value
+        # landed, values forgotten): a view of the points may be kept while it and the
+        # bucket of now are the same.
+        self.stamps: dict[str, int] = {}
 
     def landed(self, key: ReadingKey, reading: Reading) -> None:
         value = reading.value
@@ -51,6 +55,8 @@ class Trends:
             ring = self._rings[key] = _Ring(bucket)
         self._advance(ring, bucket)
         ring.values[bucket % POINTS] = float(value)
+        drive = key[0]
+        self.stamps[drive] = self.stamps.get(drive, 0) + 1
 
     def on_events(self, events: Sequence[Event]) -> None:
         """Each value that landed (an output of the lines' streams)."""
@@ -62,6 +68,7 @@ class Trends:
         """The drive's values gone (a reload), all or those not in ``keep``."""
         for key in [k for k in self._rings if k[0] == drive and (keep is None or k not in keep)]:
             del self._rings[key]
+        self.stamps[drive] = self.stamps.get(drive, 0) + 1
 
     def points(self, key: ReadingKey, now: float) -> list[float | None]:
         """The value's points up to ``now`` (wall clock), oldest first; None where none

@@ -128,10 +128,18 @@ def _reading_fields(
     parameter, index, value = poll.parameter, poll.index, reading.value
     board = runtime.alarms
     words = board.said((name, parameter, index), value) if board is not None else ""
-    shown = words or readable(value, fmt)
     counts_in = time_unit(fmt)  # a duration names its own unit ("13 h")
-    named = bool(counts_in) and not words and not isinstance(value, str)
-    named = named and duration(float(value), counts_in, fmt.scaling.factor) is not None
+    # The duration worked out once (it was twice: a third of a value's piece, in Fractions).
+    told = None
+    if counts_in and not isinstance(value, str):
+        told = duration(value, counts_in, fmt.scaling.factor)
+    named = told is not None and not words
+    if words:
+        shown = words
+    elif told is not None and not (fmt.enumerates and isinstance(value, int)):
+        shown = told  # what readable() says of a duration
+    else:
+        shown = readable(value, fmt)
     return {
         "parameter": parameter, "index": index, "value": value, "raw": reading.raw,
         "unit": fmt.unit, "timestamp": reading.timestamp, "interval": poll.every,
