@@ -24,6 +24,8 @@ import dead_drive
 import ds47
 import floor
 import line_efficiency
+import mqtt_fast_path
+import mqtt_line
 import mqtt_publish
 import mqtt_throughput
 import pkw_lag
@@ -165,6 +167,22 @@ def plan(quick: bool) -> Plan:
             "deadband 0, and every 10 s; Home Assistant discovery) in turn, a fresh process "
             "each; telegrams/s of all lines once every value has landed. Goal: >= 0.98.",
             lambda: mqtt_throughput.run(1 if q else 3, 10.0 if q else 20.0),
+        ),
+        (
+            "16. MQTT: the lines' throughput at the README's poll rate",
+            "Benchmark 12's plant (4 simulated lines × 126 FC drives × 20 values every 20 s) "
+            "with the MQTT output connected to a local mosquitto (started by the benchmark); "
+            "once the start's backlog has drained, rounds of a window with the output taken "
+            "out of the outputs list (off) then put back (on). Telegrams/s per line; goal: "
+            "on / off at least 0.98.",
+            lambda: mqtt_line.run(10.0 if q else 20.0, 1 if q else 3, 120.0 if q else 240.0),
+        ),
+        (
+            "17. MQTT: the values' fast path",
+            "10,080 QoS 0 values handed to a local mosquitto until the client's socket took "
+            "them: pkwbus's batched path (paho's packet queue, not public) against paho's "
+            "public publish and aiomqtt's awaited publish per value, side by side each round.",
+            lambda: mqtt_fast_path.run(10_080, 3 if q else 7),
         ),
     ]
 

@@ -138,13 +138,15 @@ def _mqtt_commands(
     (``sparkplug:``), both through the HTTP API's write path."""
     from pkwbus.service.mqtt.sets import take_sets
     from pkwbus.service.mqtt.sparkplug.attach import attach_sparkplug
+    from pkwbus.service.mqtt.sparkplug.host import bd_seq_path
 
     settings = config.mqtt
     assert settings is not None
     if settings.writes == "allow_list":
         take_sets(mqtt.connection, path, settings.prefix)
     try:
-        node = attach_sparkplug(settings, runtime, path)
+        node = attach_sparkplug(settings, runtime, path, metrics=mqtt.metrics,
+                                bd_seq_file=bd_seq_path(config.audit_db))  # fmt: skip
     except PkwbusError as exc:  # an account named but unset
         raise StartError(str(exc)) from None
     if node is not None and reloader is not None:

@@ -139,11 +139,22 @@ class Outbox(Model):
     ] = 24 * 3600.0
 
 
+def _host_id(value: object) -> str:
+    """A primary host application's id: one topic level (``scada``)."""
+    if not isinstance(value, str) or len(value) > 200 or not _LEVEL.match(value):
+        raise ValueError(
+            f"{short(value)} is not a host id: one topic level without /, +, # (scada)"
+        )
+    return value
+
+
 class Sparkplug(Model):
-    """Sparkplug B (an option): the edge node's group and name."""
+    """Sparkplug B (an option): the edge node's group and name, and the primary host
+    application whose STATE it waits for (None: born at once)."""
 
     group_id: Annotated[str, PlainValidator(_prefix)]
     edge_node_id: Annotated[str, PlainValidator(_prefix)]
+    primary_host_id: Annotated[str, PlainValidator(_host_id)] | None = None
 
 
 class Mqtt(Model):
@@ -224,6 +235,27 @@ def mqtt_report(mqtt: Mqtt, rates: Sequence[float], drives: int) -> Iterator[str
         extras.append(f"{drives} Home Assistant device config(s) under {ha}/")
     extras.append("writes " + ("taken on the set topics" if mqtt.writes != "off" else "off"))
     yield "mqtt: " + "; ".join(extras)
+    if mqtt.sparkplug is not None:
+        yield from sparkplug_report(mqtt, mqtt.sparkplug, drives)
+
+
+def sparkplug_report(mqtt: Mqtt, sparkplug: Sparkplug, drives: int) -> Iterator[str]:
+    """What the Sparkplug B edge node will publish (``check-config``)."""
+    node = f"spBv1.0/{sparkplug.group_id}/{{kind}}/{sparkplug.edge_node_id}"
+    when = (
+        f"while the primary host {sparkplug.primary_host_id} is online"
+        f" (spBv1.0/STATE/{sparkplug.primary_host_id})"
+        if sparkplug.primary_host_id
+        else "at each connection"
+    )
+    yield (
+        f"sparkplug: edge node {node}: NBIRTH {when}, then a DBIRTH per answering drive of"
+        f" {drives}, DDATA by exception (the values that changed, per drive), DDEATH/DBIRTH as"
+        " drives go and come, NDEATH as the will; bdSeq kept across restarts"
+    )
+    yield "sparkplug: DCMD " + (
+        "written through the write path" if mqtt.writes == "allow_list" else "not taken"
+    )
 
 
 def _bytes(size: int) -> str:

@@ -8,9 +8,9 @@ from prometheus_client import CollectorRegistry, Counter, Gauge
 __all__ = ["KINDS", "MqttMetrics"]
 
 # What the output publishes: values, drive and service statuses, drive events, Home
-# Assistant discovery configs, and what others publish through the connection (M2's
-# results; "other").
-KINDS = ("value", "status", "event", "discovery", "other")
+# Assistant discovery configs, what others publish through the connection (M2's
+# results; "other"), and the Sparkplug B edge node's messages (its own connection).
+KINDS = ("value", "status", "event", "discovery", "other", "sparkplug")
 
 
 class MqttMetrics:
@@ -23,7 +23,8 @@ class MqttMetrics:
         )  # fmt: skip
         self.messages = Counter(
             "pkwbus_mqtt_messages",
-            "Messages handed to the broker, by kind (value, status, event, discovery, other);"
+            "Messages handed to the broker, by kind (value, status, event, discovery, other,"
+            " sparkplug);"
             " an event once the broker acknowledged it",
             ["kind"],
             registry=registry,

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 from pkwbus.service.config.mqtt import Mqtt
+from pkwbus.service.mqtt.metrics import MqttMetrics
 from pkwbus.service.mqtt.sparkplug.node import SparkplugNode
 from pkwbus.service.runtime import Runtime
 from pkwbus.service.writes.path import WritePath
@@ -15,11 +17,17 @@ log = logging.getLogger("pkwbus.service.mqtt.sparkplug")
 
 
 def attach_sparkplug(
-    settings: Mqtt | None, runtime: Runtime, path: WritePath
+    settings: Mqtt | None,
+    runtime: Runtime,
+    path: WritePath,
+    *,
+    metrics: MqttMetrics | None = None,
+    bd_seq_file: Path | None = None,
 ) -> SparkplugNode | None:
     """The Sparkplug node of ``settings`` (None without ``mqtt.sparkplug``), one of the
     runtime's outputs from now on (kept over reloads), started with the runtime and
-    stopped after everything else; DCMD taken only with ``mqtt.writes: allow_list``.
+    stopped after everything else; DCMD taken only with ``mqtt.writes: allow_list``; its
+    messages counted in ``metrics``, its ``bdSeq`` kept in ``bd_seq_file``.
     :class:`~pkwbus.service.config.mqtt.MqttSettingsError` for an account named but unset."""
     if settings is None or settings.sparkplug is None:
         return None
@@ -35,6 +43,9 @@ def attach_sparkplug(
         password=password,
         tls=settings.tls,
         keepalive=settings.keepalive,
+        primary_host_id=settings.sparkplug.primary_host_id,
+        bd_seq_file=bd_seq_file,
+        metrics=metrics,
     )
     runtime.base = (*runtime.base, node)
     runtime.outputs.swap([*runtime.outputs.items, node])

@@ -13,10 +13,14 @@ true publishes the births again (same ``bdSeq``, ``seq`` from 0). Every message 
 NDEATH carries ``seq``, one more each time, 255 then 0; all at QoS 0, not retained.
 
 With writes on (``mqtt.writes: allow_list``) a DCMD's metrics are written through the
-one write path (``writable``, limits, the audit row before the wire, the read-back), the
-audit row's caller :data:`CALLER`; a drive's commands one after the other. The verified
-value goes out at once as DDATA; a refused one is audited, logged, and nothing is sent.
-The broker's ACL says who may publish DCMD (the primary host's account).
+one write path (:mod:`.commands`). The broker's ACL says who may publish DCMD (the
+primary host's account).
+
+The ``bdSeq`` goes on across restarts (kept in a file, :mod:`.host`). With a primary
+host application (``primary_host_id``) the node subscribes to its STATE and is born only
+while it is online; its offline ends the session (NDEATH, disconnect), and the node
+waits, connected again, for it to come back (Eclipse Sparkplug 3.0.0, "Edge Node Session
+Establishment"). Its messages are counted in ``pkwbus_mqtt_messages{kind="sparkplug"}``.
 
 It is an output of the lines' streams (:meth:`on_events`: it keeps what changed and
 wakes its task; it never awaits there). Raises nothing out of its task: a lost
@@ -27,16 +31,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import random
 import ssl
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import aiomqtt
 
 from pkwbus.master.events import Event, HealthChanged, MaintenanceChanged, ValueLanded
+from pkwbus.service.mqtt.metrics import MqttMetrics
 from pkwbus.service.mqtt.sparkplug.codec import (
     DataType,
     Metric,
@@ -46,6 +53,8 @@ from pkwbus.service.mqtt.sparkplug.codec import (
     decode,
     encode,
 )
+from pkwbus.service.mqtt.sparkplug.commands import CALLER, write_metrics
+from pkwbus.service.mqtt.sparkplug.host import BdSeqFile, HostState, state_topic
 from pkwbus.service.mqtt.sparkplug.metrics import (
     BD_SEQ,
     BD_SEQ_ALIAS,
@@ -56,15 +65,13 @@ from pkwbus.service.mqtt.sparkplug.metrics import (
     metric_value,
 )
 from pkwbus.service.runtime import Runtime
-from pkwbus.service.writes.checks import ApiError
-from pkwbus.service.writes.path import WriteOrder, WritePath
+from pkwbus.service.writes.path import WritePath
 
 __all__ = ["CALLER", "NAMESPACE", "SparkplugNode"]
 
 log = logging.getLogger("pkwbus.service.mqtt.sparkplug")
 
 NAMESPACE = "spBv1.0"
-CALLER = "mqtt:sparkplug"  # the audit row's caller of a DCMD's write
 FIRST_BACKOFF, MAX_BACKOFF = 1.0, 60.0
 
 
@@ -85,6 +92,9 @@ class SparkplugNode:
         tls: bool = False,
         keepalive: int = 30,
         wall: Callable[[], float] = time.time,
+        primary_host_id: str | None = None,
+        bd_seq_file: Path | None = None,
+        metrics: MqttMetrics | None = None,
     ) -> None:
         self.runtime = runtime
         self.path = path  # None: writes off, DCMD not taken
@@ -96,7 +106,11 @@ class SparkplugNode:
         self.node_topics = {k: f"{base}/{k}/{edge_node_id}" for k in ("NBIRTH", "NDEATH", "NCMD")}
         kinds = ("DBIRTH", "DDATA", "DDEATH", "DCMD")
         self.device_base = {k: f"{base}/{k}/{edge_node_id}/" for k in kinds}
-        self.bd_seq = -1  # the current connection's; the first is 0
+        self.bd_seq_file = BdSeqFile(bd_seq_file)
+        self.bd_seq = self.bd_seq_file.last()  # the current connection's; the first is 0
+        self.state_topic = state_topic(primary_host_id) if primary_host_id else None
+        self.host_state = HostState()
+        self._counted = metrics.sent["sparkplug"] if metrics is not None else None
         self.client: aiomqtt.Client | None = None
         self.born = asyncio.Event()  # set once the births of a connection are out
         self._seq = 0
@@ -166,6 +180,7 @@ class SparkplugNode:
         backoff = FIRST_BACKOFF
         while not self._stopping:
             self.bd_seq = (self.bd_seq + 1) % 256
+            self.bd_seq_file.keep(self.bd_seq)
             try:
                 async with self._new_client() as client:
                     backoff = FIRST_BACKOFF
@@ -195,19 +210,40 @@ class SparkplugNode:
         )
 
     async def _session(self, client: aiomqtt.Client) -> None:
+        """Births (at once, or once the primary host is online), then commands until the
+        connection ends or the primary host goes offline (then the NDEATH)."""
+        if self.state_topic is not None:
+            self.host_state = HostState()
+            await client.subscribe(self.state_topic, qos=1)
         await client.subscribe(self.node_topics["NCMD"], qos=0)
         if self.path is not None:
             await client.subscribe(self.device_base["DCMD"] + "+", qos=0)
-        self.client = client
-        await self._births(client)
-        data = asyncio.get_running_loop().create_task(self._data(client))
+        data: asyncio.Task[None] | None = None
+        if self.state_topic is None:
+            data = await self._born(client)
         try:
             async for message in client.messages:
-                self._command(client, message)
+                if message.topic.value != self.state_topic:
+                    self._command(client, message)
+                    continue
+                payload = message.payload
+                online = self.host_state.take(payload if isinstance(payload, bytes) else b"")
+                if online and data is None:
+                    data = await self._born(client)
+                elif online is False and data is not None:
+                    log.info("Sparkplug: the primary host is offline; session ended")
+                    await client.publish(self.node_topics["NDEATH"], self._ndeath(), 1, False)
+                    return
         finally:
-            data.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await data
+            if data is not None:
+                data.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await data
+
+    async def _born(self, client: aiomqtt.Client) -> asyncio.Task[None]:
+        self.client = client
+        await self._births(client)
+        return asyncio.get_running_loop().create_task(self._data(client))
 
     # ------------------------------------------------------------ births and data
 
@@ -313,6 +349,8 @@ class SparkplugNode:
     async def _publish(self, client: aiomqtt.Client, topic: str, payload: Payload) -> None:
         payload.seq = self._seq
         await client.publish(topic, encode(payload, self._types), qos=0, retain=False)
+        if self._counted is not None:
+            self._counted.inc()
 
     # ------------------------------------------------------------ commands
 
@@ -334,45 +372,15 @@ class SparkplugNode:
             return
         drive = topic.removeprefix(self.device_base["DCMD"])
         if self.path is not None and drive != topic and "/" not in drive:
-            task = asyncio.get_running_loop().create_task(self._dcmd(client, drive, payload))
-            task.add_done_callback(_quiet)
+            turn = self._turns.setdefault(drive, asyncio.Lock())
+            verified = functools.partial(self._verified, client)
+            work = write_metrics(self.path, turn, drive, payload, self._metrics, verified)
+            asyncio.get_running_loop().create_task(work).add_done_callback(_quiet)
 
-    async def _dcmd(self, client: aiomqtt.Client, drive: str, payload: Payload) -> None:
-        assert self.path is not None
-        async with self._turns.setdefault(drive, asyncio.Lock()):
-            for metric in payload.metrics:
-                await self._write(client, drive, metric)
-
-    async def _write(self, client: aiomqtt.Client, drive: str, metric: Metric) -> None:
-        assert self.path is not None
-        found = self._by_alias.get(metric.alias) if metric.alias is not None else None
-        if found is None and metric.name is not None:
-            found = next((m for m in self._metrics if m.drive == drive and m.name == metric.name),
-                         None)  # fmt: skip
-        what = found.name if found is not None else metric.name or f"alias {metric.alias}"
-        if found is None or found.drive != drive or metric.value is None:
-            refusal = ApiError(404, "unknown_parameter", f"{drive} has no metric {what} to write")
-            if metric.value is None:
-                refusal = ApiError(422, "invalid_value", f"DCMD {what}: no value")
-            await self.path.refuse(drive, what[:32], None, CALLER, refusal)
-            log.warning("Sparkplug DCMD refused: %s", refusal)
-            return
-        value = metric.value
-        if isinstance(value, bytes | bool):
-            refusal = ApiError(422, "invalid_value", f"{what}: not a number or text")
-            await self.path.refuse(drive, found.parameter, found.index, CALLER, refusal)
-            return
-        order = WriteOrder(value, found.index, verify=True)
-        try:
-            done = await self.path.write(drive, found.parameter, order, CALLER)
-        except ApiError as exc:
-            log.warning("Sparkplug DCMD %s %s: %s (%s)", drive, what, exc.outcome, exc)
-            return
-        if done.body.get("verified") is True:
-            async with self._order:
-                if drive in self._alive:
-                    values = {found.alias: (done.body["value"], self.wall())}
-                    await self._ddata(client, drive, values)
+    async def _verified(self, client: aiomqtt.Client, drive: str, alias: int, value: Any) -> None:
+        async with self._order:
+            if drive in self._alive:
+                await self._ddata(client, drive, {alias: (value, self.wall())})
 
 
 def _quiet(task: asyncio.Task[Any]) -> None:
