@@ -1,6 +1,6 @@
 """A fenced link (hot standby) never opens nor writes once its lease may have passed to
 another instance: the fence is asked at the opening and before every write, on
-``time.monotonic()``, and a refused write gives the port up with the reason."""
+``FENCE_CLOCK`` (CLOCK_BOOTTIME on Linux), and a refused write gives the port up with the reason."""
 
 from __future__ import annotations
 
@@ -9,21 +9,20 @@ import math
 import os
 import select
 import socket
-import time
 import tty
 from collections.abc import AsyncIterator, Iterator
 
 import pytest
 
 from pkwbus.link import ALWAYS_OPEN, Link, LinkState, PortError, PortSettings
-from pkwbus.link.fence import LineFence, fence_closed, fenced_reason
+from pkwbus.link.fence import FENCE_CLOCK, LineFence, fence_closed, fenced_reason
 from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol.buses import Bus
 
 
 class FakeFence:
-    """A fence the test moves: open until ``until`` on time.monotonic()."""
+    """A fence the test moves: open until ``until`` on FENCE_CLOCK."""
 
     def __init__(self, until: float = math.inf) -> None:
         self.until = until
@@ -34,7 +33,7 @@ class FakeFence:
         return self.until
 
     def close(self) -> None:
-        self.until = time.monotonic() - 0.001
+        self.until = FENCE_CLOCK() - 0.001
 
 
 def readable(fd: int, timeout: float) -> bool:
@@ -60,7 +59,7 @@ def test_always_open_never_closes() -> None:
 
 
 def test_a_line_fence_names_its_line_and_asks_the_engines_fence() -> None:
-    inner = FakeFence(time.monotonic() + 100)
+    inner = FakeFence(FENCE_CLOCK() + 100)
     fence = LineFence("hall-a", inner)
     assert fence.open_until() == inner.until
     assert "lease of line hall-a expired" in fenced_reason(fence)
@@ -77,7 +76,7 @@ async def test_a_closed_fence_refuses_the_opening(pty: tuple[int, str]) -> None:
     assert link.state is LinkState.FAILED and not link.is_open
     assert link.reconnect.last_error is not None
     assert "lease of line l1 expired" in link.reconnect.last_error
-    fence.until = time.monotonic() + 60  # won: the port opens
+    fence.until = FENCE_CLOCK() + 60  # won: the port opens
     await link.open()
     assert link.is_open
     await link.close()
@@ -87,7 +86,7 @@ async def test_writes_go_out_while_open_and_none_once_the_fence_closed(
     pty: tuple[int, str],
 ) -> None:
     controller, path = pty
-    fence = FakeFence(time.monotonic() + 60)
+    fence = FakeFence(FENCE_CLOCK() + 60)
     lost: list[str] = []
     link = Link(PortSettings(path, baudrate=19200), fence=LineFence("l1", fence),
                 on_lost=lost.append)  # fmt: skip
@@ -142,7 +141,7 @@ async def test_a_refused_write_closes_the_gateway_connection(
     """Over ``socket://`` the refusal closes the connection: a gateway that admits one
     connection is free for the new master."""
     url, got, closed = gateway
-    fence = FakeFence(time.monotonic() + 60)
+    fence = FakeFence(FENCE_CLOCK() + 60)
     link = Link(PortSettings(url, baudrate=19200), fence=fence)
     await link.open()
     link.write_now(b"\x01", discard=False)
@@ -175,3 +174,49 @@ def test_the_ports_of_both_buses_hand_their_fence_to_their_link() -> None:
     assert TelegramPort(settings, Bus.FC, fence=fence).link.fence is fence
     assert FdlPort(settings, 2, fence=fence).link.fence is fence
     assert TelegramPort(settings, Bus.FC).link.fence is ALWAYS_OPEN
+
+
+def test_the_fence_clock_counts_a_suspend_where_the_system_can(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """CLOCK_BOOTTIME where it exists (Linux: it runs on through a system suspend, which
+    time.monotonic() does not count), else time.monotonic."""
+    import sys
+    import time
+
+    from pkwbus.link.fence import pick_clock
+
+    if sys.platform.startswith("linux"):
+        assert hasattr(time, "CLOCK_BOOTTIME")
+    asked: list[int] = []
+
+    def clock_gettime(clock_id: int) -> float:
+        asked.append(clock_id)
+        return 1234.5
+
+    monkeypatch.setattr(time, "CLOCK_BOOTTIME", 7, raising=False)
+    monkeypatch.setattr(time, "clock_gettime", clock_gettime)
+    picked = pick_clock()
+    assert picked() == 1234.5 and asked == [7]
+    monkeypatch.delattr(time, "CLOCK_BOOTTIME")
+    assert pick_clock() is time.monotonic
+
+
+def test_the_picked_clock_is_boottime_here() -> None:
+    import sys
+    import time
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("CLOCK_BOOTTIME is Linux's")
+    before = time.clock_gettime(time.CLOCK_BOOTTIME)
+    now = FENCE_CLOCK()
+    after = time.clock_gettime(time.CLOCK_BOOTTIME)
+    assert before <= now <= after
+
+
+def test_a_fence_is_closed_on_the_clock_given() -> None:
+    fence = FakeFence(100.0)
+    assert not fence_closed(fence, lambda: 99.999)
+    assert fence_closed(fence, lambda: 100.0)
+    assert fence_closed(fence, lambda: 1e9)
+    assert not fence_closed(ALWAYS_OPEN, lambda: 1e300)

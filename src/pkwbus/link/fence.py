@@ -1,26 +1,54 @@
 """What keeps a port silent once its line may be another instance's (hot standby).
 
-A :class:`Fence` gives the moment on ``time.monotonic()`` up to which its line's
+A :class:`Fence` gives the moment on :data:`FENCE_CLOCK` up to which its line's
 port may transmit. :class:`~pkwbus.link.port.Link` asks it before it opens the
 port and before every write, so that a process resumed after SIGSTOP, or one
 whose lease renewals stopped, never sends a byte on a stale lease: the write is
 refused and the port given up, the reason told. A single instance's lines have
 :data:`ALWAYS_OPEN`, which never closes.
+
+:data:`FENCE_CLOCK` is the one clock of every lease deadline (the lease keeper's, the
+fence's, the standby engine's and the port's check), picked here by :func:`pick_clock`:
+``CLOCK_BOOTTIME`` where the system has it (Linux), which counts a system suspend as
+time passed, where ``time.monotonic()`` stops; elsewhere ``time.monotonic()``.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Final, Protocol
 
-__all__ = ["ALWAYS_OPEN", "Fence", "LineFence", "fence_closed", "fenced_reason"]
+__all__ = [
+    "ALWAYS_OPEN",
+    "FENCE_CLOCK",
+    "Fence",
+    "LineFence",
+    "fence_closed",
+    "fenced_reason",
+    "pick_clock",
+]
+
+
+def pick_clock() -> Callable[[], float]:
+    """The clock of the leases' deadlines: ``CLOCK_BOOTTIME`` where there is one (a
+    master whose host was suspended finds its lease past when it resumes), else
+    ``time.monotonic``."""
+    boottime: int | None = getattr(time, "CLOCK_BOOTTIME", None)
+    if boottime is None:
+        return time.monotonic
+    return functools.partial(time.clock_gettime, boottime)
+
+
+FENCE_CLOCK: Final[Callable[[], float]] = pick_clock()
 
 
 class Fence(Protocol):
     def open_until(self) -> float:
-        """The ``time.monotonic()`` moment from which the port may no longer transmit."""
+        """The :data:`FENCE_CLOCK` moment from which the port may no longer transmit."""
         ...
 
 
@@ -46,9 +74,9 @@ class LineFence:
         return self.fence.open_until()
 
 
-def fence_closed(fence: Fence) -> bool:
-    """Whether ``fence`` forbids transmitting now."""
-    return time.monotonic() >= fence.open_until()
+def fence_closed(fence: Fence, clock: Callable[[], float] = FENCE_CLOCK) -> bool:
+    """Whether ``fence`` forbids transmitting now (``clock``: the fences' own)."""
+    return clock() >= fence.open_until()
 
 
 def fenced_reason(fence: Fence) -> str:

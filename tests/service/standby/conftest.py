@@ -4,12 +4,12 @@ tests/service/conftest.py, each stopped at the end."""
 from __future__ import annotations
 
 import asyncio
-import time
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
 
 import pytest
 
+from pkwbus.link.fence import FENCE_CLOCK
 from pkwbus.service.config import StandbyConfig
 from pkwbus.service.standby import Standby
 from tests.service.standby_process.etcd import Etcd
@@ -20,7 +20,7 @@ LEASE = 2.0
 
 @dataclass
 class Engine:
-    """A Standby and what it told: (monotonic time, line, held) in order."""
+    """A Standby and what it told: (FENCE_CLOCK time, line, held) in order."""
 
     standby: Standby
     told: list[tuple[float, str, bool]] = field(default_factory=list)
@@ -47,7 +47,7 @@ async def engines() -> AsyncIterator[Make]:
         )  # fmt: skip
         told: list[tuple[float, str, bool]] = []
         standby = Standby(
-            config, lines, on_change=lambda line, held: told.append((time.monotonic(), line, held))
+            config, lines, on_change=lambda line, held: told.append((FENCE_CLOCK(), line, held))
         )
         engine = Engine(standby, told)
         made.append(engine)
@@ -61,8 +61,8 @@ async def engines() -> AsyncIterator[Make]:
 async def until(check: Callable[[], bool], timeout: float, what: str) -> None:
     """Until ``check()``; fails saying ``what`` after ``timeout`` seconds (generous:
     the tests wait for what etcd and the engine do, never for a speed)."""
-    end = time.monotonic() + timeout
+    end = FENCE_CLOCK() + timeout
     while not check():
-        if time.monotonic() > end:
+        if FENCE_CLOCK() > end:
             raise AssertionError(f"not within {timeout} s: {what}")
         await asyncio.sleep(0.02)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import time
 
+from pkwbus.link.fence import FENCE_CLOCK
 from pkwbus.service.standby import Master, margin
 from tests.service.standby_process.etcd import Etcd
 
@@ -31,7 +31,7 @@ async def test_exactly_one_holds_each_line_and_a_stop_hands_it_over(
     assert b.told == [] and a.standby.takeovers("l0") == 1
     assert (await etcd.keys("/test/lines/"))["/test/lines/l0"].startswith(b'{"name":"a"')
 
-    stopped = time.monotonic()
+    stopped = FENCE_CLOCK()
     await a.standby.stop()
     assert not a.standby.holds("l0") and a.standby.fence("l0").open_until() == 0.0
     await until(lambda: b.held() == ["l0"], 5, "b holds l0 after a stopped")
@@ -47,7 +47,7 @@ async def test_alone_an_instance_takes_every_line(etcd: Etcd, engines: Make) -> 
     await until(lambda: a.held() == LINES, 10, "a holds every line")
     assert sorted(line for _, line, held in a.told if held) == LINES
     fence = a.standby.fence("l2")
-    assert time.monotonic() < fence.open_until() <= time.monotonic() + LEASE - margin(LEASE)
+    assert FENCE_CLOCK() < fence.open_until() <= FENCE_CLOCK() + LEASE - margin(LEASE)
 
 
 async def test_four_lines_spread_two_and_two(etcd: Etcd, engines: Make) -> None:
@@ -92,13 +92,13 @@ async def test_etcd_killed_the_fence_closes_within_the_lease_and_back_the_lines_
     await until(lambda: a.held() == ["l0", "l1"], 10, "a holds both")
     fence = a.standby.fence("l0")
 
-    killed = time.monotonic()
+    killed = FENCE_CLOCK()
     etcd.kill(etcd.members[0])
     await until(lambda: sorted(a.lost()) == ["l0", "l1"], 3 * LEASE, "a loses both")
     # the last renewal was sent before the kill: the port went silent lease - margin after
     assert fence.open_until() <= killed + LEASE - margin(LEASE)
     assert all(at >= fence.open_until() for at, _, held in a.told if not held)
-    assert not a.standby.holds("l0") and time.monotonic() >= fence.open_until()
+    assert not a.standby.holds("l0") and FENCE_CLOCK() >= fence.open_until()
     assert not a.standby.etcd_up
     assert a.standby.master_of("l0") is None  # its own stale key is not mastering
 

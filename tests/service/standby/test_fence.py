@@ -75,3 +75,31 @@ def test_a_lines_fence_is_its_leases_while_held_and_shut_otherwise() -> None:
     assert fence.open_until() == 103.0 and other.open_until() == 0.0
     del held["l0"]
     assert fence.open_until() == 0.0
+
+
+async def test_one_clock_times_every_deadline_of_the_lease() -> None:
+    """The engine's clock (by default link.fence.FENCE_CLOCK, which the port's check
+    uses too) is the etcd client's, the view's and both lease keepers' fences'."""
+    import inspect
+
+    from pkwbus.link.fence import FENCE_CLOCK
+    from pkwbus.service.config import StandbyConfig
+    from pkwbus.service.standby import Standby
+
+    assert inspect.signature(Standby).parameters["clock"].default is FENCE_CLOCK
+    clock = Clock(500.0)
+    config = StandbyConfig.model_validate(
+        {"etcd": ["http://127.0.0.1:1"], "lease": "4s", "name": "a"}
+    )
+    engine = Standby(config, ["l1"], on_change=lambda line, held: None, clock=clock)
+    try:
+        assert engine.etcd.clock is clock and engine.view.clock is clock
+        for keeper in (engine.lease, engine.registry):
+            assert keeper.clock is clock and keeper.fence.clock is clock
+        engine.lease.fence.renewed(sent=500.0, ttl=4)
+        clock.now = 502.9
+        assert engine.lease.fence.is_open() and engine.lease.fence.left() == pytest.approx(0.1)
+        clock.now = 503.0  # sent + lease - margin, on the injected clock alone
+        assert not engine.lease.fence.is_open()
+    finally:
+        await engine.etcd.aclose()

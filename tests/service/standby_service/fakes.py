@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import json
 import math
-import time
 from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass, field
@@ -14,6 +13,7 @@ from typing import Any
 
 import httpx
 
+from pkwbus.link.fence import FENCE_CLOCK
 from pkwbus.protocol.buses import decode_adr
 from pkwbus.protocol.serial.telegram import Telegram
 from pkwbus.service.assembly.build import Parts, assemble
@@ -87,7 +87,7 @@ class FakeEngine:
         return self.fences.setdefault(line, Fence())
 
     def holds(self, line: str) -> bool:
-        return time.monotonic() < self.fence(line).open_until()
+        return FENCE_CLOCK() < self.fence(line).open_until()
 
     def master_of(self, line: str) -> Master | None:
         return self.masters.get(line)
@@ -116,7 +116,7 @@ class FakeEngine:
         self.on_change(line, False)
 
     def expire(self, line: str) -> None:
-        self.fence(line).until = time.monotonic() - 0.001
+        self.fence(line).until = FENCE_CLOCK() - 0.001
 
 
 def drive(name: str, address: int) -> dict[str, Any]:
@@ -138,7 +138,7 @@ class Service:
     """Two lines, l1 (drives a1, a2) and l2 (b1), each on its own simulated gateway."""
 
     ends: dict[str, TcpEnd]
-    heard: list[tuple[float, str, int]]  # (time.monotonic(), line, address) of each request
+    heard: list[tuple[float, str, int]]  # (FENCE_CLOCK(), line, address) of each request
     runtime: Runtime
     parts: Parts
     gate: StandbyLines
@@ -184,7 +184,7 @@ async def service(names: Sequence[str] = ("l1", "l2", "l3")) -> AsyncIterator[Se
 
             def hear(t: Telegram, now: float | None = None, n: str = n, sim: Any = sim,
                      answer: Any = answer) -> Any:  # fmt: skip
-                heard.append((time.monotonic(), n, decode_adr(sim.protocol, t.adr).address))
+                heard.append((FENCE_CLOCK(), n, decode_adr(sim.protocol, t.adr).address))
                 return answer(t, now)
 
             sim.answer = hear  # type: ignore[method-assign,assignment]

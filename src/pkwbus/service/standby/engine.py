@@ -30,11 +30,11 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Final
 
+from pkwbus.link.fence import FENCE_CLOCK
 from pkwbus.service.config.model import StandbyConfig
 from pkwbus.service.standby.etcd import Etcd, EtcdError, b64, range_kvs
 from pkwbus.service.standby.fence import LeaseClock, LineLeaseFence, request_timeout
@@ -68,7 +68,7 @@ class Standby:
         lines: Sequence[str],
         *,
         on_change: Callable[[str, bool], None],
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = FENCE_CLOCK,
     ) -> None:
         self.config = config
         self.name = config.name

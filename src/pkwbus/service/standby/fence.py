@@ -2,8 +2,8 @@
 
 etcd's leader expires a lease ``TTL`` seconds after it last received a renewal, on the
 leader's clock. A renewal received was sent earlier, so ``sent + TTL`` on the master's
-monotonic clock is no later than that expiry, if both clocks ran at the same rate. The
-master stops transmitting a safety margin before that moment::
+clock (``link.fence.FENCE_CLOCK``) is no later than that expiry, if both clocks ran at
+the same rate. The master stops transmitting a safety margin before that moment::
 
     open_until = sent + min(TTL, lease) - margin(lease)
 
@@ -35,7 +35,7 @@ MIN_MARGIN: Final = 1.0
 def margin(lease: float) -> float:
     """The safety margin: max(1 s, lease / 4).
 
-    It covers two things. (1) Clock-rate drift: the master's monotonic clock may run
+    It covers two things. (1) Clock-rate drift: the master's clock may run
     slower than the etcd leader's; quartz and NTP slewing keep that far below 0.1 %
     (500 ppm at most when slewed), which is < 30 ms of a 60 s lease; the margin leaves
     25 % of the lease, so it covers rates up to 25 % apart. (2) The time to stop a
