@@ -316,6 +316,17 @@ def check_compose_standby() -> None:
     for host in hosts:
         if host not in services:
             problem(f"{source}: {host} is no service of {COMPOSE_STANDBY}")
+    advertised = [
+        svc["environment"].get("PKWBUS_ADVERTISE") or config["standby"].get("advertise")
+        for svc in instances.values()
+    ]
+    if None in advertised or (
+        "{name}" not in str(advertised[0]) and len(set(advertised)) != len(advertised)
+    ):
+        problem(
+            f"{COMPOSE_STANDBY}: each instance needs a URL of its own"
+            f" (PKWBUS_ADVERTISE): {advertised}"
+        )
     if "0.0.0.0:9725" not in " ".join(next(iter(instances.values()))["command"]):
         problem(f"{COMPOSE_STANDBY}: pkwbus must listen on 0.0.0.0:9725 in a container")
 
@@ -384,18 +395,26 @@ def check_kubernetes() -> None:
         by_kind.setdefault(d["kind"], {})[d["metadata"]["name"]] = d
     configmaps = by_kind.get("ConfigMap", {})
     pvcs = by_kind.get("PersistentVolumeClaim", {})
-    deployments = by_kind.get("Deployment", {})
     services = by_kind.get("Service", {})
-    if not deployments:
+    # pkwbus's workloads: its Deployments and its StatefulSets (a hot standby group
+    # keeping each pod's audit database); the other StatefulSets are etcd's.
+    deployments = {
+        f"{kind} {name}": d
+        for kind in ("Deployment", "StatefulSet")
+        for name, d in by_kind.get(kind, {}).items()
+        if d["spec"]["template"]["metadata"]["labels"].get("app.kubernetes.io/name") == "pkwbus"
+    }
+    if not by_kind.get("Deployment"):
         problem(f"{K8S}: no Deployment")
     secret_names = {d["metadata"]["name"] for d in load_yaml_docs(K8S / "secret.example.yaml")}
-    for name, dep in deployments.items():
-        where = f"Deployment {name}"
+    for where, dep in deployments.items():
         spec = dep["spec"]
         pod = spec["template"]["spec"]
         standby = deployment_config(dep, configmaps).get("standby")
         if standby:
             check_standby_group(where, dep, standby, by_kind)
+        elif dep["kind"] != "Deployment":
+            problem(f"{where}: a single instance is a Deployment (replicas 1, Recreate)")
         else:
             if spec.get("replicas") != 1:
                 problem(f"{where}: replicas must be 1 (one master per RS-485 line)")
@@ -404,6 +423,11 @@ def check_kubernetes() -> None:
         if not pod.get("securityContext", {}).get("runAsNonRoot"):
             problem(f"{where}: pod securityContext.runAsNonRoot is not true")
         volumes = {v["name"]: v for v in pod.get("volumes", [])}
+        volumes |= {  # a StatefulSet's own claims: one per pod
+            t["metadata"]["name"]: {"volumeClaimTemplate": t}
+            for t in spec.get("volumeClaimTemplates", [])
+            if dep["kind"] == "StatefulSet"
+        }
         for v in volumes.values():
             if "configMap" in v and v["configMap"]["name"] not in configmaps:
                 problem(f"{where}: ConfigMap {v['configMap']['name']} not defined")
@@ -433,6 +457,8 @@ def check_kubernetes() -> None:
                 continue
             cm = configmaps[volumes[cfg_mount["name"]]["configMap"]["name"]]
             check_service_config(cw, cm, env, ports, mounts)
+            if standby:
+                check_standby_audit(cw, cm, mounts, volumes)
     services = {  # pkwbus's own; etcd.yaml's Service is checked with its StatefulSet
         name: svc
         for name, svc in services.items()
@@ -446,7 +472,7 @@ def check_kubernetes() -> None:
             if labels_match(sel, d["spec"]["template"]["metadata"]["labels"])
         ]
         if len(pods) != 1:
-            problem(f"Service {name}: selector {sel} matches {len(pods)} Deployments, not 1")
+            problem(f"Service {name}: selector {sel} matches {len(pods)} workloads, not 1")
         if not svc["spec"].get("publishNotReadyAddresses"):
             problem(
                 f"Service {name}: publishNotReadyAddresses must be true"
@@ -472,7 +498,8 @@ def check_kubernetes() -> None:
                 f"ServiceMonitor {name}: job label would not be 'pkwbus'"
                 ' (rules select job="pkwbus")'
             )
-    print(f"  {len(docs)} Kubernetes objects, {len(deployments)} Deployments wired up")
+    check_etcd_policy(by_kind)
+    print(f"  {len(docs)} Kubernetes objects, {len(deployments)} pkwbus workloads wired up")
 
 
 def deployment_config(dep: dict[str, Any], configmaps: dict[str, Any]) -> dict[str, Any]:
@@ -511,7 +538,12 @@ def check_standby_group(
         field = env.get("PKWBUS_INSTANCE", {}).get("valueFrom", {}).get("fieldRef", {})
         if field.get("fieldPath") != "metadata.name":
             problem(f"{where} container {c['name']}: PKWBUS_INSTANCE is not the pod's name")
-    statefulsets = by_kind.get("StatefulSet", {})
+    check_advertise(where, dep, standby, by_kind)
+    statefulsets = {  # etcd's
+        name: s
+        for name, s in by_kind.get("StatefulSet", {}).items()
+        if s["spec"]["template"]["metadata"]["labels"].get("app.kubernetes.io/name") != "pkwbus"
+    }
     members = {
         f"{s['metadata']['name']}-{i}.{s['spec']['serviceName']}"
         for s in statefulsets.values()
@@ -569,6 +601,88 @@ def check_service_config(
         drives += [d["name"] for d in line.get("drives", [])]
     if len(drives) != len(set(drives)):
         problem(f"{where}: drive names repeat")
+
+
+def check_standby_audit(
+    where: str, cm: dict[str, Any], mounts: dict[str, Any], volumes: dict[str, Any]
+) -> None:
+    """A hot standby pod's audit database is its own and outlives the pod: on a
+    StatefulSet's volumeClaimTemplate (one claim per pod), not an emptyDir."""
+    audit = str(yaml.safe_load(cm["data"]["config.yaml"]).get("audit_db", ""))
+    holders = [
+        volumes.get(m["name"], {})
+        for p, m in mounts.items()
+        if audit.startswith(p.rstrip("/") + "/")
+    ]
+    if not any("volumeClaimTemplate" in v for v in holders):
+        problem(
+            f"{where}: audit_db {audit!r} is not on a volumeClaimTemplate"
+            " (a StatefulSet keeps each pod's audit rows across restarts)"
+        )
+
+
+def check_advertise(
+    where: str, dep: dict[str, Any], standby: dict[str, Any], by_kind: dict[str, Any]
+) -> None:
+    """Each pod of a group advertises its own URL (a 409 not_master names it): with
+    ``{name}`` (PKWBUS_ADVERTISE or standby.advertise), under the StatefulSet's
+    headless Service, whose one DNS name per pod it is."""
+    for c in dep["spec"]["template"]["spec"]["containers"]:
+        env = {e["name"]: e for e in c.get("env", [])}
+        template = env.get("PKWBUS_ADVERTISE", {}).get("value") or standby.get("advertise")
+        if not template or "{name}" not in str(template):
+            problem(f"{where} container {c['name']}: no advertise URL with {{name}} per pod")
+            continue
+        if dep["kind"] != "StatefulSet":
+            continue
+        service = dep["spec"].get("serviceName")
+        svc = by_kind.get("Service", {}).get(service)
+        if svc is None or svc["spec"].get("clusterIP") != "None":
+            problem(f"{where}: serviceName {service!r} is no headless Service here")
+        host = re.sub(r"^https?://", "", str(template)).split(":")[0].split("/")[0]
+        if not host.startswith(f"{{name}}.{service}."):
+            problem(f"{where}: advertise {template!r} is not the pod's name under {service}")
+
+
+def check_etcd_policy(by_kind: dict[str, Any]) -> None:
+    """etcd's client port admits the pkwbus pods alone (no other pod takes or
+    revokes a line's lease); its peer port the members alone."""
+    etcd = [
+        s
+        for s in by_kind.get("StatefulSet", {}).values()
+        if s["spec"]["template"]["metadata"]["labels"].get("app.kubernetes.io/name") == "etcd"
+    ]
+    if not etcd:
+        return
+    labels = etcd[0]["spec"]["template"]["metadata"]["labels"]
+    policies = [
+        p
+        for p in by_kind.get("NetworkPolicy", {}).values()
+        if labels_match(p["spec"]["podSelector"].get("matchLabels", {}), labels)
+        and "Ingress" in p["spec"].get("policyTypes", [])
+    ]
+    if not policies:
+        problem("StatefulSet etcd: no NetworkPolicy confines who reaches its client port")
+    allowed = {"client": {"pkwbus"}, "peer": {"etcd"}}
+    for p in policies:
+        for rule in p["spec"].get("ingress", []):
+            ports = [q.get("port") for q in rule.get("ports", [])]
+            peers = rule.get("from", [])
+            names = {
+                f.get("podSelector", {}).get("matchLabels", {}).get("app.kubernetes.io/name")
+                for f in peers
+            }
+            bad = (
+                not ports
+                or not peers
+                or any(set(f) != {"podSelector"} for f in peers)
+                or any(q not in allowed or not names <= allowed[str(q)] for q in ports)
+            )
+            if bad:
+                problem(
+                    f"NetworkPolicy {p['metadata']['name']}: admits {names} to ports {ports}"
+                    " (client: pkwbus pods only; peer: etcd pods only)"
+                )
 
 
 # --- main --------------------------------------------------------------------------
