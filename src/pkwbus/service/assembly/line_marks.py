@@ -297,6 +297,11 @@ class LineMarks:
         doc = export(self.history, drives) if self.history is not None and drives else {}
         return {**doc, **extra}
 
+    def _encoded(self, line: str, extra: Mapping[str, Any]) -> tuple[bytes, int]:
+        """:meth:`document` encoded under the limit, in a thread: up to a megabyte of JSON,
+        made again while entries are left out, must not hold the loop."""
+        return encode(self.document(line, extra), self.limit)
+
     def _on_loop(self, line: str) -> dict[str, Any]:
         """What only the loop may read: the drives in maintenance and the describe book."""
         maintenance = self.runtime.snapshot.maintenance
@@ -311,8 +316,7 @@ class LineMarks:
     async def write(self, line: str) -> bool:
         """``line``'s marks put when they changed; False when the put failed."""
         try:
-            doc = await asyncio.to_thread(self.document, line, self._on_loop(line))
-            data, dropped = encode(doc, self.limit)
+            data, dropped = await asyncio.to_thread(self._encoded, line, self._on_loop(line))
         except (sqlite3.Error, ValueError, OSError) as exc:
             self._once(line, f"its marks cannot be made: {exc}")
             return False
