@@ -2,7 +2,8 @@
 
 The slave's slot (:class:`~pkwbus.protocol.profibus.dp.ppo.PkwSlot`, one a
 slave, made here and cycled by the DP wire) puts the job's request in every
-PPO-write until the job is over, and decodes each PPO-read once. The DP wire
+PPO-write until the job is over, as the bytes this carrier encoded once for the
+job's transaction (the dry run's bytes), and decodes each PPO-read once. The DP wire
 hands each PPO-read that came while the slot carried the job to the planner
 as it came (a :class:`~pkwbus.master.planning.answers.Reply`); the job's
 transaction gives it to this carrier's decoder, which takes what the slot

@@ -6,6 +6,7 @@ the slave showed AK 0 (it may still be answering an earlier request)."""
 
 from __future__ import annotations
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -16,6 +17,7 @@ from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejecte
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
+from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.profibus.dp import ppo
 from tests.protocol.profibus.test_ppo import IDLE, PCV, PPO1, pkw_of, ppo_read, value
@@ -119,3 +121,40 @@ def test_a_job_never_ends_on_an_answer_that_does_not_match(pnu: int, reads: list
             assert isinstance(outcome, Answered | Rejected)
             assert pkw.matches(request, job.tx.response, PCV) if job.tx.response else False
             break
+
+
+def test_the_ppo_write_of_a_job_is_encoded_once_by_its_carrier_and_sent_every_cycle(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The slot sends the bytes its carrier encoded for the job (the dry run's bytes) in
+    every PPO-write until the job ends, and AK 0 otherwise, encoding neither again."""
+    request = pkw.write(PCV, 302, 1500, pkw.Width.WORD)
+    carrier = carrier_for(TARGET)
+    assert isinstance(carrier, SlotCarrier)
+    slot = carrier.new_slot()
+    idle = slot.outputs()
+    tx = carrier.transaction([Item(request)], retries=2, deadline=10.0)
+    assert isinstance(tx, PkwTransaction)
+    assert tx.telegram == carrier.preview(Item(request)).telegram
+    encoded: list[object] = []
+    real = ppo.encode_ppo_write
+    monkeypatch.setattr(ppo, "encode_ppo_write", lambda *a, **k: encoded.append(a) or real(*a, **k))
+    slot.submit(request, tx.telegram)
+    sent = []
+    for n in range(3 * ppo.IDLE_WAIT_CYCLES):
+        sent.append(slot.outputs())
+        slot.feed(IDLE if n < 2 else value(1614, 9))  # AK 0, then the slave's other answers
+    assert sent[0] == idle  # before the slave's AK 0: not yet sent
+    assert sent[-1] == tx.telegram and pkw_of(sent[-1]) == request
+    slot.finish()
+    assert slot.outputs() == idle
+    assert encoded == []  # neither the job's PPO-write nor AK 0 was encoded again
+
+
+def test_a_ppo_write_of_another_length_is_refused() -> None:
+    carrier = carrier_for(TARGET)
+    assert isinstance(carrier, SlotCarrier)
+    slot = carrier.new_slot()
+    with pytest.raises(LocalProtocolError):
+        slot.submit(pkw.read(PCV, 1613), b"\x00" * 4)
+    assert not slot.busy

@@ -201,7 +201,7 @@ class CycleWire:
         if self._next(planner, name, slave.state, slave.waiting, now):
             tx = planner.active(name)
             if isinstance(tx, PkwTransaction):
-                slot.submit(tx.request)
+                slot.submit(tx.request, tx.telegram)  # encoded once, by its carrier
 
     def _next(
         self, planner: Planner, name: str, state: SlaveState, waiting: bool, now: float

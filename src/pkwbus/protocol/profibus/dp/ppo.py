@@ -249,6 +249,9 @@ class PkwSlot:
         self.profile = profile or DEFAULT_PROFILES[dia.name]
         self.request: pkw.PkwRequest | None = None
         self.update: SlotUpdate | None = None  # what the latest PPO-read brought
+        # The two PPO-writes it sends, each encoded once: AK 0, and its job's request.
+        self._idle = encode_ppo_write(ppo, dia) if ppo.has_pkw else b""
+        self._write = b""
         self.cycles = 0  # PPO-reads since the request was submitted
         self._idle_seen = False
         self._idle_cycles = 0
@@ -257,7 +260,10 @@ class PkwSlot:
     def busy(self) -> bool:
         return self.request is not None
 
-    def submit(self, request: pkw.PkwRequest) -> None:
+    def submit(self, request: pkw.PkwRequest, write: bytes | None = None) -> None:
+        """Carry ``request`` from the next PPO-write on; ``write`` is that PPO-write as its
+        carrier already encoded it (:func:`encode_ppo_write` of the same request; encoded
+        here when None), sent as it is every cycle until :meth:`finish`."""
         if not self.ppo.has_pkw:
             raise LocalProtocolError(f"PPO {self.ppo.number} has no parameter channel")
         if self.request is not None:
@@ -266,13 +272,21 @@ class PkwSlot:
             raise LocalProtocolError("AK 0 is not a job")
         if request.text:
             raise LocalProtocolError("a text write does not fit the 4 PKW words of a PPO")
+        if write is None:
+            write = encode_ppo_write(self.ppo, self.dialect, request)
+        elif len(write) != self.ppo.length:
+            raise LocalProtocolError(
+                f"a PPO {self.ppo.number} write is {self.ppo.length} bytes, not {len(write)}"
+            )
         self.request = request
+        self._write = write
         self.cycles = 0
 
     def finish(self) -> None:
         """The job is over (answered, refused, mismatched or past its deadline): AK 0
         goes out again, and the next job waits for the slave's AK 0."""
         self.request = None
+        self._write = b""
         self._idle_seen = False
         self._idle_cycles = 0
 
@@ -282,8 +296,8 @@ class PkwSlot:
         return None
 
     def outputs(self) -> bytes:
-        """The PPO-write for the next Data_Exchange."""
-        return encode_ppo_write(self.ppo, self.dialect, self._sending())
+        """The PPO-write for the next Data_Exchange (encoded once per job, not per cycle)."""
+        return self._write if self._sending() is not None else self._idle
 
     def feed(self, inputs: bytes) -> SlotUpdate:
         """Take the PPO-read answering the last :meth:`outputs`, decoded once: what it
