@@ -7,7 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from pkwbus.master.reading import Reading
+from pkwbus.service.http.views import drives as drives_view
 from pkwbus.service.http.views.drives import drive_view
 from tests.service.http.conftest import AUTH, fc_drives, service
 
@@ -62,3 +65,37 @@ async def test_each_kept_part_follows_what_it_shows(tmp_path: Path) -> None:
         snap.changes.touch("fan3")
         now = await _same_as_the_views(svc)
         assert now["fan3"]["up"] is False
+
+
+async def test_a_new_reading_of_the_same_value_changes_only_its_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A value read again (the same number, a new time: most polls) is not made again from
+    its fields: its piece is the kept one with the new time, and still what the drive's view
+    says. Another value, or the same number of another type, is made again."""
+    made: list[str] = []
+    fields = drives_view._reading_fields
+
+    def counted(*args: Any) -> dict[str, Any]:
+        made.append(args[1].parameter)
+        return fields(*args)
+
+    monkeypatch.setattr(drives_view, "_reading_fields", counted)
+    async with service(tmp_path, fc=fc_drives(polls=QUIET)) as svc:
+        await _same_as_the_views(svc)
+        snap = svc.runtime.snapshot
+        key = ("fan3", "16-13", 0)
+        old = snap.readings[key]
+        for value, raw, again in ((old.value, old.raw, False), (123, 123, True),
+                                  (123, 123, False), (123.0, 123, True)):  # fmt: skip
+            stamp = snap.readings[key].timestamp + 1.25
+            snap.readings[key] = Reading(value, raw, stamp)
+            snap.changes.touch("fan3")
+            made.clear()
+            answer = (await svc.client.get("/api/v1/drives?drive=fan3")).json()
+            assert made == (["16-13"] if again else []), (value, made)
+            (view,) = answer
+            assert view == drive_view(svc.runtime, "fan3").model_dump(mode="json")
+            (got,) = [v for v in view["values"] if v["parameter"] == "16-13"]
+            assert got["timestamp"] == stamp and got["value"] == value
+            assert type(got["value"]) is type(value)

@@ -36,7 +36,13 @@ from pkwbus.service.http.views import (
     writable_refs,
     writable_views,
 )
-from pkwbus.service.http.views.pieces import ValuesMade, head_json, json_list
+from pkwbus.service.http.views.pieces import (
+    ValuesMade,
+    head_json,
+    json_list,
+    piece_of,
+    restamped,
+)
 from pkwbus.service.http.views.readable import duration, readable, time_unit
 from pkwbus.service.runtime import DriveEntry, Runtime
 from pkwbus.service.writes.checks import ApiError, line_mastered_elsewhere, mastered_elsewhere
@@ -324,15 +330,20 @@ class DriveViews:
             was = kept[i]
             if (
                 was is not None
-                and was[0] is reading
                 and (was[1] is fmt or was[1] == fmt)  # a decoding made again, the same
                 and was[2] == source
             ):
-                texts[i] = was[3]
-                continue
+                if was[0] is reading:
+                    texts[i] = was[3]
+                    continue
+                piece = restamped(was, reading)  # a new reading of the same value
+                if piece is not None:
+                    kept[i] = (reading, fmt, source, piece, was[4], was[5])
+                    texts[i] = piece
+                    continue
             fields = _reading_fields(runtime, entry.polls[i], reading, fmt, source, name)
-            piece = to_json(fields, inf_nan_mode="null")
-            kept[i] = (reading, fmt, source, piece)
+            piece, before, after = piece_of(fields)
+            kept[i] = (reading, fmt, source, piece, before, after)
             texts[i] = piece
         plan.readings, plan.fmts, plan.told = readings, fmts, told
         plan.json = b",".join(filter(None, texts))

@@ -12,9 +12,33 @@ from pkwbus.master.snapshot import ReadingKey
 from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.runtime import DriveEntry
 
-__all__ = ["Piece", "ValuesMade", "head_json", "json_list"]
+__all__ = ["Piece", "ValuesMade", "head_json", "json_list", "piece_of", "restamped"]
 
-Piece = tuple[Reading, ParameterDescription, str, bytes]  # a value's: what it was made of
+# A value's piece: what it was made of (its reading, decoding and source), its JSON, and
+# that JSON cut around the timestamp (a new reading of the same value differs only there).
+Piece = tuple[Reading, ParameterDescription, str, bytes, bytes, bytes]
+
+TIMESTAMP = b',"timestamp":'
+
+
+def piece_of(fields: dict[str, object]) -> tuple[bytes, bytes, bytes]:
+    """A value's JSON (``to_json`` of its fields, NaN and infinity as null) and that JSON cut
+    before and after its timestamp."""
+    piece = to_json(fields, inf_nan_mode="null")
+    head, _, rest = piece.partition(TIMESTAMP)
+    stamp = to_json(fields["timestamp"], inf_nan_mode="null")
+    assert rest.startswith(stamp), "the timestamp comes after the unit"
+    return piece, head + TIMESTAMP, rest[len(stamp) :]
+
+
+def restamped(was: Piece, reading: Reading) -> bytes | None:
+    """The piece of ``reading`` made from ``was`` when only the time differs (the same
+    value and raw number, of the same type); None when it must be made again."""
+    before = was[0]
+    value = reading.value
+    if type(value) is not type(before.value) or value != before.value or reading.raw != before.raw:
+        return None
+    return b"".join((was[4], to_json(reading.timestamp, inf_nan_mode="null"), was[5]))
 
 
 class ValuesMade:
