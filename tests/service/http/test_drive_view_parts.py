@@ -99,3 +99,35 @@ async def test_a_new_reading_of_the_same_value_changes_only_its_time(
             (got,) = [v for v in view["values"] if v["parameter"] == "16-13"]
             assert got["timestamp"] == stamp and got["value"] == value
             assert type(got["value"]) is type(value)
+
+
+async def test_the_writable_part_follows_the_value_not_the_reading(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A writable parameter shows its latest value: a new reading of the same value leaves
+    the drive's tail as it was; another value (or the same number of another type) makes
+    it again, and the answer is still what the drive's view says."""
+    made: list[str] = []
+    tail = drives_view.DriveViews._tail_json
+
+    def counted(self: Any, name: str, *args: Any) -> bytes:
+        made.append(name)
+        return tail(self, name, *args)
+
+    monkeypatch.setattr(drives_view.DriveViews, "_tail_json", counted)
+    async with service(tmp_path, fc=fc_drives(polls=QUIET)) as svc:
+        r = await svc.put("fan1", "3-41", {"value": 12.5}, headers=AUTH)
+        assert r.status_code == 200, r.text
+        await svc.client.get("/api/v1/drives?drive=fan1")
+        snap = svc.runtime.snapshot
+        (key,) = [k for k in snap.latest if k[0] == "fan1" and k[1] == 341]
+        for value, again in ((12.5, False), (13.0, True), (13.0, False), (13, True)):
+            old = snap.latest[key]
+            snap.latest[key] = Reading(value, old.raw, old.timestamp + 1.0)
+            snap.changes.touch("fan1")
+            made.clear()
+            (view,) = (await svc.client.get("/api/v1/drives?drive=fan1")).json()
+            assert made == (["fan1"] if again else []), (value, made)
+            assert view == drive_view(svc.runtime, "fan1").model_dump(mode="json")
+            (shown,) = [w for w in view["writable"] if w["parameter"] == "3-41"]
+            assert shown["value"] == value and type(shown["value"]) is type(value)

@@ -50,7 +50,8 @@ from pkwbus.service.writes.checks import ApiError, line_mastered_elsewhere, mast
 __all__ = ["SLICE", "TOKEN_HEADER", "DriveViews", "Selection", "drive_view"]
 
 TOKEN_HEADER = "X-Changes-Token"  # the token of the answer, for ?changed_since=
-SLICE = 32  # drives made between two turns of the event loop
+SLICE = 32  # drives made between two looks at the time
+TURN_EVERY = 0.004  # seconds of making at most before the event loop gets a turn
 _NO_FORMAT = ParameterDescription()
 _VIEW = DriveView.__pydantic_serializer__
 _ROW = DriveOverview.__pydantic_serializer__
@@ -224,11 +225,16 @@ class DriveViews:
         return list(names), token
 
     async def full(self, names: Sequence[str]) -> bytes:
-        """The JSON list of the drives' views; the loop turns between slices of them."""
+        """The JSON list of the drives' views; the loop turns between slices of them, once
+        :data:`TURN_EVERY` seconds of making have passed (most answers are mostly kept
+        pieces and need no turn; one made whole, after a start or a reload, needs many)."""
         pieces: list[bytes] = []
+        clock = time.perf_counter
+        turn_at = clock() + TURN_EVERY
         for start in range(0, len(names), SLICE):
-            if start:
+            if start and clock() >= turn_at:
                 await asyncio.sleep(0)
+                turn_at = clock() + TURN_EVERY
             for name in names[start : start + SLICE]:
                 if name in self.runtime.drives:  # a reload between slices may remove one
                     pieces.append(self._json(name))
@@ -351,7 +357,7 @@ class DriveViews:
 
     def _writable_now(self, name: str, entry: DriveEntry) -> tuple[object, ...]:
         """What the drive's writable parameters show depends on: what the drive described
-        and stated of each, and the latest reading it confirmed."""
+        and stated of each, and the value of the latest reading it confirmed."""
         snap = self.runtime.snapshot
         decoding = snap.decoding.get(name)
         described = decoding.described if decoding is not None else {}
@@ -359,7 +365,9 @@ class DriveViews:
         now: list[object] = []
         for pnu, index, _ in writable_refs(entry):
             reading = latest.get((name, pnu, index or 0))
-            now += (described.get(pnu), stated.get((name, pnu)), reading)
+            # its value alone is shown: a new reading of the same value changes nothing
+            value = None if reading is None else reading.value
+            now += (described.get(pnu), stated.get((name, pnu)), type(value), value)
         return tuple(now)
 
     def _tail_json(self, name: str, faults: int, errors: int, swept: bool) -> bytes:
