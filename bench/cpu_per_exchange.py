@@ -109,7 +109,8 @@ async def service_path(port: str, n: int, count: int = 3) -> dict[str, float]:
     counting = Counting(line_metrics)
     sched = LineRunner(
         "bench",
-        ExchangeWire(line),
+        line,
+        ExchangeWire(line.timeout),
         drives,
         observers=[counting],
         poll_deadline=1.0,

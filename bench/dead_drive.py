@@ -46,7 +46,7 @@ async def polls(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, EVERY) for a in (1, 2, 3, 4)]
     line = make_port(port, "fc", BAUD, timeout=0.1)
-    sched = LineRunner("bench", ExchangeWire(line), drives, observers=[events])
+    sched = LineRunner("bench", line, ExchangeWire(line.timeout), drives, observers=[events])
     task = asyncio.create_task(sched.run())
     await asyncio.sleep(0.5)
     n0, t0 = events.total(HEALTHY), time.perf_counter()

@@ -63,14 +63,16 @@ async def measure(baudrate: int, seconds: float) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         end = await sim.serve_pty(str(Path(tmp) / "ttyDP"))
         try:
-            line = FdlPort(PortSettings(end.path, baudrate=baudrate), 2, listen=0.01)
+            line = FdlPort(
+                PortSettings(end.path, baudrate=baudrate), 2, listen=0.01, clear_on_close=True
+            )
             prm = dps.Parameters(sim.ident, dps.watchdog_factors(2.0))
             setup = SlaveSetup(8, 2, prm, sim.ppo.cfg, retries=2)
             target = DriveTarget.create("profibus", 8, dialect_name=sim.dialect.name)
             spec = DriveSpec("slave", carrier_for(target))
-            wire = CycleWire(line, [SlaveSpec(spec, setup, sim.ppo)])
+            wire = CycleWire([SlaveSpec(spec, setup, sim.ppo)])
             exchanges = _Count()
-            runner = LineRunner("bench", wire, [spec], observers=[exchanges])
+            runner = LineRunner("bench", line, wire, [spec], observers=[exchanges])
             task = asyncio.create_task(runner.run())
             loop = asyncio.get_running_loop()
             try:

@@ -51,7 +51,7 @@ async def back_to_back(port: str, baudrate: int, seconds: float) -> float:
     request = pkw.read(target.dialect, 1613)
     loop = asyncio.get_running_loop()
     async with LineSession(
-        ExchangeWire(line), [DriveSpec("d", carrier_for(target))], retries=2
+        line, ExchangeWire(line.timeout), [DriveSpec("d", carrier_for(target))], retries=2
     ) as session:
         for _ in range(3):  # warm-up
             await session.job("d", request, loop.time() + 1)

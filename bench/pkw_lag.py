@@ -44,9 +44,10 @@ LAGS = {"lag_telegrams=3": "3", "lag 20 ms": "20ms"}
 async def interleaved(port: str, seconds: float) -> float:
     events = Counting()
     drives = [fc_drive(f"d{a}", a, PNUS, 0.0, "uss") for a in (1, 2, 3, 4)]
+    line = make_port(port, "uss", BAUD, timeout=0.1)
     sched = LineRunner(
-        "bench", ExchangeWire(make_port(port, "uss", BAUD, timeout=0.1)), drives,
-        observers=[events], poll_deadline=2.0,
+        "bench", line, ExchangeWire(line.timeout), drives, observers=[events],
+        poll_deadline=2.0,
     )  # fmt: skip
     task = asyncio.create_task(sched.run())
     await asyncio.sleep(0.5)
@@ -64,7 +65,7 @@ async def sequential(port: str, seconds: float) -> float:
     specs = [DriveSpec(str(t.address), carrier_for(t)) for t in targets]
     loop = asyncio.get_running_loop()
     done = 0
-    async with LineSession(ExchangeWire(line), specs, retries=2) as session:
+    async with LineSession(line, ExchangeWire(line.timeout), specs, retries=2) as session:
         start = time.perf_counter()
         i = 0
         while time.perf_counter() - start < seconds:

@@ -241,3 +241,67 @@ def test_nothing_outside_master_builds_a_request() -> None:
             elif isinstance(node, ast.Attribute) and node.attr in names:
                 found.append(f"{name} calls {ast.unparse(node)}")
     assert found == []
+
+
+# The seam of a line (docs/architecture.md, rule 4): the runner is given its port and its
+# wire apart, both typed by the line's requests and answers, and alone calls the port.
+TYPED_SEAM = ("pkwbus.master.bus", "pkwbus.master.runner")
+WIRES = (
+    "pkwbus.master.wires.serial.wire",
+    "pkwbus.master.wires.profibus.wire",
+    "pkwbus.master.wires.profibus.live_list",
+)
+
+
+def _untyped(name: str) -> list[str]:
+    """Where module ``name`` gives up a type: ``Any``, a ``cast``, a ``type: ignore``."""
+    text = MODULES[name].read_text(encoding="utf-8")
+    found = [f"{name}: type: ignore" for line in text.splitlines() if "type: ignore" in line]
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.Name) and node.id in ("Any", "cast"):
+            found.append(f"{name}:{node.lineno}: {node.id}")
+        elif isinstance(node, ast.Attribute) and node.attr in ("Any", "cast"):
+            found.append(f"{name}:{node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, ast.ImportFrom) and node.module == "typing":
+            found += [f"{name}: imports {a.name}" for a in node.names if a.name in ("Any", "cast")]
+    return found
+
+
+def test_the_seam_of_port_wire_and_runner_is_typed() -> None:
+    assert _untyped("pkwbus.master.sessions.session"), "the check sees an Any"
+    assert not [found for name in TYPED_SEAM for found in _untyped(name)]
+
+
+def test_a_wire_never_reaches_its_port() -> None:
+    """A wire is given what it needs of its port when it is made (its answer timeout, the
+    master's address); it imports no port, exposes none, and nobody but the runner goes
+    through a wire to a port."""
+    assert not [f"{w} imports {dep}" for w in WIRES for dep in GRAPH[w] if dep.endswith(".port")]
+    exposing = sorted(
+        f"{name}: {node.name}: {ast.unparse(item)}"
+        for name in WIRES
+        for node in ast.walk(ast.parse(MODULES[name].read_text(encoding="utf-8")))
+        if isinstance(node, ast.ClassDef) and node.name.endswith("Wire")
+        for item in ast.walk(node)
+        if (isinstance(item, ast.FunctionDef) and item.name in ("port", "line"))
+        or (
+            isinstance(item, ast.Attribute)
+            and item.attr in ("port", "line")
+            and isinstance(item.value, ast.Name)
+            and item.value.id == "self"
+        )
+    )
+    assert not exposing
+    through = sorted(
+        f"{name}:{node.lineno}: {ast.unparse(node)}"
+        for name, path in MODULES.items()
+        if name != "pkwbus.master.runner"
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Attribute)
+        and node.attr == "port"
+        and (
+            (isinstance(node.value, ast.Name) and node.value.id == "wire")
+            or (isinstance(node.value, ast.Attribute) and node.value.attr == "wire")
+        )
+    )
+    assert not through

@@ -82,7 +82,8 @@ def runner(
         PortSettings(port, baudrate=115200), Bus(protocol), timeout=timeout, trace=trace
     )
     events = Recorder()
-    return LineRunner("line1", ExchangeWire(line), specs, observers=[events], **kw), events, trace
+    wire = ExchangeWire(line.timeout)
+    return LineRunner("line1", line, wire, specs, observers=[events], **kw), events, trace
 
 
 async def run_until(s: LineRunner, check: Callable[[], bool]) -> None:
@@ -112,7 +113,8 @@ async def test_two_lines_one_failing() -> None:
     async with serve(sim, "tcp") as port:
         good, good_events, _ = runner(port, "fc", drive_specs("fc", [1], [1613], 0.01))
         bad_line = TelegramPort(PortSettings("socket://127.0.0.1:1", reopen_initial=0.05), Bus.FC)
-        bad = LineRunner("line2", ExchangeWire(bad_line), drive_specs("fc", [1], [1613], 0.01))
+        bad_specs = drive_specs("fc", [1], [1613], 0.01)
+        bad = LineRunner("line2", bad_line, ExchangeWire(bad_line.timeout), bad_specs)
         tasks = [asyncio.create_task(x.run()) for x in (good, bad)]
         await until(
             lambda: (
@@ -155,7 +157,7 @@ async def test_an_unexpected_error_does_not_stop_the_line(caplog: pytest.LogCapt
     async with serve(sim, "tcp") as port:
         specs = drive_specs("fc", [1], [1613], 0.01)
         s, events, _ = runner(port, "fc", specs)
-        line = s.wire.line  # type: ignore[attr-defined]
+        line: Any = s.port
         real = line.start
         calls = 0
 
@@ -189,7 +191,7 @@ async def test_a_port_outage_fails_jobs_in_flight_and_marks_drives_unknown() -> 
         timeout=0.05,
         trace=trace,
     )
-    s = LineRunner("line1", ExchangeWire(line), specs, observers=[Recorder()])
+    s = LineRunner("line1", line, ExchangeWire(line.timeout), specs, observers=[Recorder()])
     task = asyncio.create_task(s.run())
     loop = asyncio.get_running_loop()
     try:

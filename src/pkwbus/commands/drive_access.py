@@ -104,7 +104,8 @@ async def _jobs(
 ) -> list[Outcome]:
     """``requests`` one after the other through the line runner, over the line's wire."""
     spec = DriveSpec("drive", carrier)
-    session = LineSession(ExchangeWire(build_port(args)), [spec], retries=args.retries)
+    port = build_port(args)
+    session = LineSession(port, ExchangeWire(port.timeout), [spec], retries=args.retries)
     try:
         await session.open()
     except PortError as exc:

@@ -73,7 +73,7 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
     bus = port_for(line, line.port)
     targets = {drive.name: target_for(line, drive) for drive in line.drives}
     specs = [DriveSpec(name, carrier_for(target)) for name, target in targets.items()]
-    session = LineSession(ExchangeWire(bus), specs, retries=line.retries)
+    session = LineSession(bus, ExchangeWire(bus.timeout), specs, retries=line.retries)
     try:
         await session.open()
     except PortError as exc:

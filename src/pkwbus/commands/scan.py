@@ -135,7 +135,7 @@ async def _scan(
             args.timeout + line.link.settings.wire_time(answer), durations.TELEGRAM_TIMEOUT.high
         )
         specs = [DriveSpec(str(a), carrier) for a, carrier in carriers.items()]
-        session = LineSession(ExchangeWire(line), specs, retries=args.retries)
+        session = LineSession(line, ExchangeWire(line.timeout), specs, retries=args.retries)
         try:
             await session.open()
         except PortError as exc:

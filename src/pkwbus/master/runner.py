@@ -5,8 +5,11 @@ the bus and what an answer means is the wire's (:class:`Wire`: FC and USS,
 :mod:`pkwbus.master.wires.serial`; PROFIBUS DP, :mod:`pkwbus.master.wires.profibus`),
 a few pure calls that the runner makes and that never reach back into it, as
 profirust's FDL station drives its application (``transmit``, ``receive``,
-``handle_timeout``). The runner is the only one that opens and closes the
-line's port (:class:`Port`), starts each request and hands its answer over.
+``handle_timeout``). The runner is given the line's port (:class:`Port`) and
+its wire apart, of the same requests and answers (both generic over them:
+a port of one bus and a wire of another do not type-check), and is the only
+one that opens and closes the port, starts each request and hands its answer
+over; a wire never holds its port.
 
 A run of exchanges goes on in the port's callbacks: each answer goes to the
 wire, and the next request starts from the same callback while the line's
@@ -32,7 +35,7 @@ import logging
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Generic, TypeVar
 
 from pkwbus.link import Link, LinkState, PortError
 from pkwbus.master.bus import Done, LineRefused, Port, Wire
@@ -50,6 +53,9 @@ __all__ = ["BATCH_EVERY", "Done", "LineRefused", "LineRunner", "Port", "Wire"]
 
 log = logging.getLogger(__name__)
 
+Request = TypeVar("Request")  # what the line's wire sends and its port carries
+Answer = TypeVar("Answer")  # what comes back: from the port, to the wire
+
 # Seconds at most between two batches of recorded events during a run.
 BATCH_EVERY = 0.05
 
@@ -65,13 +71,16 @@ def _waited_for(events: Sequence[Event]) -> bool:
     return False
 
 
-class LineRunner:
+class LineRunner(Generic[Request, Answer]):
     """Runs one line of any bus: the service's task for it."""
+
+    _request: Request  # the request out (set before the port is given it)
 
     def __init__(
         self,
         name: str,
-        wire: Wire,
+        port: Port[Request, Answer],
+        wire: Wire[Request, Answer],
         drives: Sequence[DriveSpec],
         *,
         retries: int = 2,
@@ -83,6 +92,7 @@ class LineRunner:
         batch_every: float = BATCH_EVERY,
     ) -> None:
         self.name = name
+        self.port = port
         self.wire = wire
         self.snapshot = snapshot if snapshot is not None else Snapshot()
         self.observers = list(observers)
@@ -99,15 +109,14 @@ class LineRunner:
         self._record_every = batch_every
         self._loop: asyncio.AbstractEventLoop | None = None
         self._run_over: asyncio.Future[float | None] | None = None  # one per run of exchanges
-        self._request: Any = None
         self._started = 0.0
         self._refusing = False
         self._collect()  # what the wire tells from the start (a DP slave offline)
-        wire.port.link.reconnect.add_listener(self._on_port)
+        port.link.reconnect.add_listener(self._on_port)
 
     @property
     def link(self) -> Link:
-        return self.wire.port.link
+        return self.port.link
 
     # ------------------------------------------------------------ the service's
 
@@ -177,10 +186,15 @@ class LineRunner:
         a command that must know at once."""
         await self.link.open()
         try:
-            await self.wire.port.started()
+            await self.port.started()
         except LineRefused as exc:
             self._refused(exc)
             raise
+
+    async def close(self) -> None:
+        """Close the port that :meth:`open` opened where :meth:`run` never ran (a run
+        closes it as it ends)."""
+        await self.port.close()
 
     async def run(self) -> None:
         loop = self._loop = asyncio.get_running_loop()
@@ -205,7 +219,7 @@ class LineRunner:
             self.planner.stop("the service is stopping")
             self.flush()
             with contextlib.suppress(Exception):
-                await self.wire.port.close()
+                await self.port.close()
             self.writer.apply([LineState(self.name, False)])
 
     def _refused(self, exc: LineRefused) -> None:
@@ -222,7 +236,7 @@ class LineRunner:
             self.planner.line_down(loop.time())
             self.flush()
             if await link.reopen(self._wake) and not self.stopping:
-                await self.wire.port.started()
+                await self.port.started()
                 if link.is_open:
                     self.planner.line_up(loop.time())
             return
@@ -250,12 +264,12 @@ class LineRunner:
         until: float | None = await over
         return until
 
-    def _start(self, request: Any, loop: asyncio.AbstractEventLoop) -> None:
+    def _start(self, request: Request, loop: asyncio.AbstractEventLoop) -> None:
         self._request = request
         self._started = loop.time()
-        self.wire.port.start(request, self._done)
+        self.port.start(request, self._done)
 
-    def _done(self, answer: Any) -> None:
+    def _done(self, answer: Answer | BaseException) -> None:
         """The port's callback: the answer to the wire, the next request out."""
         over = self._run_over
         try:
@@ -264,7 +278,7 @@ class LineRunner:
             loop = self._loop
             assert loop is not None
             now = loop.time()
-            wire, planner, port = self.wire, self.planner, self.wire.port
+            wire, planner, port = self.wire, self.planner, self.port
             wire.received(planner, self._request, answer, now, now - self._started,
                           now - port.sent_at)  # fmt: skip
             until: float | None = None

@@ -346,7 +346,7 @@ async def test_a_slave_owned_by_another_master_is_locked_and_costs_the_others_no
         assert svc.sample("pkwbus_drive_up", drive="fan") == 1
         runner = svc.runtime.runners["dp"]
         assert isinstance(runner, LineRunner) and isinstance(runner.wire, CycleWire)
-        assert svc.sim.slaves[10].owner == runner.wire.line.master
+        assert svc.sim.slaves[10].owner == runner.port.master
         # Control word bit 10 clear in every PPO-write to every slave (also checked at exit).
         for address in ADDRESSES:
             outputs = [f for f in svc.wire.data_exchanges() if f.da == address]

@@ -210,7 +210,7 @@ async def test_a_record_write_under_way_never_reaches_a_slave_put_in_maintenance
 
     async with dp_service(tmp_path) as svc:
         runner: Any = svc.runtime.runners["dp"]
-        port = runner.wire.port
+        port = runner.port
         start = port.start
         held: list[int] = []
         before = svc.sim.drives[9].params.number(1121)

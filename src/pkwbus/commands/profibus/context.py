@@ -249,7 +249,11 @@ def _slot_time(args: argparse.Namespace, found: Gsd | None) -> float:
     return dp_settings.slot_time(rate, args.slot_time, [found])
 
 
-def fdl_port(args: argparse.Namespace, slot_time: float | None = None) -> FdlPort:
+def fdl_port(
+    args: argparse.Namespace, slot_time: float | None = None, *, clear_on_close: bool = False
+) -> FdlPort:
+    """The command's DP port (``clear_on_close``: of a master that parametrises slaves, which
+    it clears before the port closes)."""
     try:
         settings = PortSettings(
             limits.check_port_url(args.port),
@@ -262,6 +266,7 @@ def fdl_port(args: argparse.Namespace, slot_time: float | None = None) -> FdlPor
             args.master_address,
             slot_time=slot_time if slot_time is not None else args.slot_time,
             trace=print_trace if args.trace else None,
+            clear_on_close=clear_on_close,
         )
     except ValueError as exc:
         raise CommandError(str(exc), Exit.BAD_INPUT) from None
@@ -278,9 +283,9 @@ async def session(
     master listens first, parametrises the slave, and clears it at the end)."""
     spec = DriveSpec("drive", carrier_for(ctx.target(address)))
     watch = _Watch(address)
-    line = fdl_port(args, ctx.slot_time)
-    wire = CycleWire(line, [SlaveSpec(spec, ctx.setup(address), ctx.ppo)], name="command line")
-    drive = watch.session = LineSession(wire, [spec], retries=ctx.retries, observers=[watch])
+    line = fdl_port(args, ctx.slot_time, clear_on_close=True)
+    wire = CycleWire([SlaveSpec(spec, ctx.setup(address), ctx.ppo)], name="command line")
+    drive = watch.session = LineSession(line, wire, [spec], retries=ctx.retries, observers=[watch])
     loop = asyncio.get_running_loop()
     outcomes: list[Outcome] = []
     try:

@@ -114,8 +114,8 @@ async def _scan(
 ) -> list[dict[str, Any]]:
     line = fdl_port(args)
     watch = _LiveList(args.json, progress)
-    wire = LiveListWire(line, addresses, tries=args.retries + 1)
-    session = LineSession(wire, [], retries=args.retries, observers=[watch])
+    wire = LiveListWire(line.master, addresses, tries=args.retries + 1)
+    session = LineSession(line, wire, [], retries=args.retries, observers=[watch])
     progress.show(f"listening for other masters ({line.token_lost_time():.2f} s)")
     try:
         await session.open()

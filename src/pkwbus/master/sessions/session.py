@@ -26,13 +26,15 @@ from pkwbus.master.events import Observer
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, JobKind, JobResult, Priority, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec
-from pkwbus.master.runner import LineRefused, LineRunner, Wire
+from pkwbus.master.runner import LineRefused, LineRunner, Port, Wire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.values.types import ValueType
 
 __all__ = ["EndKind", "LineSession", "SessionEnded"]
 
 T = TypeVar("T")
+Request = TypeVar("Request")
+Answer = TypeVar("Answer")
 
 # A command asks and reports: a drive that does not answer is not taken down and probed
 # at back-off behind its back (each probe is the command's own).
@@ -60,15 +62,16 @@ class LineSession:
 
     def __init__(
         self,
-        wire: Wire,
+        port: Port[Request, Answer],
+        wire: Wire[Request, Answer],
         drives: Sequence[DriveSpec],
         *,
         retries: int,
         observers: Sequence[Observer] = (),
     ) -> None:
-        self.wire = wire
-        self.runner = LineRunner(
-            "command line", wire, drives, retries=retries, observers=observers,
+        # The session asks nothing of the requests and answers: the runner's own business.
+        self.runner: LineRunner[Any, Any] = LineRunner(
+            "command line", port, wire, drives, retries=retries, observers=observers,
             policy=_ASKED_ONLY,
         )  # fmt: skip
         # Set (to SessionEnded) by the watcher; a job waits for it beside its own result.
@@ -152,4 +155,4 @@ class LineSession:
             with contextlib.suppress(Exception):
                 await task
         elif self.runner.link.is_open:
-            await self.wire.port.close()
+            await self.runner.close()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import prometheus_client
 
@@ -31,7 +32,8 @@ from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.master.wires.serial.wire import ExchangeWire
 from pkwbus.protocol.buses import Bus
 from pkwbus.protocol.profibus.dp import services as dp_services
-from pkwbus.protocol.profibus.dp.slave import SlaveSetup
+from pkwbus.protocol.profibus.dp.slave import Answer, SlaveSetup
+from pkwbus.protocol.profibus.fdl import DataFrame
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
@@ -77,7 +79,7 @@ class LinePlan:
 class BuiltLine:
     """A line ready to run: its runner, its counters, and what closes its simulated drives."""
 
-    runner: LineRunner
+    runner: LineRunner[Any, Any]  # of its bus's requests and answers
     counts: LineMetrics
     close: Callable[[], object] | None = None
 
@@ -174,15 +176,16 @@ class Parts:
         uss, dp = line.protocol is Bus.USS, line.protocol is Bus.PROFIBUS
         counts = self.metrics.for_line(line.name, dialects, uss=uss, dp=dp)
         self.counts[line.name] = counts
+        runner: LineRunner[Any, Any]
         try:
             if isinstance(line, cfg.ProfibusLine):
                 self.resolved[line.name] = tuple(d.dp.settings()[0] for d in line.drives)
                 runner = _dp_runner(line, port, specs, self.snapshot, [counts, self.outputs], fence)
             else:
-                wire = ExchangeWire(port_for(line, port, fence))
+                telegrams = port_for(line, port, fence)
                 runner = LineRunner(
-                    line.name, wire, specs, retries=line.retries, snapshot=self.snapshot,
-                    observers=[counts, self.outputs],
+                    line.name, telegrams, ExchangeWire(telegrams.timeout), specs,
+                    retries=line.retries, snapshot=self.snapshot, observers=[counts, self.outputs],
                 )  # fmt: skip
         except BaseException:
             if close is not None:
@@ -234,7 +237,7 @@ def _dp_runner(
     snapshot: Snapshot,
     outputs: list[Observer],
     fence: Fence | None = None,
-) -> LineRunner:
+) -> LineRunner[DataFrame, Answer]:
     """The DP master of a ``protocol: profibus`` line: its slaves' Set_Prm and Chk_Cfg data."""
     settings = PortSettings(
         port,
@@ -250,7 +253,8 @@ def _dp_runner(
             raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
         resolved.append(found)
     slot = dp_settings.slot_time(line.baudrate, line.slot_time, (s.gsd for s in resolved))
-    dp = FdlPort(settings, line.master_address, slot_time=slot, fence=fence)
+    # The line's master: it clears its slaves before its port closes.
+    dp = FdlPort(settings, line.master_address, slot_time=slot, fence=fence, clear_on_close=True)
     watchdog = dp_settings.watchdog(slot, line.retries, len(specs), line.watchdog)
     slaves = []
     for drive, spec, found in zip(line.drives, specs, resolved, strict=True):
@@ -264,8 +268,8 @@ def _dp_runner(
         slaves.append(SlaveSpec(spec, setup, found.ppo))
     # A job may take the cycles of every slave a few times over, and a restart of its slave.
     deadline = max(2.0, 20 * dp.slot_time * len(specs))
-    wire = CycleWire(dp, slaves, name=line.name)
+    wire = CycleWire(slaves, name=line.name)
     return LineRunner(
-        line.name, wire, specs, snapshot=snapshot, observers=outputs, poll_deadline=deadline,
+        line.name, dp, wire, specs, snapshot=snapshot, observers=outputs, poll_deadline=deadline,
         retries=line.retries,
     )  # fmt: skip

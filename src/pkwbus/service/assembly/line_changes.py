@@ -97,7 +97,7 @@ class DriveChanges:
         return changes
 
     def _same_drive(
-        self, runner: LineRunner, old: cfg.Drive, new: cfg.Drive, spec: DriveSpec,
+        self, runner: LineRunner[Any, Any], old: cfg.Drive, new: cfg.Drive, spec: DriveSpec,
         entry: DriveEntry,
     ) -> bool:  # fmt: skip
         """Whether ``new`` is the running drive with other polls, writable parameters,
@@ -115,7 +115,7 @@ class DriveChanges:
     def _update_polls(
         self,
         config: cfg.Config,
-        runner: LineRunner,
+        runner: LineRunner[Any, Any],
         plan: LinePlan,
         spec: DriveSpec,
         entry: DriveEntry,
@@ -143,7 +143,7 @@ class DriveChanges:
             runner.update_polls(spec)
         return changed
 
-    def _remove(self, runner: LineRunner, line: str, drive: str, reason: str) -> None:
+    def _remove(self, runner: LineRunner[Any, Any], line: str, drive: str, reason: str) -> None:
         runner.remove_drive(drive, reason)
         self.parts.counts[line].forget_drive(drive)
         self.parts.forget(line, drive)

@@ -203,6 +203,44 @@ async def test_another_master_on_the_line_is_refused_before_anything_is_sent() -
         assert not line.is_open
 
 
+async def test_another_master_heard_is_forgotten_when_the_port_fails() -> None:
+    """The port's own state, not its wire's: another master heard refuses every request
+    until the port fails (the runner gives it up), then it is listened for afresh."""
+    async with fake_master() as fake:
+        line = FdlPort(PortSettings(fake.url, baudrate=19200), MASTER, slot_time=SLOT)
+        await line.open()
+        try:
+            with pytest.raises(ForeignMaster):
+                await line.started()
+            assert line.foreign is not None
+            with pytest.raises(ForeignMaster):  # nothing goes out while it is heard
+                await line.exchange(
+                    fdl.DataFrame(8, MASTER, fdl.request_fc(fdl.Function.FDL_STATUS))
+                )
+            line.link.abort("another master is active")
+            assert line.foreign is None
+        finally:
+            await line.close()
+        assert fake.received == b""
+
+
+@pytest.mark.parametrize("clear", [True, False])
+async def test_the_port_of_a_lines_master_clears_its_slaves_as_it_closes(clear: bool) -> None:
+    """Made ``clear_on_close`` (the DP line's master), the port sends Global_Control Clear
+    before it closes; made without (the live list's), it only closes."""
+    sim = make_sim([8], "danfoss-pcv")
+    wire = log_frames(sim)
+    async with serve(sim, "tcp") as port:  # type: ignore[arg-type]
+        settings = PortSettings(port, baudrate=19200)
+        line = FdlPort(settings, MASTER, slot_time=SLOT, clear_on_close=clear)
+        await line.open()
+        await line.exchange(fdl.DataFrame(8, MASTER, fdl.request_fc(fdl.Function.FDL_STATUS)))
+        await line.close()
+        assert not line.is_open
+    cleared = [f for f in wire.frames if f.dsap == dps.Service.GLOBAL_CONTROL]
+    assert [(f.da, f.sa) for f in cleared] == ([(fdl.BROADCAST, MASTER)] if clear else [])
+
+
 def test_the_idle_times_and_the_slot_time_follow_the_baud_rate() -> None:
     line = FdlPort(PortSettings("/dev/null", baudrate=19200, parity="N"), MASTER)
     assert line.settings.parity == "E"

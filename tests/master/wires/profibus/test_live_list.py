@@ -3,12 +3,10 @@ answers (EN 50170 vol. 2 part 4: FDL status, then a slave's Slave_Diag)."""
 
 from __future__ import annotations
 
-from pkwbus.link import PortSettings
 from pkwbus.master.events import Event, StationAsked, StationFound, StationsAsked
 from pkwbus.master.planning.plan import Idle
 from pkwbus.master.planning.planner import Planner
 from pkwbus.master.wires.profibus.live_list import LiveListWire
-from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import services as dps
 from pkwbus.protocol.profibus.dp.slave import Answer, NoAnswer
@@ -45,9 +43,9 @@ def test_masters_slaves_and_empty_addresses() -> None:
         raw = sim.handle(fdl.encode(frame))
         return NoAnswer() if raw is None else fdl.decode(raw)  # type: ignore[return-value]
 
-    line = FdlPort(PortSettings("/dev/null", baudrate=19200), MASTER)
-    wire = LiveListWire(line, [3, 5, 8], tries=2)
+    wire = LiveListWire(MASTER, [3, 5, 8], tries=2)
     sent, events = run(wire, answer)
+    assert {f.sa for f in sent} == {MASTER}  # every request from the master it was given
     found = [e for e in events if isinstance(e, StationFound)]
     assert [(e.address, e.station_type) for e in found] == [
         (5, StationType.MASTER_READY),
@@ -74,7 +72,6 @@ def test_a_slave_without_a_readable_diagnosis_is_listed_without_one() -> None:
             return NoAnswer()
         return DataFrame(MASTER, frame.da, fdl.response_fc(fdl.Status.OK))
 
-    line = FdlPort(PortSettings("/dev/null", baudrate=19200), MASTER)
-    _, events = run(LiveListWire(line, [9], tries=3), answer)
+    _, events = run(LiveListWire(MASTER, [9], tries=3), answer)
     found = [e for e in events if isinstance(e, StationFound)]
     assert found == [StationFound(9, StationType.SLAVE, None)]

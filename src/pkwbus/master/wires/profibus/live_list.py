@@ -8,7 +8,8 @@ state, and the master that owns it. Nothing is parametrised, and the port
 closes without Global_Control Clear. Each request is repeated up to
 ``tries`` times while no answer comes, as the FDL repeats a request.
 
-Pure calls (:class:`~pkwbus.master.runner.Wire`): what it found is among its
+Pure calls, holding no port (:class:`~pkwbus.master.runner.Wire`; it is given
+the master's address, the station its requests come from): what it found is among its
 events (:class:`~pkwbus.master.events.StationFound`), and its end too
 (:class:`~pkwbus.master.events.StationsAsked`).
 """
@@ -21,7 +22,6 @@ from collections.abc import Sequence
 from pkwbus.master.events import Event, StationAsked, StationFound, StationsAsked
 from pkwbus.master.planning.plan import Idle
 from pkwbus.master.planning.planner import IDLE_AT_MOST, Planner
-from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.protocol.errors import RemoteProtocolError
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp import services as dps
@@ -42,8 +42,8 @@ class _Asking(enum.Enum):
 class LiveListWire:
     """The :class:`~pkwbus.master.runner.Wire` of a DP line's live list."""
 
-    def __init__(self, line: FdlPort, addresses: Sequence[int], *, tries: int) -> None:
-        self.line = line
+    def __init__(self, master: int, addresses: Sequence[int], *, tries: int) -> None:
+        self.master = master  # the line's master address: its requests' source
         self.addresses = list(addresses)
         self.tries = tries
         self._place = 0  # the station asked now, in ``addresses``
@@ -53,10 +53,6 @@ class LiveListWire:
         self._station = StationType.SLAVE
         self._events: list[Event] = []
         self._over = False
-
-    @property
-    def port(self) -> FdlPort:
-        return self.line
 
     def poll_deadline(self, retries: int) -> float:
         return _POLL_DEADLINE
@@ -71,7 +67,7 @@ class LiveListWire:
         if self._told != self._place:
             self._told = self._place
             self._events.append(StationAsked(address, self._place + 1, len(self.addresses)))
-        master = self.line.master
+        master = self.master
         if self._asking is _Asking.STATUS:
             return DataFrame(address, master, fdl.request_fc(fdl.Function.FDL_STATUS))
         return dps.request(dps.Service.SLAVE_DIAG, address, master, fcb=True, fcv=False)

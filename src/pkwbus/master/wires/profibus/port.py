@@ -10,7 +10,10 @@ not taken for it. The deframer is told of the gap at every request
 (``flush``), so a short acknowledge after noise is found. Before going active the master
 listens for the token-lost time; a token or a request from another address
 means another master runs the line, and pkwbus never shares a line with one
-(:class:`ForeignMaster`).
+(:class:`ForeignMaster`); what was heard is forgotten when the port fails
+(given up or lost), and heard afresh when it opens again. The port of a line's
+master (``clear_on_close``) sends Global_Control Clear to its slaves before it
+closes.
 """
 
 from __future__ import annotations
@@ -19,8 +22,8 @@ import asyncio
 import contextlib
 from collections.abc import Callable
 
-from pkwbus.link import Fence, Link, PortError, PortSettings
-from pkwbus.master.runner import Done, LineRefused
+from pkwbus.link import Fence, Link, LinkState, PortError, PortSettings
+from pkwbus.master.bus import Done, LineRefused
 from pkwbus.protocol.profibus import fdl
 from pkwbus.protocol.profibus.dp.services import global_control_clear
 from pkwbus.protocol.profibus.dp.slave import Answer, Garbled, NoAnswer
@@ -85,6 +88,7 @@ class FdlPort:
         trace: TraceHook | None = None,
         listen: float | None = None,
         fence: Fence | None = None,
+        clear_on_close: bool = False,
     ) -> None:
         baud = settings.baudrate
         self.master = master
@@ -107,8 +111,11 @@ class FdlPort:
         )
         self.trace = trace
         self.listen_for = listen  # how long to listen before going active (None: TTO)
-        self.clear_on_close = False  # Global_Control Clear to every slave before closing
+        # Global_Control Clear to every slave before closing: a master that leaves the line
+        # clears its slaves (the live list's port parametrised none: it closes so).
+        self.clear_on_close = clear_on_close
         self.link = Link(self.settings, receiver=self._on_data, on_lost=self._on_lost, fence=fence)
+        self.link.reconnect.add_listener(self._on_port)
         self.foreign: str | None = None  # another master heard, and how
         self.requests = 0
         self.sent_at = 0.0  # loop time the latest request was written (its idle time over)
@@ -141,7 +148,7 @@ class FdlPort:
         (:class:`ForeignMaster` when one is heard)."""
         await self.listen(self.listen_for)
 
-    def start(self, request: DataFrame, done: Done) -> None:
+    def start(self, request: DataFrame, done: Done[Answer]) -> None:
         """The runner's request: ``done`` gets its answer, or the exception that ended it."""
         task = asyncio.get_running_loop().create_task(self.exchange(request))
 
@@ -287,6 +294,12 @@ class FdlPort:
         if isinstance(event, DataFrame):
             return event.sa == self._asked and event.da == self.master
         return True
+
+    def _on_port(self, state: LinkState, error: str | None) -> None:
+        """The port failed (given up, lost, or not opened): another master heard is
+        forgotten, and listened for afresh once it opens again."""
+        if state is LinkState.FAILED:
+            self.foreign = None
 
     def _on_lost(self, reason: str) -> None:
         waiter = self._waiter

@@ -1,5 +1,6 @@
 """PROFIBUS DP lines under the runner: the slaves cycled in turn, the planner filling each
-slave's PKW slot. Pure calls, holding no runner (:class:`~pkwbus.master.runner.Wire`).
+slave's PKW slot. Pure calls, holding no runner and no port
+(:class:`~pkwbus.master.runner.Wire`).
 
 Every cycle sends one Data_Exchange (or start-up request) to each slave
 (:class:`~pkwbus.master.wires.profibus.cycle.SlaveCycle`). A slave whose PKW
@@ -27,7 +28,9 @@ A slave that answers RS, asks for parameters, lost its watchdog or was
 power-cycled is parametrised again by its state machine; a job in flight goes
 on after that or ends at its deadline. When the port is lost every slave is
 offline and starts afresh once the port is back (the port listens for other
-masters first; closing it sends Global_Control Clear first).
+masters first, and forgets one it heard when it fails; the port of a line's
+master, made with ``clear_on_close``, sends Global_Control Clear before it
+closes).
 """
 
 from __future__ import annotations
@@ -56,7 +59,6 @@ from pkwbus.master.wires.profibus.cycle import (
     SlaveRun,
     StartupAnswered,
 )
-from pkwbus.master.wires.profibus.port import FdlPort
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
 from pkwbus.protocol.profibus.dp.slave import (
@@ -118,9 +120,7 @@ class SlaveSpec:
 class CycleWire:
     """The :class:`~pkwbus.master.runner.Wire` of a PROFIBUS DP line."""
 
-    def __init__(self, line: FdlPort, drives: Sequence[SlaveSpec], *, name: str = "") -> None:
-        self.line = line
-        line.clear_on_close = True  # a master that leaves the line clears its slaves
+    def __init__(self, drives: Sequence[SlaveSpec], *, name: str = "") -> None:
         self.name = name  # the line's, for the log
         self.drives = list(drives)
         self.cycle = SlaveCycle([(d.setup, d.slot()) for d in drives])
@@ -129,10 +129,6 @@ class CycleWire:
         self._events: list[Event] = [SlaveStateChanged(d.name, SlaveState.OFFLINE) for d in drives]
         self._garbled: dict[str, SlotGarbled] = {}  # this exchange's unreadable PKW answer
         self._unreadable: set[str] = set()  # slaves whose PKW answers cannot be read
-
-    @property
-    def port(self) -> FdlPort:
-        return self.line
 
     def poll_deadline(self, retries: int) -> float:
         return DEFAULT_POLL_DEADLINE
@@ -151,7 +147,6 @@ class CycleWire:
 
     def lost(self) -> None:
         """Every slave offline and started afresh; every job in flight has ended."""
-        self.line.foreign = None
         for address, run in self.cycle.runs.items():
             if run.slave.state is not SlaveState.OFFLINE:
                 self._events.append(SlaveStateChanged(self._names[address], SlaveState.OFFLINE))

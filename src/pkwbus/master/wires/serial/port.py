@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable
 
 from pkwbus.link import Fence, Link, LinkState, PortError, PortSettings
+from pkwbus.master.bus import Done as RunnerDone
 from pkwbus.master.planning.answers import ErrorKind, ExchangeResult, Failure, Reply
 from pkwbus.master.planning.plan import Send
 from pkwbus.protocol.buses import Bus
@@ -161,7 +162,7 @@ class TelegramPort:
         """Loop time the latest request was written."""
         return self._started
 
-    def start(self, request: Send, done: Done) -> None:
+    def start(self, request: Send, done: RunnerDone[ExchangeResult]) -> None:
         """The runner's request: ``request``'s telegram, answered from its drive's address."""
         self.send(request.address, request.telegram, done)
 

@@ -1,10 +1,11 @@
 """FC and USS lines under the runner: one exchange at a time, as the planner chooses them.
 
-Pure calls, holding no runner (:class:`~pkwbus.master.runner.Wire`): the next
+Pure calls, holding no runner and no port (:class:`~pkwbus.master.runner.Wire`): the next
 request is the planner's next action; an answer goes to the planner as it
 came (its carrier decodes it, once), and its cost goes on the stream as an
 :class:`~pkwbus.master.events.Exchanged`. The line itself
-(:class:`~pkwbus.master.wires.serial.port.Line`) is the port the runner drives.
+(:class:`~pkwbus.master.wires.serial.port.TelegramPort`) is the port the runner
+drives beside it; the wire is given only its answer timeout, when it is made.
 """
 
 from __future__ import annotations
@@ -13,25 +14,21 @@ from pkwbus.master.events import Event, Exchanged
 from pkwbus.master.planning.answers import ExchangeResult, Failure, Reply
 from pkwbus.master.planning.plan import Action, Send
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.wires.serial.port import TelegramPort
 
 __all__ = ["ExchangeWire"]
 
 
 class ExchangeWire:
-    """The :class:`~pkwbus.master.runner.Wire` of an FC or USS line."""
+    """The :class:`~pkwbus.master.runner.Wire` of an FC or USS line whose port waits
+    ``timeout`` seconds for an answer (its :attr:`TelegramPort.timeout`)."""
 
-    def __init__(self, line: TelegramPort) -> None:
-        self.line = line
+    def __init__(self, timeout: float) -> None:
+        self.timeout = timeout
         self._events: list[Event] = []
-
-    @property
-    def port(self) -> TelegramPort:
-        return self.line
 
     def poll_deadline(self, retries: int) -> float:
         """Long enough for the retries and a lagging answer."""
-        return 4 * (retries + 1) * self.line.timeout
+        return 4 * (retries + 1) * self.timeout
 
     def transmit(self, planner: Planner, now: float) -> Action:
         return planner.next_action(now)
