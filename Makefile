@@ -71,7 +71,7 @@ run: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[bench]'
 	command -v socat >/dev/null || { echo "make bench needs socat (apt-get install -y socat)"; exit 2; }
-	$(BIN)/python bench/run_all.py
+	$(BIN)/python -m bench.run_all
 
 fuzz: $(STAMP)
 	$(BIN)/python -m pip install --quiet atheris

@@ -5,26 +5,28 @@ from __future__ import annotations
 import contextlib
 import datetime
 import gc
+import logging
 import os
 import platform
+import re
 import selectors
 import shutil
+import socket
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-from _measure import BenchSetupError, stop_process
-
+from bench._measure import ROOT, BenchSetupError, module_command, stop_process
 from pkwbus.link import PortSettings
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.wires.serial.port import TelegramPort
 from pkwbus.protocol.buses import Bus
 
-HERE = Path(__file__).resolve().parent
 FC_TELEGRAM = 16  # bytes of an FC parameter telegram (PKW 4 words + PCD 2 words), each way
 USS_TELEGRAM = 16  # USS with PKW 4 words + PZD 2 words
 
@@ -49,9 +51,8 @@ def sim_process(
     """Run the simulator in another process on a new pty; yield the pty's path."""
     tmp = Path(tempfile.mkdtemp(prefix="pkwbus-bench-sim-"))
     path = tmp / "tty"
-    argv = [
-        sys.executable,
-        str(HERE / "_simserver.py"),
+    argv = module_command(
+        "_simserver",
         "--protocol",
         protocol,
         "--pty",
@@ -66,7 +67,7 @@ def sim_process(
         lag_mode,
         "--seed",
         "1",
-    ]
+    )
     if baudrate:
         argv += ["--baudrate", str(baudrate)]
     if wire_timing:
@@ -81,6 +82,7 @@ def sim_process(
     with tempfile.TemporaryFile() as errors:
         proc = subprocess.Popen(
             argv,
+            cwd=ROOT,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=errors,
@@ -148,13 +150,25 @@ def machine() -> dict[str, str]:
     }
 
 
-def proc_cpu(pid: int) -> float:
-    """CPU seconds (user + system) of another process, from /proc."""
+@contextlib.contextmanager
+def quiet_logs() -> Iterator[None]:
+    """pkwbus's logger at ERROR for the block: the simulated drives' alarms and warnings
+    come and go, and their log lines are not figures."""
+    logger = logging.getLogger("pkwbus")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
     try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError, IndexError):
-        return float("nan")
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def machine_note(before: dict[str, str], after: dict[str, str]) -> str:
+    """The machine and its load average at the start (``before``) and end (``after``)."""
+    return (
+        f"Machine: {before['cpu']}, {before['cores']} cores, Python {before['python']}; "
+        f"load average {before['load']} at the start, {after['load']} at the end."
+    )
 
 
 def rss_mb() -> float:
@@ -243,13 +257,67 @@ def service_config(
     return "\n".join(out) + "\n"
 
 
+LISTENING = re.compile(rb"metrics on http://127\.0\.0\.1:(\d+)/metrics")
+TELEGRAMS = re.compile(r"^pkwbus_telegrams_total\{[^}]*\} ([0-9.e+]+)$", re.M)
+
+
+def telegrams_in(metrics: str) -> float:
+    """The telegrams of all lines in a ``GET /metrics`` answer."""
+    return sum(float(v) for v in TELEGRAMS.findall(metrics))
+
+
+@dataclass(frozen=True)
+class RunningService:
+    """``pkwbus run`` in its own process: the process, its base URL, its log (stderr)."""
+
+    process: subprocess.Popen[bytes]
+    port: int
+    log: Path
+
+    @property
+    def base(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+
+@contextlib.contextmanager
+def pkwbus_run(
+    config_text: str, folder: Path, name: str = "service", stop_timeout: float = 3.0
+) -> Iterator[RunningService]:
+    """``pkwbus run`` in its own process and session, on ``config_text`` (written to
+    FOLDER/NAME.yaml) with ``--listen 127.0.0.1:0``, its stderr in FOLDER/NAME.log; yielded
+    once its log says where it listens, stopped at the end (SIGTERM, then SIGKILL after
+    ``stop_timeout`` seconds)."""
+    config, log_path = folder / f"{name}.yaml", folder / f"{name}.log"
+    config.write_text(config_text)
+    with log_path.open("wb") as log:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "pkwbus", "run", "--config", str(config),
+             "--listen", "127.0.0.1:0"],
+            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+        )  # fmt: skip
+        try:
+            yield RunningService(process, _listening(log_path, process), log_path)
+        finally:
+            stop_process(process, stop_timeout)
+
+
+def _listening(log: Path, process: subprocess.Popen[bytes]) -> int:
+    """The port the service got for ``--listen 127.0.0.1:0``, from its log line."""
+    deadline = time.monotonic() + 30
+    while (found := LISTENING.search(log.read_bytes())) is None:
+        if time.monotonic() > deadline or process.poll() is not None:
+            raise BenchSetupError(f"pkwbus run did not start: see {log}")
+        time.sleep(0.1)
+    return int(found.group(1))
+
+
 async def http_client(*args: str) -> dict[str, object]:
-    """Run ``_http_client.py`` with ``args`` in another process; its JSON answer."""
+    """Run ``bench._http_client`` with ``args`` in another process; its JSON answer."""
     import asyncio
     import json
 
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, str(HERE / "_http_client.py"), *args,
+        *module_command("_http_client", *args), cwd=ROOT,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
     out, err = await proc.communicate()
@@ -305,12 +373,10 @@ class Service:
         gc.collect()
 
 
-def _tcp_socket() -> object:
+def _tcp_socket() -> socket.socket:
     """A listening socket made with IPPROTO_TCP, so that asyncio sets TCP_NODELAY on accepted
     connections (``pkwbus.service.assembly.serve.bind`` passes proto 0, and asyncio then
     leaves Nagle on)."""
-    import socket
-
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM, socket.IPPROTO_TCP)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     sock.bind(("127.0.0.1", 0))

@@ -1,6 +1,6 @@
 """A flood of HTTP connections, run in its own process by connection_flood.py.
 
-    python bench/_flood_client.py HOST PORT IDLE PARALLEL HOLD_SECONDS
+    python -m bench._flood_client HOST PORT IDLE PARALLEL HOLD_SECONDS
 
 Opens IDLE connections that send nothing, then PARALLEL connections that
 each send one GET /healthz at once, holds everything for HOLD_SECONDS and

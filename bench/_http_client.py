@@ -1,7 +1,7 @@
 """HTTP client for the service benchmarks, run in its own process (no GIL shared with the service).
 
-    python bench/_http_client.py put BASE_URL PATH N GAP TOKEN
-    python bench/_http_client.py scrape BASE_URL N [GAP]
+    python -m bench._http_client put BASE_URL PATH N GAP TOKEN
+    python -m bench._http_client scrape BASE_URL N [GAP]
 
 Prints one JSON object: the latencies in seconds, the errors, and for a
 scrape the size of the last answer.

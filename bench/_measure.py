@@ -11,6 +11,8 @@
   stand-in for an RS-485 line used by the serial benchmarks.
 - :class:`BenchSetupError` - an expected failure (tool or package missing,
   peer does not start); scripts print its message and exit with status 2.
+- :func:`module_command` - the command line of a benchmark module in another
+  process (``python -m bench.NAME``, run with ``cwd=ROOT``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import resource
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -34,9 +37,19 @@ __all__ = [
     "cpu_per_op",
     "markdown_table",
     "measure_cpu",
+    "module_command",
     "pty_pair",
     "stop_process",
 ]
+
+
+ROOT = Path(__file__).resolve().parent.parent  # the repository, where `python -m bench.NAME` runs
+
+
+def module_command(name: str, *args: str) -> list[str]:
+    """The command line of ``bench.NAME`` with ``args`` in another process; start it with
+    ``cwd=ROOT``, where the package ``bench`` is found."""
+    return [sys.executable, "-m", f"bench.{name}", *args]
 
 
 class BenchSetupError(Exception):

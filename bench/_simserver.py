@@ -7,7 +7,7 @@ instead of epoll (millisecond timeouts, rounded up), so the simulated drives
 answer when the wire timing says, not up to a millisecond later: the
 benchmarks measure the master, not the simulator's timer granularity.
 
-    python bench/_simserver.py --protocol fc --pty /tmp/x --drives 1-3 \
+    python -m bench._simserver --protocol fc --pty /tmp/x --drives 1-3 \
         --wire-timing --baudrate 115200 --response-delay 2ms
 """
 

@@ -10,16 +10,14 @@ nothing and PARALLEL connections that each send a GET at once. The service
 must stay up, refuse what is beyond ``api.max_connections`` and keep
 polling at the same rate.
 
-    .venv/bin/python bench/connection_flood.py [--idle 5000] [--parallel 2000] [--seconds 5]
+    .venv/bin/python -m bench.connection_flood [--idle 5000] [--parallel 2000] [--seconds 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import re
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,30 +25,12 @@ from typing import Any
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import service_config, sim_process, stop_process
-from _measure import markdown_table
-
-HERE = Path(__file__).resolve().parent
-TELEGRAMS = re.compile(r"^pkwbus_telegrams_total\{[^}]*\} ([0-9.e+]+)$", re.M)
-
-
-LISTENING = re.compile(rb"metrics on http://127\.0\.0\.1:(\d+)/metrics")
-
-
-def listening(path: Path, service: subprocess.Popen[bytes]) -> int:
-    """The port the service got for ``--listen 127.0.0.1:0``, from its log line."""
-    deadline = time.monotonic() + 30
-    while (found := LISTENING.search(path.read_bytes())) is None:
-        if time.monotonic() > deadline or service.poll() is not None:
-            raise RuntimeError("the service did not start")
-        time.sleep(0.1)
-    return int(found.group(1))
+from bench._common import pkwbus_run, service_config, sim_process, telegrams_in
+from bench._measure import ROOT, markdown_table, module_command
 
 
 def telegrams(client: httpx.Client) -> float:
-    return sum(float(v) for v in TELEGRAMS.findall(client.get("/metrics").text))
+    return telegrams_in(client.get("/metrics").text)
 
 
 def rate(client: httpx.Client, seconds: float) -> float:
@@ -69,53 +49,41 @@ def rss_mb(pid: int) -> float:
 def run(idle: int = 5000, parallel: int = 2000, seconds: float = 5.0) -> dict[str, Any]:
     with sim_process("fc", "1-4", response_delay=0.002, baudrate=115200, wire_timing=True) as tty:
         folder = Path(tempfile.mkdtemp(prefix="pkwbus-bench-flood-"))
-        config = folder / "config.yaml"
-        config.write_text(
-            service_config(
-                [tty], drives=4, pnus=["16-13", "16-14"], every="10ms", baudrate=115200,
-                audit_db=str(folder / "audit.sqlite"),
-            )
+        config = service_config(
+            [tty], drives=4, pnus=["16-13", "16-14"], every="10ms", baudrate=115200,
+            audit_db=str(folder / "audit.sqlite"),
         )  # fmt: skip
-        log = (folder / "service.log").open("wb")
-        service = subprocess.Popen(
-            [sys.executable, "-m", "pkwbus", "run", "--config", str(config),
-             "--listen", "127.0.0.1:0"],
-            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
-        )  # fmt: skip
-        try:
-            port = listening(folder / "service.log", service)
-            base = f"http://127.0.0.1:{port}"
-            with httpx.Client(base_url=base, timeout=30) as client:
-                deadline = time.monotonic() + 30
-                while True:
-                    try:
-                        if client.get("/readyz").status_code == 200:
-                            break
-                    except httpx.TransportError:
-                        pass
-                    if time.monotonic() > deadline or service.poll() is not None:
-                        raise RuntimeError("the service did not start")
-                    time.sleep(0.2)
-                rate(client, 1.0)  # warm-up
-                quiet = rate(client, seconds)
-                flood = subprocess.Popen(
-                    [sys.executable, str(HERE / "_flood_client.py"), "127.0.0.1", str(port),
-                     str(idle), str(parallel), str(seconds + 2)],
-                    stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                )  # fmt: skip
-                time.sleep(1.0)
-                during = rate(client, seconds)
-                out, err = flood.communicate(timeout=300)
-                if flood.returncode:
-                    raise RuntimeError(f"the flood client failed: {err.decode()[-2000:]}")
-                result = json.loads(out)
-                alive = service.poll() is None
-                after = rate(client, 2.0) if alive else 0.0
-                memory = rss_mb(service.pid) if alive else 0.0
-        finally:
-            stop_process(service)
-            log.close()
-        text = (folder / "service.log").read_text(errors="replace")
+        with (
+            pkwbus_run(config, folder) as service,
+            httpx.Client(base_url=service.base, timeout=30) as client,
+        ):
+            deadline = time.monotonic() + 30
+            while True:
+                try:
+                    if client.get("/readyz").status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                if time.monotonic() > deadline or service.process.poll() is not None:
+                    raise RuntimeError("the service did not start")
+                time.sleep(0.2)
+            rate(client, 1.0)  # warm-up
+            quiet = rate(client, seconds)
+            flood = subprocess.Popen(
+                module_command("_flood_client", "127.0.0.1", str(service.port), str(idle),
+                               str(parallel), str(seconds + 2)),
+                cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            )  # fmt: skip
+            time.sleep(1.0)
+            during = rate(client, seconds)
+            out, err = flood.communicate(timeout=300)
+            if flood.returncode:
+                raise RuntimeError(f"the flood client failed: {err.decode()[-2000:]}")
+            result = json.loads(out)
+            alive = service.process.poll() is None
+            after = rate(client, 2.0) if alive else 0.0
+            memory = rss_mb(service.process.pid) if alive else 0.0
+        text = service.log.read_text(errors="replace")
     refusals = [line for line in text.splitlines() if "refused" in line and "HTTP" in line]
     return {
         "idle": idle,

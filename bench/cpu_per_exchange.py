@@ -13,8 +13,8 @@ ends; ``time.process_time()`` here counts the master's CPU only.
 ``--drives 1,16,126`` runs (b) with that many drives on the line instead of
 3, interleaved, and prints each one's CPU per exchange against the first.
 
-    .venv/bin/python bench/cpu_per_exchange.py [--n 5000] [--repeat 3]
-    .venv/bin/python bench/cpu_per_exchange.py --drives 1,16,126 [--n 5000] [--repeat 3]
+    .venv/bin/python -m bench.cpu_per_exchange [--n 5000] [--repeat 3]
+    .venv/bin/python -m bench.cpu_per_exchange --drives 1,16,126 [--n 5000] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -22,19 +22,14 @@ from __future__ import annotations
 import argparse
 import asyncio
 import statistics
-import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
-from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import best_median, make_port, sim_process
-from _measure import markdown_table, measure_cpu
 from prometheus_client import CollectorRegistry
 
+from bench._common import best_median, make_port, sim_process
+from bench._measure import markdown_table, measure_cpu
+from pkwbus import link
 from pkwbus.master.carriers import SerialCarrier, carrier_for
 from pkwbus.master.events import Event, Exchanged, JobDone
 from pkwbus.master.planning.answers import Reply
@@ -162,7 +157,7 @@ def measure_pkwbus(n: int) -> dict[str, dict[str, float]]:
 
 
 def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
-    import pymodbus_baseline
+    from bench import pymodbus_baseline
 
     runs: dict[str, list[dict[str, Any]]] = {"raw": [], "service": [], "pymodbus": []}
     for _ in range(repeat):

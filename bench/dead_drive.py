@@ -8,25 +8,19 @@ line. Cases: all 4 answer; drive 4 dead from the start; drive 4 dies and
 revives every 2 s (flapping). The figure is completed polls per second of
 drives 1-3; the ratio is against the all-healthy case.
 
-    .venv/bin/python bench/dead_drive.py [--seconds 10] [--repeat 3]
+    .venv/bin/python -m bench.dead_drive [--seconds 10] [--repeat 3]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
+from bench._common import Counting, best_median, fc_drive, make_port, sim_process
+from bench._measure import markdown_table
 from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Counting, best_median, fc_drive, make_port, sim_process
-from _measure import markdown_table
-
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.wires.serial.wire import ExchangeWire
 

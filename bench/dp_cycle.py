@@ -8,7 +8,7 @@ USB adapter would cost (its latency timer, 1 ms in low-latency mode, 16 ms
 otherwise, on each answer). The master is the service's: the line runner with
 the DP wire, no job queued (the PKW slot stays at AK 0).
 
-    python bench/dp_cycle.py [--seconds 3] [--baudrates 19200,93750]
+    python -m bench.dp_cycle [--seconds 3] [--baudrates 19200,93750]
 """
 
 from __future__ import annotations

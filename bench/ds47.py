@@ -13,7 +13,7 @@ planner, the metrics. Counted: the polls completed per slave and second.
 - **ds47, PPO 1**: the same slaves' PPO 1 with data record 47, for a like-for-like
   cycle.
 
-    python bench/ds47.py [--seconds 5] [--baudrates 19200,93750]
+    python -m bench.ds47 [--seconds 5] [--baudrates 19200,93750]
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ before the window (how long that took is printed). Printed per run: the line's b
 share (``pkwbus_line_busy_seconds_total`` over the window), the polls done against
 those due, and the overruns; the watch's share is the difference of the busy shares.
 
-    .venv/bin/python bench/events_share.py [--protocol fc|uss|mm4] [--warnings-per-hour 12]
+    .venv/bin/python -m bench.events_share [--protocol fc|uss|mm4] [--warnings-per-hour 12]
         [--seconds 60] [--repeat 3]
 """
 
@@ -28,16 +28,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import registry_sum, sim_process
-
+from bench._common import registry_sum, sim_process
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.history import remember

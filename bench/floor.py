@@ -33,7 +33,7 @@ same simulated drive, in the same run:
 With pymodbus installed (``.[bench]``), its async RTU client in the same run
 gives the ratios.
 
-    .venv/bin/python bench/floor.py [--n 5000] [--repeat 3]
+    .venv/bin/python -m bench.floor [--n 5000] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -48,15 +48,11 @@ import termios
 import time
 import tty
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import make_port, sim_process
-from _measure import BenchSetupError, markdown_table, measure_cpu
-from cpu_per_exchange import raw_loop
-
+from bench._common import make_port, sim_process
+from bench._measure import BenchSetupError, markdown_table, measure_cpu
+from bench.cpu_per_exchange import raw_loop
 from pkwbus import link
 from pkwbus.master.carriers import SerialCarrier
 from pkwbus.master.planning.answers import Reply
@@ -224,7 +220,7 @@ VARIANTS: dict[str, Callable[[str, int], Any]] = {
 def run(n: int = 5000, repeat: int = 3) -> dict[str, Any]:
     """Every variant ``repeat`` times, interleaved (one round = each variant once)."""
     try:
-        import pymodbus_baseline
+        from bench import pymodbus_baseline
     except ImportError:  # pragma: no cover - the bench extras are missing
         pymodbus_baseline = None
     runs: dict[str, list[dict[str, float]]] = {name: [] for name in VARIANTS}

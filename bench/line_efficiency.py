@@ -12,7 +12,7 @@ theoretical exchange time is
 
 with 16 bytes each way (FC parameter telegram).
 
-    .venv/bin/python bench/line_efficiency.py [--seconds 5] [--repeat 3]
+    .venv/bin/python -m bench.line_efficiency [--seconds 5] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -21,16 +21,11 @@ import argparse
 import asyncio
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
+from bench._common import FC_TELEGRAM, best_median, exchange_time, make_port, sim_process
+from bench._measure import markdown_table
 from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import FC_TELEGRAM, best_median, exchange_time, make_port, sim_process
-from _measure import markdown_table
-
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.planning.plan import DriveSpec

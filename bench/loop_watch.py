@@ -21,22 +21,17 @@ The kinds run interleaved, ``--repeat`` times; the table gives the fastest
 run of each (the one least disturbed by the rest of the machine) and the
 difference to pkwbus's loop not watched.
 
-    .venv/bin/python bench/loop_watch.py [--n 200000] [--chains 100] [--repeat 5]
+    .venv/bin/python -m bench.loop_watch [--n 200000] [--chains 100] [--repeat 5]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _measure import markdown_table
-
+from bench._measure import markdown_table
 from pkwbus import link
 from pkwbus.link.eventloop import watch_callbacks
 

@@ -11,7 +11,7 @@ on all three alike), median of ``--repeat`` rounds:
   :meth:`Connection.publish_nowait` calls; aiomqtt offers no call that does not await);
 - **aiomqtt publish**: aiomqtt's public ``await client.publish(...)`` per value.
 
-    .venv/bin/python bench/mqtt_fast_path.py [--values 10080] [--repeat 7]
+    .venv/bin/python -m bench.mqtt_fast_path [--values 10080] [--repeat 7]
 """
 
 from __future__ import annotations
@@ -19,19 +19,16 @@ from __future__ import annotations
 import argparse
 import asyncio
 import statistics
-import sys
 import tempfile
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _measure import markdown_table
-from mqtt_publish import mosquitto
 from prometheus_client import CollectorRegistry
 
+from bench._measure import markdown_table
+from bench.mqtt_publish import mosquitto
 from pkwbus.service.mqtt.connection import Connection, publish_head
 from pkwbus.service.mqtt.metrics import MqttMetrics
 from pkwbus.service.mqtt.output import SLICE

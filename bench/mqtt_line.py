@@ -14,29 +14,32 @@ heartbeat). Telegrams/s per line from the lines' own counts, this process's CPU 
 the event loop's lag, the values published in the on windows. The figure: median
 telegrams/s on / off (goal: at least 0.98), and each round's ratio.
 
-    .venv/bin/python bench/mqtt_line.py [--rounds 3] [--seconds 20] [--settle 240]
+    .venv/bin/python -m bench.mqtt_line [--rounds 3] [--seconds 20] [--settle 240]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
-import logging
 import statistics
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Service, machine, service_config
-from _measure import markdown_table
-from mqtt_publish import mosquitto
-from plant_scale import DRIVES, EVERY, LINES, LagProbe, _line, _settle, _window
-from scale import BAUD, PARAMETERS
-
+from bench._common import machine, machine_note
+from bench._measure import markdown_table
+from bench.mqtt_publish import mosquitto
+from bench.plant_scale import (
+    DRIVES,
+    EVERY,
+    LINES,
+    _settle,
+    _window,
+    plant_lines,
+    plant_service,
+)
+from bench.scale import PARAMETERS
 from pkwbus import link
 from pkwbus.service.config import parse_config
 from pkwbus.service.mqtt.output import attach
@@ -47,37 +50,26 @@ GOAL_RATIO = 0.98
 async def _measure(
     ports: list[str], broker: int, drives: int, seconds: float, rounds: int, settle: float
 ) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory() as tmp:
-        text = service_config(
-            ports, drives=drives, pnus=PARAMETERS, every=f"{EVERY:g}s", baudrate=BAUD,
-            audit_db=f"{tmp}/audit.sqlite",
-        )  # fmt: skip
-        text = text.replace("    protocol: fc\n", "    protocol: fc\n    counters: off\n")
-        text += f"mqtt:\n  url: mqtt://127.0.0.1:{broker}\n  homeassistant: {{discovery: false}}\n"
-        async with Service(text, nodelay=True) as service:
-            runtime = service.runtime
-            output = attach(parse_config(text), runtime, None)
-            assert output is not None
-            output.start()
-            probe = LagProbe()
-            probe.start()
-            try:
-                await asyncio.wait_for(output.connection.connected.wait(), 30.0)
-                start = await _settle(runtime, settle)
-                on = list(runtime.outputs.items)
-                off = [o for o in on if o is not output]
-                sent = output.metrics.sent["value"]
-                found: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
-                for _ in range(rounds):
-                    runtime.outputs.swap(off)
-                    found["off"].append(await _window(runtime, probe, seconds))
-                    runtime.outputs.swap(on)
-                    before = sent._value.get()
-                    window = await _window(runtime, probe, seconds)
-                    window["published_s"] = (sent._value.get() - before) / seconds
-                    found["on"].append(window)
-            finally:
-                await probe.stop()  # the output: stopped with the runtime (its cleanup)
+    extra = f"mqtt:\n  url: mqtt://127.0.0.1:{broker}\n  homeassistant: {{discovery: false}}\n"
+    async with plant_service(ports, drives, extra) as (service, probe):
+        runtime = service.runtime
+        output = attach(parse_config(service.config_text), runtime, None)
+        assert output is not None
+        output.start()  # stopped with the runtime (its cleanup)
+        await asyncio.wait_for(output.connection.connected.wait(), 30.0)
+        start = await _settle(runtime, settle)
+        on = list(runtime.outputs.items)
+        off = [o for o in on if o is not output]
+        sent = output.metrics.sent["value"]
+        found: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
+        for _ in range(rounds):
+            runtime.outputs.swap(off)
+            found["off"].append(await _window(runtime, probe, seconds))
+            runtime.outputs.swap(on)
+            before = sent._value.get()
+            window = await _window(runtime, probe, seconds)
+            window["published_s"] = (sent._value.get() - before) / seconds
+            found["on"].append(window)
     return {"start": start, **found}
 
 
@@ -85,17 +77,12 @@ def measure(
     lines: int = LINES, drives: int = DRIVES, seconds: float = 20.0, rounds: int = 3,
     settle: float = 240.0,
 ) -> dict[str, Any]:  # fmt: skip
-    logger = logging.getLogger("pkwbus")
-    level = logger.level
-    logger.setLevel(logging.ERROR)  # the simulated drives' warnings are not figures
-    try:
-        with contextlib.ExitStack() as stack:
-            broker = stack.enter_context(mosquitto(Path(stack.enter_context(
-                tempfile.TemporaryDirectory()))))  # fmt: skip
-            ports = [stack.enter_context(_line(drives, n + 1)) for n in range(lines)]
-            return link.run(_measure(ports, broker, drives, seconds, rounds, settle))
-    finally:
-        logger.setLevel(level)
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        mosquitto(Path(tmp)) as broker,
+        plant_lines(lines, drives) as ports,
+    ):
+        return link.run(_measure(ports, broker, drives, seconds, rounds, settle))
 
 
 def run(
@@ -128,9 +115,7 @@ def run(
         f"\nGoal: on / off at least {GOAL_RATIO:g}: "
         f"{'met' if ratio >= GOAL_RATIO else 'NOT met'} ({ratio:.3f}). {lines} lines × "
         f"{drives} drives × {len(PARAMETERS)} values every {EVERY:g} s, {seconds:g} s "
-        f"windows, {rounds} rounds. Machine: {before['cpu']}, {before['cores']} cores, "
-        f"Python {before['python']}; load average {before['load']} at the start, "
-        f"{after['load']} at the end.\n"
+        f"windows, {rounds} rounds. {machine_note(before, after)}\n"
     )
     return {"rows": rows, "table": table, "measured": got, "ratio": ratio}
 

@@ -17,7 +17,7 @@ Timed, in CPU time of this process (the broker's is its own), median of ``--repe
 - **scrape**: ``exposition.render(registry)`` after a quarter of the values landed
   anew (what ``GET /metrics`` awaits); per value in the scrape.
 
-    .venv/bin/python bench/mqtt_publish.py [--lines 4] [--drives 126] [--repeat 7]
+    .venv/bin/python -m bench.mqtt_publish [--lines 4] [--drives 126] [--repeat 7]
 """
 
 from __future__ import annotations
@@ -36,11 +36,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _measure import markdown_table
-from scrape import SHARE, Plant, build
-
+from bench._measure import markdown_table
+from bench.scrape import SHARE, Plant, build
 from pkwbus import link
 from pkwbus.service.config.mqtt import Mqtt
 from pkwbus.service.metrics.exposition import render

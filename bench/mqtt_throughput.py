@@ -17,7 +17,7 @@ over ``--seconds``, and, with MQTT, the values published per second
 (``pkwbus_mqtt_messages_total{kind="value"}``). The ratio with / without of each round
 and their median.
 
-    .venv/bin/python bench/mqtt_throughput.py [--rounds 3] [--seconds 20]
+    .venv/bin/python -m bench.mqtt_throughput [--rounds 3] [--seconds 20]
 """
 
 from __future__ import annotations
@@ -26,8 +26,6 @@ import argparse
 import contextlib
 import re
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -35,15 +33,11 @@ from typing import Any
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench._common import pkwbus_run, service_config, telegrams_in
+from bench._measure import markdown_table
+from bench.mqtt_publish import mosquitto
+from bench.scale import BAUD, PARAMETERS, fc_lines
 
-from _common import service_config, sim_process
-from _measure import markdown_table, stop_process
-from connection_flood import listening
-from mqtt_publish import mosquitto
-from scale import BAUD, DELAY, PARAMETERS
-
-TELEGRAMS = re.compile(r"^pkwbus_telegrams_total\{[^}]*\} ([0-9.e+]+)$", re.M)
 VALUES_SENT = re.compile(r'^pkwbus_mqtt_messages_total\{kind="value"\} ([0-9.e+]+)$', re.M)
 PARAMETER_VALUES = re.compile(r"^pkwbus_parameter_value\{", re.M)
 
@@ -55,7 +49,7 @@ def _counts(client: httpx.Client) -> tuple[float, float, int]:
     text = client.get("/metrics").text
     sent = VALUES_SENT.search(text)
     return (
-        sum(float(v) for v in TELEGRAMS.findall(text)),
+        telegrams_in(text),
         float(sent.group(1)) if sent else 0.0,
         len(PARAMETER_VALUES.findall(text)),
     )
@@ -65,7 +59,6 @@ def _one(
     folder: Path, ports: list[str], broker: int | None, seconds: float, settle: float
 ) -> dict[str, Any]:
     """One service's telegrams/s (and MQTT values/s) at full load, once settled."""
-    config = folder / ("mqtt.yaml" if broker else "quiet.yaml")
     text = service_config(
         ports, drives=126, pnus=PARAMETERS, every="1s", baudrate=BAUD,
         audit_db=str(folder / "audit.sqlite"),
@@ -76,37 +69,28 @@ def _one(
             "  values: {deadband: 0, heartbeat: 10s}\n"
             "  homeassistant: {discovery: true, prefix: homeassistant}\n" + text
         )
-    config.write_text(text)
-    log_path = folder / f"service-{'mqtt' if broker else 'quiet'}.log"
-    with log_path.open("wb") as log:
-        service = subprocess.Popen(
-            [sys.executable, "-m", "pkwbus", "run", "--config", str(config),
-             "--listen", "127.0.0.1:0"],
-            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
-        )  # fmt: skip
-        try:
-            port = listening(log_path, service)
-            with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as client:
-                polled = len(ports) * 126 * len(PARAMETERS)
-                deadline = time.monotonic() + settle
-                while True:
-                    with contextlib.suppress(httpx.TransportError):
-                        if _counts(client)[2] >= polled:
-                            break
-                    if time.monotonic() > deadline or service.poll() is not None:
-                        raise RuntimeError(f"not every value landed within {settle:.0f} s")
-                    time.sleep(1.0)
-                time.sleep(2.0)  # the first publication of everything is over
-                n0, s0, _ = _counts(client)
-                t0 = time.monotonic()
-                time.sleep(seconds)
-                n1, s1, _ = _counts(client)
-                t1 = time.monotonic()
-        finally:
-            stop_process(service, 10.0)
-    tracebacks = log_path.read_text(errors="replace").count("Traceback")
+    with (
+        pkwbus_run(text, folder, "mqtt" if broker else "quiet", stop_timeout=10.0) as service,
+        httpx.Client(base_url=service.base, timeout=60) as client,
+    ):
+        polled = len(ports) * 126 * len(PARAMETERS)
+        deadline = time.monotonic() + settle
+        while True:
+            with contextlib.suppress(httpx.TransportError):
+                if _counts(client)[2] >= polled:
+                    break
+            if time.monotonic() > deadline or service.process.poll() is not None:
+                raise RuntimeError(f"not every value landed within {settle:.0f} s")
+            time.sleep(1.0)
+        time.sleep(2.0)  # the first publication of everything is over
+        n0, s0, _ = _counts(client)
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        n1, s1, _ = _counts(client)
+        t1 = time.monotonic()
+    tracebacks = service.log.read_text(errors="replace").count("Traceback")
     if tracebacks:
-        raise RuntimeError(f"the service logged {tracebacks} traceback(s): see {log_path}")
+        raise RuntimeError(f"the service logged {tracebacks} traceback(s): see {service.log}")
     return {"telegrams_s": (n1 - n0) / (t1 - t0), "values_s": (s1 - s0) / (t1 - t0)}
 
 
@@ -117,19 +101,7 @@ def run(
     with contextlib.ExitStack() as stack:
         folder = Path(stack.enter_context(tempfile.TemporaryDirectory()))
         broker = stack.enter_context(mosquitto(folder))
-        ports = [
-            stack.enter_context(
-                sim_process(
-                    "fc",
-                    "1-126",
-                    response_delay=DELAY,
-                    baudrate=BAUD,
-                    wire_timing=True,
-                    catalog="danfoss-fc",
-                )
-            )
-            for _ in range(lines)
-        ]
+        ports = stack.enter_context(fc_lines(lines, 126))
         for i in range(rounds):
             quiet = _one(folder, ports, None, seconds, settle)
             loud = _one(folder, ports, broker, seconds, settle)

@@ -7,25 +7,19 @@ the ``LineRunner`` interleaving the 4 drives (polls always due), and
 strictly sequential handling (a command's line session: one job after
 another, drive after drive).
 
-    .venv/bin/python bench/pkw_lag.py [--seconds 5] [--repeat 3]
+    .venv/bin/python -m bench.pkw_lag [--seconds 5] [--repeat 3]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
+from bench._common import Counting, best_median, fc_drive, make_port, sim_process
+from bench._measure import markdown_table
 from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Counting, best_median, fc_drive, make_port, sim_process
-from _measure import markdown_table
-
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.outcomes import Answered
 from pkwbus.master.planning.plan import DriveSpec

@@ -38,7 +38,7 @@ If the service does not understand ``?view=overview``, ``?drive=`` or
 ``?changed_since=`` (no ``X-Changes-Token`` header), ``--page overview`` says so
 and is skipped.
 
-    .venv/bin/python bench/plant_scale.py [--page full --page overview] [--seconds 20]
+    .venv/bin/python -m bench.plant_scale [--page full --page overview] [--seconds 20]
 """
 
 from __future__ import annotations
@@ -47,21 +47,24 @@ import argparse
 import asyncio
 import contextlib
 import json
-import logging
 import statistics
 import sys
 import tempfile
 import time
-from pathlib import Path
+from collections.abc import AsyncIterator, Iterator
 from typing import Any
 from urllib.parse import quote, urlsplit
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Service, machine, registry_sum, service_config, sim_process
-from _measure import BenchSetupError, markdown_table
-from scale import BAUD, DELAY, PARAMETERS
-
+from bench._common import (
+    Service,
+    machine,
+    machine_note,
+    quiet_logs,
+    registry_sum,
+    service_config,
+)
+from bench._measure import ROOT, BenchSetupError, markdown_table, module_command
+from bench.scale import BAUD, PARAMETERS, fc_lines
 from pkwbus import link
 
 # What the status page fetches (src/pkwbus/service/http/static/status.js), as (path,
@@ -318,7 +321,7 @@ def _client_main(spec: dict[str, Any]) -> int:
 
 async def _start_client(**spec: object) -> asyncio.subprocess.Process:
     return await asyncio.create_subprocess_exec(
-        sys.executable, str(Path(__file__).resolve()), "--client", json.dumps(spec),
+        *module_command("plant_scale", "--client", json.dumps(spec)), cwd=ROOT,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
 
@@ -473,57 +476,69 @@ async def _settle(runtime: Any, limit: float) -> dict[str, float]:
     }
 
 
+def plant_config(ports: list[str], drives: int, audit_db: str) -> str:
+    """The plant's configuration: ``drives`` FC drives on each port, PARAMETERS polled every
+    EVERY seconds, the twenty values of each drive only (not the catalog's counters)."""
+    text = service_config(
+        ports, drives=drives, pnus=PARAMETERS, every=f"{EVERY:g}s", baudrate=BAUD,
+        audit_db=audit_db,
+    )  # fmt: skip
+    return text.replace("    protocol: fc\n", "    protocol: fc\n    counters: off\n")
+
+
+@contextlib.asynccontextmanager
+async def plant_service(
+    ports: list[str], drives: int, extra: str = ""
+) -> AsyncIterator[tuple[Service, LagProbe]]:
+    """The service in this process on the plant's configuration (and ``extra`` YAML), with
+    a LagProbe running."""
+    with tempfile.TemporaryDirectory() as tmp:
+        text = plant_config(ports, drives, f"{tmp}/audit.sqlite") + extra
+        async with Service(text, nodelay=True) as service:
+            probe = LagProbe()
+            probe.start()
+            try:
+                yield service, probe
+            finally:
+                await probe.stop()
+
+
+@contextlib.contextmanager
+def plant_lines(lines: int, drives: int) -> Iterator[list[str]]:
+    """The plant's simulated lines (a seed each), pkwbus's log at ERROR; their ptys."""
+    with quiet_logs(), fc_lines(lines, drives, own_seeds=True) as ports:
+        yield ports
+
+
 async def _measure(
     ports: list[str], drives: int, seconds: float, pages: tuple[str, ...], repeat: int,
     settle: float,
 ) -> dict[str, Any]:  # fmt: skip
-    with tempfile.TemporaryDirectory() as tmp:
-        text = service_config(
-            ports, drives=drives, pnus=PARAMETERS, every=f"{EVERY:g}s", baudrate=BAUD,
-            audit_db=f"{tmp}/audit.sqlite",
-        )  # fmt: skip
-        # the twenty values of each drive only: not the catalog's counters besides
-        text = text.replace("    protocol: fc\n", "    protocol: fc\n    counters: off\n")
-        async with Service(text, nodelay=True) as service:
-            runtime, base = service.runtime, service.base
-            probe = LagProbe()
-            probe.start()
-            try:
-                start = await _settle(runtime, settle)
-                chosen = []
-                skipped: dict[str, str] = {}
-                for page in pages:
-                    if page == "overview":
-                        check = await _client(60.0, role="probe", base=base)
-                        if not check["supported"]:
-                            skipped[page] = "; ".join(check["problems"])
-                            print(
-                                "plant_scale: the service does not understand the overview "
-                                f"page's requests ({skipped[page]}): --page overview skipped",
-                                file=sys.stderr, flush=True,
-                            )  # fmt: skip
-                            continue
-                    chosen.append(page)
-                quiet = [await _window(runtime, probe, seconds)]
-                loaded: dict[str, dict[str, Any]] = {}
-                for page in chosen:
-                    loaded[page] = await _loaded(base, runtime, probe, page, seconds)
-                    quiet.append(await _window(runtime, probe, seconds))
-                drives_get = await _client(60.0 + repeat * 30.0, role="drives", base=base, n=repeat)
-            finally:
-                await probe.stop()
+    async with plant_service(ports, drives) as (service, probe):
+        runtime, base = service.runtime, service.base
+        start = await _settle(runtime, settle)
+        chosen = []
+        skipped: dict[str, str] = {}
+        for page in pages:
+            if page == "overview":
+                check = await _client(60.0, role="probe", base=base)
+                if not check["supported"]:
+                    skipped[page] = "; ".join(check["problems"])
+                    print(
+                        "plant_scale: the service does not understand the overview "
+                        f"page's requests ({skipped[page]}): --page overview skipped",
+                        file=sys.stderr, flush=True,
+                    )  # fmt: skip
+                    continue
+            chosen.append(page)
+        quiet = [await _window(runtime, probe, seconds)]
+        loaded: dict[str, dict[str, Any]] = {}
+        for page in chosen:
+            loaded[page] = await _loaded(base, runtime, probe, page, seconds)
+            quiet.append(await _window(runtime, probe, seconds))
+        drives_get = await _client(60.0 + repeat * 30.0, role="drives", base=base, n=repeat)
     return {"start": start, "quiet": quiet, "loaded": loaded, "skipped": skipped,
             "drives_get": drives_get, "chosen": chosen}  # fmt: skip
-
-
-def _line(drives: int, seed: int) -> contextlib.AbstractContextManager[str]:
-    """One simulated line in another process, as benchmark 6 has it; its pty's path. A seed
-    of its own: the drives' warnings and trips (which the service reads from their logs)
-    come at other times on each line."""
-    return sim_process(
-        "fc", f"1-{drives}", response_delay=DELAY, baudrate=BAUD, wire_timing=True,
-        catalog="danfoss-fc", extra=("--seed", str(seed)),
-    )  # fmt: skip
 
 
 def measure(
@@ -534,16 +549,8 @@ def measure(
     repeat: int = 7,
     settle: float = 240.0,
 ) -> dict[str, Any]:
-    # The simulated drives' alarms and warnings come and go: their log lines are not figures.
-    logger = logging.getLogger("pkwbus")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    try:
-        with contextlib.ExitStack() as stack:
-            ports = [stack.enter_context(_line(drives, n + 1)) for n in range(lines)]
-            return link.run(_measure(ports, drives, seconds, pages, repeat, settle))
-    finally:
-        logger.setLevel(level)
+    with plant_lines(lines, drives) as ports:
+        return link.run(_measure(ports, drives, seconds, pages, repeat, settle))
 
 
 # --- the figures ------------------------------------------------------------------------
@@ -645,9 +652,7 @@ def run(
             digits=1,
         )  # fmt: skip
     table += (
-        f"\n{lines} lines × {drives} drives, {seconds:g} s windows. Machine: {before['cpu']}, "
-        f"{before['cores']} cores, Python {before['python']}; load average "
-        f"{before['load']} at the start, {after['load']} at the end.\n"
+        f"\n{lines} lines × {drives} drives, {seconds:g} s windows. {machine_note(before, after)}\n"
     )
     return {"rows": rows, "requests": requests, "table": table, "measured": got}
 

@@ -8,7 +8,7 @@ process, so ``time.process_time()`` here counts the client's CPU only.
 
 Run::
 
-    .venv/bin/python bench/pymodbus_baseline.py --n 5000
+    .venv/bin/python -m bench.pymodbus_baseline --n 5000
 
 or, from the benchmark runner, ``measure(5000)`` for a dict of the figures.
 pymodbus is not a dependency of pkwbus; install it into the venv with
@@ -33,11 +33,15 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-try:
-    from _measure import BenchSetupError, Timing, measure_cpu, pty_pair, stop_process
-except ImportError:  # imported as bench.pymodbus_baseline or from elsewhere
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from _measure import BenchSetupError, Timing, measure_cpu, pty_pair, stop_process
+from bench._measure import (
+    ROOT,
+    BenchSetupError,
+    Timing,
+    measure_cpu,
+    module_command,
+    pty_pair,
+    stop_process,
+)
 
 __all__ = ["measure"]
 
@@ -111,7 +115,8 @@ def _server_process(port: str) -> Iterator[subprocess.Popen[bytes]]:
     """Start the pymodbus RTU server on ``port`` in a child process."""
     with tempfile.TemporaryFile() as errors:
         proc = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--serve", port],
+            module_command("pymodbus_baseline", "--serve", port),
+            cwd=ROOT,
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=errors,

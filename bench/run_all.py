@@ -1,9 +1,10 @@
 """Run every benchmark and write docs/benchmarks.md (``make bench``).
 
-    .venv/bin/python bench/run_all.py [--quick] [--out docs/benchmarks.md]
+    .venv/bin/python -m bench.run_all [--quick] [--only N] [--list] [--out docs/benchmarks.md]
 
-``--quick`` runs each benchmark in a short form (about a minute in all);
-the default takes a few minutes. The figures are noisy on a shared machine:
+from the repository's root (``bench`` is a package). ``--quick`` runs each benchmark in a
+short form; the default takes a few minutes; ``--list`` prints the numbered benchmarks
+and runs none. The figures are noisy on a shared machine:
 each benchmark repeats its runs and reports the best and the median.
 """
 
@@ -16,25 +17,27 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import connection_flood
-import cpu_per_exchange
-import dead_drive
-import ds47
-import floor
-import line_efficiency
-import mqtt_fast_path
-import mqtt_line
-import mqtt_publish
-import mqtt_throughput
-import pkw_lag
-import plant_scale
-import scale
-import scrape
-import status_page
-import write_latency
-from _common import machine
+from bench import (
+    connection_flood,
+    cpu_per_exchange,
+    dead_drive,
+    ds47,
+    floor,
+    line_efficiency,
+    mqtt_fast_path,
+    mqtt_line,
+    mqtt_publish,
+    mqtt_throughput,
+    pkw_lag,
+    plant_scale,
+    scale,
+    scrape,
+    sim_cpu,
+    status_page,
+    value_path,
+    write_latency,
+)
+from bench._common import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -184,6 +187,24 @@ def plan(quick: bool) -> Plan:
             "public publish and aiomqtt's awaited publish per value, side by side each round.",
             lambda: mqtt_fast_path.run(10_080, 3 if q else 7),
         ),
+        (
+            "18. The simulator's own CPU per telegram",
+            "`Simulator.handle` on a mix of parameter reads (live and stored) and a write, "
+            "in this process; then over TCP, a client in another process sending one request "
+            "at a time, the simulator's process's CPU per answered telegram. It bounds how "
+            "fast the benchmarks' simulated drives can answer.",
+            lambda: sim_cpu.run(4000 if q else 20_000),
+        ),
+        (
+            "19. The rooms one polled value crosses",
+            "The service built from a configuration as `pkwbus run` builds it, an FC line "
+            "(3 drives) and a PROFIBUS DP line in turn against a simulator in another process; "
+            "every call of a pkwbus function traced (`sys.setprofile`: counts, not times) for "
+            "a window of exchanges in steady state. Per exchange: the modules that ran in most "
+            "exchanges, the calls that crossed into another module and into another layer, "
+            "the times the path came back into `master`.",
+            lambda: value_path.run(100 if q else 300),
+        ),
     ]
 
 
@@ -192,7 +213,12 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
     parser.add_argument("--only", type=int, action="append", help="benchmark number(s)")
+    parser.add_argument("--list", action="store_true", help="print the benchmarks, run none")
     args = parser.parse_args()
+    if args.list:
+        for title, _, _ in plan(args.quick):
+            print(title)
+        return 0
     info = machine()
     started = time.monotonic()
     sections = []
@@ -208,7 +234,7 @@ def main() -> int:
         )
     header = (
         "# Benchmarks\n\n"
-        "Written by `bench/run_all.py` (`make bench`). "
+        "Written by `python -m bench.run_all` (`make bench`). "
         f"Machine: {info['cpu']}, {info['cores']} cores, Python {info['python']}, "
         f"{info['platform']}; run {info['date']}, load average at the start {info['load']}. "
         "The machine was shared with other developers' test runs, so figures are noisy: "

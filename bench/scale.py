@@ -15,7 +15,7 @@ ten back to back), the number of parameter values in it, and the exchanges
 per second while that client scrapes back to back (polling must keep its
 pace).
 
-    .venv/bin/python bench/scale.py [--lines 1 --lines 8] [--seconds 10]
+    .venv/bin/python -m bench.scale [--lines 1 --lines 8] [--seconds 10]
 """
 
 from __future__ import annotations
@@ -24,18 +24,14 @@ import argparse
 import asyncio
 import contextlib
 import statistics
-import sys
 import tempfile
 import time
-from pathlib import Path
+from collections.abc import Iterator
 from typing import Any
 
+from bench._common import Service, http_client, rss_mb, service_config, sim_process
+from bench._measure import markdown_table
 from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Service, http_client, rss_mb, service_config, sim_process
-from _measure import markdown_table
 
 BAUD = 115200
 # Seconds between two scrapes as the deploy's Prometheus has them (scrape_interval 5s),
@@ -49,6 +45,24 @@ PARAMETERS = (
     "15-30[3]", "15-30[4]", "16-00", "16-03", "16-10", "16-13", "16-14", "16-30", "16-90",
     "16-92", "15-30[5]",
 )  # fmt: skip
+
+
+@contextlib.contextmanager
+def fc_lines(lines: int, drives: int, *, own_seeds: bool = False) -> Iterator[list[str]]:
+    """``lines`` simulated lines as this benchmark has them (a process each, FC drives 1 to
+    ``drives`` with the Danfoss catalog, wire timing at BAUD, DELAY to answer); their ptys'
+    paths. ``own_seeds``: a seed of each line's own, so that the drives' warnings and trips
+    (which the service reads from their logs) come at other times on each line."""
+    with contextlib.ExitStack() as stack:
+        yield [
+            stack.enter_context(
+                sim_process(
+                    "fc", f"1-{drives}", response_delay=DELAY, baudrate=BAUD, wire_timing=True,
+                    catalog="danfoss-fc", extra=("--seed", str(n + 1)) if own_seeds else (),
+                )
+            )
+            for n in range(lines)
+        ]  # fmt: skip
 
 
 def _telegrams(runtime: Any) -> float:
@@ -130,20 +144,7 @@ async def _measure(ports: list[str], drives: int, seconds: float) -> dict[str, A
 
 
 def measure(lines: int, drives: int, seconds: float) -> dict[str, Any]:
-    with contextlib.ExitStack() as stack:
-        ports = [
-            stack.enter_context(
-                sim_process(
-                    "fc",
-                    f"1-{drives}",
-                    response_delay=DELAY,
-                    baudrate=BAUD,
-                    wire_timing=True,
-                    catalog="danfoss-fc",
-                )
-            )
-            for _ in range(lines)
-        ]
+    with fc_lines(lines, drives) as ports:
         return link.run(_measure(ports, drives, seconds))
 
 

@@ -22,7 +22,7 @@ process through the service's app on uvicorn (a quarter of the values landing
 meanwhile, in slices). ``--families``: each collector's CPU time;
 ``--profile``: a cProfile of the scrapes.
 
-    .venv/bin/python bench/scrape.py [--lines 4] [--drives 126] [--repeat 15]
+    .venv/bin/python -m bench.scrape [--lines 4] [--drives 126] [--repeat 15]
         [--no-memory] [--no-http] [--families] [--profile]
 """
 
@@ -35,18 +35,14 @@ import gc
 import math
 import pstats
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import http_client, service_config
-from _measure import markdown_table
-from scale import PARAMETERS
-
+from bench._common import http_client, service_config
+from bench._measure import markdown_table
+from bench.scale import PARAMETERS
 from pkwbus.master.events import Exchanged, JobDone, ValueLanded
 from pkwbus.master.planning.jobs import JobKind, JobResult
 from pkwbus.master.planning.outcomes import Heard

@@ -14,7 +14,7 @@ output).
   slaves, each polled for 2 parameters every 1 ms through its PKW slot; cycles per
   second (Data_Exchange requests / slaves) and CPU per cycle.
 
-    .venv/bin/python bench/service_path.py [--n 5000] [--seconds 5] [--repeat 3] [--tree NAME]
+    .venv/bin/python -m bench.service_path [--n 5000] [--seconds 5] [--repeat 3] [--tree NAME]
 """
 
 from __future__ import annotations
@@ -31,12 +31,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import sim_process
-from _measure import stop_process
 from prometheus_client import CollectorRegistry
 
+from bench._common import sim_process
+from bench._measure import stop_process
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
@@ -181,7 +179,7 @@ def main() -> None:
         rows["dp_cycles"].append(found["cycles_per_s"])
         rows["dp_cpu"].append(found["cpu_us_per_cycle"])
         if not args.no_pymodbus:
-            import pymodbus_baseline
+            from bench import pymodbus_baseline
 
             rows["pymodbus"].append(pymodbus_baseline.measure(args.n)["cpu_us_per_op"])
     out: dict[str, Any] = {"tree": args.tree}

@@ -13,7 +13,7 @@ once). The share at the default interval is then reads per second at one hour
 (126 x 14 / 3600) times that time. The same line runs with ``settings: off`` too,
 interleaved, for the polls done against those due.
 
-    .venv/bin/python bench/settings_share.py [--seconds 60] [--repeat 3] [--every 300]
+    .venv/bin/python -m bench.settings_share [--seconds 60] [--repeat 3] [--every 300]
 """
 
 from __future__ import annotations
@@ -21,16 +21,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import registry_sum, sim_process
-
+from bench._common import registry_sum, sim_process
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.history import remember

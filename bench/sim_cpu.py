@@ -5,7 +5,7 @@ parameters) and a write, timed with ``time.process_time``. Over TCP: a
 client in another process sends requests one at a time, and this process
 (the simulator's) measures its own CPU time per answered telegram.
 
-    .venv/bin/python bench/sim_cpu.py [--telegrams 20000]
+    .venv/bin/python -m bench.sim_cpu [--telegrams 20000]
 """
 
 from __future__ import annotations
@@ -15,7 +15,9 @@ import asyncio
 import multiprocessing
 import socket
 import time
+from typing import Any
 
+from bench._measure import markdown_table
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.dialects import FC, USS
 from pkwbus.protocol.serial.telegram import encode_block, frame
@@ -67,15 +69,35 @@ async def over_tcp(protocol: str, n: int) -> float:
     return used / n
 
 
+def run(telegrams: int = 20_000) -> dict[str, Any]:
+    """CPU per telegram of ``Simulator.handle`` (``telegrams`` of them) and over TCP (a
+    quarter as many), FC and USS; with their table (for run_all)."""
+    rows = []
+    for protocol in ("fc", "uss"):
+        for how, per in (
+            ("handle()", in_process(protocol, telegrams)),
+            ("over TCP", asyncio.run(over_tcp(protocol, telegrams // 4))),
+        ):
+            rows.append({"protocol": protocol.upper(), "how": how, "cpu_us": per * 1e6,
+                         "rate": 1 / per})  # fmt: skip
+    table = markdown_table(
+        rows,
+        {"protocol": "protocol", "how": "path", "cpu_us": "CPU µs per telegram",
+         "rate": "telegrams/s of one core"},
+        digits=1,
+    )  # fmt: skip
+    return {"rows": rows, "table": table, "telegrams": telegrams}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--telegrams", type=int, default=20_000)
     args = parser.parse_args()
-    for protocol in ("fc", "uss"):
-        per = in_process(protocol, args.telegrams)
-        print(f"{protocol} handle():  {per * 1e6:7.1f} us CPU per telegram ({1 / per:8.0f}/s)")
-        per = asyncio.run(over_tcp(protocol, args.telegrams // 4))
-        print(f"{protocol} over TCP:  {per * 1e6:7.1f} us CPU per telegram ({1 / per:8.0f}/s)")
+    for row in run(args.telegrams)["rows"]:
+        print(
+            f"{row['protocol'].lower()} {row['how']}:  {row['cpu_us']:7.1f} us CPU per telegram "
+            f"({row['rate']:8.0f}/s)"
+        )
 
 
 if __name__ == "__main__":

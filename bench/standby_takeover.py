@@ -15,7 +15,7 @@ served meanwhile, from its own /metrics (``grpc_server_handled_total``: finished
 ``grpc_server_msg_received_total``: messages, each lease keep-alive on a stream one), per
 second, and per second per line.
 
-    .venv/bin/python bench/standby_takeover.py [--kills 20] [--lease 4] [--quiet 60]
+    .venv/bin/python -m bench.standby_takeover [--kills 20] [--lease 4] [--quiet 60]
         [--lines 1,4]
 """
 
@@ -32,16 +32,12 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+from tests.service.standby_process.etcd import Etcd, etcd_binary
+from tests.service.standby_process.follower import Follower
+from tests.service.standby_process.group import Group
+
+from bench._measure import markdown_table
 from pkwbus import link
-
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "bench"))
-
-from _measure import markdown_table  # noqa: E402
-from tests.service.standby_process.etcd import Etcd, etcd_binary  # noqa: E402
-from tests.service.standby_process.follower import Follower  # noqa: E402
-from tests.service.standby_process.group import Group  # noqa: E402
 
 
 @contextlib.asynccontextmanager

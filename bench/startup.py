@@ -11,7 +11,7 @@ restart). For each: seconds from the start until every polled parameter has
 a value, the telegrams exchanged by then, and the identity and description
 requests among them.
 
-    .venv/bin/python bench/startup.py [--drives 126]
+    .venv/bin/python -m bench.startup [--drives 126]
 """
 
 from __future__ import annotations
@@ -19,23 +19,19 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
+from bench._common import service_config, sim_process
+from bench._measure import markdown_table
+from bench.scale import BAUD, DELAY, PARAMETERS
 from pkwbus import link
 from pkwbus.master.planning import describing
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.config import parse_config
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import service_config, sim_process
-from _measure import markdown_table
-from scale import BAUD, DELAY, PARAMETERS
 
 _steps = {"identity": 0, "description": 0}
 _next_request = describing.DriveDescriber.next_request

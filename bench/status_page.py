@@ -38,16 +38,14 @@ not counted).
 ``--throttle 4`` also runs the page with its CPU slowed four times (Chromium's CPU
 throttling), for an old plant PC.
 
-    .venv/bin/python bench/status_page.py [--drives 126] [--lines 1] [--throttle 1 --throttle 4]
+    .venv/bin/python -m bench.status_page [--drives 126] [--lines 1] [--throttle 1 --throttle 4]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import json
-import logging
 import math
 import shutil
 import statistics
@@ -58,12 +56,9 @@ import tracemalloc
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import Service, service_config, sim_process
-from _measure import BenchSetupError, markdown_table
-from scale import BAUD, DELAY, PARAMETERS
-
+from bench._common import Service, quiet_logs, service_config
+from bench._measure import BenchSetupError, markdown_table
+from bench.scale import BAUD, PARAMETERS, fc_lines
 from pkwbus import link
 from pkwbus.master.reading import Reading
 from pkwbus.service.metrics.trends import POINTS, Trends
@@ -316,28 +311,8 @@ def measure(
     lines: int = 1,
 ) -> list[dict[str, Any]]:
     """``drives`` on each of ``lines`` lines."""
-    # The simulated drives' alarms and warnings come and go: their log lines are not figures.
-    logger = logging.getLogger("pkwbus")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    try:
-        with contextlib.ExitStack() as stack:
-            ports = [
-                stack.enter_context(
-                    sim_process(
-                        "fc",
-                        f"1-{drives}",
-                        response_delay=DELAY,
-                        baudrate=BAUD,
-                        wire_timing=True,
-                        catalog="danfoss-fc",
-                    )
-                )
-                for _ in range(lines)
-            ]
-            return link.run(_measure(ports, drives, parameters, throttles))
-    finally:
-        logger.setLevel(level)
+    with quiet_logs(), fc_lines(lines, drives) as ports:
+        return link.run(_measure(ports, drives, parameters, throttles))
 
 
 def trend_memory(lines: int = 8, drives: int = 126, parameters: int = 20) -> dict[str, Any]:

@@ -9,7 +9,7 @@ and records the longest time the loop did not let it run during the request (the
 held), and the request's process time. Three kinds of request: the first (every piece
 made), again at once (nothing changed), and after one drive's value landed.
 
-    .venv/bin/python bench/trends_view.py [--rounds 5]
+    .venv/bin/python -m bench.trends_view [--rounds 5]
 """
 
 from __future__ import annotations
@@ -17,19 +17,14 @@ from __future__ import annotations
 import argparse
 import asyncio
 import statistics
-import sys
 import time
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
 import httpx
 from fastapi import FastAPI, Response
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from scale import PARAMETERS
-
+from bench.scale import PARAMETERS
 from pkwbus.master.reading import Reading
 from pkwbus.service.http.views import trend_views
 from pkwbus.service.http.views.trend_pieces import TrendPieces

@@ -9,7 +9,7 @@ the time). Printed per bus, per exchange: the modules that ran, the calls that c
 into another module, into another layer (``protocol``, ``master``, ``service`` ...),
 and the times the path came back into ``master`` from another layer.
 
-    .venv/bin/python bench/value_path.py [--n 300] [--tree NAME]
+    .venv/bin/python -m bench.value_path [--n 300] [--tree NAME] [--modules]
 """
 
 from __future__ import annotations
@@ -18,15 +18,12 @@ import argparse
 import asyncio
 import sys
 from collections import Counter
-from pathlib import Path
 from types import FrameType
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import service_path
-from _common import sim_process
-
+from bench import service_path
+from bench._common import sim_process
+from bench._measure import markdown_table
 from pkwbus import link
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
@@ -60,7 +57,7 @@ class Tracer:
                 self.into_master += 1
 
 
-async def _trace(config_text: str, n: int) -> dict[str, float]:
+async def _trace(config_text: str, n: int) -> dict[str, Any]:
     runtime = await build_runtime(parse_config(config_text, environ={}))
     await runtime.start()
     tracer = Tracer()
@@ -98,17 +95,35 @@ def dp(n: int) -> dict[str, Any]:
         return link.run(_trace(service_path._dp_config(pty), n))
 
 
+def run(n: int = 300) -> dict[str, Any]:
+    """Both buses' figures, and their table (for run_all)."""
+    rows = [{"bus": bus, **trace(n)} for bus, trace in (("FC", fc), ("PROFIBUS DP", dp))]
+    table = markdown_table(
+        rows,
+        {
+            "bus": "bus",
+            "exchanges": "exchanges traced",
+            "modules_in_most_exchanges": "modules run in most exchanges",
+            "calls_crossing_modules": "calls into another module per exchange",
+            "calls_crossing_layers": "into another layer",
+            "back_into_master": "back into master",
+        },
+        digits=1,
+    )
+    return {"rows": rows, "table": table}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=300)
     parser.add_argument("--tree", default="this tree")
     parser.add_argument("--modules", action="store_true", help="list the modules too")
     args = parser.parse_args()
-    for bus, run in (("fc", fc), ("dp", dp)):
-        found = run(args.n)
-        modules = found.pop("modules")
+    for row in run(args.n)["rows"]:
+        modules = row.pop("modules")
+        bus = row.pop("bus")
         figures = ", ".join(
-            f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}" for k, v in found.items()
+            f"{k} {v:.1f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()
         )
         print(f"{args.tree} {bus}: {figures}")
         if args.modules:

@@ -17,7 +17,7 @@ goes out after its headers waits for the client's delayed ACK (40 ms on
 Linux). The PUT is therefore measured twice: on ``bind``'s socket, and on a
 socket made with ``IPPROTO_TCP`` (the one-line fix).
 
-    .venv/bin/python bench/write_latency.py [--writes 100] [--baud 19200]
+    .venv/bin/python -m bench.write_latency [--writes 100] [--baud 19200]
 """
 
 from __future__ import annotations
@@ -27,17 +27,11 @@ import asyncio
 import os
 import random
 import statistics
-import sys
 import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
-from pkwbus import link
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import (
+from bench._common import (
     FC_TELEGRAM,
     Service,
     exchange_time,
@@ -45,7 +39,8 @@ from _common import (
     service_config,
     sim_process,
 )
-from _measure import markdown_table
+from bench._measure import markdown_table
+from pkwbus import link
 
 DELAY = 0.002
 TOKEN_ENV = "PKWBUS_BENCH_TOKEN"

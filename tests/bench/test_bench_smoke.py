@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import importlib
+import subprocess
 import sys
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
+ROOT = Path(__file__).resolve().parents[2]  # where `python -m bench.NAME` runs
 MODULES = [
     "connection_flood",
     "cpu_per_exchange",
@@ -27,20 +28,21 @@ MODULES = [
     "run_all",
     "scale",
     "scrape",
+    "sim_cpu",
     "status_page",
+    "value_path",
     "write_latency",
 ]
 
 
 def load(name: str) -> ModuleType:
-    if str(BENCH) not in sys.path:
-        sys.path.insert(0, str(BENCH))
-    return importlib.import_module(name)
+    """The benchmark module ``bench.NAME`` (the root is on sys.path: pyproject's pythonpath)."""
+    return importlib.import_module(f"bench.{name}")
 
 
 @pytest.mark.parametrize("name", MODULES)
 def test_each_benchmark_has_a_command_line(name: str) -> None:
-    """`python bench/NAME.py` runs ``main``; run_all calls the others' ``run``."""
+    """`python -m bench.NAME` runs ``main``; run_all calls the others' ``run``."""
     module = load(name)
     assert callable(getattr(module, "main", None))
     if name != "run_all":
@@ -52,6 +54,19 @@ def test_run_all_plans_every_benchmark() -> None:
     # cpu_per_exchange gives two: by kind of master, and by the number of drives
     assert len(titles) == len(MODULES) - 1 + 1
     assert all(callable(step) for _, _, step in load("run_all").plan(quick=True))
+
+
+def test_run_all_runs_as_a_module_from_the_root() -> None:
+    """`python -m bench.run_all --list`, as make bench starts it: the package found from the
+    repository's root, every benchmark numbered in order, none run."""
+    done = subprocess.run(
+        [sys.executable, "-m", "bench.run_all", "--list"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    titles = done.stdout.splitlines()
+    assert titles == [title for title, _, _ in load("run_all").plan(quick=False)]
+    assert [t.split(".")[0] for t in titles] == [str(i) for i in range(1, len(titles) + 1)]
 
 
 def test_line_efficiency_smallest() -> None:
@@ -159,6 +174,23 @@ def test_events_share_smallest(protocol: str) -> None:
     found = load("events_share").run(seconds=1.0, repeat=1, settle=1.0, protocol=protocol)
     assert found["busy_off"] > 0 and found["busy_auto"] > 0
     assert found["polls_done_off"] > 0
+
+
+def test_sim_cpu_smallest() -> None:
+    got = load("sim_cpu").run(40)
+    assert [(r["protocol"], r["how"]) for r in got["rows"]] == [
+        ("FC", "handle()"), ("FC", "over TCP"), ("USS", "handle()"), ("USS", "over TCP")
+    ]  # fmt: skip
+    assert all(r["cpu_us"] > 0 for r in got["rows"])
+
+
+def test_value_path_smallest() -> None:
+    rows = load("value_path").run(20)["rows"]
+    assert [r["bus"] for r in rows] == ["FC", "PROFIBUS DP"]
+    for row in rows:
+        assert row["exchanges"] >= 20 and row["modules_in_most_exchanges"] > 0
+        assert row["calls_crossing_modules"] >= row["calls_crossing_layers"] > 0
+        assert any(m.startswith("pkwbus.master.") for m in row["modules"])
 
 
 def test_settings_share_smallest() -> None:
