@@ -33,6 +33,7 @@ from bench import (
     scale,
     scrape,
     sim_cpu,
+    standby_marks,
     status_page,
     value_path,
     write_latency,
@@ -204,6 +205,15 @@ def plan(quick: bool) -> Plan:
             "exchanges, the calls that crossed into another module and into another layer, "
             "the times the path came back into `master`.",
             lambda: value_path.run(100 if q else 300),
+        ),
+        (
+            "20. Hot standby: a held line's marks per turn",
+            "One line of 126 drives, a history of 10,000 log entries and 20 swept settings a "
+            "drive, a describe book of 3 models × 300 parameters, a fake etcd in memory; "
+            "CPU per turn of the line's marks writer (every 2 s per held line) with nothing "
+            "changed, as every turn went before the change counts and with them, and after "
+            "one change of each kind.",
+            lambda: standby_marks.run(turns_=10 if q else 50, repeat=1 if q else 3),
         ),
     ]
 

@@ -29,6 +29,7 @@ MODULES = [
     "scale",
     "scrape",
     "sim_cpu",
+    "standby_marks",
     "status_page",
     "value_path",
     "write_latency",

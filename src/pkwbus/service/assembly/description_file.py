@@ -52,6 +52,7 @@ class DescriptionFile:
         self._pending: DescriptionBook | None = None  # the copy the writer takes next
         self._writer: threading.Thread | None = None  # while it writes
         self._written = ""  # the text last written: drives of one kind tell the same
+        self.saves = 0  # how many times the book was saved: changed (a line's marks ask)
 
     def _load(self) -> DescriptionBook:
         try:
@@ -72,6 +73,7 @@ class DescriptionFile:
     def save(self) -> None:
         """Store the book as it is now, off the caller's thread (the writer's): a new file
         renamed over the old one, never half a file."""
+        self.saves += 1
         copy = DescriptionBook()
         copy.entries = {identity: dict(found) for identity, found in self.book.entries.items()}
         with self._lock:

@@ -101,7 +101,7 @@ def watch_settings(
             turn += 1
     if not swept:
         return None
-    kept = store() if store is not None else SettingsStore(stream.store.path)
+    kept = store() if store is not None else SettingsStore(stream.store.path, stream.store.changes)
     runners = dict(runtime.runners)
     watcher = SettingsWatcher(runners, kept, stream, swept, runtime.registry)
     for name in runners:
@@ -127,7 +127,8 @@ class Memory:
 
     def _store(self) -> SettingsStore:
         if self._settings_store is None:
-            self._settings_store = SettingsStore(self.stream.store.path)
+            history = self.stream.store  # its changes counted where the history's are
+            self._settings_store = SettingsStore(history.path, history.changes)
         return self._settings_store
 
     def watch(self, config: cfg.Config) -> None:

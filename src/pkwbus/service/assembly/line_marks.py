@@ -24,7 +24,13 @@ Bound: a document stays under :data:`MAX_MARK_BYTES` (etcd takes 1.5 MiB a reque
 it the oldest log entries are left out (logged once a line): those could be told again.
 Written while the line is held, every :data:`WRITE_EVERY` seconds when it changed, off
 the loop (the database read in a thread) and never on the exchange path; a put that
-fails is tried again at the next turn, logged once until one succeeds.
+fails is tried again at the next turn (not made again), logged once until one succeeds.
+
+A turn costs what changed: the document is made again only when a count of what it is
+made of moved - the history's changes of the line's drives' log entries, and of their
+settings (:class:`~pkwbus.service.history.store.Changes`), the describe book's saves - or
+the drives in maintenance differ; a turn with none reads and encodes nothing. Made again,
+only the parts that changed are read and encoded again (:func:`.mark_document.make`).
 """
 
 from __future__ import annotations
@@ -36,12 +42,11 @@ import logging
 import sqlite3
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final, Protocol
+from typing import Final, Protocol
 
 from pkwbus.master.planning.identity import DescriptionBook
-from pkwbus.service.audit.synced import connect_synced
-from pkwbus.service.history.settings_store import SETTINGS_SCHEMA
-from pkwbus.service.history.store import EVENT_COLUMNS, SCHEMA
+from pkwbus.service.assembly.mark_document import Made, dumps, encode, export, make, merge
+from pkwbus.service.history.store import EVENTS, SETTINGS, Changes
 from pkwbus.service.runtime import Runtime
 
 __all__ = ["MARK", "MAX_MARK_BYTES", "WRITE_EVERY", "LineMarks", "encode", "export", "merge"]
@@ -52,14 +57,17 @@ MARK: Final = "memory"
 MAX_MARK_BYTES: Final = 1_000_000
 WRITE_EVERY: Final = 2.0
 
-_SETTINGS: Final = (
-    "drive, pnu, idx, parameter, raw, value, seen, baseline_raw, baseline_value,"
-    " baseline_since, baseline_by, changed_seen"
-)
+# What a line's marks are made of, on the loop: its drives, the history's counts of their
+# log entries' and settings' changes (None: not counted), the book's saves (None: not
+# counted), the drives in maintenance and why.
+Sources = tuple[tuple[str, ...], tuple[int | None, int | None], int | None, dict[str, str]]
 
 
 class Saved(Protocol):
-    """Where the describe book is kept on disk (:class:`.description_file.DescriptionFile`)."""
+    """Where the describe book is kept on disk (:class:`.description_file.DescriptionFile`):
+    ``saves`` counts its saves, one each time the book changed."""
+
+    saves: int
 
     def save(self) -> None: ...
 
@@ -71,117 +79,12 @@ class MarkStore(Protocol):
     async def put(self, line: str, name: str, value: bytes) -> bool: ...
 
 
-def _marks(values: Sequence[str]) -> str:
-    return ", ".join("?" * len(values))
-
-
-def _open(path: Path) -> sqlite3.Connection:
-    return connect_synced(path, SCHEMA + SETTINGS_SCHEMA)
-
-
-def export(path: Path, drives: Sequence[str]) -> dict[str, Any]:
-    """The events and settings the database ``path`` keeps of ``drives`` (events oldest
-    first)."""
-    db = _open(path)
-    try:
-        of = _marks(drives)
-        events = db.execute(
-            f"SELECT {EVENT_COLUMNS} FROM events WHERE drive IN ({of}) ORDER BY seen, id",
-            tuple(drives),
-        ).fetchall()
-        settings = db.execute(
-            f"SELECT {_SETTINGS} FROM settings WHERE drive IN ({of}) ORDER BY drive, pnu, idx",
-            tuple(drives),
-        ).fetchall()
-        swept = db.execute(
-            f"SELECT drive, identity, swept FROM settings_drives WHERE drive IN ({of})"
-            " ORDER BY drive",
-            tuple(drives),
-        ).fetchall()
-    finally:
-        db.close()
-    return {
-        "events": [list(r) for r in events],
-        "settings": [list(r) for r in settings],
-        "swept": [list(r) for r in swept],
-    }
-
-
-def _latest(db: sqlite3.Connection, drive: str) -> float | None:
-    """When the database last saw ``drive``'s settings (sweep or baseline)."""
-    row = db.execute(
-        "SELECT max(coalesce((SELECT swept FROM settings_drives WHERE drive = ?), 0),"
-        " coalesce((SELECT max(max(coalesce(seen, 0), coalesce(baseline_since, 0)))"
-        " FROM settings WHERE drive = ?), 0))",
-        (drive, drive),
-    ).fetchone()
-    return row[0] or None
-
-
-def _latest_of(doc: Mapping[str, Any], drive: str) -> float:
-    times = [r[2] or 0 for r in doc.get("swept", []) if r[0] == drive]
-    for r in doc.get("settings", []):
-        if r[0] == drive:
-            times += [r[6] or 0, r[9] or 0]
-    return max(times, default=0)
-
-
-def merge(path: Path, doc: Mapping[str, Any]) -> int:
-    """Merge the line's document ``doc`` into the database ``path`` (the rule in the
-    module's docstring), in one transaction; how many log entries were new here."""
-    db = _open(path)
-    try:
-        with db:
-            added = 0
-            row_of = f"INSERT OR IGNORE INTO events ({EVENT_COLUMNS}) VALUES ({_marks('?' * 12)})"
-            for event in doc.get("events", []):
-                added += db.execute(row_of, tuple(event)).rowcount
-            drives = {r[0] for r in doc.get("swept", [])} | {r[0] for r in doc.get("settings", [])}
-            for drive in sorted(drives):
-                local = _latest(db, drive)
-                if local is not None and local >= _latest_of(doc, drive):
-                    continue  # this instance's view is as new: it stays
-                db.execute("DELETE FROM settings WHERE drive = ?", (drive,))
-                db.execute("DELETE FROM settings_drives WHERE drive = ?", (drive,))
-                for r in doc.get("settings", []):
-                    if r[0] == drive:
-                        db.execute(
-                            f"INSERT INTO settings ({_SETTINGS}) VALUES ({_marks('?' * 12)})",
-                            tuple(r),
-                        )
-                for r in doc.get("swept", []):
-                    if r[0] == drive:
-                        db.execute(
-                            "INSERT INTO settings_drives (drive, identity, swept) VALUES (?, ?, ?)",
-                            tuple(r),
-                        )
-    finally:
-        db.close()
-    return added
-
-
-def encode(doc: Mapping[str, Any], limit: int = MAX_MARK_BYTES) -> tuple[bytes, int]:
-    """The document as compact JSON under ``limit`` bytes, and how many of its oldest log
-    entries were left out to keep it there (settings and maintenance are never left
-    out; a document too big without any entries is refused with ValueError)."""
-    events = list(doc.get("events", []))
-    dropped = 0
-    while True:
-        text = json.dumps({**doc, "events": events[dropped:]}, separators=(",", ":"))
-        data = text.encode()
-        if len(data) <= limit:
-            return data, dropped
-        if dropped >= len(events):
-            raise ValueError(f"a line's marks take {len(data)} bytes without log entries")
-        # Drop about the share over the limit, at least one.
-        over = (len(data) - limit) / len(data)
-        dropped = min(len(events), dropped + max(1, int((len(events) - dropped) * over) + 1))
-
-
 class LineMarks:
     """The marks of the lines this instance masters: loaded when it wins one, written
     while it holds it. ``history``: the history database (None: no drive memory kept,
-    only maintenance is carried); ``drives_of``: the drives of a line."""
+    only maintenance is carried); ``drives_of``: the drives of a line; ``changes``: the
+    history's count of its changes, ``saved``: the book's keeper, counting its saves
+    (without either, that source is read and encoded every turn)."""
 
     def __init__(
         self,
@@ -193,6 +96,7 @@ class LineMarks:
         limit: int = MAX_MARK_BYTES,
         book: DescriptionBook | None = None,
         saved: Saved | None = None,
+        changes: Changes | None = None,
     ) -> None:
         self.marks = marks
         self.runtime = runtime
@@ -202,6 +106,9 @@ class LineMarks:
         self.limit = limit
         self.book = book
         self.saved = saved
+        self.changes = changes
+        self._made: dict[str, tuple[Sources, Made, bytes]] = {}  # of what, how, the bytes
+        self._book: tuple[int, str] | None = None  # the book's JSON text at a count of saves
         self._writers: dict[str, asyncio.Task[None]] = {}
         self._written: dict[str, bytes] = {}
         self._failing: set[str] = set()
@@ -225,6 +132,11 @@ class LineMarks:
             if self.history is not None:
                 added = await asyncio.to_thread(merge, self.history, doc)
                 log.info("line %s: its marks merged, %d log entries known from etcd", line, added)
+                if self.changes is not None:  # the marks of a line holding these drives too
+                    drives = {r[1] for r in doc.get("events", [])}
+                    drives |= {r[0] for r in [*doc.get("settings", []), *doc.get("swept", [])]}
+                    self.changes.changed(EVENTS, drives)
+                    self.changes.changed(SETTINGS, drives)
             self._merge_book(doc.get("book"))
             kept = doc.get("maintenance", {})
             return {str(k): str(v) for k, v in kept.items()} if isinstance(kept, dict) else {}
@@ -273,6 +185,7 @@ class LineMarks:
         if flush:
             await self.write(line)
         self._written.pop(line, None)
+        self._made.pop(line, None)
 
     async def keep_only(self, lines: Collection[str]) -> None:
         """A reload removed the other lines: their marks are no longer written."""
@@ -290,42 +203,32 @@ class LineMarks:
             await asyncio.sleep(self.every)
             await self.write(line)
 
-    def document(self, line: str, extra: Mapping[str, Any]) -> dict[str, Any]:
-        """``line``'s marks, with ``extra`` (what was taken on the loop), in a thread: it
-        reads the database."""
-        drives = list(self.drives_of(line))
-        doc = export(self.history, drives) if self.history is not None and drives else {}
-        return {**doc, **extra}
-
-    def _encoded(self, line: str, extra: Mapping[str, Any]) -> tuple[bytes, int]:
-        """:meth:`document` encoded under the limit, in a thread: up to a megabyte of JSON,
-        made again while entries are left out, must not hold the loop."""
-        return encode(self.document(line, extra), self.limit)
-
-    def _on_loop(self, line: str) -> dict[str, Any]:
-        """What only the loop may read: the drives in maintenance and the describe book."""
+    def _sources(self, line: str) -> Sources:
+        """What ``line``'s marks are made of, as counts of its changes (and the drives in
+        maintenance, few: compared whole), on the loop."""
+        drives = tuple(self.drives_of(line))
+        counts: tuple[int | None, int | None] = (None, None)
+        if self.changes is not None:
+            counts = (self.changes.count(EVENTS, drives), self.changes.count(SETTINGS, drives))
+        elif self.history is None or not drives:
+            counts = (0, 0)  # nothing read
+        saves = 0 if self.book is None else self.saved.saves if self.saved is not None else None
         maintenance = self.runtime.snapshot.maintenance
-        drives = self.drives_of(line)
-        extra: dict[str, Any] = {
-            "maintenance": {d: maintenance[d].reason for d in drives if d in maintenance}
-        }
-        if self.book is not None:
-            extra["book"] = self.book.to_json()
-        return extra
+        kept = {d: m.reason for d, m in maintenance.items() if d in drives}
+        return drives, counts, saves, kept
 
     async def write(self, line: str) -> bool:
-        """``line``'s marks put when they changed; False when the put failed."""
-        try:
-            data, dropped = await asyncio.to_thread(self._encoded, line, self._on_loop(line))
-        except (sqlite3.Error, ValueError, OSError) as exc:
-            self._once(line, f"its marks cannot be made: {exc}")
+        """``line``'s marks put when they changed; False when the put failed. Made again
+        only when what they are made of changed since they were last made."""
+        sources = self._sources(line)  # before the read: a change meanwhile is made again
+        _, counts, saves, _ = sources
+        last = self._made.get(line)
+        if last is not None and last[0] == sources and None not in (*counts, saves):
+            data: bytes | None = last[2]  # nothing changed: nothing read, nothing encoded
+        else:
+            data = await self._make(line, sources, last[1] if last is not None else None)
+        if data is None:
             return False
-        if dropped and line not in self._cut:
-            self._cut.add(line)
-            log.warning(
-                "line %s: its marks exceed %d bytes: the %d oldest log entries are left out",
-                line, self.limit, dropped, extra={"line": line},
-            )  # fmt: skip
         if self._written.get(line) == data:
             return True
         if not await self.marks.put(line, MARK, data):
@@ -337,7 +240,57 @@ class LineMarks:
         self._written[line] = data
         return True
 
+    async def _make(self, line: str, sources: Sources, last: Made | None) -> bytes | None:
+        """``line``'s marks made again from ``last`` (what changed read and encoded, in a
+        thread); None when they cannot be (logged once)."""
+        drives, counts, saves, maintenance = sources
+        book: str | DescriptionBook | None = None
+        if self.book is not None:  # its JSON made again when it was saved since
+            kept = self._book
+            book = kept[1] if kept is not None and kept[0] == saves else _copy(self.book)
+        try:
+            made, data, dropped, text = await asyncio.to_thread(
+                self._encoded, drives, counts, last, maintenance, book
+            )
+        except (sqlite3.Error, ValueError, OSError) as exc:
+            self._once(line, f"its marks cannot be made: {exc}")
+            return None
+        if saves is not None and text is not None:
+            self._book = (saves, text)
+        if dropped and line not in self._cut:
+            self._cut.add(line)
+            log.warning(
+                "line %s: its marks exceed %d bytes: the %d oldest log entries are left out",
+                line, self.limit, dropped, extra={"line": line},
+            )  # fmt: skip
+        self._made[line] = (sources, made, data)
+        return data
+
+    def _encoded(
+        self,
+        drives: tuple[str, ...],
+        counts: tuple[int | None, int | None],
+        last: Made | None,
+        maintenance: dict[str, str],
+        book: str | DescriptionBook | None,
+    ) -> tuple[Made, bytes, int, str | None]:
+        """The marks made (:func:`.mark_document.make`), in a thread: up to a megabyte of
+        JSON must not hold the loop; and the book's JSON text."""
+        text = book if book is None or isinstance(book, str) else dumps(book.to_json())
+        extra = [("maintenance", dumps(maintenance))]
+        if text is not None:
+            extra.append(("book", text))
+        return (*make(self.history, drives, counts, last, extra, self.limit), text)
+
     def _once(self, line: str, what: str) -> None:
         if line not in self._failing:
             self._failing.add(line)
             log.warning("line %s: %s", line, what, extra={"line": line})
+
+
+def _copy(book: DescriptionBook) -> DescriptionBook:
+    """``book`` as it is now, to be made JSON off the loop (its entries are immutable: a
+    copy of two levels of dicts, as its keeper takes one)."""
+    copy = DescriptionBook()
+    copy.entries = {identity: dict(found) for identity, found in book.entries.items()}
+    return copy

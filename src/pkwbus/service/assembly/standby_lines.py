@@ -306,7 +306,9 @@ def _line_marks(
     marks = getattr(engine, "marks", None)
     if marks is None:
         return None
-    path = memory.stream.store.path if memory is not None else None
+    store = memory.stream.store if memory is not None else None
+    path = store.path if store is not None else None
     history = None if path is None or str(path) == ":memory:" else path
+    changes = store.changes if store is not None else None
     return LineMarks(marks, runtime, history, lambda line: lines().get(line, ()),
-                     book=parts.book, saved=parts.kept)  # fmt: skip
+                     book=parts.book, saved=parts.kept, changes=changes)  # fmt: skip

@@ -25,7 +25,10 @@ from typing import Any, Final
 
 from pkwbus.service.audit.synced import connect_synced
 from pkwbus.service.history.store import (
+    EVENTS,
     SCHEMA,
+    SETTINGS,
+    Changes,
     DriveEvent,
     HistoryError,
     insert_events,
@@ -106,10 +109,12 @@ class SweptDrive:
 
 class SettingsStore:
     """The settings' tables of the history database, opened at the first load or store: it
-    is made on the event loop (at the start, or by a reload) and used off it."""
+    is made on the event loop (at the start, or by a reload) and used off it. ``changes``:
+    where each stored change is counted (the history store's, :class:`Changes`)."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, changes: Changes | None = None) -> None:
         self.path = Path(path)
+        self.changes = changes if changes is not None else Changes()
         self._lock = threading.Lock()
         self._opening = threading.Lock()
         self._conn: sqlite3.Connection | None = None
@@ -159,20 +164,25 @@ class SettingsStore:
         they tell, in one synced transaction: a row flagged changed is never kept without
         its event. The events that were new."""
         sql = f"INSERT OR REPLACE INTO settings ({_COLUMNS}) VALUES ({', '.join('?' * 12)})"
+        stored = list(rows)
         with synced_transaction(self._db, self._lock, self.path):
-            for row in rows:
+            for row in stored:
                 self._db.execute(sql, row.values())
-            return insert_events(self._db, events)
+            new = insert_events(self._db, events)
+        self.changes.changed(SETTINGS, (row.drive for row in stored))
+        self.changes.changed(EVENTS, (e.drive for e in new))
+        return new
 
     def swept(self, drive: str, identity: str | None, when: float | None) -> None:
         """The identity of ``drive``'s baseline and the end of its last complete sweep."""
         sql = "INSERT OR REPLACE INTO settings_drives (drive, identity, swept) VALUES (?, ?, ?)"
-        self._write([(sql, (drive, identity, when))])
+        self._write(drive, [(sql, (drive, identity, when))])
 
     def forget(self, drive: str, identity: str | None) -> None:
         """A new baseline for ``drive``, another drive now (``identity``): its rows go."""
         head = "INSERT OR REPLACE INTO settings_drives (drive, identity, swept) VALUES (?, ?, NULL)"
-        self._write([("DELETE FROM settings WHERE drive = ?", (drive,)), (head, (drive, identity))])
+        self._write(drive, [("DELETE FROM settings WHERE drive = ?", (drive,)),
+                            (head, (drive, identity))])  # fmt: skip
 
     def close(self) -> None:
         with self._lock, self._opening:  # the order of a load's first use
@@ -181,7 +191,8 @@ class SettingsStore:
                 self._conn.close()
                 self._conn = None
 
-    def _write(self, statements: list[tuple[str, tuple[Any, ...]]]) -> None:
+    def _write(self, drive: str, statements: list[tuple[str, tuple[Any, ...]]]) -> None:
         with synced_transaction(self._db, self._lock, self.path):
             for sql, args in statements:
                 self._db.execute(sql, args)
+        self.changes.changed(SETTINGS, [drive])

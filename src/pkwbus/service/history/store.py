@@ -29,8 +29,11 @@ from pkwbus.errors import PkwbusError
 from pkwbus.service.audit.synced import connect_synced
 
 __all__ = [
+    "EVENTS",
     "EVENT_COLUMNS",
     "SCHEMA",
+    "SETTINGS",
+    "Changes",
     "DriveEvent",
     "HistoryError",
     "HistoryStore",
@@ -122,10 +125,37 @@ class HistoryError(PkwbusError):
     """The history database cannot be opened or written."""
 
 
+EVENTS: Final = "events"  # what :class:`Changes` counts: a drive's kept log entries
+SETTINGS: Final = "settings"  # a drive's settings, baselines and last sweep
+
+
+class Changes:
+    """How many times each drive's kept log entries (:data:`EVENTS`) and settings
+    (:data:`SETTINGS`) changed in the database, counted by the stores once a change is
+    committed: who carries what is kept (a line's marks in hot standby) reads again only
+    when a count moved. Thread-safe; counts only go up."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._counts: dict[tuple[str, str], int] = {}
+
+    def changed(self, part: str, drives: Iterable[str]) -> None:
+        """``drives``' ``part`` changed (committed)."""
+        with self._lock:
+            for drive in set(drives):
+                self._counts[(part, drive)] = self._counts.get((part, drive), 0) + 1
+
+    def count(self, part: str, drives: Iterable[str]) -> int:
+        """How many changes of ``drives``' ``part`` were counted."""
+        counts = self._counts
+        return sum(counts.get((part, drive), 0) for drive in drives)
+
+
 class HistoryStore:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._lock = threading.Lock()
+        self.changes = Changes()  # what changed in it (a settings' store given it counts too)
         try:
             self._db = connect_synced(path, SCHEMA)
         except (sqlite3.Error, OSError) as exc:
@@ -137,7 +167,9 @@ class HistoryStore:
         if not events:
             return []
         with synced_transaction(self._db, self._lock, self.path):
-            return insert_events(self._db, events)
+            new = insert_events(self._db, events)
+        self.changes.changed(EVENTS, (e.drive for e in new))
+        return new
 
     def known(self, drive: str) -> set[str]:
         """The keys of the entries kept of ``drive``."""
@@ -194,9 +226,12 @@ class HistoryStore:
             sql += f" AND key NOT IN ({_marks(held)})"
         with self._lock:
             try:
-                return self._db.execute(sql, (drive, before, *of, *held)).rowcount
+                dropped: int = self._db.execute(sql, (drive, before, *of, *held)).rowcount
             except sqlite3.Error as exc:
                 raise HistoryError(f"history database {self.path}: {exc}") from None
+        if dropped:
+            self.changes.changed(EVENTS, [drive])
+        return dropped
 
     def close(self) -> None:
         with self._lock:
