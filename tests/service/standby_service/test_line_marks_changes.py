@@ -16,9 +16,9 @@ import pytest
 
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.protocol.pkw.descriptions import DriveDescription
-from pkwbus.service.assembly import mark_document
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.assembly.line_marks import MARK, LineMarks
+from pkwbus.service.history import marks as mark_document
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import DriveEvent, HistoryStore
 

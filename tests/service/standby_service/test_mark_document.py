@@ -1,4 +1,4 @@
-"""A line's marks as a document (service.assembly.mark_document): encoded from text parts, the
+"""A line's marks as a document (service.history.marks): encoded from text parts, the
 same bytes and the same entries left out as one JSON dump of the whole document cut down
 entry by entry; made again from the last one's parts, the same as made afresh."""
 
@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from pkwbus.service.assembly.mark_document import encode, export, make
+from pkwbus.service.history.marks import encode, export, make
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import EVENTS, SETTINGS, DriveEvent, HistoryStore
 

@@ -30,7 +30,7 @@ A turn costs what changed: the document is made again only when a count of what 
 made of moved - the history's changes of the line's drives' log entries, and of their
 settings (:class:`~pkwbus.service.history.store.Changes`), the describe book's saves - or
 the drives in maintenance differ; a turn with none reads and encodes nothing. Made again,
-only the parts that changed are read and encoded again (:func:`.mark_document.make`).
+only the parts that changed are read and encoded again (:func:`pkwbus.service.history.marks.make`).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Final, Protocol
 
 from pkwbus.master.planning.identity import DescriptionBook
-from pkwbus.service.assembly.mark_document import Made, dumps, encode, export, make, merge
+from pkwbus.service.history.marks import Made, dumps, encode, export, make, merge
 from pkwbus.service.history.store import EVENTS, SETTINGS, Changes
 from pkwbus.service.runtime import Runtime
 
@@ -274,8 +274,8 @@ class LineMarks:
         maintenance: dict[str, str],
         book: str | DescriptionBook | None,
     ) -> tuple[Made, bytes, int, str | None]:
-        """The marks made (:func:`.mark_document.make`), in a thread: up to a megabyte of
-        JSON must not hold the loop; and the book's JSON text."""
+        """The marks made (:func:`pkwbus.service.history.marks.make`), in a thread: up to a
+        megabyte of JSON must not hold the loop; and the book's JSON text."""
         text = book if book is None or isinstance(book, str) else dumps(book.to_json())
         extra = [("maintenance", dumps(maintenance))]
         if text is not None:

@@ -1,5 +1,5 @@
-"""A line's marks as a document (:mod:`.line_marks`): read from the history database,
-merged into it, encoded under a bound.
+"""A line's marks as a document (:mod:`pkwbus.service.assembly.line_marks`): read from the
+history database, merged into it, encoded under a bound.
 
 Encoded whole (:func:`encode`), or made again from what the last one was made of
 (:func:`make`): a part - the line's log entries, its drives' settings - is read and encoded
