@@ -55,21 +55,24 @@ async def _measure(
         runtime = service.runtime
         output = attach(parse_config(service.config_text), runtime, None)
         assert output is not None
-        output.start()  # stopped with the runtime (its cleanup)
-        await asyncio.wait_for(output.connection.connected.wait(), 30.0)
-        start = await _settle(runtime, settle)
-        on = list(runtime.outputs.items)
-        off = [o for o in on if o is not output]
-        sent = output.metrics.sent["value"]
-        found: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
-        for _ in range(rounds):
-            runtime.outputs.swap(off)
-            found["off"].append(await _window(runtime, probe, seconds))
-            runtime.outputs.swap(on)
-            before = sent._value.get()
-            window = await _window(runtime, probe, seconds)
-            window["published_s"] = (sent._value.get() - before) / seconds
-            found["on"].append(window)
+        output.start()
+        try:
+            await asyncio.wait_for(output.connection.connected.wait(), 30.0)
+            start = await _settle(runtime, settle)
+            on = list(runtime.outputs.items)
+            off = [o for o in on if o is not output]
+            sent = output.metrics.sent["value"]
+            found: dict[str, list[dict[str, Any]]] = {"off": [], "on": []}
+            for _ in range(rounds):
+                runtime.outputs.swap(off)
+                found["off"].append(await _window(runtime, probe, seconds))
+                runtime.outputs.swap(on)
+                before = sent._value.get()
+                window = await _window(runtime, probe, seconds)
+                window["published_s"] = (sent._value.get() - before) / seconds
+                found["on"].append(window)
+        finally:
+            await output.stop()  # the assembly's cleanup does it in the service
     return {"start": start, **found}
 
 

@@ -101,6 +101,8 @@ TOKEN_HEADER = "x-changes-token"
 SLICE = 10.0  # seconds of the lines' busy share while waiting for the start's backlog to drain
 SETTLED = 0.9  # a busy share under this: the backlog has drained (about 0.8 with the polls)
 
+BODY_BUFFER = 1 << 25  # bytes a client reads before it stops reading (32 MiB)
+
 GOAL_RATIO = 0.95
 GOAL_DRIVES_MS = 1.0  # per 1,000 values
 GOAL_LAG_P99_MS = 20.0
@@ -126,7 +128,12 @@ class _Http:
         head, tries = b"", 0
         while not head:
             if self.reader is None or self.writer is None:
-                self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
+                # A buffer that takes a whole answer (as a browser's or Prometheus's
+                # does): with asyncio's 64 KiB default the client would stop reading
+                # every 128 KiB, and the service wait on a full socket.
+                self.reader, self.writer = await asyncio.open_connection(
+                    self.host, self.port, limit=BODY_BUFFER
+                )
             try:
                 self.writer.write(request)
                 await self.writer.drain()

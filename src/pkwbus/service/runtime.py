@@ -1,15 +1,13 @@
-"""The running service's object graph: lines with their runners, drives, snapshot, metrics.
-
-Built from the configuration by :mod:`pkwbus.service.assembly.build`; started and
-stopped by :mod:`pkwbus.service.assembly.serve`. The HTTP API reads the snapshot and
-queues jobs through :meth:`Runtime.submit`.
-"""
+"""The running service's object graph: the configuration's load (lines with their runners,
+drives), the snapshot, metrics. Built by :mod:`pkwbus.service.assembly`, started and
+stopped by :mod:`pkwbus.service.assembly.serve`; the HTTP API reads the snapshot and
+queues jobs through :meth:`Runtime.submit`."""
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Iterable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Protocol
@@ -42,6 +40,7 @@ __all__ = [
     "History",
     "LineMaster",
     "LineTask",
+    "Load",
     "Masters",
     "Runtime",
     "Settings",
@@ -175,25 +174,13 @@ class Masters(Protocol):
     @property
     def etcd_up(self) -> bool: ...
 
-    def lines(self) -> Mapping[str, Sequence[str]]:
-        """Each configured line's drives, by line, in the configuration's order."""
-        ...
-
-    def line_of(self, drive: str) -> str | None:
-        """The configured line of ``drive`` (None: no such drive)."""
-        ...
-
-    def here(self, line: str) -> bool:
-        """Whether this instance masters ``line`` now."""
-        ...
-
-    def master_of(self, line: str) -> LineMaster | None:
-        """Who masters ``line`` (this instance included); None: nobody now."""
-        ...
-
-    def takeovers(self, line: str) -> int:
-        """How often this instance took ``line``."""
-        ...
+    # Each configured line's drives, by line, in the configuration's order.
+    def lines(self) -> Mapping[str, Sequence[str]]: ...
+    def line_of(self, drive: str) -> str | None: ...  # None: no such drive
+    def here(self, line: str) -> bool: ...  # whether this instance masters ``line`` now
+    # Who masters ``line`` (this instance included); None: nobody now.
+    def master_of(self, line: str) -> LineMaster | None: ...
+    def takeovers(self, line: str) -> int: ...  # how often this instance took ``line``
 
 
 class Trends(Protocol):
@@ -205,43 +192,87 @@ class Trends(Protocol):
     def points(self, key: ReadingKey, now: float) -> list[float | None]: ...
 
 
+@dataclass(frozen=True)
+class Load:
+    """What one load of the configuration made: the lines' runners, the drives, who masters
+    the lines, the drives' memory, what starts and stops with it. Built once by the
+    assembly (service.assembly.loading.LoadBuilder), never changed: a reload, or a line won
+    or lost in hot standby, makes the next, swapped in whole (:meth:`Runtime.swap`)."""
+
+    runners: Mapping[str, LineTask] = field(default_factory=dict)
+    drives: Mapping[str, DriveEntry] = field(default_factory=dict)
+    job_timeout: float = 5.0
+    history: History | None = None  # the drives' own log entries (None: not kept)
+    settings: Settings | None = None  # the sweep of the drives' settings (None: none)
+    masters: Masters | None = None  # hot standby: who masters each line (None: all here)
+    # The part of the lines' outputs there from the start (the drives' watchers join it).
+    base: tuple[Observer, ...] = ()
+    # What starts once the lines run, what ends after they stopped, and what closes a
+    # line's simulated drives after the line stopped.
+    starters: tuple[Callable[[], Awaitable[None]], ...] = ()
+    cleanups: tuple[Callable[[], object], ...] = ()
+    closers: Mapping[str, Callable[[], object]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("runners", "drives", "closers"):
+            object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
+        for name in ("base", "starters", "cleanups"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+
+
 class Runtime:
+    """The running service: the current :class:`Load`, and what the process keeps across
+    loads (the snapshot, registry, outputs, alarms, trends, the lines' tasks, stopping)."""
+
     def __init__(
         self,
-        runners: Iterable[LineTask],
-        drives: Iterable[DriveEntry],
         snapshot: Snapshot,
         registry: CollectorRegistry,
+        load: Load | None = None,
         *,
-        job_timeout: float = 5.0,
         alarms: Alarms | None = None,
         trends: Trends | None = None,
         outputs: Outputs | None = None,
-        base: Sequence[Observer] = (),
     ) -> None:
-        self.runners = {s.name: s for s in runners}
-        self.drives = {d.name: d for d in drives}
         self.snapshot = snapshot
         self.registry = registry
-        self.job_timeout = job_timeout
         self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
-        # What every line's stream goes to (given to each runner at its construction), and
-        # the part of it that is there from the start (the drives' watchers join it).
+        # What every line's stream goes to (given to each runner at its construction).
         self.outputs = outputs if outputs is not None else Outputs()
-        self.base = tuple(base)
-        self.history: History | None = None  # the drives' own log entries (None: not kept)
-        self.settings: Settings | None = None  # the sweep of the drives' settings (None: none)
-        # Hot standby: who masters each configured line (None: one instance masters all).
-        self.masters: Masters | None = None
+        self._load = load if load is not None else Load()
         self.stopping = False  # set by stop(): no line starts from then on
-        self._tasks: dict[str, asyncio.Task[None]] = {}
-        # What starts once the lines run (the watch of the drives' logs), and what ends
-        # after they stopped.
-        self.starters: list[Callable[[], Awaitable[None]]] = []
-        self.cleanups: list[Callable[[], object]] = []
-        # What closes a line's simulated drives, after the line stopped.
-        self.closers: dict[str, Callable[[], object]] = {}
+        self._tasks: dict[str, tuple[LineTask, asyncio.Task[None]]] = {}  # by line
+        self._ended: set[str] = set()  # lines stopped for good, still in the load
+        self._closed: list[Callable[[], object]] = []  # closers, cleanups called
+
+    @property
+    def load(self) -> Load:
+        return self._load
+
+    def swap(self, load: Load) -> None:
+        """``load`` the current one, by one assignment: a reader sees the old or the new."""
+        self._load = load
+
+    @property
+    def runners(self) -> Mapping[str, LineTask]:
+        return self._load.runners
+
+    @property
+    def drives(self) -> Mapping[str, DriveEntry]:
+        return self._load.drives
+
+    @property
+    def history(self) -> History | None:
+        return self._load.history
+
+    @property
+    def settings(self) -> Settings | None:
+        return self._load.settings
+
+    @property
+    def masters(self) -> Masters | None:
+        return self._load.masters
 
     def format_of(self, drive: str, ref: ParameterRef) -> ParameterDescription:
         """What is known of the drive's ``ref`` now (:meth:`DriveEntry.format_of`), with
@@ -252,28 +283,34 @@ class Runtime:
         return self.drives[drive].format_of(ref, described, snap.stated.get((drive, ref.pnu)))
 
     async def start(self) -> None:
-        for runner in self.runners.values():
+        load = self._load
+        for runner in load.runners.values():
             self.start_line(runner)
-        for start in self.starters:
+        for start in load.starters:
             await start()
 
     def start_line(self, runner: LineTask) -> None:
-        """Run ``runner``'s line (at the start, or a line a reload added)."""
-        self.runners[runner.name] = runner
+        """Run ``runner``'s line (at the start, or a line a reload added: the load that
+        holds it is swapped in by the reload)."""
         task = asyncio.create_task(runner.run(), name=f"line {runner.name}")
         task.add_done_callback(self._line_ended)
-        self._tasks[runner.name] = task
+        self._tasks[runner.name] = (runner, task)
+        self._ended.discard(runner.name)
 
-    async def stop_line(self, name: str, grace: float = 3.0) -> None:
+    async def stop_line(
+        self, name: str, grace: float = 3.0, close: Callable[[], object] | None = None
+    ) -> None:
         """Stop one line for good (a reload): its exchange in flight finishes, its port
-        closes, and nothing of it stays in the snapshot."""
-        runner = self.runners.pop(name)
-        runner.stop()
-        task = self._tasks.pop(name, None)
-        if task is not None:
-            await self._end([task], grace)
-        runner.forget()
-        await self._close(name)
+        closes, ``close`` closes its simulated drives, and nothing of it stays in the
+        snapshot. No job goes to it from now on; the next load leaves it out."""
+        runner, task = self._tasks.pop(name, (self._load.runners.get(name), None))
+        self._ended.add(name)
+        if runner is not None:
+            runner.stop()
+            if task is not None:
+                await self._end([task], grace)
+            runner.forget()
+        await self._close(close)
 
     async def _end(self, tasks: list[asyncio.Task[None]], grace: float) -> None:
         _, pending = await asyncio.wait(tasks, timeout=grace)
@@ -282,27 +319,32 @@ class Runtime:
         if pending:
             await asyncio.wait(pending, timeout=1.0)
 
-    async def _close(self, name: str) -> None:
-        close = self.closers.pop(name, None)
-        result = close() if close is not None else None
-        if asyncio.iscoroutine(result):
-            await result
-
     def _line_ended(self, task: asyncio.Task[None]) -> None:
         if not task.cancelled() and task.exception() is not None:
             log.error("%s stopped: %r", task.get_name(), task.exception())
 
+    def _line(self, name: str) -> LineTask | None:
+        """The runner of line ``name`` that takes jobs (None: none, or stopped for good)."""
+        return None if name in self._ended else self._load.runners.get(name)
+
     async def stop(self, grace: float = 3.0) -> None:
         """Stop taking jobs, let each line finish its exchange in flight, close the ports."""
         self.stopping = True
-        for runner in self.runners.values():
+        load = self._load
+        for runner in {*load.runners.values(), *(r for r, _ in self._tasks.values())}:
             runner.stop()
         if self._tasks:
-            await self._end(list(self._tasks.values()), grace)
-        for name in list(self.closers):
-            await self._close(name)
-        for cleanup in reversed(self.cleanups):
-            result = cleanup()
+            await self._end([t for _, t in self._tasks.values()], grace)
+        for close in load.closers.values():
+            await self._close(close)
+        for cleanup in reversed(load.cleanups):
+            await self._close(cleanup)
+
+    async def _close(self, close: Callable[[], object] | None) -> None:
+        """Call a closer or a cleanup once (a line stopped while the service stops)."""
+        if close is not None and not any(c is close for c in self._closed):
+            self._closed.append(close)
+            result = close()
             if asyncio.iscoroutine(result):
                 await result
 
@@ -314,7 +356,7 @@ class Runtime:
         its carrier cannot carry: the one check before anything is sent."""
         entry = self.drives[drive]
         item = Item(request, vtype)
-        runner = self.runners.get(entry.line)
+        runner = self._line(entry.line)
         if runner is not None:
             try:
                 return runner.preview(drive, item)
@@ -342,13 +384,13 @@ class Runtime:
             request,
             kind,
             Priority.WRITE if kind is JobKind.WRITE else Priority.READ,
-            loop.time() + (timeout or self.job_timeout),
+            loop.time() + (timeout or self._load.job_timeout),
             fmt,
             future,
             parameter,
             index,
         )
-        runner = self.runners.get(entry.line)
+        runner = self._line(entry.line)
         if runner is None:
             future.set_result(JobResult(Cancelled("no such line")))
         else:

@@ -254,6 +254,8 @@ async def test_a_broken_file_changes_nothing(tmp_path: Path) -> None:
             write_config(config, [line("l", end.url, [drive("d1", 1, ["16-13"], every="200ms")])])
             await svc.hangup()
             assert "pkwbus_config_last_reload_successful 1.0" in await svc.metrics()
+            # the reload's row is completed by the audit's writer after its log line
+            await svc.until(lambda: [o for _, o, _ in svc.audit()][-1:] != ["pending"])
             assert [o for _, o, _ in svc.audit()] == ["invalid", "ok"]
             assert "lines[0].baudrate" in svc.audit()[0][2]
     finally:

@@ -13,7 +13,7 @@ from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.service.history.store import DriveEvent, HistoryStore
 from pkwbus.service.http.api import create_app
-from pkwbus.service.runtime import DriveEntry, Runtime
+from pkwbus.service.runtime import DriveEntry, Load, Runtime
 
 T0 = 1_794_902_400.0  # 2026-11-17T08:00:00Z
 
@@ -29,14 +29,14 @@ def event(drive: str, number: int, time: float | None, seen: float) -> DriveEven
 @pytest.fixture
 async def client(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
     drives = [DriveEntry(name, "l1", DriveTarget.create("uss", i)) for i, name in enumerate("ab")]
-    runtime = Runtime([], drives, Snapshot(), CollectorRegistry())
     store = HistoryStore(tmp_path / "history.sqlite")
     store.add([
         event("a", 7801, T0 + 10, T0 + 500),
         event("a", 7802, None, T0 + 400),
         event("b", 30001, T0 + 600, T0 + 700),
     ])  # fmt: skip
-    runtime.history = store
+    load = Load(drives={d.name: d for d in drives}, history=store)
+    runtime = Runtime(Snapshot(), CollectorRegistry(), load)
     app = create_app(runtime, audit=None, write_token=None, read_token=None)
     transport = httpx.ASGITransport(app=app)
     async with httpx.AsyncClient(transport=transport, base_url="http://pkwbus") as client:

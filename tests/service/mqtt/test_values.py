@@ -56,7 +56,7 @@ def test_stale_after_is_the_status_pages_rule() -> None:
 
 
 async def test_topics_name_the_index_where_it_tells(runtime: Runtime) -> None:
-    topics = ValueTopics("pkwbus/site", runtime.drives, runtime.snapshot)
+    topics = ValueTopics("pkwbus/site", lambda: runtime.drives, runtime.snapshot)
     plain = topics.get(("fan", "16-13", 0))
     array = topics.get(("fan", "15-30", 2))
     indexed = topics.get(("fan", "16-14", 1))

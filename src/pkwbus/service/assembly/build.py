@@ -39,6 +39,7 @@ from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.assembly.drive_plans import plan_drive
+from pkwbus.service.assembly.loading import LoadBuilder
 from pkwbus.service.assembly.simulated import start_dp_sim, start_sim
 from pkwbus.service.config.resolved import port_for
 from pkwbus.service.metrics.alarms import AlarmBoard
@@ -218,15 +219,17 @@ async def assemble(
     for plan in plans:
         parts.show(config, plan)
     built = [await parts.build(plan) for plan in plans]
-    runtime = Runtime(
-        [b.runner for b in built], [], parts.snapshot, parts.registry, alarms=parts.board,
-        trends=parts.trends, outputs=parts.outputs, base=parts.base,
-    )  # fmt: skip
-    runtime.drives = parts.entries
-    parts.registry.register(MasterCollector(lambda: parts.lines, lambda: runtime.masters))
+    next_load = LoadBuilder(drives=parts.entries)
+    next_load.base = list(parts.base)
     for b in built:
+        next_load.runners[b.runner.name] = b.runner
         if b.close is not None:
-            runtime.closers[b.runner.name] = b.close
+            next_load.closers[b.runner.name] = b.close
+    runtime = Runtime(
+        parts.snapshot, parts.registry, next_load.freeze(), alarms=parts.board, trends=parts.trends,
+        outputs=parts.outputs,
+    )  # fmt: skip
+    parts.registry.register(MasterCollector(lambda: parts.lines, lambda: runtime.masters))
     return runtime, parts
 
 

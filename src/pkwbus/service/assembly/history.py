@@ -13,6 +13,7 @@ from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.logs import DriveLog
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service import config as cfg
+from pkwbus.service.assembly.loading import LoadBuilder, change
 from pkwbus.service.config.default_polls import swept_settings
 from pkwbus.service.config.resolved import description_form
 from pkwbus.service.history.setting_reads import Swept
@@ -48,12 +49,14 @@ def _codes(catalog: str | None, log: DriveLog) -> CodeTable | None:
     return None
 
 
-def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> LogWatcher | None:
-    """The watcher of every drive whose log is known, on the runtime's lines (None: none);
-    it starts once the lines run and stops after them."""
+def watch_logs(
+    config: cfg.Config, next_load: LoadBuilder, stream: EventStream
+) -> LogWatcher | None:
+    """The watcher of every drive whose log is known, on the lines of ``next_load`` (None:
+    none); it starts once the lines run and stops after them."""
     watched = []
     for line, drive in config.drives():
-        entry = runtime.drives.get(drive.name)
+        entry = next_load.drives.get(drive.name)
         if entry is None:
             continue
         every = drive.events_every or line.events_every
@@ -63,9 +66,9 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
             watched.append(Watched(line.name, drive.name, dialect, found, every, codes))
     if not watched:
         return None
-    runners = dict(runtime.runners)
+    runners = dict(next_load.runners)
     watcher = LogWatcher(runners, stream, watched, retention=config.history_retention)
-    runtime.history = stream.store
+    next_load.history = stream.store
     drives, path = len({w.drive for w in watched}), stream.store.path
     log.info("watching %d log(s) of %d drive(s), kept in %s", len(watched), drives, path)
     return watcher
@@ -74,17 +77,18 @@ def watch_logs(config: cfg.Config, runtime: Runtime, stream: EventStream) -> Log
 def watch_settings(
     config: cfg.Config,
     runtime: Runtime,
+    next_load: LoadBuilder,
     stream: EventStream,
     store: Callable[[], SettingsStore] | None = None,
 ) -> SettingsWatcher | None:
-    """The sweep of every drive's settings (``settings``), on the runtime's lines (None:
+    """The sweep of every drive's settings (``settings``), on the lines of ``next_load`` (None:
     none are swept); it starts once the lines run and stops after them."""
     swept: list[Swept] = []
     for line in config.lines:
         turn = 0
         for drive in line.drives:
             every, refs = swept_settings(line, drive)
-            entry = runtime.drives.get(drive.name)
+            entry = next_load.drives.get(drive.name)
             if not refs or entry is None:
                 continue
             named = []
@@ -102,11 +106,11 @@ def watch_settings(
     if not swept:
         return None
     kept = store() if store is not None else SettingsStore(stream.store.path, stream.store.changes)
-    runners = dict(runtime.runners)
+    runners = dict(next_load.runners)
     watcher = SettingsWatcher(runners, kept, stream, swept, runtime.registry)
     for name in runners:
         watcher.line_state(name, runtime.snapshot.lines.get(name, False))  # a reload's
-    runtime.settings = watcher
+    next_load.settings = watcher
     log.info("sweeping the settings of %d drive(s), kept in %s", len(swept), kept.path)
     return watcher
 
@@ -118,7 +122,6 @@ class Memory:
     def __init__(self, runtime: Runtime, store: HistoryStore) -> None:
         self.runtime = runtime
         self.stream = EventStream(store, runtime.registry)
-        runtime.history = store
         self.logs: LogWatcher | None = None
         self.settings: SettingsWatcher | None = None
         # One store of the settings for every watcher a reload makes: a write that ends
@@ -131,14 +134,15 @@ class Memory:
             self._settings_store = SettingsStore(history.path, history.changes)
         return self._settings_store
 
-    def watch(self, config: cfg.Config) -> None:
-        """Watch the drives of ``config`` (started with the runtime, or by a reload)."""
-        self.logs = watch_logs(config, self.runtime, self.stream)
-        self.settings = watch_settings(config, self.runtime, self.stream, self._store)
+    def watch(self, config: cfg.Config, next_load: LoadBuilder) -> None:
+        """Watch the drives of ``config`` on the lines of ``next_load`` (the runtime's next load:
+        at the start, a reload's, a line's won or lost in hot standby)."""
+        self.logs = watch_logs(config, next_load, self.stream)
+        self.settings = watch_settings(config, self.runtime, next_load, self.stream, self._store)
         # Drives and lines that come back, drives identified as other drives: the watchers
         # follow every line's stream, as outputs.
         watchers = [w for w in (self.logs, self.settings) if w is not None]
-        self.runtime.outputs.swap([*self.runtime.base, *watchers])
+        self.runtime.outputs.swap([*next_load.base, *watchers])
 
     async def start(self) -> None:
         for watcher in (self.logs, self.settings):
@@ -148,7 +152,7 @@ class Memory:
     async def stop(self, *, final: bool = True) -> None:
         """Stop watching: the watchers leave the lines, their gauges leave the registry;
         ``final``: the service stops (not a reload)."""
-        self.runtime.outputs.swap(self.runtime.base)
+        self.runtime.outputs.swap(self.runtime.load.base)
         if self.logs is not None:
             await self.logs.stop()
         if self.settings is not None:
@@ -161,10 +165,15 @@ class Memory:
         self.stream.again()
 
 
-def remember(config: cfg.Config, runtime: Runtime, store: HistoryStore) -> Memory:
-    """What the drives remember, watched from the runtime's start to its stop."""
+def remember(
+    config: cfg.Config, runtime: Runtime, store: HistoryStore, next_load: LoadBuilder | None = None
+) -> Memory:
+    """What the drives remember, watched from the runtime's start to its stop: into
+    ``next_load`` (None: the runtime's next load, swapped in here)."""
     memory = Memory(runtime, store)
-    memory.watch(config)
-    runtime.starters.append(memory.start)
-    runtime.cleanups.append(memory.stop)
+    with change(runtime, next_load) as next_load:
+        next_load.history = store
+        memory.watch(config, next_load)
+        next_load.starters.append(memory.start)
+        next_load.cleanups.append(memory.stop)
     return memory

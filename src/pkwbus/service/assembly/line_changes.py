@@ -107,7 +107,7 @@ class DriveChanges:
             return False
         running = runner.planner.drive(new.name).spec
         return (
-            self.runtime.drives[new.name].target == entry.target
+            self.parts.entries[new.name].target == entry.target
             and running.form == spec.form
             and bool(running.describe) == bool(spec.describe)  # a describer, or none
         )
@@ -123,7 +123,7 @@ class DriveChanges:
         """The drive's new polls, described parameters and entry (its writable list, its
         overrides), its state kept; what changed (None: nothing the line sees)."""
         name = entry.name
-        old = self.runtime.drives[name]
+        old = self.parts.entries[name]
         described = runner.planner.drive(name).spec.describe
         changed = (
             "polls changed"

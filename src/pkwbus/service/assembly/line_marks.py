@@ -47,7 +47,7 @@ from typing import Final, Protocol
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.service.history.marks import Made, dumps, encode, export, make, merge
 from pkwbus.service.history.store import EVENTS, SETTINGS, Changes
-from pkwbus.service.runtime import Runtime
+from pkwbus.service.runtime import LineTask, Runtime
 
 __all__ = ["MARK", "MAX_MARK_BYTES", "WRITE_EVERY", "LineMarks", "encode", "export", "merge"]
 
@@ -159,9 +159,12 @@ class LineMarks:
         if added and self.saved is not None:
             self.saved.save()
 
-    def maintained(self, line: str, kept: Mapping[str, str]) -> None:
-        """Put the drives of ``kept`` in maintenance on ``line``'s runner (once it runs)."""
-        runner = self.runtime.runners.get(line)
+    def maintained(
+        self, line: str, kept: Mapping[str, str], runner: LineTask | None = None
+    ) -> None:
+        """Put the drives of ``kept`` in maintenance on ``line``'s ``runner`` (None: the one
+        running; a line started now is in the runtime's next load)."""
+        runner = runner if runner is not None else self.runtime.runners.get(line)
         if runner is None:
             return
         for drive, reason in kept.items():

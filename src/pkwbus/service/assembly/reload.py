@@ -54,6 +54,7 @@ from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
 from pkwbus.service.assembly.line_changes import CONFIGURED, IN_PLACE, DriveChanges, fields
+from pkwbus.service.assembly.loading import LoadBuilder, change
 from pkwbus.service.assembly.standby_lines import StandbyLines
 from pkwbus.service.config import ConfigError
 from pkwbus.service.http.reload import ReloadRefused
@@ -164,9 +165,17 @@ class Reloader:
             gate = self.gate.lock if self.gate is not None else contextlib.nullcontext()
             try:
                 async with gate:
-                    await self._apply(new, held, changes, failed)
-                    if self.gate is not None:
-                        changes += await self.gate.reloaded(new, watch=not touched)
+                    # The next load, built from the running one and swapped in whole.
+                    with change(self.runtime, drives=self.parts.entries) as next_load:
+                        try:
+                            await self._apply(new, held, changes, failed, next_load)
+                            if self.gate is not None:
+                                changes += await self.gate.reloaded(
+                                    new, next_load, watch=not touched
+                                )
+                        finally:
+                            if touched and self.memory is not None:
+                                self.memory.watch(new, next_load)
             except Exception as exc:  # a defect: say so; the next reload opens them afresh
                 self._down.update(line.name for line in new.lines)
                 problem = f"the change could not be applied ({exc!r}): every line is opened" \
@@ -177,7 +186,6 @@ class Reloader:
                 self.config = new
                 self.parts.lines = [line.name for line in new.lines]
                 if touched and self.memory is not None:
-                    self.memory.watch(new)
                     await self.memory.start()
                 for told in self.after:
                     told()
@@ -224,31 +232,36 @@ class Reloader:
         }
 
     async def _apply(
-        self, new: cfg.Config, held: dict[str, str], changes: list[str], failed: list[str]
+        self,
+        new: cfg.Config,
+        held: dict[str, str],
+        changes: list[str],
+        failed: list[str],
+        next_load: LoadBuilder,
     ) -> None:
-        """Apply ``new`` over the running configuration: what changed into ``changes``,
-        lines that could not start into ``failed``."""
+        """Apply ``new`` over the running configuration, into the next load ``next_load``: what
+        changed into ``changes``, lines that could not start into ``failed``."""
         old_lines = {line.name: line for line in self.config.lines}
         new_lines = {line.name: line for line in new.lines}
         # Everything that goes first, then what comes: a drive that moves to another line
         # leaves the old one before it joins the new one.
         for name in sorted(old_lines.keys() - new_lines.keys()):
-            await self._stop_line(name)
+            await self._stop_line(name, next_load)
             changes.append(f"line {name} removed")
         starts: list[tuple[cfg.Line, str]] = []
         updates: list[tuple[cfg.Line, cfg.Line]] = []
         for name, line in new_lines.items():
             old = old_lines.get(name)
-            if self.gate is not None and name not in self.runtime.runners:
+            if self.gate is not None and name not in next_load.runners:
                 continue  # not mastered here now: started by the gate when it is
             if old is None or name in self._down:
                 if old is not None:
-                    await self._stop_line(name)
+                    await self._stop_line(name, next_load)
                 starts.append((line, "added" if old is None else "started"))
             elif old == line and not self._gsd_changed(line):
                 continue
             elif not self._in_place(old, line):
-                await self._stop_line(name)
+                await self._stop_line(name, next_load)
                 starts.append((line, "reopened"))
             else:
                 changes += self._drives.removed(old, line)
@@ -256,7 +269,7 @@ class Reloader:
         for old, line in updates:
             changes += self._drives.update(new, old, line, held)
         for line, how in starts:
-            changes += await self._start_line(new, line, failed, how, held)
+            changes += await self._start_line(new, line, failed, how, held, next_load)
         if self._api is not None and (new.api != self.config.api):
             self._api(new)
             changes.append("API settings applied")
@@ -285,9 +298,9 @@ class Reloader:
         built = self.parts.resolved.get(line.name)
         return built is not None and built != tuple(d.dp.settings()[0] for d in line.drives)
 
-    async def _stop_line(self, name: str) -> None:
-        if name in self.runtime.runners:
-            await self.runtime.stop_line(name)
+    async def _stop_line(self, name: str, next_load: LoadBuilder) -> None:
+        if next_load.runners.pop(name, None) is not None:
+            await self.runtime.stop_line(name, close=next_load.closers.pop(name, None))
         self.parts.counts.pop(name, None)
         self.parts.forget(name)
         self._down.discard(name)
@@ -299,6 +312,7 @@ class Reloader:
         failed: list[str],
         how: str,
         held: dict[str, str],
+        next_load: LoadBuilder,
     ) -> list[str]:
         plan = self.parts.plan(line)
         self.parts.show(config, plan)
@@ -315,6 +329,7 @@ class Reloader:
             if drive.name in held:
                 built.runner.maintenance(drive.name, True, held[drive.name])
         if built.close is not None:
-            self.runtime.closers[line.name] = built.close
+            next_load.closers[line.name] = built.close
+        next_load.runners[line.name] = built.runner
         self.runtime.start_line(built.runner)
         return [f"line {line.name} {how}"]

@@ -29,6 +29,7 @@ from pkwbus.errors import PkwbusError
 from pkwbus.service.assembly.build import assemble
 from pkwbus.service.assembly.description_file import DescriptionFile, description_path
 from pkwbus.service.assembly.history import remember
+from pkwbus.service.assembly.loading import LoadBuilder
 from pkwbus.service.assembly.logs import setup_logging
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.assembly.serve import (
@@ -49,6 +50,7 @@ from pkwbus.service.runtime import Runtime
 if TYPE_CHECKING:
     from pkwbus.service.history.stream import EventStream
     from pkwbus.service.mqtt.output import MqttOutput
+    from pkwbus.service.mqtt.sparkplug.node import SparkplugNode
     from pkwbus.service.writes.path import WritePath
 
 __all__ = ["StartError", "open_audit", "open_history", "run_service"]
@@ -115,16 +117,34 @@ def open_history(config: Config) -> HistoryStore:
         raise StartError(f"history_db: {exc}") from None
 
 
-def _mqtt(config: Config, runtime: Runtime, stream: EventStream) -> MqttOutput | None:
-    """The MQTT output (None: no ``mqtt:``); imported only then (the ``mqtt`` extra)."""
+def _mqtt(
+    config: Config, runtime: Runtime, stream: EventStream, next_load: LoadBuilder
+) -> MqttOutput | None:
+    """The MQTT output (None: no ``mqtt:``), one of ``next_load``'s outputs; imported only then
+    (the ``mqtt`` extra)."""
     if config.mqtt is None:
         return None
     from pkwbus.service.mqtt.output import attach
 
     try:
-        return attach(config, runtime, stream)
+        output = attach(config, runtime, stream)
     except PkwbusError as exc:  # an account named but unset
         raise StartError(str(exc)) from None
+    if output is not None:
+        _joins(next_load, output)
+    return output
+
+
+def _joins(next_load: LoadBuilder, output: MqttOutput | SparkplugNode) -> None:
+    """``output`` one of the outputs' base (kept over reloads), started with the runtime
+    before the rest and stopped after everything else (the drives' watchers first)."""
+
+    async def start() -> None:
+        output.start()
+
+    next_load.base.append(output)
+    next_load.starters.insert(0, start)
+    next_load.cleanups.insert(0, output.stop)
 
 
 def _mqtt_commands(
@@ -133,6 +153,7 @@ def _mqtt_commands(
     mqtt: MqttOutput,
     path: WritePath,
     reloader: Reloader | None,
+    next_load: LoadBuilder,
 ) -> None:
     """MQTT's writes (``writes: allow_list``: the set topics) and Sparkplug B
     (``sparkplug:``), both through the HTTP API's write path."""
@@ -149,6 +170,8 @@ def _mqtt_commands(
                                 bd_seq_file=bd_seq_path(config.audit_db))  # fmt: skip
     except PkwbusError as exc:  # an account named but unset
         raise StartError(str(exc)) from None
+    if node is not None:
+        _joins(next_load, node)
     if node is not None and reloader is not None:
         reloader.after.append(node.rebirth)  # the drives' metrics change: births again
 
@@ -164,9 +187,11 @@ async def _serve(
     # written as drives describe more, off the loop).
     kept = await asyncio.to_thread(DescriptionFile, description_path(config.audit_db))
     runtime, parts = await assemble(config, kept)
-    runtime.cleanups.insert(0, kept.settled)  # the last: a write under way ends first
-    memory = remember(config, runtime, history)
-    mqtt = _mqtt(config, runtime, memory.stream)
+    # The rest of the load, frozen and swapped in once before the service starts.
+    next_load = LoadBuilder(runtime.load, parts.entries)
+    next_load.cleanups.insert(0, kept.settled)  # the last: a write under way ends first
+    memory = remember(config, runtime, history, next_load)
+    mqtt = _mqtt(config, runtime, memory.stream, next_load)
     token = config.write_token()
     limit = ConnectionLimit(config.api.max_connections)
 
@@ -178,7 +203,7 @@ async def _serve(
 
     gate = None  # hot standby: the lines start as this instance wins them
     if config.standby is not None:
-        gate = StandbyLines(config, runtime, parts, etcd_engine, memory)
+        gate = StandbyLines(config, runtime, parts, etcd_engine, memory, next_load)
     reloader = None
     if reread is not None:
         reloader = Reloader(config, reread, runtime, parts, memory, api=apply_api, gate=gate)
@@ -188,7 +213,8 @@ async def _serve(
         runtime, audit=audit, write_token=token, read_token=config.read_token(), reloader=reloader
     )
     if mqtt is not None:
-        _mqtt_commands(config, runtime, mqtt, api.writes, reloader)
+        _mqtt_commands(config, runtime, mqtt, api.writes, reloader, next_load)
+    runtime.swap(next_load.freeze())
     audit_writer = api.audit_writer
     interrupted = await audit_writer.close_interrupted()
     if interrupted:

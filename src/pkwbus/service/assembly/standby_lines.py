@@ -28,6 +28,7 @@ from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
 from pkwbus.service.assembly.line_marks import LineMarks
+from pkwbus.service.assembly.loading import LoadBuilder, change
 from pkwbus.service.config import StandbyConfig
 from pkwbus.service.runtime import LineMaster, Runtime
 from pkwbus.service.standby import Standby
@@ -90,7 +91,9 @@ class StandbyLines:
         parts: Parts,
         engine: EngineFactory,
         memory: Memory | None = None,
+        next_load: LoadBuilder | None = None,
     ) -> None:
+        """``next_load``: the runtime's next load, under way (None: swapped in here)."""
         self.config = config
         self.runtime = runtime
         self.parts = parts
@@ -106,10 +109,11 @@ class StandbyLines:
         self.engine = engine(section, list(self._lines), self.on_change)
         self.marks = _line_marks(self.engine, runtime, memory, self.lines, parts)
         parts.fence_of = self.fence_of
-        runtime.masters = self
-        runtime.starters.append(self.engine.start)
-        # After the lines stopped (their ports closed): the leases revoked.
-        runtime.cleanups.append(self.close)
+        with change(runtime, next_load) as next_load:
+            next_load.masters = self
+            next_load.starters.append(self.engine.start)
+            # After the lines stopped (their ports closed): the leases revoked.
+            next_load.cleanups.append(self.close)
 
     def _configure(self, config: cfg.Config) -> None:
         self.config = config
@@ -161,22 +165,31 @@ class StandbyLines:
             log.error("hot standby: a line's change failed: %r", exc)
 
     async def _change(self, line: str, held: bool) -> None:
+        """The line started or stopped, the runtime's next load swapped in at once (no wait
+        between a runner started and its load: the service's stop finds it); then the
+        drives' memory watched again, in the load after it."""
         async with self.lock:
-            running = line in self.runtime.runners
-            if held and not running and self.engine.holds(line) and line in self._lines:
-                if not self.runtime.stopping:
-                    if line in self._shown():  # shown down: it could not start before
-                        self.parts.forget(line)
-                    await self._start(self._lines[line])
-            elif not held and (running or line in self._shown()):
-                await self._stop(line)
+            again = False
+            with change(self.runtime, drives=self.parts.entries) as next_load:
+                running = line in next_load.runners
+                if held and not running and self.engine.holds(line) and line in self._lines:
+                    if not self.runtime.stopping:
+                        if line in self._shown():  # shown down: it could not start before
+                            self.parts.forget(line)
+                        again = await self._start(self._lines[line], next_load)
+                elif not held and (running or line in self._shown()):
+                    await self._stop(line, next_load)
+                    again = True
+            if again:
+                with change(self.runtime, drives=self.parts.entries) as next_load:
+                    await self._watch_again(next_load)
 
     def _shown(self) -> set[str]:
         return set(self.parts.line_of.values())
 
-    async def _start(self, line: cfg.Line, watch: bool = True) -> bool:
-        """Start ``line`` here; False when it cannot start (shown down) or the service
-        stops. ``watch``: the drives' memory watched again over the lines then."""
+    async def _start(self, line: cfg.Line, next_load: LoadBuilder) -> bool:
+        """Start ``line`` here, into ``next_load``; False when it cannot start (shown down)
+        or the service stops."""
         parts = self.parts
         # The line's marks merged before it is planned (the describe book) and watched.
         kept = await self.marks.load(line.name) if self.marks is not None else {}
@@ -204,14 +217,13 @@ class StandbyLines:
             parts.forget(line.name)
             return False
         if built.close is not None:
-            self.runtime.closers[line.name] = built.close
+            next_load.closers[line.name] = built.close
+        next_load.runners[line.name] = built.runner
         self.runtime.start_line(built.runner)
         if self.marks is not None:  # the line's marks: maintenance kept, written while held
-            self.marks.maintained(line.name, kept)
+            self.marks.maintained(line.name, kept, built.runner)
             self.marks.hold(line.name)
         log.info("line %s: mastered here (hot standby)", line.name, extra={"line": line.name})
-        if watch:
-            await self._watch_again()
         return True
 
     def _retry_later(self, line: str) -> float:
@@ -235,44 +247,45 @@ class StandbyLines:
         if handle is not None:
             handle.cancel()
 
-    async def _stop(self, line: str) -> None:
+    async def _stop(self, line: str, next_load: LoadBuilder) -> None:
         if self.marks is not None:  # the lease is gone: no more marks from here
             await self.marks.release(line, flush=False)
-        if line in self.runtime.runners:
-            await self.runtime.stop_line(line, STOP_GRACE)
+        if next_load.runners.pop(line, None) is not None:
+            await self.runtime.stop_line(line, STOP_GRACE, next_load.closers.pop(line, None))
         self.parts.counts.pop(line, None)
         self.parts.forget(line)
         log.info("line %s: no longer mastered here (hot standby)", line, extra={"line": line})
-        await self._watch_again()
 
-    async def _watch_again(self) -> None:
-        """The drives' memory watched again, on the lines that run here now."""
+    async def _watch_again(self, next_load: LoadBuilder) -> None:
+        """The drives' memory watched again, on the lines of ``next_load`` (that run here now)."""
         if self.memory is None or self.runtime.stopping:
             return
         await self.memory.stop(final=False)
-        self.memory.watch(self.config)
+        self.memory.watch(self.config, next_load)
         await self.memory.start()
 
     # ------------------------------------------------------------ reload and stop
 
-    async def reloaded(self, config: cfg.Config, *, watch: bool) -> list[str]:
-        """A reload applied ``config`` (under :attr:`lock`): the engine campaigns for its
-        lines; a held line that does not run yet starts (those started, as the reload
-        says them). ``watch``: the drives' memory is watched again here (the reload does
-        not do it itself)."""
+    async def reloaded(
+        self, config: cfg.Config, next_load: LoadBuilder, *, watch: bool
+    ) -> list[str]:
+        """A reload applied ``config`` (under :attr:`lock`), its next load ``next_load``: the
+        engine campaigns for its lines; a held line that does not run yet starts (those
+        started, as the reload says them). ``watch``: the drives' memory is watched again
+        here (the reload does not do it itself)."""
         self._configure(config)
         self.engine.set_lines(list(self._lines))
         if self.marks is not None:
             await self.marks.keep_only(self._lines)
         started = []
         for name, line in self._lines.items():
-            if name not in self.runtime.runners and self.engine.holds(name):
+            if name not in next_load.runners and self.engine.holds(name):
                 if name in self._shown():  # shown down: it could not start before
                     self.parts.forget(name)
-                if await self._start(line, watch=False):
+                if await self._start(line, next_load):
                     started.append(f"line {name} started (mastered here)")
         if started and watch:
-            await self._watch_again()
+            await self._watch_again(next_load)
         return started
 
     async def close(self) -> None:

@@ -71,7 +71,7 @@ class MqttOutput:
         self.prefix = settings.prefix
         self.deadband = settings.values.deadband
         self.heartbeat = settings.values.heartbeat
-        self.topics = ValueTopics(settings.prefix, runtime.drives, runtime.snapshot)
+        self.topics = ValueTopics(settings.prefix, lambda: runtime.drives, runtime.snapshot)
         self._pending: dict[ReadingKey, Reading] = {}
         self._statuses: set[str] = set()
         self._wake = asyncio.Event()
@@ -357,9 +357,9 @@ def _logged(task: asyncio.Task[None]) -> None:
 
 def attach(config: Config, runtime: Runtime, stream: EventStream | None) -> MqttOutput | None:
     """The MQTT output of ``config`` (None: no ``mqtt:``), one of the runtime's outputs from
-    now on (kept over reloads), told of the drives' events by ``stream``; started with the
-    runtime, stopped after everything else. :class:`MqttSettingsError` for an account named
-    but unset."""
+    now on, told of the drives' events by ``stream``; the assembly makes it one of the
+    outputs' base (kept over reloads), started with the runtime and stopped after everything
+    else. :class:`MqttSettingsError` for an account named but unset."""
     settings = config.mqtt
     if settings is None:
         return None
@@ -373,15 +373,8 @@ def attach(config: Config, runtime: Runtime, stream: EventStream | None) -> Mqtt
     outbox = Outbox(outbox_path(config.audit_db), settings.outbox.max_bytes,
                     settings.outbox.max_age)  # fmt: skip
     output = MqttOutput(settings, runtime, connection, outbox, metrics)
-    runtime.base = (*runtime.base, output)
     runtime.outputs.swap([*runtime.outputs.items, output])
     if stream is not None:
         stream.listeners.append(output.on_drive_events)
-
-    async def start() -> None:
-        output.start()
-
-    runtime.starters.insert(0, start)
-    runtime.cleanups.insert(0, output.stop)  # the last: the drives' watchers stop before
     log.info("MQTT: publishing to %s under %s/", settings.url, settings.prefix)
     return output

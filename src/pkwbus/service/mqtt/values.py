@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from pkwbus.catalog.description import Value
@@ -105,9 +105,11 @@ class ValueTopics:
     """The topics of the runtime's polled values, made as each is first needed and
     forgotten with its drive."""
 
-    def __init__(self, prefix: str, drives: Mapping[str, DriveEntry], snapshot: Snapshot) -> None:
+    def __init__(
+        self, prefix: str, drives: Callable[[], Mapping[str, DriveEntry]], snapshot: Snapshot
+    ) -> None:
         self.prefix = prefix
-        self.drives = drives  # the runtime's, as a reload changes them
+        self.drives = drives  # the runtime's now (its load's, as a reload swaps it)
         self.snapshot = snapshot
         self.topics: dict[ReadingKey, ValueTopic | None] = {}
 
@@ -119,7 +121,7 @@ class ValueTopics:
 
     def _make(self, key: ReadingKey) -> ValueTopic | None:
         drive, parameter, index = key
-        entry = self.drives.get(drive)
+        entry = self.drives().get(drive)
         if entry is None:
             return None
         polls = [p for p in entry.polls if p.parameter == parameter]

@@ -25,9 +25,10 @@ def attach_sparkplug(
     bd_seq_file: Path | None = None,
 ) -> SparkplugNode | None:
     """The Sparkplug node of ``settings`` (None without ``mqtt.sparkplug``), one of the
-    runtime's outputs from now on (kept over reloads), started with the runtime and
-    stopped after everything else; DCMD taken only with ``mqtt.writes: allow_list``; its
-    messages counted in ``metrics``, its ``bdSeq`` kept in ``bd_seq_file``.
+    runtime's outputs from now on (the assembly makes it one of the outputs' base, kept over
+    reloads, started with the runtime and stopped after everything else); DCMD taken only
+    with ``mqtt.writes: allow_list``; its messages counted in ``metrics``, its ``bdSeq``
+    kept in ``bd_seq_file``.
     :class:`~pkwbus.service.config.mqtt.MqttSettingsError` for an account named but unset."""
     if settings is None or settings.sparkplug is None:
         return None
@@ -47,14 +48,7 @@ def attach_sparkplug(
         bd_seq_file=bd_seq_file,
         metrics=metrics,
     )
-    runtime.base = (*runtime.base, node)
     runtime.outputs.swap([*runtime.outputs.items, node])
-
-    async def start() -> None:
-        node.start()
-
-    runtime.starters.insert(0, start)
-    runtime.cleanups.insert(0, node.stop)
     log.info("Sparkplug B: edge node %s of group %s", settings.sparkplug.edge_node_id,
              settings.sparkplug.group_id)  # fmt: skip
     return node
