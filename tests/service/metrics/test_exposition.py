@@ -212,16 +212,21 @@ def test_promtool_accepts_the_text() -> None:
     assert result.returncode == 0, result.stdout.decode() + result.stderr.decode()
 
 
-def test_the_scrape_returns_to_the_event_loop_while_it_renders() -> None:
-    """A large configuration is rendered in pieces: another task runs in between."""
+def test_the_scrape_returns_to_the_event_loop_once_its_time_is_up() -> None:
+    """A large configuration is rendered in pieces: once TURN_EVERY seconds of rendering
+    have passed, another task runs before the next piece; a render that takes less time
+    takes no turn. A fake clock: each look at it is ``step`` seconds later."""
     plant = Plant(lines=2, drives=100, parameters=20)
     plant.poll(1_700_000_000.5)
-    size = len(generate_latest(plant.registry))
-    assert size > 4 * exposition.YIELD_EVERY
+    pieces = sum(1 for p in plant.registry.exposition() if p)
 
-    async def scrape() -> tuple[int, bytes]:
-        turns = 0
-        done = False
+    async def scrape(step: float) -> tuple[int, bytes]:
+        now, turns, done = 0.0, 0, False
+
+        def clock() -> float:
+            nonlocal now
+            now += step
+            return now
 
         async def other() -> None:
             nonlocal turns
@@ -232,14 +237,16 @@ def test_the_scrape_returns_to_the_event_loop_while_it_renders() -> None:
         task = asyncio.create_task(other())
         await asyncio.sleep(0)
         start = turns
-        body = await render(plant.registry)
+        body = await render(plant.registry, clock=clock)
         done = True
         await task
         return turns - start, body
 
-    turns, body = asyncio.run(scrape())
-    # the unchanging parameter_info text is one piece; the rest comes in pieces
-    assert turns >= (size - len(plant.info_text())) // exposition.YIELD_EVERY
+    turns, body = asyncio.run(scrape(exposition.TURN_EVERY))  # each piece takes it all
+    assert turns >= pieces - 1, (turns, pieces)
+    assert body == generate_latest(plant.registry)
+    turns, body = asyncio.run(scrape(exposition.TURN_EVERY / (4 * pieces)))  # a quarter
+    assert turns == 0
     assert body == generate_latest(plant.registry)
 
 

@@ -262,7 +262,7 @@ class SnapshotCollector(Collector):
         ups, words, bits, mavs = self._drive_rows.sync(snap.drives)
         lines = dict(snap.lines)
         yield _HEADERS[VALUE]
-        yield from filter(None, values)  # no empty piece: that asks render() for a turn
+        yield from filter(None, values)  # the pieces made; an empty one is a place to turn
         yield _HEADERS[STAMP]
         yield from filter(None, stamps)
         if self._info_text is None:

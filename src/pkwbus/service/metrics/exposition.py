@@ -17,15 +17,17 @@ collectors below also answer ``collect()`` with the same series, so
 ``registry.get_sample_value`` and ``generate_latest`` still see them.
 
 :func:`render` hands the event loop back between pieces of text (at most
-:data:`CHUNK` lines each, :data:`YIELD_EVERY` bytes together), and wherever a
-collector yields an empty piece, so polling keeps its pace while a large
-configuration is scraped.
+:data:`CHUNK` lines each; a collector whose work between two pieces is long yields
+an empty piece in between) once :data:`TURN_EVERY` seconds of rendering have
+passed, so polling keeps its pace while a large configuration is scraped, and a
+scrape that finds most pieces kept is not made to wait for turns it does not need.
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import Protocol, runtime_checkable
 
 from prometheus_client import CollectorRegistry, generate_latest
@@ -39,7 +41,7 @@ from pkwbus.service.metrics.textformat import format_value, head, header
 __all__ = [
     "CHUNK",
     "CONTENT_TYPE",
-    "YIELD_EVERY",
+    "TURN_EVERY",
     "CounterFamily",
     "Exposed",
     "MetricsRegistry",
@@ -51,18 +53,18 @@ __all__ = [
 ]
 
 CONTENT_TYPE = CONTENT_TYPE_PLAIN_0_0_4
-# Lines rendered at most in one piece of text, and characters rendered before
-# the scrape returns to the event loop: a few milliseconds of work.
+# Lines rendered at most in one piece of text, and seconds of rendering before the
+# scrape returns to the event loop.
 CHUNK = 500
-YIELD_EVERY = 200_000
+TURN_EVERY = 0.004
 
 
 @runtime_checkable
 class Exposed(Protocol):
     """A collector that renders its own text (the lines of its families, in order).
 
-    An empty piece asks :func:`render` for a turn of the event loop: a collector
-    whose work between two pieces of text is long yields one now and then.
+    An empty piece is a place where :func:`render` may give the event loop a turn: a
+    collector whose work between two pieces of text is long yields one now and then.
     """
 
     def exposition(self) -> Iterator[bytes]: ...
@@ -262,17 +264,19 @@ class MetricsRegistry(CollectorRegistry):
         yield text
 
 
-async def render(registry: CollectorRegistry) -> bytes:
-    """The registry's text; a :class:`MetricsRegistry` returns to the loop now and then."""
+async def render(
+    registry: CollectorRegistry, *, clock: Callable[[], float] = time.perf_counter
+) -> bytes:
+    """The registry's text; a :class:`MetricsRegistry` returns to the loop between two
+    pieces once :data:`TURN_EVERY` seconds of ``clock`` have passed since the last turn."""
     if not isinstance(registry, MetricsRegistry):
         return await asyncio.to_thread(generate_latest, registry)
     parts: list[bytes] = []
-    size = 0
+    turn_at = clock() + TURN_EVERY
     for piece in registry.exposition():
         if piece:
             parts.append(piece)
-            size += len(piece)
-        if not piece or size >= YIELD_EVERY:  # an empty piece asks for a turn
-            size = 0
+        if clock() >= turn_at:
             await asyncio.sleep(0)
+            turn_at = clock() + TURN_EVERY
     return b"".join(parts)
