@@ -37,17 +37,20 @@ def _reaches_snapshot(node: ast.AST) -> bool:
     return isinstance(node, ast.Name) and node.id in {"snapshot", "snap"}
 
 
+def _targets(node: ast.AST) -> list[ast.AST]:
+    """What ``node`` assigns to or deletes (none: it is no assignment)."""
+    if isinstance(node, ast.Assign | ast.Delete):
+        return list(node.targets)
+    if isinstance(node, ast.AugAssign | ast.AnnAssign):
+        return [node.target]
+    return []
+
+
 def _writes(path: Path) -> Iterator[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
     for node in ast.walk(tree):
-        targets: list[ast.AST] = []
-        if isinstance(node, ast.Assign):
-            targets = list(node.targets)
-        elif isinstance(node, ast.AugAssign | ast.AnnAssign):
-            targets = [node.target]
-        elif isinstance(node, ast.Delete):
-            targets = list(node.targets)
-        elif (
+        targets = _targets(node)
+        if (
             isinstance(node, ast.Call)
             and isinstance(node.func, ast.Attribute)
             and node.func.attr in MUTATORS
@@ -130,14 +133,8 @@ def _runtime_writes(path: Path) -> Iterator[str]:
         return _reaches_runtime(node, names)
 
     for node in ast.walk(tree):
-        targets: list[ast.AST] = []
-        if isinstance(node, ast.Assign):
-            targets = list(node.targets)
-        elif isinstance(node, ast.AugAssign | ast.AnnAssign):
-            targets = [node.target]
-        elif isinstance(node, ast.Delete):
-            targets = list(node.targets)
-        elif isinstance(node, ast.Call):
+        targets = _targets(node)
+        if isinstance(node, ast.Call):
             func = node.func
             changes = isinstance(func, ast.Attribute) and (
                 func.attr in MUTATORS | {"insert"} and _reaches(func.value)

@@ -21,6 +21,7 @@ from pkwbus.service.assembly.line_marks import MARK, LineMarks
 from pkwbus.service.history import marks as mark_document
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import DriveEvent, HistoryStore
+from tests.service.standby_service.test_line_marks import FakeMarks as KeptMarks
 
 IDLE_TURNS = 25
 
@@ -33,22 +34,7 @@ def baseline(drive: str, raw: int, when: float) -> SettingRow:
     return SettingRow(drive, 100, 0, "1-00", raw, str(raw), when, raw, str(raw), when, "sweep")
 
 
-class FakeMarks:
-    def __init__(self) -> None:
-        self.kept: dict[tuple[str, str], bytes] = {}
-        self.puts = 0
-        self.refuse = False
-
-    async def get(self, line: str, name: str) -> bytes | None:
-        return self.kept.get((line, name))
-
-    async def put(self, line: str, name: str, value: bytes) -> bool:
-        self.puts += 1
-        if self.refuse:
-            return False
-        self.kept[(line, name)] = value
-        return True
-
+class FakeMarks(KeptMarks):
     def doc(self, line: str = "l1") -> dict[str, Any]:
         loaded: dict[str, Any] = json.loads(self.kept[(line, MARK)])
         return loaded
