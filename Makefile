@@ -24,9 +24,14 @@ typecheck: $(STAMP)
 # sockets, so two share a two-core machine well; a fixed number, not "auto",
 # which counts the host's cores where a container may have fewer.
 PYTEST_WORKERS ?= 2
+# Work stealing: each worker starts on half of the tests and one that runs out takes
+# half of what the other still has queued. With the default (load), a worker is handed
+# a run of tests in collection order that it alone may run while the other has nothing
+# left: a minute of one worker idle at the end of make test.
+PYTEST_DIST ?= worksteal
 
 pytest: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --cov=pkwbus --cov-report=term:skip-covered \
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist $(PYTEST_DIST) --cov=pkwbus --cov-report=term:skip-covered \
 		$(PYTEST_SELECT)
 
 # tests/protocol alone must cover src/pkwbus/protocol to PROTOCOL_COVERAGE % of its lines:
@@ -37,7 +42,7 @@ pytest: $(STAMP)
 PROTOCOL_COVERAGE ?= 95
 
 protocol-coverage: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --cov=pkwbus --cov-report= tests/protocol
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist $(PYTEST_DIST) --cov=pkwbus --cov-report= tests/protocol
 	$(BIN)/python -m coverage report --include='*/pkwbus/protocol/*' --skip-covered --show-missing \
 		--precision=1 --fail-under=$(PROTOCOL_COVERAGE)
 
@@ -49,7 +54,7 @@ test: lint typecheck
 # schemathesis over the API, 3 minutes of make soak); .ci/run runs them after make test,
 # on two workers: the three minutes of make soak beside the others.
 test-long: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) -m long
+	$(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist $(PYTEST_DIST) -m long
 
 # An hour of pkwbus run on simulated lines with faults, lost ports and restarts, measured
 # (README.md, "Measuring and fuzzing"); not in make test. SOAK_MINUTES=5 SOAK_LINES=3: a

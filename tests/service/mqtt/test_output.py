@@ -130,7 +130,9 @@ def config(folder: Path, url: str, broker: Broker, *, only: int = 2, **mqtt: Any
             "url": f"mqtt://{broker.host}:{broker.port}",
             "username_env": "T_MQTT_USER",
             "password_env": "T_MQTT_PASSWORD",
-            "values": {"deadband": 0, "heartbeat": "5s"},
+            # Values unchanged on the steady drives come at each heartbeat: the shortest
+            # the configuration allows, so that a wait for a few values is a short one.
+            "values": {"deadband": 0, "heartbeat": "1s"},
             **mqtt,
         },
         "lines": [
