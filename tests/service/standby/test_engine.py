@@ -58,6 +58,12 @@ async def test_four_lines_spread_two_and_two(etcd: Etcd, engines: Make) -> None:
     await b.standby.start()  # joins: a gives two lines away, one at a time
     await until(lambda: len(a.held()) == 2 and len(b.held()) == 2, 15, "2 and 2")
     assert set(a.held()).isdisjoint(b.held())
+    # each learns who holds a line from its watch of etcd: the two views meet soon after
+    await until(
+        lambda: all(a.standby.master_of(n) == b.standby.master_of(n) is not None for n in LINES),
+        10,
+        "both know every line's master",
+    )
     for line in LINES:
         holder = "a" if line in a.held() else "b"
         assert a.standby.master_of(line) == b.standby.master_of(line)
