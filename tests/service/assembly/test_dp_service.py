@@ -458,9 +458,10 @@ async def test_telegram_errors_and_pkw_faults_are_what_the_simulator_injected(
     """One injected fault, one error of its kind on its slave: a dropped answer is a
     timeout, a wrong FCS a checksum error; noise before a frame is skipped (no error).
     The simulator answers within about a millisecond, well inside the slot time: only a
-    dropped answer misses it."""
+    dropped answer misses it (a slot time of 200 ms: a busy test machine that holds the
+    loop or the simulator for 50 ms would have made a timeout of its own)."""
     faults = DpFaults(drop=0.03, corrupt=0.03, garbage=0.03)
-    async with dp_service(tmp_path, faults, slot_time="50ms") as svc:
+    async with dp_service(tmp_path, faults, slot_time="200ms") as svc:
         injected = svc.sim.stats.injected
         await until(lambda: all(injected[k] >= 10 for k in ("drop", "corrupt", "garbage")))
         # A PKW fault the drive answers: a write to a read-only parameter (16-13).
