@@ -131,3 +131,20 @@ async def test_the_writable_part_follows_the_value_not_the_reading(
             assert view == drive_view(svc.runtime, "fan1").model_dump(mode="json")
             (shown,) = [w for w in view["writable"] if w["parameter"] == "3-41"]
             assert shown["value"] == value and type(shown["value"]) is type(value)
+
+
+async def test_a_drive_says_how_many_values_it_polls_before_any_is_read(tmp_path: Path) -> None:
+    """``polled`` is the number of values the drive polls, read or not: a drive none of
+    whose values landed yet is told apart from one that polls nothing (the page says
+    which)."""
+    async with service(tmp_path, fc=fc_drives(polls=QUIET)) as svc:
+        polls = {n: len(e.polls) for n, e in svc.runtime.drives.items()}  # with the defaults
+        assert min(polls.values()) >= len(QUIET)
+        now = await _same_as_the_views(svc)
+        assert {n: d["polled"] for n, d in now.items()} == polls
+        snap = svc.runtime.snapshot
+        for key in [k for k in snap.readings if k[0] == "fan3"]:
+            del snap.readings[key]  # by hand: the test is the snapshot's writer here
+        snap.changes.touch("fan3")
+        now = await _same_as_the_views(svc)
+        assert now["fan3"]["values"] == [] and now["fan3"]["polled"] == polls["fan3"]

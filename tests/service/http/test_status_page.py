@@ -231,6 +231,23 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             fan3 = page.locator('#detail[data-drive="fan3"]')
             expect(fan3.locator("p.nothing")).to_have_text("Nothing is polled on this drive.")
             expect(fan3.locator("table.values")).to_have_count(0)
+            # A drive none of whose values was read yet (as just after the start) says
+            # that, not that nothing is polled: its answer given so, the rest as it is.
+            fan1_answer = re.compile(r".*/api/v1/drives\?drive=fan1(&.*)?$")
+
+            def unread(route: Any) -> None:
+                response = route.fetch()
+                views = response.json()
+                for view in views:
+                    view["values"] = []
+                route.fulfill(response=response, json=views)
+
+            page.route(fan1_answer, unread)
+            row("fan1").click()
+            expect(fan1.locator("p.nothing")).to_have_text(
+                re.compile(r"None of the \d+ values polled has been read yet\.")
+            )
+            page.unroute(fan1_answer, unread)
             # Closed, and opened again from the address.
             page.click("#detail-close")
             expect(detail).to_be_hidden()

@@ -132,6 +132,7 @@ class DriveView(BaseModel):
     up: bool
     status_word: int | None
     status: dict[str, bool]
+    polled: int = 0  # the values it polls (``values``: those read so far)
     values: list[ParameterReading]
     faults: int = 0  # rejections since the service started
     telegram_errors: int = 0  # exchanges without a usable answer since the service started

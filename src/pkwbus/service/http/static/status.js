@@ -621,9 +621,11 @@ function drawDetail(d) {
       el("th", {}, "15 min"), el("th", { class: "num" }, "age"))),
       el("tbody", {}, ...d.rows.map((r) => r.row)));
   } else {
-    values = el("p", { class: "nothing" }, drive.up || held
-      ? "Nothing is polled on this drive."
-      : "No value read from this drive: it is down.");
+    const polled = drive.polled || 0;
+    values = el("p", { class: "nothing" }, !polled ? "Nothing is polled on this drive."
+      : drive.up || held
+        ? `None of the ${polled === 1 ? "value" : `${polled} values`} polled has been read yet.`
+        : "No value read from this drive: it is down.");
   }
   const body = document.getElementById("detail-body");
   body.className = state;

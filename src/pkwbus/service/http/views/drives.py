@@ -83,6 +83,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         up=state.up if state else True,
         status_word=word,
         status=status_bits(word, entry.target.profile) if word is not None else {},
+        polled=len(entry.polls),
         faults=counts.faults if counts is not None else 0,
         telegram_errors=counts.errors if counts is not None else 0,
         values=readings_of(runtime, entry),

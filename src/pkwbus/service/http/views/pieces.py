@@ -80,5 +80,6 @@ def head_json(name: str, entry: DriveEntry, up: bool, word: int | None) -> bytes
         "address": entry.target.address, "dialect": entry.target.dialect.name,
         "up": up, "status_word": word,
         "status": status_bits(word, entry.target.profile) if word is not None else {},
+        "polled": len(entry.polls),
     }  # fmt: skip
     return to_json(head)[:-1] + b","
