@@ -219,7 +219,7 @@ class SettingsWatcher:
             with contextlib.suppress(KeyError):
                 self.changed.remove(s.line, s.drive, row.parameter, str(row.index))
         try:
-            await asyncio.shield(asyncio.to_thread(self.store.save, [moved]))
+            await self.store.saved([moved])
             s.expected.pop(key, None)
         except HistoryError as exc:
             log.error("drive %s: the baseline of %s is not stored: %s", drive, row.parameter,
@@ -234,7 +234,7 @@ class SettingsWatcher:
                     baseline_by="accepted", changed_seen=None)
             for r in s.rows.values() if r.raw is not None
         ]  # fmt: skip
-        await asyncio.shield(asyncio.to_thread(self.store.save, rows))  # HistoryError
+        await self.store.saved(rows)  # HistoryError
         for row in rows:
             self._unflag(s, s.rows[row.key])
             s.rows[row.key] = row
@@ -348,12 +348,12 @@ class SettingsWatcher:
                 s.line, s.drive, f"{KIND}|{ref.name}|{ref.index or 0}|{raw}|{now:.3f}", KIND,
                 ref.name, ref.pnu, fmt.name, raw, None, "seen", "", now,
             ))  # fmt: skip
-        new = await asyncio.shield(asyncio.to_thread(self.store.save, [row], events))
+        new = await self.store.saved([row], events)
         self.stream.count(new)
         moved = s.rows.get(key)
         if moved is not found:  # a write pkwbus made meanwhile (written): newer than this read
             if moved is not None:
-                await asyncio.shield(asyncio.to_thread(self.store.save, [moved]))
+                await self.store.saved([moved])
             return
         s.rows[key] = row
         s.expected.pop(key, None)

@@ -16,6 +16,8 @@ be opened or written.
 
 from __future__ import annotations
 
+import asyncio
+import logging
 import sqlite3
 import threading
 from collections.abc import Iterable
@@ -34,6 +36,8 @@ from pkwbus.service.history.store import (
     insert_events,
     synced_transaction,
 )
+
+log = logging.getLogger("pkwbus.service.settings")
 
 __all__ = ["SETTINGS_SCHEMA", "SettingRow", "SettingsStore", "SweptDrive"]
 
@@ -157,6 +161,19 @@ class SettingsStore:
         found.rows = {(r[1], r[2]): SettingRow(*r) for r in rows}
         return found
 
+    async def saved(
+        self, rows: Iterable[SettingRow], events: Iterable[DriveEvent] = ()
+    ) -> list[DriveEvent]:
+        """:meth:`save` in a thread, finished even when its caller is cancelled (the
+        service stopping): what it raises then, the database closed meanwhile, is logged,
+        not left to the loop as a task nobody asked (HistoryError to a caller that waits)."""
+        done = asyncio.ensure_future(asyncio.to_thread(self.save, list(rows), list(events)))
+        try:
+            return await asyncio.shield(done)
+        except asyncio.CancelledError:
+            done.add_done_callback(_unawaited)
+            raise
+
     def save(
         self, rows: Iterable[SettingRow], events: Iterable[DriveEvent] = ()
     ) -> list[DriveEvent]:
@@ -196,3 +213,10 @@ class SettingsStore:
             for sql, args in statements:
                 self._db.execute(sql, args)
         self.changes.changed(SETTINGS, [drive])
+
+
+def _unawaited(done: asyncio.Future[list[DriveEvent]]) -> None:
+    """A save whose caller was cancelled ended: its failure logged (it had no one to
+    tell)."""
+    if not done.cancelled() and done.exception() is not None:
+        log.warning("settings not stored while the service stopped: %s", done.exception())
