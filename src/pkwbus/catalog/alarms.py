@@ -31,7 +31,16 @@ from pkwbus.notation.problems import plain
 from pkwbus.notation.yamlfile import YamlError, load_yaml
 from pkwbus.protocol.values.notation import parse_parameter
 
-__all__ = ["ActiveAlarm", "Alarm", "AlarmTable", "CodeTable", "Kind", "WordTable", "alarm_table"]
+__all__ = [
+    "ActiveAlarm",
+    "Alarm",
+    "AlarmDecoder",
+    "AlarmTable",
+    "CodeTable",
+    "Kind",
+    "WordTable",
+    "alarm_table",
+]
 
 Kind = Literal["alarm", "warning", "status"]
 
@@ -112,6 +121,9 @@ class CodeTable(_Strict):
         return (Alarm(code, self.texts.get(value, ""), self.kind, self.parameter),)
 
 
+AlarmDecoder = WordTable | CodeTable  # how one parameter's value is told in words
+
+
 class AlarmTable(_Strict):
     catalog: str
     sources: dict[str, str]
@@ -126,7 +138,7 @@ class AlarmTable(_Strict):
                 raise ValueError(f"{entry.parameter}: source {entry.source!r} is not in sources")
         return self
 
-    def decoder(self, pnu: int) -> WordTable | CodeTable | None:
+    def decoder(self, pnu: int) -> AlarmDecoder | None:
         """How a value of ``pnu`` is told in words (None: it is no alarm parameter)."""
         entries: list[WordTable | CodeTable] = [*self.words, *self.codes]
         for entry in entries:

@@ -10,6 +10,7 @@ import itertools
 import os
 from dataclasses import dataclass, field
 
+from pkwbus.catalog.alarms import ActiveAlarm
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.reading import Reading
 from pkwbus.protocol.pkw.descriptions import DriveDescription
@@ -146,7 +147,10 @@ class Snapshot:
     latest value each drive confirmed of any parameter, polled, read or written; a
     write counts once the drive's answer echoes the value it now holds. By drive:
     ``decoding`` (how its values are decoded), ``counts`` (faults, telegram errors);
-    by line: ``totals``; ``changes``: which drives changed since a token."""
+    by line: ``totals``; ``changes``: which drives changed since a token; ``alarms``: the
+    drives' active alarms and warnings (alarms first, oldest first; only drives that show
+    one), as their polled alarm words and fault numbers tell them
+    (:mod:`pkwbus.master.alarms`)."""
 
     readings: dict[ReadingKey, Reading] = field(default_factory=dict)
     drives: dict[str, DriveState] = field(default_factory=dict)
@@ -163,6 +167,7 @@ class Snapshot:
     counts: dict[str, DriveCounts] = field(default_factory=dict)
     totals: dict[str, LineTotals] = field(default_factory=dict)
     changes: Changes = field(default_factory=Changes)
+    alarms: dict[str, tuple[ActiveAlarm, ...]] = field(default_factory=dict)
 
     def forget(self, drive: str) -> None:
         """Everything of ``drive`` (gone from the configuration)."""
@@ -174,6 +179,7 @@ class Snapshot:
         self.maintenance.pop(drive, None)
         self.decoding.pop(drive, None)
         self.counts.pop(drive, None)
+        self.alarms.pop(drive, None)
         self.changes.forget(drive)
 
     def copy(self) -> Snapshot:
@@ -182,6 +188,7 @@ class Snapshot:
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
             dict(self.stated), dict(self.slaves), dict(self.maintenance),
             dict(self.decoding), dict(self.counts), dict(self.totals), self.changes,
+            dict(self.alarms),
         )  # fmt: skip
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from pkwbus.catalog.precedence import resolve
 from pkwbus.master import told
+from pkwbus.master.alarms import LineAlarms
 from pkwbus.master.decoded import DecodedValues, job_result
 from pkwbus.master.events import (
     DescriptionChecked,
@@ -91,6 +92,7 @@ class SnapshotWriter:
         self._targets: dict[str, tuple[DescribeTarget, ...]] = {}
         self._totals = snapshot.totals.setdefault(line, LineTotals())
         self._values = DecodedValues()  # a value that holds is decoded once
+        self._alarms = LineAlarms(line)  # the polled parameters that tell active alarms
         self._on: dict[type, Callable[[Any, float], None]] = {
             Exchanged: self._exchanged,
             Finished: self._finished,
@@ -126,6 +128,7 @@ class SnapshotWriter:
         snapshot.decoding[name] = Decoding(formats, pending=pending)
         snapshot.counts[name] = DriveCounts()
         snapshot.drives[name] = DriveState()
+        self._alarms.watch(name, spec.alarms)
         snapshot.changes.touch(name)
 
     def remove_drive(self, drive: str) -> None:
@@ -137,6 +140,7 @@ class SnapshotWriter:
         self._silent.discard(drive)
         self._refusals.forget(drive)
         self._values.forget(drive)
+        self._alarms.forget(drive)
         self.snapshot.forget(drive)
 
     def forget_line(self) -> None:
@@ -164,6 +168,8 @@ class SnapshotWriter:
         if spec.form is not None:
             decoding.pending = (decoding.pending & asked) | (asked - known)
         decoding.formats = {(p.parameter, p.index): p.fmt for p in polls}
+        if self._alarms.watch(drive, spec.alarms):
+            self._show_alarms(drive)  # what a parameter no longer watched showed
         self.snapshot.changes.touch(drive)
 
     def apply(self, events: Sequence[Event], at: float | None = None) -> list[Event]:
@@ -379,3 +385,15 @@ class SnapshotWriter:
         snapshot.readings[key] = reading
         snapshot.counts[key[0]].landed = reading.timestamp
         self._out.append(ValueLanded(key, reading))
+        decoder = self._alarms.decoders.get(key)
+        if decoder is not None and self._alarms.landed(key, decoder, reading):
+            self._show_alarms(key[0])
+
+    def _show_alarms(self, drive: str) -> None:
+        """The drive's active alarms and warnings, as its alarm parameters show them now."""
+        active = self._alarms.active(drive)
+        if active:
+            self.snapshot.alarms[drive] = active
+        else:
+            self.snapshot.alarms.pop(drive, None)
+        self.snapshot.changes.touch(drive)

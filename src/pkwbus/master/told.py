@@ -7,6 +7,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+from pkwbus.catalog.alarms import Alarm
 from pkwbus.catalog.precedence import Disagreement, disagreements
 from pkwbus.master.planning.describing import ASK_AGAIN
 from pkwbus.master.planning.outcomes import Answered, Outcome, Rejected
@@ -19,7 +20,16 @@ from pkwbus.master.planning.plan import (
 )
 from pkwbus.protocol.pkw.length import AUTO, shown
 
-__all__ = ["REFUSAL_RETELL", "Refusals", "described", "health", "pkw_length", "unanswered"]
+__all__ = [
+    "REFUSAL_RETELL",
+    "Refusals",
+    "alarm_came",
+    "alarm_went",
+    "described",
+    "health",
+    "pkw_length",
+    "unanswered",
+]
 
 log = logging.getLogger("pkwbus.master.runner")  # what the runner records
 
@@ -126,3 +136,14 @@ def pkw_length(line: str, event: PkwLengthTold) -> None:
     elif length.known:
         log.info("drive %s: PKW length %s, learned from its answers", drive,
                  shown(length.words), extra=ctx)  # fmt: skip
+
+
+def alarm_came(line: str, drive: str, alarm: Alarm) -> None:
+    """An alarm or warning the drive shows now (the parameter that showed it)."""
+    log.warning("drive %s: %s %s (%s)", drive, alarm.kind, alarm.shown, alarm.parameter,
+                extra={"line": line, "drive": drive})  # fmt: skip
+
+
+def alarm_went(line: str, drive: str, alarm: Alarm) -> None:
+    log.info("drive %s: %s %s is gone", drive, alarm.kind, alarm.shown,
+             extra={"line": line, "drive": drive})  # fmt: skip

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 
-from pkwbus.catalog.alarms import ActiveAlarm
+from pkwbus.catalog.alarms import AlarmDecoder
 from pkwbus.catalog.description import (
     OTHER_INDEX,
     ParameterDescription,
@@ -35,7 +35,6 @@ from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.types import ValueType
 
 __all__ = [
-    "Alarms",
     "DriveEntry",
     "History",
     "LineMaster",
@@ -71,6 +70,11 @@ class DriveEntry:
     # Where each polled parameter's description comes from before the drive described it
     # (catalog.precedence.SOURCES): the configuration, the catalog or none.
     sources: Mapping[str, str] = field(default_factory=lambda: MappingProxyType({}))
+    # The polled parameters the catalog's alarm table tells in words (by parameter and
+    # index): what the page shows of their values (pkwbus.master.alarms.said).
+    alarm_words: Mapping[tuple[str, int], AlarmDecoder] = field(
+        default_factory=lambda: MappingProxyType({})
+    )
 
     @property
     def access(self) -> str:
@@ -124,14 +128,6 @@ class LineTask(Protocol):
     def stop(self) -> None: ...
     def forget(self) -> None: ...
     async def run(self) -> None: ...
-
-
-class Alarms(Protocol):
-    """The drives' active alarms in words (service.metrics.alarms.AlarmBoard)."""
-
-    def active(self, drive: str) -> list[ActiveAlarm]: ...
-
-    def said(self, key: ReadingKey, value: object) -> str: ...
 
 
 class History(Protocol):
@@ -222,7 +218,7 @@ class Load:
 
 class Runtime:
     """The running service: the current :class:`Load`, and what the process keeps across
-    loads (the snapshot, registry, outputs, alarms, trends, the lines' tasks, stopping)."""
+    loads (the snapshot, registry, outputs, trends, the lines' tasks, stopping)."""
 
     def __init__(
         self,
@@ -230,13 +226,11 @@ class Runtime:
         registry: CollectorRegistry,
         load: Load | None = None,
         *,
-        alarms: Alarms | None = None,
         trends: Trends | None = None,
         outputs: Outputs | None = None,
     ) -> None:
         self.snapshot = snapshot
         self.registry = registry
-        self.alarms = alarms  # the drives' active alarms, in words (None: none are watched)
         self.trends = trends  # the values' last minutes, for the page (None: none kept)
         # What every line's stream goes to (given to each runner at its construction).
         self.outputs = outputs if outputs is not None else Outputs()

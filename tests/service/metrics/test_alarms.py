@@ -10,9 +10,16 @@ import pytest
 from prometheus_client import CollectorRegistry, generate_latest
 
 from pkwbus.catalog.alarms import CodeTable, alarm_table
-from pkwbus.master.reading import Reading
+from pkwbus.master.alarms import said, tells_alarms
+from pkwbus.master.carriers import carrier_for
+from pkwbus.master.planning.outcomes import Answered
+from pkwbus.master.planning.plan import DriveSpec, Finished, PollSpec
+from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot_writer import SnapshotWriter
+from pkwbus.master.target import DriveTarget
+from pkwbus.protocol import pkw
 from pkwbus.service.http.api import create_app
-from pkwbus.service.metrics.alarms import AlarmBoard, Watched
+from pkwbus.service.metrics.alarms import AlarmCollector
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.drives.model import ModelConfig
 from tests.master.conftest import until
@@ -45,6 +52,28 @@ def test_the_danfoss_alarm_word_against_its_table() -> None:
     assert table.decoder(1613) is None  # not an alarm parameter
 
 
+def _writer(drive: str, catalog: str, *parameters: tuple[int, str]) -> SnapshotWriter:
+    """A line's snapshot writer with ``drive`` polling ``parameters`` (PNU, name), its alarm
+    parameters as the drive's catalog's alarm table tells them (as plan_drive gives them)."""
+    table = alarm_table(catalog)
+    assert table is not None
+    target = DriveTarget.create("fc", 1)
+    polls = tuple(PollSpec(name, 0, pkw.read(target.dialect, pnu), 1.0) for pnu, name in parameters)
+    alarms = tuple(
+        (name, 0, d) for pnu, name in parameters
+        if (d := table.decoder(pnu)) is not None and tells_alarms(d)
+    )  # fmt: skip
+    spec = DriveSpec(drive, carrier_for(target), polls, alarms=alarms)
+    return SnapshotWriter("line_fc", [spec], Snapshot())
+
+
+def _landed(writer: SnapshotWriter, drive: str, parameter: str, value: int, at: float) -> None:
+    """A poll of ``parameter`` answered with ``value`` at ``at`` (wall clock)."""
+    poll = next(p for p in writer._polls[drive] if p.parameter == parameter)
+    answer = pkw.ValueResponse(1, poll.request.pnu, 0, value, pkw.Width.WORD)
+    writer.apply([Finished(drive, poll, Answered(answer))], at)
+
+
 def test_the_danfoss_extended_status_word_is_told_bit_by_bit_and_never_an_alarm() -> None:
     # 16-94 Ext. Status Word (Danfoss BACnet OI MG.14.C1.02, 7.1: one bit each); no
     # reachable document words its bits: each set bit is its code alone.
@@ -57,12 +86,66 @@ def test_the_danfoss_extended_status_word_is_told_bit_by_bit_and_never_an_alarm(
         ("16-94 bit 0", "", "status"), ("16-94 bit 3", "", "status")
     ]  # fmt: skip
     # Polled, its value is told in bits on the page; no alarm comes of it.
+    assert said(word, 0x9) == "16-94 bit 0; 16-94 bit 3"
+    assert not tells_alarms(word)
+    writer = _writer("press", "danfoss-fc", (1694, "16-94"))
+    _landed(writer, "press", "16-94", 0x9, 1000.0)
+    assert writer.snapshot.readings[("press", "16-94", 0)].value == 0x9
+    assert writer.snapshot.alarms == {}
     registry = CollectorRegistry()
-    board = AlarmBoard({("press", "16-94", 0): Watched("line_fc", word)}, registry)
-    board.landed(("press", "16-94", 0), Reading(0x9, 0x9, 1000.0))
-    assert board.said(("press", "16-94", 0), 0x9) == "16-94 bit 0; 16-94 bit 3"
-    assert board.active("press") == []
+    registry.register(AlarmCollector(writer.snapshot, {"press": "line_fc"}))
     assert "pkwbus_drive_alarm{" not in generate_latest(registry).decode()
+
+
+def test_the_writer_keeps_each_alarm_from_the_reading_that_first_showed_it(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Danfoss 16-90: bits 2 (Earth fault) and 6 (Over current) come one after the other;
+    the first keeps its time while the word changes, each is told once as it comes and as
+    it goes, and the series follow the read model."""
+    caplog.set_level(logging.INFO, logger="pkwbus.master.runner")
+    writer = _writer("press", "danfoss-fc", (1690, "16-90"), (1613, "16-13"))
+    snap = writer.snapshot
+    registry = CollectorRegistry()
+    registry.register(AlarmCollector(snap, {"press": "line_fc"}))
+    _landed(writer, "press", "16-90", 0, 1000.0)
+    assert "press" not in snap.alarms
+    _landed(writer, "press", "16-90", 0x4, 1001.0)
+    _landed(writer, "press", "16-90", 0x4, 1002.0)  # the same word: nothing told again
+    _landed(writer, "press", "16-90", 0x44, 1003.0)
+    shown = [(a.alarm.code, a.alarm.text, a.since) for a in snap.alarms["press"]]
+    assert shown == [
+        ("16-90 bit 2", "Earth fault", 1001.0),
+        ("16-90 bit 6", "Over current", 1003.0),
+    ]
+    came = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert came == ["drive press: alarm 16-90 bit 2 Earth fault (16-90)",
+                    "drive press: alarm 16-90 bit 6 Over current (16-90)"]  # fmt: skip
+    text = generate_latest(registry).decode()
+    assert (
+        'code="16-90 bit 6",drive="press",kind="alarm",line="line_fc",text="Over current"} 1.0'
+        in text
+    )
+    _landed(writer, "press", "16-13", 0x4, 1004.0)  # no alarm parameter: nothing of alarms
+    _landed(writer, "press", "16-90", 0x40, 1005.0)
+    assert [(a.alarm.code, a.since) for a in snap.alarms["press"]] == [("16-90 bit 6", 1003.0)]
+    gone = [r.getMessage() for r in caplog.records if r.levelno == logging.INFO]
+    assert gone == ["drive press: alarm 16-90 bit 2 Earth fault is gone"]
+    assert 'code="16-90 bit 2"' not in generate_latest(registry).decode()
+    # Its polls changed (a reload): the alarm word no longer polled, what it showed goes.
+    target = DriveTarget.create("fc", 1)
+    spec = DriveSpec("press", carrier_for(target), writer._polls["press"][1:])
+    writer.update_polls(spec, spec.polls)
+    assert "press" not in snap.alarms
+    assert "pkwbus_drive_alarm{" not in generate_latest(registry).decode()
+
+
+def test_a_drive_gone_takes_its_alarms_with_it() -> None:
+    writer = _writer("press", "danfoss-fc", (1690, "16-90"))
+    _landed(writer, "press", "16-90", 0x4, 1000.0)
+    assert [a.alarm.code for a in writer.snapshot.alarms["press"]] == ["16-90 bit 2"]
+    writer.remove_drive("press")
+    assert writer.snapshot.alarms == {}
 
 
 async def test_a_trip_is_shown_in_words_and_goes_with_the_reset(
@@ -72,7 +155,7 @@ async def test_a_trip_is_shown_in_words_and_goes_with_the_reset(
     sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.001), catalog="danfoss-fc",
                     model=calm)  # fmt: skip
     server = await sim.serve_tcp("127.0.0.1", 0)
-    caplog.set_level(logging.INFO, logger="pkwbus.service.metrics.alarms")
+    caplog.set_level(logging.INFO, logger="pkwbus.master.runner")
     try:
         async with running(f"lines:{fc_line('l1', server.url, DRIVES)}") as runtime:
             app = create_app(runtime, audit=None, write_token=None)
@@ -148,13 +231,11 @@ def test_a_fault_number_is_shown_in_words_as_an_alarm_number_is(number: int) -> 
     assert faults.source == alarms.source  # the same List Manual, cited in its sources
     text = faults.texts[number]
     assert text.strip()
-    watched = {("pump", "r0947", 0): Watched("l1", faults),
-               ("pump", "r2122", 0): Watched("l1", alarms)}  # fmt: skip
-    board = AlarmBoard(watched, CollectorRegistry())
-    assert board.said(("pump", "r0947", 0), number) == f"F{number:05d} {text}"
-    assert board.said(("pump", "r2122", 0), 7409) == f"A07409 {alarms.texts[7409]}"
-    board.landed(("pump", "r0947", 0), Reading(number, number, 1000.0))
-    (active,) = board.active("pump")
+    assert said(faults, number) == f"F{number:05d} {text}"
+    assert said(alarms, 7409) == f"A07409 {alarms.texts[7409]}"
+    writer = _writer("pump", "siemens-g120", (947, "r0947"), (2122, "r2122"))
+    _landed(writer, "pump", "r0947", number, 1000.0)
+    (active,) = writer.snapshot.alarms["pump"]
     assert (active.alarm.code, active.alarm.text, active.alarm.kind) == (
         f"F{number:05d}", text, "alarm"
     )  # fmt: skip
@@ -174,8 +255,7 @@ async def test_a_sinamics_fault_number_is_shown_in_words_until_acknowledged() ->
                                        parameter="r0947") == 0)  # fmt: skip
             sim.drives[3].model.trip(30001, 0)
             await until(lambda: sample(runtime, "pkwbus_drive_alarm", **labels) == 1)
-            assert runtime.alarms is not None
-            (active,) = runtime.alarms.active("conveyor")
+            (active,) = runtime.snapshot.alarms["conveyor"]
             assert active.alarm.shown == "F30001 Power unit: Overcurrent"
             sim.drives[3].model.reset()  # acknowledged: out of the current entries
             await until(lambda: sample(runtime, "pkwbus_drive_alarm", drive="conveyor") is None)

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 
+from pkwbus.catalog.alarms import AlarmDecoder
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.catalog.precedence import Layers
 from pkwbus.master.planning.carrier import Carrier, Item
@@ -123,6 +124,9 @@ class DriveSpec:
     form: DescriptionForm | None = None  # how the drive describes (None: it is not asked)
     # Descriptions by drive identity, shared by every drive (None: none are kept).
     book: DescriptionBook | None = None
+    # The polled parameters (name, index) whose values tell active alarms, with their
+    # decoders: what the snapshot's writer keeps of them; the planner does not read it.
+    alarms: tuple[tuple[str, int, AlarmDecoder], ...] = ()
 
 
 # ------------------------------------------------------------------ actions

@@ -35,14 +35,13 @@ from pkwbus.protocol.profibus.dp import services as dp_services
 from pkwbus.protocol.profibus.dp.slave import Answer, SlaveSetup
 from pkwbus.protocol.profibus.fdl import DataFrame
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.described import DescriptionSink
 from pkwbus.service.assembly.description_file import DescriptionFile
 from pkwbus.service.assembly.drive_plans import plan_drive
 from pkwbus.service.assembly.loading import LoadBuilder
 from pkwbus.service.assembly.simulated import start_dp_sim, start_sim
 from pkwbus.service.config.resolved import port_for
-from pkwbus.service.metrics.alarms import AlarmBoard
+from pkwbus.service.metrics.alarms import AlarmCollector
 from pkwbus.service.metrics.devices import DriveInfo, ParameterInfo, SnapshotCollector
 from pkwbus.service.metrics.exposition import MetricsRegistry
 from pkwbus.service.metrics.forget import forget_series
@@ -106,13 +105,12 @@ class Parts:
         self.collector = SnapshotCollector(snapshot, {}, [])
         registry.register(self.collector)
         registry.register(MaintenanceCollector(snapshot, self.line_of))
-        self.board = AlarmBoard({}, registry)
+        registry.register(AlarmCollector(snapshot, self.line_of))
         self.trends = Trends()
         self.descriptions = DescriptionSink(self.entries, self.collector, kept)
         # What every line's stream goes to besides its own counters: one list, given to
         # each runner at its construction; the drives' watchers join it by one swap.
-        self.base: tuple[Observer, ...] = (self.collector, self.board, self.trends,
-                                           self.descriptions)  # fmt: skip
+        self.base: tuple[Observer, ...] = (self.collector, self.trends, self.descriptions)
         self.outputs = Outputs(self.base)
         # Hot standby: each line's fence, given to its port (None: always open).
         self.fence_of: Callable[[str], Fence] | None = None
@@ -125,7 +123,7 @@ class Parts:
         specs = [plan_drive(line, d, entries, infos, self.book) for d in line.drives]
         return LinePlan(line, specs, entries, infos)
 
-    def show(self, config: cfg.Config, plan: LinePlan, drives: set[str] | None = None) -> None:
+    def show(self, plan: LinePlan, drives: set[str] | None = None) -> None:
         """The plan's drives (those named in ``drives``, all when None) into the runtime's
         drives and metrics: their values are exported as they land."""
         line = plan.line
@@ -135,7 +133,6 @@ class Parts:
             self.line_of[entry.name] = line.name
             info = DriveInfo(line.name, entry.target.profile)
             self.collector.add_drive(entry.name, info, plan.infos_of(entry.name))
-        self.board.watch(alarm_parameters(config, entries))
 
     def forget(self, line: str, drive: str | None = None) -> None:
         """Everything the metrics and the runtime show of ``drive`` (of every drive of
@@ -145,7 +142,6 @@ class Parts:
             self.entries.pop(name, None)
             self.line_of.pop(name, None)
             self.collector.forget_drive(name)
-            self.board.forget(name)
             self.trends.forget(name)
         if drive is None:
             forget_series(self.registry, line=line)
@@ -217,7 +213,7 @@ async def assemble(
     # so that every line's metrics are given it (a value is rendered as it lands).
     plans = [parts.plan(line) for line in here]
     for plan in plans:
-        parts.show(config, plan)
+        parts.show(plan)
     built = [await parts.build(plan) for plan in plans]
     next_load = LoadBuilder(drives=parts.entries)
     next_load.base = list(parts.base)
@@ -226,7 +222,7 @@ async def assemble(
         if b.close is not None:
             next_load.closers[b.runner.name] = b.close
     runtime = Runtime(
-        parts.snapshot, parts.registry, next_load.freeze(), alarms=parts.board, trends=parts.trends,
+        parts.snapshot, parts.registry, next_load.freeze(), trends=parts.trends,
         outputs=parts.outputs,
     )  # fmt: skip
     parts.registry.register(MasterCollector(lambda: parts.lines, lambda: runtime.masters))

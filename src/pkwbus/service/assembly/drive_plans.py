@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from types import MappingProxyType
 
+from pkwbus.catalog.alarms import AlarmDecoder, alarm_table
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.alarms import tells_alarms
 from pkwbus.master.carriers import carrier_for
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.planning.plan import DriveSpec, PollSpec
@@ -75,6 +77,7 @@ def plan_drive(
     ]
     _, settings = swept_settings(line, drive)  # described with their limits, for a restore
     describe = describe_targets(target, drive, table, counters, settings) if form else ()
+    words = _alarm_words(drive, polls)
     entries.append(
         DriveEntry(
             drive.name,
@@ -84,9 +87,25 @@ def plan_drive(
             parameters=table,
             layers=explicit_layers(drive, table),
             sources=MappingProxyType(sources),
+            alarm_words=MappingProxyType(words),
         )
     )
-    return DriveSpec(drive.name, carrier_for(target), tuple(polls), describe, form, book)
+    alarms = tuple((p, i, d) for (p, i), d in words.items() if tells_alarms(d))
+    return DriveSpec(drive.name, carrier_for(target), tuple(polls), describe, form, book, alarms)
+
+
+def _alarm_words(drive: cfg.Drive, polls: list[PollSpec]) -> dict[tuple[str, int], AlarmDecoder]:
+    """The polled parameters the drive's catalog's alarm table tells in words, by
+    parameter and index: alarm words, fault and alarm numbers, status words, logs."""
+    table = alarm_table(drive.catalog) if drive.catalog is not None else None
+    if table is None:
+        return {}
+    words = {}
+    for poll in polls:
+        decoder = table.decoder(poll.request.pnu)
+        if decoder is not None:
+            words[(poll.parameter, poll.index)] = decoder
+    return words
 
 
 def _read(target: DriveTarget, ref: ParameterRef, fmt: ParameterDescription) -> pkw.PkwRequest:

@@ -11,7 +11,6 @@ from pydantic import BaseModel
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.runner import LineRunner
 from pkwbus.service import config as cfg
-from pkwbus.service.assembly.alarm_polls import alarm_parameters
 from pkwbus.service.assembly.build import LinePlan, Parts
 from pkwbus.service.runtime import DriveEntry, Runtime
 
@@ -72,7 +71,7 @@ class DriveChanges:
                 continue
             if before is not None and self._same_drive(runner, before, drive, specs[name],
                                                        entries[name]):  # fmt: skip
-                changed = self._update_polls(config, runner, plan, specs[name], entries[name])
+                changed = self._update_polls(runner, plan, specs[name], entries[name])
                 if changed:
                     changes.append(f"{said} drive {name}: {changed}")
                 if drive.maintenance and not before.maintenance:
@@ -88,7 +87,7 @@ class DriveChanges:
                 self._remove(runner, new.name, name, REPLACED)
             runner.add_drive(specs[name])
             counts.add_drive(name, drive.pkw_dialect)
-            self.parts.show(config, plan, {name})
+            self.parts.show(plan, {name})
             if name in api_held:  # the API's maintenance stays, on whichever line it is now
                 runner.maintenance(name, True, api_held[name])
             elif drive.maintenance:
@@ -114,7 +113,6 @@ class DriveChanges:
 
     def _update_polls(
         self,
-        config: cfg.Config,
         runner: LineRunner[Any, Any],
         plan: LinePlan,
         spec: DriveSpec,
@@ -136,8 +134,6 @@ class DriveChanges:
         keys = {(name, p.parameter, p.index) for p in entry.polls}
         self.parts.entries[name] = entry
         self.parts.collector.set_parameters(name, plan.infos_of(name))
-        self.parts.board.forget(name, keep=keys)
-        self.parts.board.watch(alarm_parameters(config, [entry]))
         self.parts.trends.forget(name, keep=keys)
         if changed is not None:
             runner.update_polls(spec)

@@ -315,7 +315,7 @@ class Reloader:
         next_load: LoadBuilder,
     ) -> list[str]:
         plan = self.parts.plan(line)
-        self.parts.show(config, plan)
+        self.parts.show(plan)
         try:
             built = await self.parts.build(plan)
         except Exception as exc:  # a sim that cannot start, a GSD file gone since the check

@@ -194,7 +194,7 @@ class StandbyLines:
         # The line's marks merged before it is planned (the describe book) and watched.
         kept = await self.marks.load(line.name) if self.marks is not None else {}
         plan = parts.plan(line)
-        parts.show(self.config, plan)
+        parts.show(plan)
         try:
             built = await parts.build(plan)
         except Exception as exc:  # a sim that cannot start, a GSD file gone since the check

@@ -1,5 +1,5 @@
 """The MQTT output: one more member of the lines' outputs list, fed by the same stream
-as the collector, the alarm board and the trends, and told of the drives' events by the
+as the collector and the trends, and told of the drives' events by the
 history's event stream.
 
 Its observer path only notes what changed (a value landed: its key and reading, latest

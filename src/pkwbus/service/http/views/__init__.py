@@ -76,8 +76,7 @@ def line_views(
 
 def alarm_views(runtime: Runtime, name: str) -> list[AlarmView]:
     """The drive's active alarms and warnings, in words."""
-    board = runtime.alarms
-    active = board.active(name) if board is not None else []
+    active = runtime.snapshot.alarms.get(name, ())
     return [
         AlarmView(code=a.alarm.code, text=a.alarm.text, kind=a.alarm.kind,
                   parameter=a.alarm.parameter, since=a.since)

@@ -25,6 +25,7 @@ from typing import Any, Literal
 from pydantic_core import to_json
 
 from pkwbus.catalog.description import ParameterDescription
+from pkwbus.master.alarms import said
 from pkwbus.master.planning.plan import PollSpec
 from pkwbus.master.reading import Reading
 from pkwbus.protocol.pzd import status_bits
@@ -134,8 +135,8 @@ def _reading_fields(
 ) -> dict[str, Any]:
     """A ParameterReading's fields."""
     parameter, index, value = poll.parameter, poll.index, reading.value
-    board = runtime.alarms
-    words = board.said((name, parameter, index), value) if board is not None else ""
+    decoder = runtime.drives[name].alarm_words.get((parameter, index))
+    words = said(decoder, value) if decoder is not None else ""
     counts_in = time_unit(fmt)  # a duration names its own unit ("13 h")
     # The duration worked out once (it was twice: a third of a value's piece, in Fractions).
     told = None
@@ -166,8 +167,7 @@ def overview_row(runtime: Runtime, name: str, now: float) -> DriveOverview:
     shown: Literal["up", "down", "maintenance"] = "maintenance"
     if name not in snap.maintenance:
         shown = "up" if state is None or state.up else "down"
-    board = runtime.alarms
-    active = board.active(name) if board is not None else []
+    active = snap.alarms.get(name, ())
     landed = counts.landed if counts is not None else None
     return DriveOverview(
         name=name, line=entry.line, address=entry.target.address, state=shown,
@@ -281,7 +281,7 @@ class DriveViews:
         head (where the drive is, up, its status word) until one of them changes; the tail
         (counts, alarms, writable parameters, DP, maintenance, settings) until what it
         shows changes."""
-        runtime, snap = self.runtime, self.runtime.snapshot
+        snap = self.runtime.snapshot
         values = self._values_json(name, entry)
         state, counts = snap.drives.get(name), snap.counts.get(name)
         up, word = (state.up, state.status_word) if state is not None else (True, None)
@@ -290,8 +290,7 @@ class DriveViews:
             head = (entry, up, word, head_json(name, entry, up, word))
             self._heads[name] = head
         faults, errors = (counts.faults, counts.errors) if counts is not None else (0, 0)
-        board = runtime.alarms
-        active = tuple(board.active(name)) if board is not None else ()
+        active = snap.alarms.get(name, ())
         shown = (faults, errors, active, self._writable_now(name, entry),
                  snap.slaves.get(name), snap.maintenance.get(name), swept)  # fmt: skip
         tail = self._tails.get(name)
