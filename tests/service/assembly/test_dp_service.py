@@ -565,8 +565,10 @@ async def test_late_answers_are_timeouts_of_their_own_slave_only(tmp_path: Path)
 
         sim.answer = fan_only  # type: ignore[method-assign]
 
-    faults = DpFaults(late=0.05, late_seconds=0.3)
-    async with dp_service(tmp_path, faults, slot_time="50ms", watch=watch) as svc:
+    # A slot time of 200 ms: the other slaves' answers, in time, must not miss it because a
+    # loaded machine held the simulator's process (at 50 ms it failed so once, load 4.8).
+    faults = DpFaults(late=0.05, late_seconds=0.5)
+    async with dp_service(tmp_path, faults, slot_time="200ms", watch=watch) as svc:
         await until(lambda: svc.sim.stats.injected["late"] >= 10)
         await svc.runtime.stop()
         late = svc.sim.stats.drive_injected[10]["late"]
