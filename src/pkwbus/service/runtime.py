@@ -7,10 +7,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Awaitable, Callable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Protocol
 
 from prometheus_client import CollectorRegistry
 
@@ -27,12 +26,13 @@ from pkwbus.master.events import Observer, Outputs
 from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.plan import PollSpec
-from pkwbus.master.snapshot import ReadingKey, Snapshot
+from pkwbus.master.snapshot import Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DriveDescription
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.types import ValueType
+from pkwbus.service.roles import History, LineMaster, LineTask, Masters, Settings, Trends
 
 __all__ = [
     "DriveEntry",
@@ -117,77 +117,6 @@ class DriveEntry:
         return self.parameters.canonical(ref)
 
 
-class LineTask(Protocol):
-    """One line's task: a :class:`~pkwbus.master.runner.LineRunner` of any bus."""
-
-    name: str
-
-    def submit(self, job: Job) -> None: ...
-    def preview(self, drive: str, item: Item) -> Preview: ...
-    def maintenance(self, drive: str, on: bool, reason: str = "") -> None: ...
-    def stop(self) -> None: ...
-    def forget(self) -> None: ...
-    async def run(self) -> None: ...
-
-
-class History(Protocol):
-    """The drives' own log entries as kept (service.history.store.HistoryStore)."""
-
-    def latest(
-        self, *, drive: str | None = None, since: float | None = None, limit: int = 100
-    ) -> list[Any]: ...
-
-
-class Settings(Protocol):
-    """The drives' settings as swept (service.history.settings.SettingsWatcher)."""
-
-    @property
-    def swept(self) -> Mapping[str, Any]: ...
-
-    def view(self, drive: str) -> dict[str, Any]: ...
-
-    async def accept(self, drive: str) -> int: ...
-
-    async def written(
-        self, drive: str, pnu: int, index: int, raw: int, value: Any, *, answered: bool = True
-    ) -> None: ...
-
-
-class LineMaster(Protocol):
-    """Who masters a line (service.standby.Master): its instance's name and URL."""
-
-    @property
-    def name(self) -> str: ...
-
-    @property
-    def url(self) -> str | None: ...
-
-
-class Masters(Protocol):
-    """Who masters each configured line, in hot standby
-    (service.assembly.standby_lines.StandbyLines)."""
-
-    @property
-    def etcd_up(self) -> bool: ...
-
-    # Each configured line's drives, by line, in the configuration's order.
-    def lines(self) -> Mapping[str, Sequence[str]]: ...
-    def line_of(self, drive: str) -> str | None: ...  # None: no such drive
-    def here(self, line: str) -> bool: ...  # whether this instance masters ``line`` now
-    # Who masters ``line`` (this instance included); None: nobody now.
-    def master_of(self, line: str) -> LineMaster | None: ...
-    def takeovers(self, line: str) -> int: ...  # how often this instance took ``line``
-
-
-class Trends(Protocol):
-    """The last minutes of each polled value (service.metrics.trends.Trends)."""
-
-    step: float  # seconds a point
-    stamps: dict[str, int]  # per drive: changed each time a point changed but by time
-
-    def points(self, key: ReadingKey, now: float) -> list[float | None]: ...
-
-
 @dataclass(frozen=True)
 class Load:
     """What one load of the configuration made: the lines' runners, the drives, who masters
@@ -201,8 +130,11 @@ class Load:
     history: History | None = None  # the drives' own log entries (None: not kept)
     settings: Settings | None = None  # the sweep of the drives' settings (None: none)
     masters: Masters | None = None  # hot standby: who masters each line (None: all here)
-    # The part of the lines' outputs there from the start (the drives' watchers join it).
+    # The lines' outputs: the part there from the start and over reloads (the collector,
+    # the trends, the description keeper, MQTT), and the drives' log and settings watchers
+    # of this load; Runtime.swap gives the lines both, as one list.
     base: tuple[Observer, ...] = ()
+    watchers: tuple[Observer, ...] = ()
     # What starts once the lines run, what ends after they stopped, and what closes a
     # line's simulated drives after the line stopped.
     starters: tuple[Callable[[], Awaitable[None]], ...] = ()
@@ -212,7 +144,7 @@ class Load:
     def __post_init__(self) -> None:
         for name in ("runners", "drives", "closers"):
             object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
-        for name in ("base", "starters", "cleanups"):
+        for name in ("base", "watchers", "starters", "cleanups"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
 
 
@@ -245,8 +177,15 @@ class Runtime:
         return self._load
 
     def swap(self, load: Load) -> None:
-        """``load`` the current one, by one assignment: a reader sees the old or the new."""
+        """``load`` the current one, by one assignment: a reader sees the old or the new;
+        the lines' outputs are its outputs from then on (one swap of the one list)."""
         self._load = load
+        self.outputs.swap((*load.base, *load.watchers))
+
+    def unwatch(self) -> None:
+        """The drives' watchers leave the lines' outputs (they stop: the service stops, or a
+        reload watches afresh); the load's base stays."""
+        self.outputs.swap(self._load.base)
 
     @property
     def runners(self) -> Mapping[str, LineTask]:

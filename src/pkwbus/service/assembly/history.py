@@ -141,8 +141,7 @@ class Memory:
         self.settings = watch_settings(config, self.runtime, next_load, self.stream, self._store)
         # Drives and lines that come back, drives identified as other drives: the watchers
         # follow every line's stream, as outputs.
-        watchers = [w for w in (self.logs, self.settings) if w is not None]
-        self.runtime.outputs.swap([*next_load.base, *watchers])
+        next_load.watchers = [w for w in (self.logs, self.settings) if w is not None]
 
     async def start(self) -> None:
         for watcher in (self.logs, self.settings):
@@ -152,7 +151,7 @@ class Memory:
     async def stop(self, *, final: bool = True) -> None:
         """Stop watching: the watchers leave the lines, their gauges leave the registry;
         ``final``: the service stops (not a reload)."""
-        self.runtime.outputs.swap(self.runtime.load.base)
+        self.runtime.unwatch()
         if self.logs is not None:
             await self.logs.stop()
         if self.settings is not None:

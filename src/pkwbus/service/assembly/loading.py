@@ -32,6 +32,7 @@ class LoadBuilder:
         self.settings: Settings | None = load.settings
         self.masters: Masters | None = load.masters
         self.base: list[Observer] = list(load.base)
+        self.watchers: list[Observer] = list(load.watchers)
         self.starters: list[Callable[[], Awaitable[None]]] = list(load.starters)
         self.cleanups: list[Callable[[], object]] = list(load.cleanups)
         self.closers: dict[str, Callable[[], object]] = dict(load.closers)
@@ -41,8 +42,8 @@ class LoadBuilder:
         return Load(
             runners=self.runners, drives=self.drives, job_timeout=self.job_timeout,
             history=self.history, settings=self.settings, masters=self.masters,
-            base=tuple(self.base), starters=tuple(self.starters), cleanups=tuple(self.cleanups),
-            closers=self.closers,
+            base=tuple(self.base), watchers=tuple(self.watchers),
+            starters=tuple(self.starters), cleanups=tuple(self.cleanups), closers=self.closers,
         )  # fmt: skip
 
 

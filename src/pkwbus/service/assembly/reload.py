@@ -162,6 +162,7 @@ class Reloader:
                 await self.memory.stop(final=False)
             changes: list[str] = []
             failed: list[str] = []
+            watched = touched  # the drives' memory watched again: started once swapped in
             gate = self.gate.lock if self.gate is not None else contextlib.nullcontext()
             try:
                 async with gate:
@@ -170,9 +171,11 @@ class Reloader:
                         try:
                             await self._apply(new, held, changes, failed, next_load)
                             if self.gate is not None:
-                                changes += await self.gate.reloaded(
+                                started, again = await self.gate.reloaded(
                                     new, next_load, watch=not touched
                                 )
+                                changes += started
+                                watched = watched or again
                         finally:
                             if touched and self.memory is not None:
                                 self.memory.watch(new, next_load)
@@ -185,7 +188,7 @@ class Reloader:
             finally:
                 self.config = new
                 self.parts.lines = [line.name for line in new.lines]
-                if touched and self.memory is not None:
+                if watched and self.memory is not None:
                     await self.memory.start()
                 for told in self.after:
                     told()

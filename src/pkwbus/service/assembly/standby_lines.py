@@ -182,7 +182,9 @@ class StandbyLines:
                     again = True
             if again:
                 with change(self.runtime, drives=self.parts.entries) as next_load:
-                    await self._watch_again(next_load)
+                    again = await self._watch_again(next_load)
+            if again and self.memory is not None:
+                await self.memory.start()  # its watchers in the lines' outputs now
 
     def _shown(self) -> set[str]:
         return set(self.parts.line_of.values())
@@ -256,23 +258,26 @@ class StandbyLines:
         self.parts.forget(line)
         log.info("line %s: no longer mastered here (hot standby)", line, extra={"line": line})
 
-    async def _watch_again(self, next_load: LoadBuilder) -> None:
-        """The drives' memory watched again, on the lines of ``next_load`` (that run here now)."""
+    async def _watch_again(self, next_load: LoadBuilder) -> bool:
+        """The drives' memory watched again, on the lines of ``next_load`` (that run here
+        now); whether it was (then started by the caller once ``next_load`` is swapped in:
+        its watchers are in the lines' outputs from then on)."""
         if self.memory is None or self.runtime.stopping:
-            return
+            return False
         await self.memory.stop(final=False)
         self.memory.watch(self.config, next_load)
-        await self.memory.start()
+        return True
 
     # ------------------------------------------------------------ reload and stop
 
     async def reloaded(
         self, config: cfg.Config, next_load: LoadBuilder, *, watch: bool
-    ) -> list[str]:
+    ) -> tuple[list[str], bool]:
         """A reload applied ``config`` (under :attr:`lock`), its next load ``next_load``: the
         engine campaigns for its lines; a held line that does not run yet starts (those
         started, as the reload says them). ``watch``: the drives' memory is watched again
-        here (the reload does not do it itself)."""
+        here (the reload does not do it itself); whether it was (the reload starts it once
+        ``next_load`` is swapped in)."""
         self._configure(config)
         self.engine.set_lines(list(self._lines))
         if self.marks is not None:
@@ -284,9 +289,8 @@ class StandbyLines:
                     self.parts.forget(name)
                 if await self._start(line, next_load):
                     started.append(f"line {name} started (mastered here)")
-        if started and watch:
-            await self._watch_again(next_load)
-        return started
+        watched = bool(started and watch) and await self._watch_again(next_load)
+        return started, watched
 
     async def close(self) -> None:
         """The service stops, its lines stopped: the changes under way end, then the

@@ -356,10 +356,10 @@ def _logged(task: asyncio.Task[None]) -> None:
 
 
 def attach(config: Config, runtime: Runtime, stream: EventStream | None) -> MqttOutput | None:
-    """The MQTT output of ``config`` (None: no ``mqtt:``), one of the runtime's outputs from
-    now on, told of the drives' events by ``stream``; the assembly makes it one of the
-    outputs' base (kept over reloads), started with the runtime and stopped after everything
-    else. :class:`MqttSettingsError` for an account named but unset."""
+    """The MQTT output of ``config`` (None: no ``mqtt:``), told of the drives' events by
+    ``stream``; the assembly makes it one of the outputs' base (kept over reloads: the lines'
+    outputs once its load is swapped in), started with the runtime and stopped after
+    everything else. :class:`MqttSettingsError` for an account named but unset."""
     settings = config.mqtt
     if settings is None:
         return None
@@ -373,7 +373,6 @@ def attach(config: Config, runtime: Runtime, stream: EventStream | None) -> Mqtt
     outbox = Outbox(outbox_path(config.audit_db), settings.outbox.max_bytes,
                     settings.outbox.max_age)  # fmt: skip
     output = MqttOutput(settings, runtime, connection, outbox, metrics)
-    runtime.outputs.swap([*runtime.outputs.items, output])
     if stream is not None:
         stream.listeners.append(output.on_drive_events)
     log.info("MQTT: publishing to %s under %s/", settings.url, settings.prefix)

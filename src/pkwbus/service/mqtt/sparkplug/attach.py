@@ -25,8 +25,8 @@ def attach_sparkplug(
     bd_seq_file: Path | None = None,
 ) -> SparkplugNode | None:
     """The Sparkplug node of ``settings`` (None without ``mqtt.sparkplug``), one of the
-    runtime's outputs from now on (the assembly makes it one of the outputs' base, kept over
-    reloads, started with the runtime and stopped after everything else); DCMD taken only
+    lines' outputs once the assembly made it one of the outputs' base and swapped its load in
+    (kept over reloads, started with the runtime and stopped after everything else); DCMD taken only
     with ``mqtt.writes: allow_list``; its messages counted in ``metrics``, its ``bdSeq``
     kept in ``bd_seq_file``.
     :class:`~pkwbus.service.config.mqtt.MqttSettingsError` for an account named but unset."""
@@ -48,7 +48,6 @@ def attach_sparkplug(
         bd_seq_file=bd_seq_file,
         metrics=metrics,
     )
-    runtime.outputs.swap([*runtime.outputs.items, node])
     log.info("Sparkplug B: edge node %s of group %s", settings.sparkplug.edge_node_id,
              settings.sparkplug.group_id)  # fmt: skip
     return node
