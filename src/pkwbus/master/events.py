@@ -49,6 +49,7 @@ __all__ = [
     "Outputs",
     "Overrun",
     "PkwLengthTold",
+    "SettingsSeen",
     "SlaveDiagnosed",
     "SlaveRestarted",
     "SlaveSilent",
@@ -125,6 +126,17 @@ class MaintenanceChanged:
     reason: str = ""
 
 
+@dataclass(frozen=True, slots=True)
+class SettingsSeen:
+    """What the sweep of a drive's settings found (the service's settings watcher): how
+    many differ from their baseline now, and when its last complete sweep ended (wall
+    clock; None: none yet). ``changed`` None: its settings are not swept (any more)."""
+
+    drive: str
+    changed: int | None
+    swept: float | None = None
+
+
 # -------------------------------------------------------- the snapshot writer's
 
 
@@ -192,8 +204,8 @@ WireEvent = (
     | StationAsked | StationFound | StationsAsked
 )  # fmt: skip
 Event = (
-    PlanEvent | WireEvent | LineState | MaintenanceChanged | JobDone | ValueLanded
-    | DescriptionChecked
+    PlanEvent | WireEvent | LineState | MaintenanceChanged | SettingsSeen | JobDone
+    | ValueLanded | DescriptionChecked
 )  # fmt: skip
 
 

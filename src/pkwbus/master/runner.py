@@ -39,7 +39,7 @@ from typing import Generic, TypeVar
 
 from pkwbus.link import Link, LinkState, PortError
 from pkwbus.master.bus import Done, LineRefused, Port, Wire
-from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer
+from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer, SettingsSeen
 from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
@@ -142,6 +142,11 @@ class LineRunner(Generic[Request, Answer]):
         self.tell([MaintenanceChanged(drive, on, reason)])
         self.flush()
         self._wake.set()
+
+    def settings_seen(self, drive: str, changed: int | None, swept: float | None) -> None:
+        """What the sweep of ``drive``'s settings found, into the read model
+        (:class:`~pkwbus.master.events.SettingsSeen`)."""
+        self.tell([SettingsSeen(drive, changed, swept)])
 
     # A reload: the line's drives and polls change while its port stays open and its other
     # drives go on as they were.

@@ -26,6 +26,7 @@ __all__ = [
     "LiveSlave",
     "Maintained",
     "ReadingKey",
+    "SettingsShown",
     "Snapshot",
     "ValueKey",
 ]
@@ -48,6 +49,15 @@ class Maintained:
 
     reason: str
     since: float
+
+
+@dataclass(frozen=True, slots=True)
+class SettingsShown:
+    """A drive's settings as last swept: how many differ from their baseline, and when the
+    last complete sweep ended (wall clock; None: none yet)."""
+
+    changed: int
+    swept: float | None = None
 
 
 ReadingKey = tuple[str, str, int]  # drive, parameter as configured, index
@@ -150,7 +160,8 @@ class Snapshot:
     by line: ``totals``; ``changes``: which drives changed since a token; ``alarms``: the
     drives' active alarms and warnings (alarms first, oldest first; only drives that show
     one), as their polled alarm words and fault numbers tell them
-    (:mod:`pkwbus.master.alarms`)."""
+    (:mod:`pkwbus.master.alarms`); ``settings``: what the sweep of each swept drive's
+    settings found."""
 
     readings: dict[ReadingKey, Reading] = field(default_factory=dict)
     drives: dict[str, DriveState] = field(default_factory=dict)
@@ -168,6 +179,7 @@ class Snapshot:
     totals: dict[str, LineTotals] = field(default_factory=dict)
     changes: Changes = field(default_factory=Changes)
     alarms: dict[str, tuple[ActiveAlarm, ...]] = field(default_factory=dict)
+    settings: dict[str, SettingsShown] = field(default_factory=dict)
 
     def forget(self, drive: str) -> None:
         """Everything of ``drive`` (gone from the configuration)."""
@@ -180,6 +192,7 @@ class Snapshot:
         self.decoding.pop(drive, None)
         self.counts.pop(drive, None)
         self.alarms.pop(drive, None)
+        self.settings.pop(drive, None)
         self.changes.forget(drive)
 
     def copy(self) -> Snapshot:
@@ -188,7 +201,7 @@ class Snapshot:
             dict(self.readings), dict(self.drives), dict(self.lines), dict(self.latest),
             dict(self.stated), dict(self.slaves), dict(self.maintenance),
             dict(self.decoding), dict(self.counts), dict(self.totals), self.changes,
-            dict(self.alarms),
+            dict(self.alarms), dict(self.settings),
         )  # fmt: skip
 
 

@@ -15,9 +15,11 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from functools import partial
 from typing import Any
 
 from pkwbus.catalog.precedence import resolve
+from pkwbus.master import snapshot_states as states
 from pkwbus.master import told
 from pkwbus.master.alarms import LineAlarms
 from pkwbus.master.decoded import DecodedValues, job_result
@@ -26,10 +28,6 @@ from pkwbus.master.events import (
     Event,
     Exchanged,
     JobDone,
-    LineState,
-    MaintenanceChanged,
-    SlaveDiagnosed,
-    SlaveStateChanged,
     ValueLanded,
 )
 from pkwbus.master.planning.answers import ErrorKind
@@ -48,7 +46,6 @@ from pkwbus.master.planning.plan import (
     PkwLengthTold,
     PollSpec,
     Redecoded,
-    StatusWord,
 )
 from pkwbus.master.reading import Reading
 from pkwbus.master.snapshot import (
@@ -56,8 +53,6 @@ from pkwbus.master.snapshot import (
     DriveCounts,
     DriveState,
     LineTotals,
-    LiveSlave,
-    Maintained,
     ReadingKey,
     Snapshot,
 )
@@ -96,7 +91,6 @@ class SnapshotWriter:
         self._on: dict[type, Callable[[Any, float], None]] = {
             Exchanged: self._exchanged,
             Finished: self._finished,
-            StatusWord: self._status_word,
             HealthChanged: self._health,
             PkwLengthTold: self._pkw_length,
             DescribedAnew: self._settled,
@@ -104,11 +98,9 @@ class SnapshotWriter:
             LeftUnanswered: self._settled,
             Forgotten: self._forgotten,
             Redecoded: self._redecoded,
-            LineState: self._line_state,
-            MaintenanceChanged: self._maintenance,
-            SlaveStateChanged: self._slave_state,
-            SlaveDiagnosed: self._slave_diagnosed,
         }
+        for kind, handler in states.HANDLERS.items():  # the states the events tell
+            self._on[kind] = partial(handler, snapshot, line)
         snapshot.lines[line] = False
         for d in drives:
             self.add_drive(d)
@@ -196,33 +188,6 @@ class SnapshotWriter:
             counts.errors += 1
             self.snapshot.changes.touch(event.drive)
 
-    def _status_word(self, event: StatusWord, at: float) -> None:
-        drives = self.snapshot.drives
-        old = drives.get(event.drive)
-        if old is None:
-            return  # a drive gone from the line
-        drives[event.drive] = DriveState(old.up, event.word, at, event.main_actual)
-        if old.status_word != event.word or old.main_actual != event.main_actual:
-            self.snapshot.changes.touch(event.drive)
-
-    def _line_state(self, event: LineState, at: float) -> None:
-        self.snapshot.lines[event.line] = event.up
-
-    def _slave_state(self, event: SlaveStateChanged, at: float) -> None:
-        slaves = self.snapshot.slaves
-        slaves[event.drive] = replace(
-            slaves.get(event.drive, LiveSlave(self.line)), state=event.state
-        )
-        self.snapshot.changes.touch(event.drive)
-
-    def _slave_diagnosed(self, event: SlaveDiagnosed, at: float) -> None:
-        slaves, found = self.snapshot.slaves, event.diagnosis
-        slaves[event.drive] = replace(
-            slaves.get(event.drive, LiveSlave(self.line)), ident=found.ident,
-            owner=found.master, flags=found.flags, diagnosed=at,
-        )  # fmt: skip
-        self.snapshot.changes.touch(event.drive)
-
     def _decode_as(self, decoding: Decoding, event: DescriptionSettled | Redecoded) -> None:
         """The event's polls decode as now described, from now on."""
         for poll in event.polls:
@@ -278,17 +243,6 @@ class SnapshotWriter:
             self._silent.discard(drive)
         contradicts = told.described(self.line, event)
         self._out.append(DescriptionChecked(event, tuple(contradicts)))
-
-    def _maintenance(self, event: MaintenanceChanged, at: float) -> None:
-        """A drive in maintenance, or out of it: one log line each."""
-        drive, ctx = event.drive, {"line": self.line, "drive": event.drive}
-        self.snapshot.changes.touch(drive)
-        if event.on:
-            self.snapshot.maintenance[drive] = Maintained(event.reason, at)
-            log.warning("drive %s is in maintenance (%s): nothing goes out to it", drive,
-                        event.reason or "no reason given", extra=ctx)  # fmt: skip
-        elif self.snapshot.maintenance.pop(drive, None) is not None:
-            log.warning("drive %s is out of maintenance: it is polled again", drive, extra=ctx)
 
     def _pkw_length(self, event: PkwLengthTold, at: float) -> None:
         told.pkw_length(self.line, event)

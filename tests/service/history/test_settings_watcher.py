@@ -18,6 +18,7 @@ from prometheus_client import CollectorRegistry
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol.values import ParameterRef, Scaling, ValueType
+from pkwbus.service.history import settings_view
 from pkwbus.service.history.setting_reads import Swept
 from pkwbus.service.history.settings import KIND, SettingsWatcher
 from pkwbus.service.history.settings_store import SettingsStore
@@ -119,10 +120,10 @@ async def test_a_flag_of_a_setting_no_longer_swept_is_not_exported(tmp_path: Pat
 
 
 def test_a_negative_factory_value_reads_as_the_drive_sent_it(tmp_path: Path) -> None:
-    w, s = made(tmp_path)
+    _, s = made(tmp_path)
     s.factory[341] = -10000  # factory_raw: a number of the type, signed
     signed = ParameterDescription("x", ValueType.I32, Scaling.conversion(-2), "s")
-    assert w._factory(s, RAMP, signed) == pytest.approx(-100.0)
+    assert settings_view._factory(s, RAMP, signed) == pytest.approx(-100.0)
 
 
 async def test_other_software_keeps_the_baseline_and_another_model_starts_anew(

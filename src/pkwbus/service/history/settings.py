@@ -40,12 +40,11 @@ from prometheus_client import CollectorRegistry, Gauge
 from pkwbus.catalog.description import ParameterDescription, Value
 from pkwbus.master.events import Event, LineState
 from pkwbus.master.planning.plan import Described
-from pkwbus.protocol import pkw
 from pkwbus.protocol.values import ParameterRef
-from pkwbus.protocol.values.encoding import decode_value
 from pkwbus.service.history.backup import drive_type
 from pkwbus.service.history.setting_reads import SettingReads, Swept, Unanswered
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
+from pkwbus.service.history.settings_view import changed_count, settings_view
 from pkwbus.service.history.store import DriveEvent, HistoryError
 from pkwbus.service.history.stream import EventStream
 from pkwbus.service.runtime import LineTask
@@ -88,6 +87,7 @@ class SettingsWatcher:
         self._tasks: list[asyncio.Task[None]] = []
         self._identifying: set[asyncio.Future[None]] = set()
         self._lines: dict[str, asyncio.Event] = {}  # each line's port open
+        self._told: dict[str, tuple[int, float | None]] = {}  # what the read model shows
         self.changed = Gauge(
             "pkwbus_drive_setting_changed",
             "1 while a setting of the drive differs from its baseline and nobody audited the"
@@ -174,6 +174,7 @@ class SettingsWatcher:
             for row in s.rows.values():  # what the old drive held is gone at once
                 self._unflag(s, row)
             s.rows, s.swept = {}, None
+            self._tell(s)
             s.factory.clear()
             s.characteristics.clear()
             s.from_factory.clear()
@@ -218,6 +219,7 @@ class SettingsWatcher:
         if row.changed_seen is not None:
             with contextlib.suppress(KeyError):
                 self.changed.remove(s.line, s.drive, row.parameter, str(row.index))
+            self._tell(s)
         try:
             await self.store.saved([moved])
             s.expected.pop(key, None)
@@ -238,52 +240,13 @@ class SettingsWatcher:
         for row in rows:
             self._unflag(s, s.rows[row.key])
             s.rows[row.key] = row
+        self._tell(s)
         return len(rows)
 
     def view(self, drive: str) -> dict[str, Any]:
         """The last sweep of ``drive``, as the API shows it (times in seconds since the
         epoch)."""
-        s = self.swept[drive]
-        parameters = []
-        for ref in s.refs:
-            row = s.rows.get((ref.pnu, ref.index or 0))
-            fmt = s.format_of(ref)
-            parameters.append({
-                "parameter": ref.name,
-                "index": ref.index or 0,
-                "name": fmt.name,
-                "unit": fmt.unit,
-                "value": _value(row.value if row else None),
-                "raw": row.raw if row else None,
-                "seen": row.seen if row else None,
-                "baseline": _value(row.baseline_value if row else None),
-                "baseline_since": row.baseline_since if row else None,
-                "baseline_by": row.baseline_by if row else None,
-                "changed": bool(row and row.changed_seen is not None),
-                "changed_seen": row.changed_seen if row else None,
-                "factory": self._factory(s, ref, fmt),
-                "changed_from_factory": s.from_factory.get(ref.pnu),
-                "refused": s.refused.get((ref.pnu, ref.index or 0)),
-            })  # fmt: skip
-        return {
-            "drive": s.drive,
-            "line": s.line,
-            "identity": s.identity,
-            "catalog": s.catalog,
-            "every": s.every,
-            "swept": s.swept,
-            "parameters": parameters,
-        }
-
-    def _factory(self, s: Swept, ref: ParameterRef, fmt: ParameterDescription) -> Value | None:
-        raw = s.factory.get(ref.pnu)
-        if raw is None or fmt.vtype is None or isinstance(raw, float):
-            return raw
-        width = fmt.vtype.width or pkw.Width.DWORD
-        try:  # factory_raw gives the number of the type, signed: as it is sent again
-            return decode_value(raw & ((1 << width.value) - 1), width, fmt.vtype, fmt.scaling)
-        except ValueError:
-            return None
+        return settings_view(self.swept[drive])
 
     # ------------------------------------------------------------ one drive
 
@@ -372,6 +335,8 @@ class SettingsWatcher:
                 s.drive, ref.name, fmt.name, _said(value, fmt),
                 _said(_value(row.baseline_value), fmt), extra=ctx,
             )  # fmt: skip
+        if back or changed:
+            self._tell(s)
 
     def _unflag(self, s: Swept, row: SettingRow) -> None:
         if row.changed_seen is not None:
@@ -386,6 +351,16 @@ class SettingsWatcher:
         for row in s.rows.values():
             if row.changed_seen is not None and row.key in swept:
                 self.changed.labels(s.line, s.drive, row.parameter, str(row.index)).set(1)
+        self._tell(s)
+
+    def _tell(self, s: Swept) -> None:
+        """What the sweep found of the drive now, into the read model (its line's runner),
+        when it differs from what was told."""
+        seen = (changed_count(s), s.swept)
+        runner = self.runners.get(s.line)
+        if runner is not None and self._told.get(s.drive) != seen:
+            self._told[s.drive] = seen
+            runner.settings_seen(s.drive, *seen)
 
 
 def _value(text: str | None) -> Value | None:
