@@ -105,6 +105,9 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             expect(row("fan1").locator(".faults")).to_have_text("0")
             expect(row("fan3").locator(".age")).to_have_text("none yet")
             expect(page.locator("#shown-count")).to_have_text("(3)")
+            # Its bus as the API names it; its settings not swept: no count.
+            expect(row("fan1").locator(".bus")).to_have_text("FC")
+            expect(row("fan1").locator(".settings")).to_have_text("-")
             # The counts per line: the port, the drives up, down, ...; busy from the second
             # refresh on; and all lines together.
             line = page.locator('#lines [data-line="line_fc"]')
@@ -125,8 +128,45 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
             page.fill("#filter-text", "")
             page.select_option("#filter-state", "down")
             expect(page.locator("#no-match")).to_be_visible()
+            page.select_option("#filter-state", "settings")  # none swept: none changed
+            expect(page.locator("#no-match")).to_be_visible()
             page.select_option("#filter-state", "")
             expect(page.locator("#no-match")).to_be_hidden()
+            # A PROFIBUS DP slave out of data exchange (the answers made so): its state in
+            # the live list beside its bus, in red, and found by it.
+            overview = re.compile(r".*/api/v1/drives\?view=overview.*")
+
+            def on_dp(route: Any) -> None:
+                response = route.fetch()
+                rows = response.json()
+                for r in rows:
+                    if r["name"] == "fan3":
+                        r["protocol"], r["dp_state"] = "profibus", "wait_prm"
+                route.fulfill(response=response, json=rows)
+
+            def at_a_full_refresh(cell: Any, text: str) -> None:
+                """Every row asked for at the next refresh until ``cell`` shows ``text`` (fan3
+                polls nothing: its row is in no answer of the rows changed; an answer under
+                way may be of before the change)."""
+                deadline = time.monotonic() + 30
+                while True:
+                    page.evaluate("fullAt = 0")
+                    try:
+                        expect(cell).to_have_text(text, timeout=3_000)
+                        return
+                    except AssertionError:
+                        assert time.monotonic() < deadline, f"{text!r} not shown"
+
+            page.route(overview, on_dp)
+            bus = row("fan3").locator(".bus")
+            at_a_full_refresh(bus, "DP wait prm")
+            expect(bus).to_have_class(re.compile(r"\bbad\b"))
+            expect(bus).to_have_attribute("title", re.compile(r"^PROFIBUS DP: wait prm"))
+            page.fill("#filter-text", "wait prm")
+            expect(page.locator("#shown-count")).to_have_text("(1 of 3 shown)")
+            page.fill("#filter-text", "")
+            page.unroute(overview, on_dp)
+            at_a_full_refresh(bus, "FC")
             page.click('#drives th button[data-sort="name"]')
             assert order() == ["fan1", "fan2", "fan3"]
             expect(page.locator("#drives th", has_text="drive")).to_have_attribute(
@@ -329,6 +369,63 @@ def test_status_page_in_a_browser(served: ServedInThread, tmp_path: Path) -> Non
     fetched_only_what_it_shows(asked)
 
 
+def test_status_page_at_plant_scale_draws_the_rows_near_the_screen(served: ServedInThread) -> None:
+    """1,008 drives (the overview's answers made so): the rows near the screen are drawn,
+    and every drive is found by the filter, the sort and the scroll bar; a printout draws
+    every row."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no chromium at {CHROMIUM} (deploy/browser-setup installs it)")
+    expect = sync_api.expect
+    now = time.time()
+    rows = [
+        {"name": f"l{n}d{d}", "line": f"l{n}", "protocol": "fc", "address": d, "state": "up",
+         "dp_state": None, "faults": 0, "telegram_errors": 0, "alarms": [], "warnings": [],
+         "updated": now, "age": 0.0, "settings_changed": None}
+        for n in range(8) for d in range(1, 127)
+    ]  # fmt: skip
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.route(re.compile(r".*/api/v1/drives\?view=overview.*"),
+                       lambda route: route.fulfill(json=rows))  # fmt: skip
+            page.goto(served.url + "/")
+            table = page.locator("#drives")
+            drawn = page.locator("#drives tbody tr")
+            expect(table).to_have_attribute("aria-rowcount", "1009", timeout=20_000)
+            expect(page.locator("#shown-count")).to_have_text("(1008)")
+            expect(page.locator("#lines tfoot td.drives")).to_have_text("1008")
+            count = drawn.count()
+            assert 0 < count < 200, f"{count} rows drawn of 1,008"
+            expect(drawn.first).to_have_attribute("aria-rowindex", "2")
+            # Any drive found by the filter.
+            page.fill("#filter-text", "l7d126")
+            expect(drawn).to_have_count(1)
+            expect(drawn.first).to_have_attribute("data-drive", "l7d126")
+            expect(page.locator("#shown-count")).to_have_text("(1 of 1008 shown)")
+            page.fill("#filter-text", "")
+            expect(table).to_have_attribute("aria-rowcount", "1009")
+            # By the sort: the last by name first.
+            page.click('#drives th button[data-sort="name"]')
+            page.click('#drives th button[data-sort="name"]')
+            expect(drawn.first).to_have_attribute("data-drive", "l7d126")
+            # By the scroll bar: the last row drawn at the end of the table.
+            page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+            last = page.locator('#drives tbody tr[data-drive="l0d1"]')
+            expect(last).to_be_in_viewport()
+            expect(last).to_have_attribute("aria-rowindex", "1009")
+            expect(last.locator(".age")).to_have_text(re.compile(r"^\d+ s$"))
+            assert drawn.count() < 200
+            # A printout: every row.
+            page.evaluate("window.dispatchEvent(new Event('beforeprint'))")
+            expect(drawn).to_have_count(1008)
+            page.evaluate("window.dispatchEvent(new Event('afterprint'))")
+            expect(drawn).not_to_have_count(1008)
+        finally:
+            browser.close()
+
+
 # Two drives whose 3-41 and 3-42 are swept every second (the line's settings).
 SWEPT = [
     {"name": name, "address": address, "catalog": "danfoss-fc",
@@ -424,6 +521,16 @@ def test_status_page_shows_the_settings_changed_from_their_baseline(tmp_path: Pa
                 sync_api.expect(fan2.locator(".settings")).to_contain_text(
                     "PUT api/v1/drives/fan2/settings/baseline"
                 )
+                # Counted in its overview row, in red, and found by the state filter.
+                counted = page.locator('#drives tr[data-drive="fan2"] td.settings')
+                sync_api.expect(counted).to_have_text("1", timeout=20_000)
+                sync_api.expect(counted).to_have_class(re.compile(r"\bbad\b"))
+                sync_api.expect(page.locator('#drives tr[data-drive="fan1"] td.settings')
+                                ).to_have_text("0")  # fmt: skip
+                page.select_option("#filter-state", "settings")
+                sync_api.expect(page.locator("#drives tbody tr")).to_have_count(1)
+                sync_api.expect(page.locator('#drives tr[data-drive="fan2"]')).to_be_visible()
+                page.select_option("#filter-state", "")
                 # It stands out as an alarm does (asked again until it holds: a refresh
                 # may replace the row between the look and the style's reading).
                 sync_api.expect(row.locator(".value")).to_have_css("color", "rgb(176, 0, 32)")
@@ -446,6 +553,7 @@ def test_status_page_shows_the_settings_changed_from_their_baseline(tmp_path: Pa
                 sync_api.expect(fan2.locator(".settings p.sweep")).to_contain_text(
                     "none of 2 settings differs from the baseline"
                 )
+                sync_api.expect(counted).to_have_text("0", timeout=20_000)
             finally:
                 browser.close()
         assert elsewhere == []

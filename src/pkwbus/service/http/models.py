@@ -148,14 +148,25 @@ class DriveOverview(BaseModel):
 
     name: str
     line: str
+    protocol: str = Field(
+        description="its line's bus, as the drive's view names it: fc, uss or profibus"
+    )
     address: int
     state: Literal["up", "down", "maintenance"]
+    dp_state: str | None = Field(
+        default=None, description="a PROFIBUS DP slave: its state in the live list, as its"
+        " view's dp.state (null: not a DP slave)",
+    )  # fmt: skip
     faults: int = 0  # fault answers since the service started
     telegram_errors: int = 0  # exchanges without a usable answer since the service started
     alarms: list[str] = []  # active alarms in words (code and text), oldest first
     warnings: list[str] = []  # active warnings in words
     updated: float | None = None  # wall clock of its latest polled value (None: none yet)
     age: float | None = None  # seconds since then, at the answer
+    settings_changed: int | None = Field(
+        default=None, description="its swept settings that differ from their baseline, as"
+        " GET .../settings marks them changed (null: its settings are not swept)",
+    )  # fmt: skip
 
 
 class MasterView(BaseModel):

@@ -83,7 +83,7 @@ function learnClock(rows, receivedAt) {
 // ---- What the reader chose: filters, sort, the open drive (kept in the address's #) ----
 
 const chosen = { line: "", state: "", text: "", sort: "state", descending: false, drive: "" };
-const DESCENDING_FIRST = new Set(["alarms", "faults", "errors", "age"]);
+const DESCENDING_FIRST = new Set(["alarms", "settings", "faults", "errors", "age"]);
 
 function readHash() {
   const found = new URLSearchParams(location.hash.slice(1));
@@ -114,40 +114,66 @@ function saveHash() {
   history.replaceState(null, "", hash ? `#${hash}` : location.href.split("#")[0]);
 }
 
-// ---- The overview: one row per drive, keyed by its name, its cells filled in place ----
+// ---- The overview: one entry per drive, keyed by its name; its row drawn only while it is
+// near the screen ----
 
-const entries = new Map();  // drive -> {data, row, cells..., place, rank, haystack, shown}
-let shownRows = [];  // the entries of the rows shown (not filtered out), in the table's order
+// At 1,008 drives, with every row in the page, a refresh cost a slow computer (CPU slowed
+// four times) 110-120 ms of its main thread, most of it Chromium's walks over the rows
+// (layout, pre-paint, the intersections of content-visibility) whenever one changed or
+// moved, and its first view up to 2.1 s (benchmark 11). Only the rows on the screen, and a
+// screen above and below it, are in the table now (at most some 90 on a 900 px screen),
+// the others stand in as its height: every drive stays found by the filters, the sort and
+// the scroll bar, and a printout draws every row.
+const entries = new Map();  // drive -> {name, data, place, rank, haystack, shown, row...}
+let shownRows = [];  // the entries shown (not filtered out), in the table's order
+let drawnRows = [];  // the entries whose rows are in the table now, in its order
 let places = 0;  // the configuration's order, as the full overview gives it
 let changesToken = "";
 let fullAt = 0;  // when the whole overview was last asked for
-const driveBody = document.querySelector("#drives tbody");
+const driveTable = document.getElementById("drives");
+const driveBody = driveTable.querySelector("tbody");
 const collator = new Intl.Collator(undefined, { numeric: true });
+
+// The bus as pkwbus's documents name it; a PROFIBUS DP slave's state in the live list.
+const BUSES = { fc: "FC", uss: "USS", profibus: "PROFIBUS DP" };
+const BUS_SHORT = { profibus: "DP" };
+
+function busOf(d) {
+  return BUSES[d.protocol] || d.protocol || "";
+}
 
 // (Roles: the table's rows are laid out as boxes, status.css, and keep a table's meaning.)
 const ROW = el("tr", { role: "row" },
   el("td", { class: "name", role: "cell" }, el("a", {})),
-  el("td", { class: "line", role: "cell" }), el("td", { class: "num address", role: "cell" }),
+  el("td", { class: "line", role: "cell" }),
+  el("td", { class: "bus", role: "cell" }, el("span", { class: "v" })),
+  el("td", { class: "num address", role: "cell" }),
   el("td", { class: "state", role: "cell" }, el("span", { class: "v" })),
   el("td", { class: "alarms", role: "cell" },
     el("span", { class: "v" }, el("span", { class: "alarm" }), el("span", { class: "warning" }))),
+  el("td", { class: "num settings", role: "cell" }, el("span", { class: "v" })),
   el("td", { class: "num faults", role: "cell" }, el("span", { class: "v" })),
   el("td", { class: "num errors", role: "cell" }, el("span", { class: "v" })),
   el("td", { class: "num age", role: "cell" }, el("span", { class: "v" })));
 
 function makeEntry(name) {
+  return { name, data: null, row: null, place: places++, rank: 3, haystack: "", shown: true,
+    index: -1 };
+}
+
+function makeRow(e) {  // its row, made when it first comes near the screen, then kept
   const row = ROW.cloneNode(true);
-  row.dataset.drive = name;
+  row.dataset.drive = e.name;
   const cells = row.cells;
   const link = cells[0].firstChild;
-  link.href = `#drive=${encodeURIComponent(name)}`;
-  link.textContent = name;
-  const said = cells[4].firstChild;
-  return { name, data: null, row, line: cells[1], address: cells[2],
-    state: cells[3].firstChild, alarms: cells[4], alarm: said.firstChild, warning: said.lastChild,
-    faultsCell: cells[5], faults: cells[5].firstChild, errorsCell: cells[6],
-    errors: cells[6].firstChild, age: cells[7].firstChild, place: places++,
-    rank: 3, haystack: "", shown: true };
+  link.href = `#drive=${encodeURIComponent(e.name)}`;
+  link.textContent = e.name;
+  const said = cells[5].firstChild;
+  Object.assign(e, { row, line: cells[1], busCell: cells[2], bus: cells[2].firstChild,
+    address: cells[3], state: cells[4].firstChild, alarms: cells[5], alarm: said.firstChild,
+    warning: said.lastChild, settingsCell: cells[6], settings: cells[6].firstChild,
+    faultsCell: cells[7], faults: cells[7].firstChild, errorsCell: cells[8],
+    errors: cells[8].firstChild, age: cells[9].firstChild });
 }
 
 function rankOf(d) {  // down first, then alarms, warnings, up, in maintenance
@@ -158,77 +184,115 @@ function rankOf(d) {  // down first, then alarms, warnings, up, in maintenance
   return 3;
 }
 
-function fillEntry(e, d) {
+function fillEntry(e, d) {  // what sorts and filters it; its row is drawn by drawRows
   e.data = d;
   e.rank = rankOf(d);
-  const alarms = d.alarms.join("; ");
-  const warnings = d.warnings.join("; ");
-  e.haystack = [d.name, d.line, `${d.address}`, d.state, alarms, warnings].join("\n")
-    .toLowerCase();
+  const dp = d.dp_state ? words(d.dp_state) : "";
+  e.haystack = [d.name, d.line, `${d.address}`, d.state, busOf(d), dp, d.alarms.join("; "),
+    d.warnings.join("; ")].join("\n").toLowerCase();
+}
+
+function drawRow(e, now) {  // only a change touches the page (setText, setClass)
+  const d = e.data;
   setText(e.line, d.line);
+  const bus = BUS_SHORT[d.protocol] || busOf(d);
+  const dp = d.dp_state ? words(d.dp_state) : "";
+  setText(e.bus, dp ? `${bus} ${dp}` : bus);
+  const busTitle = dp ? `${busOf(d)}: ${dp} (its state in the live list)` : busOf(d);
+  if (e.busCell.title !== busTitle) e.busCell.title = busTitle;
+  setClass(e.busCell, d.dp_state && d.dp_state !== "data_exchange" ? "bus bad" : "bus");
   setText(e.address, `${d.address}`);
   setText(e.state, d.state);
+  const alarms = d.alarms.join("; ");
+  const warnings = d.warnings.join("; ");
   setText(e.alarm, alarms);
   setText(e.warning, alarms && warnings ? `; ${warnings}` : warnings);
   const all = d.alarms.concat(d.warnings).join("\n");
   if (e.alarms.title !== all) e.alarms.title = all;
-  const flag = d.alarms.length ? " alarm" : (d.warnings.length ? " warning" : "");
-  setClass(e.row, `${d.state}${flag}${e.name === openName ? " open" : ""}`);
-}
-
-// The numbers that change at every refresh (the age of the newest value, the counts) are
-// written only in the rows on the screen and a screen above and below it, the others when
-// they scroll into it, each in a box laid out on its own (status.css). At 1,008 rows,
-// writing every row's age cost a refresh some 35 ms of layout and 20 ms of paint; this,
-// 2 ms. The rows are all of one height.
-let rowHeight = 0;
-
-function fillNumbers(e, now) {
-  const d = e.data;
+  const changed = d.settings_changed;
+  setText(e.settings, typeof changed === "number" ? `${changed}` : "-");
+  setClass(e.settingsCell, changed ? "num settings bad" : "num settings");
   setText(e.faults, `${d.faults}`);
   setClass(e.faultsCell, d.faults ? "num faults bad" : "num faults");
   setText(e.errors, `${d.telegram_errors}`);
   setClass(e.errorsCell, d.telegram_errors ? "num errors bad" : "num errors");
   setText(e.age, typeof d.updated === "number" ? age(now - d.updated) : "none yet");
+  const flag = d.alarms.length ? " alarm" : (d.warnings.length ? " warning" : "");
+  setClass(e.row, `${d.state}${flag}${e.name === openName ? " open" : ""}`);
 }
 
-function fillNear(now = serverNow()) {
-  if (!shownRows.length) return;
-  const top = driveBody.getBoundingClientRect().top;
-  if (!rowHeight) rowHeight = shownRows[0].row.getBoundingClientRect().height || 28;
-  const screen = window.innerHeight;
-  const from = Math.max(0, Math.floor((-screen - top) / rowHeight));
-  const to = Math.min(shownRows.length, Math.ceil((2 * screen - top) / rowHeight));
-  for (let i = from; i < to; i++) fillNumbers(shownRows[i], now);
+let rowHeight = 0;  // measured on a drawn row (a zoom: again); all rows are of one height
+let everyRow = false;  // a printout: every row shown is drawn
+
+// The rows shown from a screen above the screen to a screen below it, in the table, in
+// their order (moving the fewest), each filled; the others stand in as the table's height.
+function drawRows(now = serverNow()) {
+  const count = shownRows.length;
+  const height = rowHeight || 30;
+  let from = 0, to = count;
+  if (!everyRow) {
+    const top = driveBody.getBoundingClientRect().top;
+    const screen = window.innerHeight;
+    from = Math.min(count, Math.max(0, Math.floor((-screen - top) / height)));
+    to = Math.max(from, Math.min(count, Math.ceil((2 * screen - top) / height)));
+  }
+  const wanted = shownRows.slice(from, to);
+  const keep = new Set(wanted);
+  for (const e of drawnRows) if (!keep.has(e)) e.row.remove();
+  let node = driveBody.firstChild;
+  wanted.forEach((e, i) => {
+    if (!e.row) makeRow(e);
+    drawRow(e, now);
+    if (e.index !== from + i) {  // its place for assistive technology (aria-rowindex)
+      e.index = from + i;
+      e.row.setAttribute("aria-rowindex", `${e.index + 2}`);
+    }
+    if (e.row === node) node = node.nextSibling;
+    else driveBody.insertBefore(e.row, node);
+  });
+  drawnRows = wanted;
+  const above = `${from * height}px`, below = `${(count - to) * height}px`;
+  if (driveBody.style.paddingTop !== above) driveBody.style.paddingTop = above;
+  if (driveBody.style.paddingBottom !== below) driveBody.style.paddingBottom = below;
+  if (!rowHeight && wanted.length) {
+    rowHeight = wanted[0].row.getBoundingClientRect().height;
+    if (rowHeight && Math.abs(rowHeight - height) > 0.01) drawRows(now);
+  }
 }
 
-let nearQueued = false;
+let drawQueued = false;
 
-function fillNearSoon() {  // at the next frame, before it is painted
-  if (nearQueued) return;
-  nearQueued = true;
+function drawRowsSoon() {  // at the next frame, before it is painted
+  if (drawQueued) return;
+  drawQueued = true;
   requestAnimationFrame(() => {
-    nearQueued = false;
-    fillNear();
+    drawQueued = false;
+    drawRows();
   });
 }
 
-window.addEventListener("scroll", fillNearSoon, { passive: true });
+window.addEventListener("scroll", drawRowsSoon, { passive: true });
 window.addEventListener("resize", () => {  // a zoom, too: the rows' height is measured again
   rowHeight = 0;
-  fillNearSoon();
+  drawRowsSoon();
 });
 window.addEventListener("beforeprint", () => {  // a printout shows every row
-  const now = serverNow();
-  for (const e of entries.values()) fillNumbers(e, now);
+  everyRow = true;
+  drawRows();
+});
+window.addEventListener("afterprint", () => {
+  everyRow = false;
+  drawRows();
 });
 
 const SORTS = {  // each row's key for a column
   name: (e) => e.name,
   line: (e) => e.data.line,
+  bus: (e) => `${busOf(e.data)} ${e.data.dp_state || ""}`,
   address: (e) => e.data.address,
   state: (e) => e.rank,
   alarms: (e) => e.data.alarms.length * 10000 + e.data.warnings.length,
+  settings: (e) => (typeof e.data.settings_changed === "number" ? e.data.settings_changed : -1),
   faults: (e) => e.data.faults,
   errors: (e) => e.data.telegram_errors,
   // In whole seconds, and under 10 s all alike: the rows do not change places at every
@@ -241,51 +305,17 @@ const SORTS = {  // each row's key for a column
 };
 const FRESH_S = 10;
 
-// The indexes of a longest increasing run of `a` (patience sorting): the rows to leave.
-function longestRun(a) {
-  const tails = [];
-  const before = new Array(a.length);
-  for (let i = 0; i < a.length; i++) {
-    let low = 0, high = tails.length;
-    while (low < high) {
-      const mid = (low + high) >> 1;
-      if (a[tails[mid]] < a[i]) low = mid + 1; else high = mid;
-    }
-    before[i] = low > 0 ? tails[low - 1] : -1;
-    tails[low] = i;
-  }
-  const keep = new Set();
-  for (let i = tails.length ? tails[tails.length - 1] : -1; i >= 0; i = before[i]) keep.add(i);
-  return keep;
-}
-
-function placeRows(order) {  // the rows in this order, moving the fewest
-  const at = new Map();
-  let i = 0;
-  for (let node = driveBody.firstChild; node; node = node.nextSibling) at.set(node, i++);
-  const places = order.map((e) => at.get(e.row));
-  if (places.every((p, k) => k === 0 || places[k - 1] < p)) return;  // in order already
-  const keep = longestRun(places);
-  let next = null;
-  for (let k = order.length - 1; k >= 0; k--) {
-    if (!keep.has(k)) driveBody.insertBefore(order[k].row, next);
-    next = order[k].row;
-  }
-}
-
-function sortRows() {  // the rows in the chosen order: only the rows out of place move
+function sortRows() {  // the entries shown, in the chosen order (drawRows draws them)
   const key = SORTS[chosen.sort];
   const sign = chosen.descending ? -1 : 1;
   const now = serverNow();
   const keyed = [];
-  for (const e of entries.values()) keyed.push([key(e, now), e]);
+  for (const e of entries.values()) if (e.shown) keyed.push([key(e, now), e]);
   keyed.sort(([a, x], [b, y]) => {
     const order = typeof a === "string" ? collator.compare(a, b) : (a < b ? -1 : (a > b ? 1 : 0));
     return sign * order || x.place - y.place;
   });
-  const order = keyed.map(([, e]) => e);
-  placeRows(order);
-  shownRows = order.filter((e) => e.shown);
+  shownRows = keyed.map(([, e]) => e);
   for (const button of document.querySelectorAll("#drives th button")) {
     const th = button.parentElement;
     const sorted = button.dataset.sort === chosen.sort;
@@ -301,6 +331,7 @@ function matches(e) {
     case "attention": if (e.rank > 2) return false; break;
     case "alarm": if (!d.alarms.length) return false; break;
     case "warning": if (!d.warnings.length) return false; break;
+    case "settings": if (!d.settings_changed) return false; break;
     case "up": case "down": case "maintenance": if (d.state !== chosen.state) return false; break;
     default: break;
   }
@@ -310,12 +341,12 @@ function matches(e) {
 function filterRows() {
   let shown = 0;
   for (const e of entries.values()) {
-    const show = matches(e);
-    if (show !== e.shown) {
-      e.row.hidden = !show;
-      e.shown = show;
-    }
-    if (show) shown += 1;
+    e.shown = matches(e);
+    if (e.shown) shown += 1;
+  }
+  const rows = `${shown + 1}`;  // the head's row, and a row per drive shown
+  if (driveTable.getAttribute("aria-rowcount") !== rows) {
+    driveTable.setAttribute("aria-rowcount", rows);
   }
   setText(document.getElementById("shown-count"),
     shown === entries.size ? `(${entries.size})` : `(${shown} of ${entries.size} shown)`);
@@ -325,30 +356,19 @@ function filterRows() {
 // The overview's rows as the API answered them: `complete` when all drives were asked for,
 // so that a drive not in it is gone.
 function applyOverview(rows, complete) {
-  const fresh = [];
   const seen = complete ? new Set() : null;
   for (const d of rows) {
     let e = entries.get(d.name);
-    if (!e) {
-      e = makeEntry(d.name);
-      entries.set(d.name, e);
-      fresh.push(e.row);
-    }
+    if (!e) entries.set(d.name, e = makeEntry(d.name));
     if (seen) seen.add(d.name);
     fillEntry(e, d);
   }
   if (seen) {
-    for (const [name, e] of entries) {
-      if (!seen.has(name)) {
-        e.row.remove();
-        entries.delete(name);
-      }
-    }
+    for (const name of entries.keys()) if (!seen.has(name)) entries.delete(name);
   }
-  if (fresh.length) driveBody.append(...fresh);  // placed by sortRows
   filterRows();
   sortRows();
-  fillNear();
+  drawRows();
 }
 
 async function refreshOverview() {
@@ -674,7 +694,7 @@ function showDetail(name) {
 
 function markOpen(name, on) {
   const e = entries.get(name);
-  if (e) e.row.classList.toggle("open", on);
+  if (e && e.row) e.row.classList.toggle("open", on);
 }
 
 function openDrive(name) {
@@ -734,7 +754,7 @@ async function fetchDetail() {
   return { d, views: await response.json(), token: response.headers.get(TOKEN_HEADER) || "" };
 }
 
-// Then what is due of its trends, settings and log: they fill it when they have arrived.
+// Then what is due of its trends, settings and log: each fills it when it has arrived.
 function applyDetail(found) {
   if (!found || detail !== found.d) return;  // another drive opened meanwhile
   const d = found.d;
@@ -749,10 +769,13 @@ function applyDetail(found) {
   if (found.views.length) d.drive = found.views[0];
   fillDetail(d);
   if (!d.drive) return;
-  const due = [refreshTrends(d), refreshSettings(d), refreshDriveEvents(d)];
-  Promise.all(due.map((p) => p.catch(() => {}))).then((done) => {
-    if (detail === d && done.some((changed) => changed)) fillDetail(d);
-  });
+  // Each drawn as it arrives: the sparklines do not wait for the log (a query of the
+  // history) or the settings.
+  for (const due of [refreshTrends(d), refreshSettings(d), refreshDriveEvents(d)]) {
+    due.then((changed) => {
+      if (changed && detail === d) fillDetail(d);
+    }, () => {});
+  }
 }
 
 async function refreshDetail() {
@@ -1048,7 +1071,7 @@ document.querySelector("#drives thead").addEventListener("click", (event) => {
   chosen.descending = key === chosen.sort ? !chosen.descending : DESCENDING_FIRST.has(key);
   chosen.sort = key;
   sortRows();
-  fillNear();
+  drawRows();
   saveHash();
 });
 
@@ -1075,7 +1098,7 @@ document.getElementById("lines").addEventListener("click", (event) => {
   document.getElementById("filter-state").value = chosen.state;
   filterRows();
   sortRows();
-  fillNear();
+  drawRows();
   saveHash();
 });
 
@@ -1085,7 +1108,7 @@ function filtersChanged() {
   chosen.text = document.getElementById("filter-text").value.trim().toLowerCase();
   filterRows();
   sortRows();
-  fillNear();
+  drawRows();
   saveHash();
 }
 
@@ -1106,7 +1129,7 @@ window.addEventListener("hashchange", () => {  // typed or followed by the reade
   document.getElementById("filter-line").value = chosen.line;
   filterRows();
   sortRows();
-  fillNear();
+  drawRows();
   const wanted = chosen.drive;
   if (wanted !== openName) {
     if (wanted) openDrive(wanted); else closeDrive();

@@ -37,6 +37,7 @@ from pkwbus.service.http.views import (
     writable_refs,
     writable_views,
 )
+from pkwbus.service.http.views.overview import settings_changed
 from pkwbus.service.http.views.pieces import (
     ValuesMade,
     head_json,
@@ -158,8 +159,9 @@ def _reading_fields(
 
 
 def overview_row(runtime: Runtime, name: str, now: float) -> DriveOverview:
-    """One short row of the drive: where it is, its state, its faults and alarms in words,
-    the age of its latest value."""
+    """One short row of the drive: where it is and on which bus, its state (a DP slave's in
+    the live list too), its faults and alarms in words, its settings that differ from their
+    baseline, the age of its latest value."""
     entry = runtime.drives[name]
     snap = runtime.snapshot
     state = snap.drives.get(name)
@@ -169,13 +171,17 @@ def overview_row(runtime: Runtime, name: str, now: float) -> DriveOverview:
         shown = "up" if state is None or state.up else "down"
     active = snap.alarms.get(name, ())
     landed = counts.landed if counts is not None else None
+    live = snap.slaves.get(name)
     return DriveOverview(
-        name=name, line=entry.line, address=entry.target.address, state=shown,
+        name=name, line=entry.line, protocol=entry.target.protocol.value,
+        address=entry.target.address, state=shown,
+        dp_state=live.state.value if live is not None else None,
         faults=counts.faults if counts is not None else 0,
         telegram_errors=counts.errors if counts is not None else 0,
         alarms=[a.alarm.shown for a in active if a.alarm.kind == "alarm"],
         warnings=[a.alarm.shown for a in active if a.alarm.kind != "alarm"],
         updated=landed, age=None if landed is None else max(0.0, now - landed),
+        settings_changed=settings_changed(runtime, name),
     )  # fmt: skip
 
 
