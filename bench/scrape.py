@@ -20,10 +20,12 @@ and CPU time; also with nothing new and with every value new); the size of the
 text; then, unless ``--no-http``, ``GET /metrics`` from a client in another
 process through the service's app on uvicorn (a quarter of the values landing
 meanwhile, in slices). ``--families``: each collector's CPU time;
-``--profile``: a cProfile of the scrapes.
+``--profile``: a cProfile of the scrapes; ``--gzip``: the CPU time of compressing the
+body as ``Content-Encoding: gzip`` would (zlib levels 1 and 6), beside the render's,
+and the share of the size left.
 
     .venv/bin/python -m bench.scrape [--lines 4] [--drives 126] [--repeat 15]
-        [--no-memory] [--no-http] [--families] [--profile]
+        [--no-memory] [--no-http] [--families] [--profile] [--gzip]
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import pstats
 import statistics
 import tempfile
 import time
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -202,6 +205,7 @@ async def measure(
     http: bool = True,
     families: bool = False,
     profile: bool = False,
+    gzip: bool = False,
 ) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         plant = await build(lines, drives, memory, tmp)
@@ -228,6 +232,7 @@ async def measure(
                 if profiler is not None:
                     profiler.disable()
         values = body.count(b"\npkwbus_parameter_value{")
+        packed = _gzip(body, repeat) if gzip else {}
         parts = _families(registry, repeat, plant) if families else []
         gets = await _http(plant, repeat, tmp) if http else []
         gc.unfreeze()
@@ -247,8 +252,24 @@ async def measure(
         "per_1000_all": per_k["all"],
         "http_per_1000": http_k,
         "met": "yes" if max(per_k["quarter"], http_k if gets else 0) <= GOAL_MS_PER_1000 else "no",
+        **packed,
         "families": parts,
     }
+
+
+def _gzip(body: bytes, repeat: int) -> dict[str, float]:
+    """CPU ms (median of ``repeat``) to gzip ``body`` at zlib levels 1 and 6, and the
+    share of its size each leaves."""
+    out: dict[str, float] = {}
+    for level in (1, 6):
+        times = []
+        for _ in range(repeat):
+            c0 = time.process_time()
+            packed = zlib.compress(body, level, wbits=31)  # the gzip format
+            times.append(time.process_time() - c0)
+        out[f"gzip_{level}_cpu_ms"] = statistics.median(times) * 1e3
+        out[f"gzip_{level}_share"] = len(packed) / len(body)
+    return out
 
 
 def run(lines: int = 4, drives: int = 126, repeat: int = 15) -> dict[str, Any]:
@@ -284,10 +305,11 @@ def main() -> None:
     parser.add_argument("--no-http", action="store_true", help="the renderer only, no GET")
     parser.add_argument("--families", action="store_true", help="each collector's time")
     parser.add_argument("--profile", action="store_true", help="cProfile of the scrapes")
+    parser.add_argument("--gzip", action="store_true", help="CPU time of gzipping the body")
     args = parser.parse_args()
     row = asyncio.run(measure(args.lines, args.drives, args.repeat, memory=not args.no_memory,
                               http=not args.no_http, families=args.families,
-                              profile=args.profile))  # fmt: skip
+                              profile=args.profile, gzip=args.gzip))  # fmt: skip
     for key, value in row.items():
         if key != "families":
             print(f"{key}: {value:.3f}" if isinstance(value, float) else f"{key}: {value}")

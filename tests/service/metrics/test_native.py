@@ -141,3 +141,13 @@ def test_names_outside_the_legacy_ones_are_left_to_generate_latest() -> None:
     accented.labels("a").set(2)
     text = _same(registry)
     assert 't_dot{line="a"} 1.0\n' in text and 't_accent{l_ne="a"} 2.0\n' in text
+
+
+def test_a_series_given_a_function_after_a_scrape_shows_the_function_s_value() -> None:
+    f = Families()
+    series = [f.gauge.labels("l1", f"d{n}") for n in range(30)]
+    for n, gauge in enumerate(series):
+        gauge.set(n)
+    _same(f.registry)
+    series[29].set_function(lambda: 4242.0)  # the last series: the values as they were
+    assert 't_gauge{drive="d29",line="l1"} 4242.0\n' in _same(f.registry)

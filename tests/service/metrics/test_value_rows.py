@@ -147,3 +147,67 @@ def test_each_change_of_a_drive_s_state_is_shown(values: Values) -> None:
             drives[f"d{n}"] = state
         text = values.text()
         assert f'pkwbus_drive_up{{drive="d29",line="line0"}} {float(state.up)}\n' in text
+
+
+class Listed(dict[tuple[str, str, int], Reading]):
+    """The snapshot's readings, counting how often their keys are listed."""
+
+    listed = 0
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        self.listed += 1
+        return super().__iter__()
+
+
+def _render(values: Values) -> str:
+    return asyncio.run(render(values.registry)).decode()
+
+
+def test_a_scrape_after_told_landings_does_not_list_the_keys(values: Values) -> None:
+    readings = values.snapshot.readings = Listed(values.snapshot.readings)
+    values.land(5, 1.5, 200.0)
+    values.land(CHUNK + 5, 2.5, 200.0)
+    text = _render(values)
+    assert readings.listed == 0  # every place holds what its row was made of
+    assert _line(5, "1.5") in text and _line(CHUNK + 5, "2.5") in text
+    values.land(7, 3.5, 201.0, told=False)  # not told: the keys are compared, then shown
+    text = _render(values)
+    assert readings.listed == 1 and _line(7, "3.5") in text
+    assert text == values.text()
+    values.collector.landed(("gone", "1-20", 0), Reading(1.0, 1, 202.0))  # not held
+    assert 'drive="gone"' not in _render(values) and readings.listed == 2
+    values.land(9, 4.5, 203.0)
+    assert _line(9, "4.5") in _render(values) and readings.listed == 2  # not listed again
+
+
+def test_keys_that_move_or_swap_untold_are_shown_in_the_snapshot_s_order(values: Values) -> None:
+    readings = values.snapshot.readings
+    second = values.infos[1]
+    key = (second.drive, second.parameter, 0)
+    readings[key] = readings.pop(key)  # the same object, now at the end
+    assert _line(1, "1.0") in values.text()  # Values.text: the order of generate_latest
+    held = readings.pop(next(reversed(readings)))  # the last: key 1, as it moved
+    readings[("stranger", "1-20", 0)] = held  # the same size, the same object at each place
+    text = values.text()  # Values.text: generate_latest's text, not the row of key 1
+    assert 'drive="stranger"' in text and _line(1, "1.0") not in text
+
+
+def test_a_main_actual_value_that_moved_leaves_the_other_pieces_of_the_drives(
+    values: Values,
+) -> None:
+    drives, rows = values.snapshot.drives, values.collector._drive_rows
+    for n in range(DRIVES):
+        drives[f"d{n}"] = DriveState(True, 0x0F07, 1.0, 0x2000)
+    values.text()
+    before = rows.sync(drives)
+    for n in range(DRIVES):
+        drives[f"d{n}"] = DriveState(True, 0x0F07, 2.0, 0x2000 + 64 * n)
+    text = values.text()
+    after = rows.sync(drives)
+    ups, words, bits, mavs = (
+        all(a is b for a, b in zip(old, new, strict=True))
+        for old, new in zip(before, after, strict=True)
+    )
+    assert ups and words and bits and not mavs  # only the main actual values joined again
+    percent = (0x2000 + 64 * 29) / 0x4000 * 100  # 0x4000: 100 % of nominal
+    assert f'pkwbus_drive_main_actual_percent{{drive="d29",line="line0"}} {percent}\n' in text

@@ -7,14 +7,24 @@ when the object the mapping holds then is not the one its row was made of
 row never shows an object the mapping no longer holds. The objects are immutable (a
 frozen ``Reading``, ``DriveState``): a new value is a new object.
 
+The keys (the layout) are listed and compared only when something says they may
+have changed: another size, a key landed that has no row yet, another last key, or an
+object other than its row's at some place (one pass in C; a 10,080-key list compared
+at every scrape cost more). A key that comes goes to the end of a dict: keys replaced
+while every place holds the object its row was made of and the last key stays would
+take a key gone and the keys after it put back with the very objects they held, which
+no writer does (a writer lands a reading when it makes it).
+
 Each column is joined in pieces of ``chunk`` rows, and a piece is joined again only
-when one of its rows was made again since: values that landed together (a drive's,
-a line's round) leave the other pieces as they were.
+when one of its texts in that column is another since (a row made again keeps the
+texts that did not change, the same objects): values that landed together (a drive's,
+a line's round) leave the other pieces as they were, and a drive whose main actual
+value moved leaves its status bits' piece as it was.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Hashable
 from itertools import compress
 from operator import is_not
 from typing import Generic, TypeVar
@@ -46,9 +56,9 @@ class Rows(Generic[K, S]):
         self._objects: list[object] = []  # the object each row was made of
         self._rows: list[Made] = []  # each row as made (its texts are in the columns)
         self._columns: list[list[bytes]] = [[] for _ in range(columns)]
-        # Each column's pieces as joined, and the pieces to join again.
+        # Each column's pieces as joined, and the pieces of each column to join again.
         self._joined: list[list[bytes]] = [[] for _ in range(columns)]
-        self._dirty: set[int] = set()
+        self._dirty: list[set[int]] = [set() for _ in range(columns)]
         # Rows of keys not in the columns yet (landed since the last scrape).
         self._early: dict[K, tuple[S, Made]] = {}
         self._made = 0
@@ -74,23 +84,35 @@ class Rows(Generic[K, S]):
         if at is not None:
             self._objects[at] = _STALE
 
-    def sync(self, entries: Mapping[K, S]) -> list[list[bytes]]:
+    def sync(self, entries: dict[K, S]) -> list[list[bytes]]:
         """The text of ``entries`` as they are now, in their order: each column's pieces
         (of ``chunk`` rows each; they stay as they are when rows change later)."""
-        keys = list(entries)
-        objects = list(entries.values())
-        if keys != self._keys:
-            self._lay_out(keys, objects)
-        else:
-            for at in compress(range(len(objects)), map(is_not, objects, self._objects)):
-                self._put(at, keys[at], objects[at])
+        keys = self._keys
+        if (
+            len(entries) != len(keys)
+            or self._early
+            or (keys and next(reversed(entries)) is not keys[-1])
+            or any(map(is_not, entries.values(), self._objects))
+        ):
+            self._check(entries)
         chunk = self._chunk
-        for n in self._dirty:
-            start = n * chunk
-            for column, joined in zip(self._columns, self._joined, strict=True):
+        for column, joined, dirty in zip(self._columns, self._joined, self._dirty, strict=True):
+            for n in dirty:
+                start = n * chunk
                 joined[n] = b"".join(column[start : start + chunk])
-        self._dirty.clear()
+            dirty.clear()
         return [joined[:] for joined in self._joined]
+
+    def _check(self, entries: dict[K, S]) -> None:
+        """Keys or objects other than the rows': the keys compared, then the objects."""
+        keys = list(entries)
+        if keys != self._keys:
+            self._lay_out(keys, list(entries.values()))
+            return
+        self._early.clear()  # landed, but not held (it would be among the keys)
+        objects = list(entries.values())
+        for at in compress(range(len(objects)), map(is_not, objects, self._objects)):
+            self._put(at, keys[at], objects[at])
 
     def _put(self, at: int, key: K, obj: S) -> None:
         old = self._objects[at]
@@ -98,9 +120,11 @@ class Rows(Generic[K, S]):
         row = self._make(key, obj, None if old is _STALE else (old, self._rows[at]))  # type: ignore[arg-type]
         self._objects[at] = obj
         self._rows[at] = row
-        for column, text in zip(self._columns, row, strict=True):
-            column[at] = text
-        self._dirty.add(at // self._chunk)
+        n = at // self._chunk
+        for column, text, dirty in zip(self._columns, row, self._dirty, strict=True):
+            if column[at] is not text:  # a text kept from the previous row: its piece too
+                column[at] = text
+                dirty.add(n)
 
     def _lay_out(self, keys: list[K], objects: list[S]) -> None:
         """Keys came or went: the columns in the new order, each row kept when its key
@@ -131,4 +155,4 @@ class Rows(Generic[K, S]):
         self._columns = self._columns or [[] for _ in range(width)]
         pieces = -(-len(rows) // self._chunk)
         self._joined = [[b""] * pieces for _ in range(width)]
-        self._dirty = set(range(pieces))
+        self._dirty = [set(range(pieces)) for _ in range(width)]
