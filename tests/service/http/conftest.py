@@ -118,6 +118,7 @@ def line_yaml(
     timeout: float = 0.1,
     retries: int = 1,
     settings: str = "off",
+    inter_char_timeout: float | None = None,
 ) -> str:
     lines = [
         f"  - name: {name}",
@@ -126,6 +127,7 @@ def line_yaml(
         "    baudrate: 115200",
         f"    timeout: {timeout}",
         f"    retries: {retries}",
+        *([f"    inter_char_timeout: {inter_char_timeout}"] if inter_char_timeout else []),
         # The tests count the requests: no alarm words polled beyond what they poll.
         "    alarms: off",
         # Nor settings swept, unless a test sweeps them.
@@ -191,6 +193,7 @@ async def service(
     timing: SimTiming | None = None,
     faults: SimFaults | None = None,
     line_timeout: float = 0.1,
+    inter_char_timeout: float | None = None,
     retries: int = 1,
     audit: bool = True,
     read_token: str | None = None,
@@ -232,6 +235,7 @@ async def service(
                     timeout=line_timeout,
                     retries=retries,
                     settings=settings,
+                    inter_char_timeout=inter_char_timeout,
                 )
             )
         audit_path = tmp_path / "audit.sqlite"
