@@ -278,7 +278,7 @@ lines:
     port: "{server.url}"
     protocol: profibus
     baudrate: 19200
-    slot_time: 20ms
+    slot_time: 50ms
     watchdog: 2s
     alarms: off  # the test counts the values that land
     counters: off

@@ -46,7 +46,7 @@ lines:
     port: {dp_url}
     protocol: profibus
     baudrate: 19200
-    slot_time: 20ms
+    slot_time: 50ms
     alarms: off
     counters: off
     settings: off

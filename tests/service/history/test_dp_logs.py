@@ -25,7 +25,7 @@ def dp_line(name: str, url: str, drive: str, address: int, access: str) -> str:
     port: "{url}"
     protocol: profibus
     baudrate: 93750
-    slot_time: 20ms
+    slot_time: 50ms
     watchdog: 2s
     events_every: 1s
     drives:

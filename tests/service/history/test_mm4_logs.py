@@ -153,7 +153,7 @@ def dp_config(ppo_url: str, record_url: str, folder: Path) -> str:
     port: "{url}"
     protocol: profibus
     baudrate: 93750
-    slot_time: 20ms
+    slot_time: 50ms
     watchdog: 2s
     events_every: 1s
     drives:

@@ -170,7 +170,7 @@ lines:
     port: "{end.url}"
     protocol: profibus
     baudrate: 93750
-    slot_time: 20ms
+    slot_time: 50ms
     watchdog: 2s
     alarms: off
     counters: off
