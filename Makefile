@@ -3,6 +3,13 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
+# Python writes its bytecode (__pycache__/, ignored by git) even where the shell says not
+# to (PYTHONDONTWRITEBYTECODE, as in this project's image): otherwise each process of make
+# test - every pytest worker, every service and simulator a test starts - compiles the
+# sources anew and pytest rewrites every test module again (collecting the suite: 8.5 s of
+# CPU in each worker instead of 3.2 s).
+unexport PYTHONDONTWRITEBYTECODE
+
 .PHONY: test test-long lint typecheck pytest protocol-coverage run bench fuzz clean status-page soak
 
 # The runtime dependencies at the exact versions of constraints.txt (the
