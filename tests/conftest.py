@@ -10,6 +10,7 @@ the code and not on a draw; runs without it keep exploring new examples.
 from __future__ import annotations
 
 import os
+import signal
 from collections.abc import Mapping
 from typing import Any
 
@@ -17,6 +18,12 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from pkwbus.link import new_event_loop
+
+# The services the tests start reload on SIGHUP unless whoever started them ignores it, as
+# nohup does (pkwbus keeps it ignored, on purpose): a test run started under nohup gives
+# its services the default again, so that what a reload test sends is heard.
+if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
 
 settings.register_profile("pkwbus", deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("pkwbus-ci", settings.get_profile("pkwbus"), derandomize=True)
