@@ -94,25 +94,31 @@ class LineAlarms:
     """A line's watched alarm parameters (``decoders``, by reading key) and its drives'
     alarms: the snapshot's writer's, who shows :meth:`active` in the snapshot."""
 
-    __slots__ = ("_drives", "decoders", "line")
+    __slots__ = ("_drives", "_keys", "decoders", "line")
 
     def __init__(self, line: str) -> None:
         self.line = line
         self.decoders: dict[ReadingKey, AlarmDecoder] = {}
+        self._keys: dict[str, tuple[ReadingKey, ...]] = {}  # each drive's keys in decoders
         self._drives: dict[str, DriveAlarms] = {}
 
     def watch(self, drive: str, alarms: Sequence[tuple[str, int, AlarmDecoder]]) -> bool:
         """The drive's watched parameters now (a drive added, or its polls changed); whether
         an active alarm left with a parameter no longer watched."""
-        decoders = {k: d for k, d in self.decoders.items() if k[0] != drive}
-        decoders.update(((drive, parameter, index), d) for parameter, index, d in alarms)
-        self.decoders = decoders
+        self._unwatch(drive)
+        mine = {(drive, parameter, index): d for parameter, index, d in alarms}
+        self.decoders.update(mine)
+        self._keys[drive] = tuple(mine)
         kept = self._drives.get(drive)
-        return kept is not None and kept.keep({k for k in decoders if k[0] == drive})
+        return kept is not None and kept.keep(mine.keys())
 
     def forget(self, drive: str) -> None:
-        self.decoders = {k: d for k, d in self.decoders.items() if k[0] != drive}
+        self._unwatch(drive)
         self._drives.pop(drive, None)
+
+    def _unwatch(self, drive: str) -> None:
+        for key in self._keys.pop(drive, ()):
+            del self.decoders[key]
 
     def landed(self, key: ReadingKey, decoder: AlarmDecoder, reading: Reading) -> bool:
         """A watched parameter's reading: the alarms that came and went with it, told once
