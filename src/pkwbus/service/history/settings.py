@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import time
 from collections.abc import Callable, Sequence
@@ -43,23 +42,23 @@ from pkwbus.master.planning.plan import Described
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.history.backup import drive_type
 from pkwbus.service.history.setting_reads import SettingReads, Swept, Unanswered
-from pkwbus.service.history.settings_store import SettingRow, SettingsStore
+from pkwbus.service.history.settings_store import (
+    SettingRow,
+    SettingsStore,
+    stored_text,
+    stored_value,
+)
 from pkwbus.service.history.settings_view import changed_count, settings_view
 from pkwbus.service.history.store import DriveEvent, HistoryError
 from pkwbus.service.history.stream import EventStream
 from pkwbus.service.runtime import LineTask
 
-__all__ = ["KIND", "SettingsWatcher", "shown"]
+__all__ = ["KIND", "SettingsWatcher"]
 
 log = logging.getLogger("pkwbus.service.settings")
 
 KIND = "setting"  # the kind of a setting's change in the stream of the drives' events
 NEW_BASELINE = "baseline"  # the code of the event that says a drive starts a new baseline
-
-
-def shown(value: Value | None) -> str | None:
-    """A value as the store keeps it (JSON text)."""
-    return None if value is None else json.dumps(value)
 
 
 class SettingsWatcher:
@@ -212,8 +211,9 @@ class SettingsWatcher:
         if not answered or row is None:
             return
         now = self.clock()
-        moved = replace(row, raw=raw, value=shown(value), seen=now, baseline_raw=raw,
-                        baseline_value=shown(value), baseline_since=now, baseline_by="write",
+        text = stored_text(value)
+        moved = replace(row, raw=raw, value=text, seen=now, baseline_raw=raw,
+                        baseline_value=text, baseline_since=now, baseline_by="write",
                         changed_seen=None)  # fmt: skip
         s.rows[key] = moved
         if row.changed_seen is not None:
@@ -294,7 +294,7 @@ class SettingsWatcher:
         key = (ref.pnu, ref.index or 0)
         found = s.rows.get(key)
         kept = found or SettingRow(s.drive, ref.pnu, ref.index or 0, ref.name)
-        row = replace(kept, raw=raw, value=shown(value), seen=now)
+        row = replace(kept, raw=raw, value=stored_text(value), seen=now)
         events: list[DriveEvent] = []
         written = s.expected.get(key) == raw  # a write pkwbus made whose answer got lost
         back = changed = False
@@ -333,7 +333,7 @@ class SettingsWatcher:
             log.warning(
                 "drive %s: setting %s %s changed to %s (baseline %s), not by pkwbus",
                 s.drive, ref.name, fmt.name, _said(value, fmt),
-                _said(_value(row.baseline_value), fmt), extra=ctx,
+                _said(stored_value(row.baseline_value), fmt), extra=ctx,
             )  # fmt: skip
         if back or changed:
             self._tell(s)
@@ -361,10 +361,6 @@ class SettingsWatcher:
         if runner is not None and self._told.get(s.drive) != seen:
             self._told[s.drive] = seen
             runner.settings_seen(s.drive, *seen)
-
-
-def _value(text: str | None) -> Value | None:
-    return None if text is None else json.loads(text)
 
 
 def _said(value: Value | None, fmt: ParameterDescription) -> str:

@@ -17,6 +17,7 @@ be opened or written.
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import sqlite3
 import threading
@@ -25,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from pkwbus.catalog.description import Value
 from pkwbus.service.audit.synced import connect_synced
 from pkwbus.service.history.store import (
     EVENTS,
@@ -39,7 +41,25 @@ from pkwbus.service.history.store import (
 
 log = logging.getLogger("pkwbus.service.settings")
 
-__all__ = ["SETTINGS_SCHEMA", "SettingRow", "SettingsStore", "SweptDrive"]
+__all__ = [
+    "SETTINGS_SCHEMA",
+    "SettingRow",
+    "SettingsStore",
+    "SweptDrive",
+    "stored_text",
+    "stored_value",
+]
+
+
+def stored_text(value: Value | None) -> str | None:
+    """A value as a row keeps it (JSON text)."""
+    return None if value is None else json.dumps(value)
+
+
+def stored_value(text: str | None) -> Value | None:
+    """A row's value, from the text it keeps (:func:`stored_text`)."""
+    return None if text is None else json.loads(text)
+
 
 SETTINGS_SCHEMA: Final = """
 CREATE TABLE IF NOT EXISTS settings (

@@ -4,7 +4,6 @@ its factory setting (:mod:`.settings`)."""
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription, Value
@@ -12,6 +11,7 @@ from pkwbus.protocol import pkw
 from pkwbus.protocol.values import ParameterRef
 from pkwbus.protocol.values.encoding import decode_value
 from pkwbus.service.history.setting_reads import Swept
+from pkwbus.service.history.settings_store import stored_value
 
 __all__ = ["changed_count", "settings_view"]
 
@@ -39,10 +39,10 @@ def settings_view(s: Swept) -> dict[str, Any]:
             "index": ref.index or 0,
             "name": fmt.name,
             "unit": fmt.unit,
-            "value": _value(row.value if row else None),
+            "value": stored_value(row.value if row else None),
             "raw": row.raw if row else None,
             "seen": row.seen if row else None,
-            "baseline": _value(row.baseline_value if row else None),
+            "baseline": stored_value(row.baseline_value if row else None),
             "baseline_since": row.baseline_since if row else None,
             "baseline_by": row.baseline_by if row else None,
             "changed": bool(row and row.changed_seen is not None),
@@ -71,7 +71,3 @@ def _factory(s: Swept, ref: ParameterRef, fmt: ParameterDescription) -> Value | 
         return decode_value(raw & ((1 << width.value) - 1), width, fmt.vtype, fmt.scaling)
     except ValueError:
         return None
-
-
-def _value(text: str | None) -> Value | None:
-    return None if text is None else json.loads(text)
