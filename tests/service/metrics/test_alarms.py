@@ -140,6 +140,41 @@ def test_the_writer_keeps_each_alarm_from_the_reading_that_first_showed_it(
     assert "pkwbus_drive_alarm{" not in generate_latest(registry).decode()
 
 
+def test_one_drive_s_alarm_polls_changed_or_gone_leave_the_other_drives_alarms() -> None:
+    """Two drives on a line, each polling Danfoss 16-90: one drive's alarm word no longer
+    polled, then the drive removed, and the other's alarm stays, its word still decoded."""
+    table = alarm_table("danfoss-fc")
+    assert table is not None
+    decoder = table.decoder(1690)
+    assert decoder is not None
+    specs = []
+    for address, drive in enumerate(("press", "saw"), start=1):
+        target = DriveTarget.create("fc", address)
+        polls = (
+            PollSpec("16-90", 0, pkw.read(target.dialect, 1690), 1.0),
+            PollSpec("16-13", 0, pkw.read(target.dialect, 1613), 1.0),
+        )
+        specs.append(DriveSpec(drive, carrier_for(target), polls, alarms=(("16-90", 0, decoder),)))
+    writer = SnapshotWriter("line_fc", specs, Snapshot())
+    snap = writer.snapshot
+    _landed(writer, "press", "16-90", 0x4, 1000.0)
+    _landed(writer, "saw", "16-90", 0x40, 1001.0)
+    press = writer._polls["press"]
+    spec = DriveSpec("press", specs[0].carrier, press[1:])  # press: 16-90 no longer polled
+    writer.update_polls(spec, spec.polls)
+    assert "press" not in snap.alarms
+    assert [(a.alarm.code, a.since) for a in snap.alarms["saw"]] == [("16-90 bit 6", 1001.0)]
+    _landed(writer, "saw", "16-90", 0x44, 1002.0)  # saw's word still decoded
+    assert [a.alarm.code for a in snap.alarms["saw"]] == ["16-90 bit 6", "16-90 bit 2"]
+    writer.update_polls(specs[0], press)  # press polls its word again: decoded again
+    _landed(writer, "press", "16-90", 0x4, 1003.0)
+    assert [(a.alarm.code, a.since) for a in snap.alarms["press"]] == [("16-90 bit 2", 1003.0)]
+    writer.remove_drive("press")
+    assert set(snap.alarms) == {"saw"}
+    _landed(writer, "saw", "16-90", 0x0, 1004.0)
+    assert snap.alarms == {}
+
+
 def test_a_drive_gone_takes_its_alarms_with_it() -> None:
     writer = _writer("press", "danfoss-fc", (1690, "16-90"))
     _landed(writer, "press", "16-90", 0x4, 1000.0)
