@@ -64,8 +64,11 @@ def make_sim(protocol: str, addresses: list[int], **kw: Any) -> Simulator:
 
 @asynccontextmanager
 async def open_port(
-    port: str, protocol: str, *, timeout: float = 0.05, **kw: Any
+    port: str, protocol: str, *, timeout: float = 0.5, **kw: Any
 ) -> AsyncIterator[tuple[TelegramPort, Trace]]:
+    """A line on ``port``. The simulator answers from this test's own event loop: a
+    loaded machine that holds the loop holds the answer too, so the default answer
+    timeout is long enough for it (a test of timeouts gives its own)."""
     trace = Trace()
     line = TelegramPort(
         PortSettings(port, baudrate=115200, **kw), Bus(protocol), timeout=timeout, trace=trace
