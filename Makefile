@@ -33,10 +33,10 @@ typecheck: $(STAMP)
 # whole cores. A fixed number, not "auto", which counts the host's cores where a
 # container may have fewer.
 PYTEST_WORKERS ?= 3
-# Work stealing: each worker starts on half of the tests and one that runs out takes
-# half of what the other still has queued. With the default (load), a worker is handed
-# a run of tests in collection order that it alone may run while the other has nothing
-# left: a minute of one worker idle at the end of make test.
+# Work stealing: each worker starts on its share of the tests and one that runs out takes
+# half of what another still has queued. With the default (load), a worker is handed a
+# run of tests in collection order that it alone may run while the others have nothing
+# left: a minute of idle workers at the end of make test.
 PYTEST_DIST ?= worksteal
 
 pytest: $(STAMP)

@@ -289,6 +289,8 @@ class _Reader:
         )  # fmt: skip
         if length is None:
             raise ConnectionError(f"GET {path}: an answer without a Content-Length")
+        if len(got) > length:
+            raise ConnectionError(f"GET {path}: more bytes than the answer's Content-Length")
         if length > len(self.buffer):
             self.buffer = bytearray(length)
         view = memoryview(self.buffer)[:length]
