@@ -28,6 +28,8 @@ __all__ = [
     "line_views",
     "maintenance_view",
     "parse_since",
+    "settings_changed",
+    "settings_swept",
     "slave_view",
     "trend_views",
     "writable_refs",
@@ -146,6 +148,23 @@ def slave_view(runtime: Runtime, name: str) -> SlaveView | None:
 def maintenance_view(runtime: Runtime, name: str) -> MaintenanceView | None:
     held = runtime.snapshot.maintenance.get(name)
     return MaintenanceView(reason=held.reason, since=held.since) if held is not None else None
+
+
+def settings_swept(runtime: Runtime, name: str) -> bool:
+    """Whether the drive's settings are swept (``GET .../settings`` has them)."""
+    settings = runtime.settings
+    return settings is not None and name in settings.swept
+
+
+def settings_changed(runtime: Runtime, name: str) -> int | None:
+    """How many of the drive's swept settings differ from their baseline: those its
+    settings view (``GET .../settings``) marks ``changed``, as the read model has it from
+    the sweep (:attr:`pkwbus.master.snapshot.Snapshot.settings`; None: its settings are
+    not swept, or not read yet)."""
+    if not settings_swept(runtime, name):
+        return None
+    shown = runtime.snapshot.settings.get(name)
+    return shown.changed if shown is not None else None
 
 
 def trend_views(runtime: Runtime, name: str, now: float) -> dict[str, list[float | None]]:

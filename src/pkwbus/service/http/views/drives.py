@@ -33,11 +33,12 @@ from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReadin
 from pkwbus.service.http.views import (
     alarm_views,
     maintenance_view,
+    settings_changed,
+    settings_swept,
     slave_view,
     writable_refs,
     writable_views,
 )
-from pkwbus.service.http.views.overview import settings_changed
 from pkwbus.service.http.views.pieces import (
     ValuesMade,
     head_json,
@@ -75,7 +76,6 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
     state = snap.drives.get(name)
     counts = snap.counts.get(name)
     word = state.status_word if state else None
-    settings = runtime.settings
     return DriveView(
         name=name,
         line=entry.line,
@@ -93,7 +93,7 @@ def drive_view(runtime: Runtime, name: str) -> DriveView:
         writable=writable_views(runtime, name),
         dp=slave_view(runtime, name),
         maintenance=maintenance_view(runtime, name),
-        settings=settings is not None and name in settings.swept,
+        settings=settings_swept(runtime, name),
     )
 
 
@@ -272,7 +272,7 @@ class DriveViews:
         runtime = self.runtime
         number = runtime.snapshot.changes.number_of(name)
         entry = runtime.drives[name]
-        swept = runtime.settings is not None and name in runtime.settings.swept
+        swept = settings_swept(runtime, name)
         kept = self._kept.get(name)
         if kept is not None and kept[0] == number and kept[1] is entry and kept[2] == swept:
             return kept[3]
