@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import inspect
 import tempfile
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
@@ -80,13 +81,16 @@ async def open_port(
         await line.close()
 
 
-async def until(check: Callable[[], bool], timeout: float = 10.0, step: float = 0.01) -> None:
-    """Until ``check()`` holds; the test fails after ``timeout`` seconds (generous: the
-    machine may be loaded; waiting for the event, not a fixed time, keeps it short)."""
+async def until(
+    check: Callable[[], bool | Awaitable[bool]], timeout: float = 10.0, step: float = 0.01
+) -> None:
+    """Until ``check()`` holds (a coroutine function's answer awaited); the test fails
+    after ``timeout`` seconds (generous: the machine may be loaded; waiting for the event,
+    not a fixed time, keeps it short)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout
-    while not check():
-        assert loop.time() < end, f"not within {timeout} s"
+    while not (await got if inspect.isawaitable(got := check()) else got):
+        assert loop.time() < end, f"{getattr(check, '__name__', 'check')}: not within {timeout} s"
         await asyncio.sleep(step)
 
 

@@ -4,7 +4,6 @@ its settings differ from their baseline as its settings view counts them."""
 
 from __future__ import annotations
 
-import asyncio
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +54,7 @@ async def test_a_dp_slave_row_shows_its_state_in_the_live_list(tmp_path: Path) -
         async def fan_left() -> bool:
             return (await rows_of(svc.client))["fan"]["dp_state"] != "data_exchange"
 
-        await until_async(fan_left)
+        await until(fan_left, 40, step=0.1)
         rows, views = await rows_of(svc.client), await views_of(svc.client)
         assert rows["fan"]["dp_state"] == views["fan"]["dp"]["state"] != "data_exchange"
         assert rows["pump"]["dp_state"] == "data_exchange"
@@ -76,19 +75,10 @@ async def test_the_row_counts_the_settings_that_differ_from_their_baseline(
         async def both_found() -> bool:
             return await changed_settings(svc.client, "fan1") == 2
 
-        await until_async(both_found)
+        await until(both_found, 40, step=0.1)
 
         async def counted() -> bool:  # the read model has it with the line's next batch
             return (await rows_of(svc.client))["fan1"]["settings_changed"] == 2
 
-        await until_async(counted)
+        await until(counted, 40, step=0.1)
         assert rows["fan2"]["settings_changed"] == 0 == await changed_settings(svc.client, "fan2")
-
-
-async def until_async(check: Any, timeout: float = 40.0) -> None:
-    """Ask ``check`` (a coroutine function) again until it says yes."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while not await check():
-        assert loop.time() < deadline, f"{check.__name__}: not within {timeout:g} s"
-        await asyncio.sleep(0.1)
