@@ -263,3 +263,38 @@ async def test_a_settings_change_stays_flagged_and_told_once_across_a_reload(
         await stack.aclose()
         store.close()
         await end.close()
+
+
+async def test_a_drive_whose_sweep_a_reload_turns_off_shows_no_sweep_any_more(
+    tmp_path: Path,
+) -> None:
+    """A reload that turns a drive's settings sweep off: the read model drops what it showed
+    of the last sweep; the other drive, still swept, keeps its own."""
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), seed=2,
+                    catalog="danfoss-fc")  # fmt: skip
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    swept = {"every": "1s", "parameters": ["3-41"]}
+
+    def text(d1_swept: bool) -> str:
+        d1, d2 = drive("d1", 1, "200ms"), drive("d2", 2, "200ms")
+        d1["settings"] = swept if d1_swept else "off"
+        d2["settings"] = swept
+        return json.dumps({"audit_db": str(tmp_path / "audit.sqlite"),
+                           "lines": [line("a", end.url, [d1, d2])]})  # fmt: skip
+
+    file = [text(True)]
+    stack = AsyncExitStack()
+    store = HistoryStore(parse_config(file[0], environ={}).history_path)
+    _, runtime, _, reloader = await reloadable(file, stack, store)
+    try:
+        shown = runtime.snapshot.settings
+        await until(lambda: {"d1", "d2"} <= shown.keys())
+        file[0] = text(False)
+        outcome = await reloader.reload()
+        assert outcome.loaded and not outcome.problems, outcome
+        await until(lambda: "d1" not in runtime.snapshot.settings)
+        assert "d2" in runtime.snapshot.settings
+    finally:
+        await stack.aclose()
+        store.close()
+        await end.close()

@@ -127,6 +127,7 @@ class Memory:
         # One store of the settings for every watcher a reload makes: a write that ends
         # while a reload makes the next one moves the baseline the next one loads.
         self._settings_store: SettingsStore | None = None
+        self._swept: set[str] = set()  # the drives whose settings the last watcher swept
 
     def _store(self) -> SettingsStore:
         if self._settings_store is None:
@@ -139,9 +140,21 @@ class Memory:
         at the start, a reload's, a line's won or lost in hot standby)."""
         self.logs = watch_logs(config, next_load, self.stream)
         self.settings = watch_settings(config, self.runtime, next_load, self.stream, self._store)
+        swept = set(self.settings.swept) if self.settings is not None else set()
+        self._unswept(config, next_load, self._swept - swept)
+        self._swept = swept
         # Drives and lines that come back, drives identified as other drives: the watchers
         # follow every line's stream, as outputs.
         next_load.watchers = [w for w in (self.logs, self.settings) if w is not None]
+
+    def _unswept(self, config: cfg.Config, next_load: LoadBuilder, drives: set[str]) -> None:
+        """The read model told that ``drives``, still on a line, are not swept any more (a
+        reload turned their sweep off): what it showed of their last sweep is not current."""
+        for line in config.lines:
+            runner = next_load.runners.get(line.name)
+            for drive in line.drives:
+                if drive.name in drives and runner is not None:
+                    runner.settings_seen(drive.name, None, None)
 
     async def start(self) -> None:
         for watcher in (self.logs, self.settings):
