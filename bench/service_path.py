@@ -15,6 +15,11 @@ output).
   second (Data_Exchange requests / slaves) and CPU per cycle.
 
     .venv/bin/python -m bench.service_path [--n 5000] [--seconds 5] [--repeat 3] [--tree NAME]
+        [--without-pause]
+
+``--without-pause`` adds the FC line with the FC/USS start pause not kept, as pymodbus
+keeps none: the second wake-up per exchange that keeping it costs (see "Where the CPU per
+exchange cannot go" in docs/benchmarks.md), a measurement, not a mode of the service.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 from prometheus_client import CollectorRegistry
 
@@ -130,9 +136,17 @@ async def _measure(config_text: str, n: int | None, seconds: float | None) -> di
     return {"cpu_us": (c1 - c0) / count * 1e6, "rate": count / (w1 - w0), "count": count}
 
 
-def fc(n: int) -> dict[str, float]:
+def fc(n: int, *, pause: bool = True) -> dict[str, float]:
+    """CPU per exchange of the FC line; ``pause`` False: with the start pause not kept
+    (``Link.pause_left`` patched to 0 in this process, as pymodbus writes its next request
+    at once): what keeping it costs, a measurement, not a mode of the service."""
     with sim_process("fc", "1-3") as port:
-        return link.run(_measure(_fc_config(port), n, None))
+        if pause:
+            return link.run(_measure(_fc_config(port), n, None))
+        from pkwbus.link.port import Link  # here: an older tree may lay its modules out otherwise
+
+        with mock.patch.object(Link, "pause_left", lambda self, now: 0.0):
+            return link.run(_measure(_fc_config(port), n, None))
 
 
 @contextlib.contextmanager
@@ -171,10 +185,18 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--tree", default="this tree")
     parser.add_argument("--no-pymodbus", action="store_true")
+    parser.add_argument(
+        "--without-pause",
+        action="store_true",
+        help="also the FC line with the start pause not kept (what it costs)",
+    )
     args = parser.parse_args()
-    rows: dict[str, list[float]] = {"fc": [], "dp_cycles": [], "dp_cpu": [], "pymodbus": []}
+    rows: dict[str, list[float]] = {"fc": [], "fc_without_pause": [], "dp_cycles": [],
+                                    "dp_cpu": [], "pymodbus": []}  # fmt: skip
     for _ in range(args.repeat):
         rows["fc"].append(fc(args.n)["cpu_us"])
+        if args.without_pause:
+            rows["fc_without_pause"].append(fc(args.n, pause=False)["cpu_us"])
         found = dp(args.seconds)
         rows["dp_cycles"].append(found["cycles_per_s"])
         rows["dp_cpu"].append(found["cpu_us_per_cycle"])
@@ -188,9 +210,12 @@ def main() -> None:
             out[key] = {"min": min(values), "median": statistics.median(values),
                         "max": max(values), "runs": [round(v, 1) for v in values]}  # fmt: skip
     if rows["pymodbus"]:
-        out["fc_vs_pymodbus_median"] = statistics.median(rows["fc"]) / statistics.median(
-            rows["pymodbus"]
-        )
+        pymodbus = statistics.median(rows["pymodbus"])
+        out["fc_vs_pymodbus_median"] = statistics.median(rows["fc"]) / pymodbus
+        if rows["fc_without_pause"]:
+            out["fc_without_pause_vs_pymodbus_median"] = (
+                statistics.median(rows["fc_without_pause"]) / pymodbus
+            )
     for key, value in out.items():
         print(f"{key}: {value}")
 

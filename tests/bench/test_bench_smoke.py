@@ -110,6 +110,18 @@ def test_service_path_smallest() -> None:
     assert got["errors"] == 0 and got["cpu_us_per_op"] > 0
 
 
+def test_service_path_without_the_pause_smallest() -> None:
+    """The service's FC line with the start pause not kept, patched for the measurement
+    only: it exchanges, and the line keeps its pause again afterwards."""
+    from pkwbus.link.port import Link
+
+    mod = load("service_path")
+    kept = Link.pause_left
+    got = mod.fc(100, pause=False)
+    assert got["count"] >= 100 and got["cpu_us"] > 0
+    assert Link.pause_left is kept
+
+
 def test_cpu_by_drives_smallest() -> None:
     got = load("cpu_per_exchange").by_drives(50, 1, [1, 2])
     assert [row["drives"] for row in got["rows"]] == [1, 2]
