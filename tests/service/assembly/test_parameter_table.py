@@ -17,7 +17,7 @@ from pkwbus.catalog.alarms import CodeTable, WordTable
 from pkwbus.protocol.values import ParameterRef, parse_parameter
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import Config, parse_config
-from pkwbus.service.config.resolved import parameter_table
+from pkwbus.service.config.resolved import explicit_layers, parameter_table
 from pkwbus.service.runtime import DriveEntry, Runtime
 
 CONFIG = """
@@ -108,6 +108,26 @@ def test_the_table_says_what_the_configuration_says_of_every_parameter(drive: st
                 want, writable=False, prefix=""
             ), given
             assert got.writable == found.may_write(given), given
+
+
+def test_element_0_of_a_parameter_that_is_no_array_is_the_parameter_itself() -> None:
+    """The limits given for 3-41[0] (no array in the catalog: the same telegram as 3-41) hold
+    for 3-41 too, in the table and in the layers a drive's own description goes between;
+    those given for 15-30[0] (an array of 10) stay with element 0."""
+    text = CONFIG.replace('"3-41": {min: 1, max: 60}', '"3-41[0]": {min: 1, max: 45}').replace(
+        '"3-42[1]": {max: 30}', '"3-42[1]": {max: 30}\n          "15-30[0]": {max: 5}'
+    )
+    config = parse_config(text, environ={})
+    fan = next(d for _, d in config.drives() if d.name == "fan")
+    table = parameter_table(fan)
+    for given in ("3-41", "3-41[0]"):
+        found = table.describe(fan.canonical(ref(given)))
+        assert (found.minimum, found.maximum, found.writable) == (1, 45, True), given
+    layers = explicit_layers(fan, table)
+    assert layers[(341, None)].config.maximum == 45
+    assert table.describe(fan.canonical(ref("15-30[0]"))).maximum == 5
+    assert table.describe(fan.canonical(ref("15-30"))).maximum is None
+    assert layers[(1530, None)].config.maximum is None
 
 
 def objects(root: object, seen: set[int] | None = None) -> Iterator[object]:

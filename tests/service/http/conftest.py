@@ -146,6 +146,9 @@ def line_yaml(
         lines.append(f"        writable: [{writable}]")
         if "describe" in d:
             lines.append(f"        describe: {d['describe']}")
+        if "parameters" in d:  # {key: a YAML flow mapping of its settings}
+            lines.append("        parameters:")
+            lines += [f'          "{k}": {v}' for k, v in d["parameters"].items()]
         if "counters" in d:
             lines.append(f"        counters: {d['counters']}")
     return "\n".join(lines)

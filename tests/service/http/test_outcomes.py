@@ -47,6 +47,30 @@ async def test_outside_the_limits_the_drive_describes_is_422_and_nothing_is_sent
         assert r.status_code == 200, r.text
 
 
+async def test_limits_given_for_element_0_hold_for_the_parameter_that_is_no_array(
+    tmp_path: Path,
+) -> None:
+    """3-41 is no array in its catalog: 3-41[0] is 3-41 itself (the same telegram), so the
+    limits the configuration gives 3-41[0] hold for a write of 3-41 without an index."""
+    drives = fc_drives(writable=["3-41"])[:1]
+    drives[0]["parameters"] = {"3-41[0]": "{min: 1, max: 60}"}
+    async with service(tmp_path, fc=drives) as svc:
+        drive = svc.sim.drives[1]
+        before = drive.value(341)
+        for value, index in ((61, None), (0.5, None), (61, 0)):
+            body: dict[str, object] = {"value": value}
+            if index is not None:
+                body["index"] = index
+            r = await svc.put("fan1", "3-41", body)
+            assert r.status_code == 422, (body, r.text)
+            assert r.json()["error"]["kind"] == "invalid_value"
+        assert svc.audit_writer.for_pnu(1, 341) == []  # nothing sent
+        assert drive.value(341) == before
+        r = await svc.put("fan1", "3-41", {"value": 60})  # the limit itself is allowed
+        assert r.status_code == 200, r.text
+        assert drive.value(341) == 6000
+
+
 async def test_outside_the_drives_own_limits_is_409_with_fault_2(tmp_path: Path) -> None:
     # not described (describe: off): only the drive knows its maximum of 3-41 and refuses
     drives = [{**d, "describe": "off"} for d in fc_drives()]

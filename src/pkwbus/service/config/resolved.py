@@ -15,7 +15,7 @@ Nothing here raises: the configuration was checked when it was loaded.
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from types import MappingProxyType
 
@@ -60,19 +60,37 @@ def parameter_table(drive: cfg.Drive) -> ParameterTable:
     named: dict[int, set[int | None]] = {}
     for _, ref in drive.refs():
         named.setdefault(ref.pnu, {None}).add(ref.index)
+    catalog = _catalog(drive.catalog) if drive.catalog is not None else MappingProxyType({})
     configured: dict[ParameterKey, ParameterDescription] = {}
     for pnu, indexes in named.items():
         prefix = drive.prefix_of(pnu)
         for index in indexes:
-            configured[(pnu, index)] = _resolve(drive, pnu, index, prefix)
+            configured[(pnu, index)] = _resolve(drive, pnu, _told(catalog, pnu, index, indexes),
+                                                prefix)  # fmt: skip
         # Any index the configuration does not name takes only the overrides without index.
         other = next((i for i in range(MAX_INDEX + 1) if i not in indexes), None)
         if other is not None:
             found = _resolve(drive, pnu, other, prefix)
             if found != configured[(pnu, None)]:
                 configured[(pnu, OTHER_INDEX)] = found
-    catalog = _catalog(drive.catalog) if drive.catalog is not None else MappingProxyType({})
     return ParameterTable(drive.pkw_dialect.danfoss_numbers, MappingProxyType(configured), catalog)
+
+
+def _told(
+    catalog: Mapping[int, ParameterDescription],
+    pnu: int,
+    index: int | None,
+    named: Iterable[int | None],
+) -> int | None:
+    """The index whose configuration tells of ``(pnu, index)``: index 0 for the parameter
+    itself when its catalog does not call it an array and the configuration names element
+    0 (the same telegram: index 0 of a parameter that is no array is the parameter itself,
+    so the limits given for ``3-41[0]`` hold for a write of ``3-41`` too); else ``index``."""
+    if index is None and 0 in named:
+        entry = catalog.get(pnu)
+        if entry is None or entry.array is None:
+            return 0
+    return index
 
 
 def _resolve(drive: cfg.Drive, pnu: int, index: int | None, prefix: str) -> ParameterDescription:
@@ -116,14 +134,14 @@ def explicit_layers(drive: cfg.Drive, table: ParameterTable) -> dict[ParameterKe
     resolve a drive's description against."""
     found: dict[ParameterKey, Layers] = {}
     for pnu, index in table.configured:
+        named = {i for p, i in table.configured if p == pnu}
         if index == OTHER_INDEX:
-            named = {i for p, i in table.configured if p == pnu}
             index_of = next((i for i in range(MAX_INDEX + 1) if i not in named), None)
             if index_of is None:
                 continue
             ref = ParameterRef(pnu, index_of, str(pnu))
         else:
-            ref = ParameterRef(pnu, index, str(pnu))
+            ref = ParameterRef(pnu, _told(table.catalog, pnu, index, named), str(pnu))
         found[(pnu, index)] = layers_of(drive, table, drive.canonical(ref))
     return found
 
