@@ -269,16 +269,17 @@ async def test_a_drive_whose_sweep_a_reload_turns_off_shows_no_sweep_any_more(
     tmp_path: Path,
 ) -> None:
     """A reload that turns a drive's settings sweep off: the read model drops what it showed
-    of the last sweep; the other drive, still swept, keeps its own."""
+    of the last sweep; the other drive, still swept, keeps its own. Then one that turns
+    every drive's off: nothing of a sweep is shown, nor kept to be asked for."""
     sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), seed=2,
                     catalog="danfoss-fc")  # fmt: skip
     end = await sim.serve_tcp("127.0.0.1", 0)
     swept = {"every": "1s", "parameters": ["3-41"]}
 
-    def text(d1_swept: bool) -> str:
+    def text(d1_swept: bool, d2_swept: bool = True) -> str:
         d1, d2 = drive("d1", 1, "200ms"), drive("d2", 2, "200ms")
         d1["settings"] = swept if d1_swept else "off"
-        d2["settings"] = swept
+        d2["settings"] = swept if d2_swept else "off"
         return json.dumps({"audit_db": str(tmp_path / "audit.sqlite"),
                            "lines": [line("a", end.url, [d1, d2])]})  # fmt: skip
 
@@ -294,6 +295,13 @@ async def test_a_drive_whose_sweep_a_reload_turns_off_shows_no_sweep_any_more(
         assert outcome.loaded and not outcome.problems, outcome
         await until(lambda: "d1" not in runtime.snapshot.settings)
         assert "d2" in runtime.snapshot.settings
+        assert runtime.settings is not None
+        # Every drive's sweep off: no watcher is left to answer for their settings either.
+        file[0] = text(False, False)
+        outcome = await reloader.reload()
+        assert outcome.loaded and not outcome.problems, outcome
+        await until(lambda: not runtime.snapshot.settings)
+        assert runtime.settings is None
     finally:
         await stack.aclose()
         store.close()

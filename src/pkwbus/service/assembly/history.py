@@ -104,6 +104,7 @@ def watch_settings(
                                snapshot=runtime.snapshot))  # fmt: skip
             turn += 1
     if not swept:
+        next_load.settings = None  # nor the last load's watcher, stopped: nothing is swept
         return None
     kept = store() if store is not None else SettingsStore(stream.store.path, stream.store.changes)
     runners = dict(next_load.runners)
