@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AsyncExitStack, asynccontextmanager
 from dataclasses import dataclass, field
@@ -21,8 +22,11 @@ from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.reload import Reloader, ReloadRefused
 from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.http.views import line_views
+from pkwbus.service.http.views.drives import DriveViews, Selection
 from pkwbus.service.metrics.exposition import render
 from pkwbus.service.runtime import Runtime
+from pkwbus.service.writes.checks import ApiError
 from pkwbus.sim import SimTiming, Simulator
 from pkwbus.sim.serving.ends import TcpEnd
 from tests.service.assembly.test_reload_dp import reloadable, until
@@ -184,6 +188,14 @@ async def test_a_line_that_cannot_start_is_shown_down_and_started_by_the_next_re
         assert "pkwbus_config_last_reload_successful 0.0" in text
         assert 'pkwbus_line_up{line="b"} 0.0' in text
         assert 'pkwbus_drive_up{drive="e1",line="b"} 0.0' in text
+        # The API shows it too: down, with its drive, and asked for by name.
+        shown = {v.name: (v.open, v.drives) for v in line_views(lines.runtime, {}, time.time())}
+        assert shown == {"a": (True, 1), "b": (False, 1)}
+        views = DriveViews(lines.runtime)
+        assert views.select(Selection(line="b"))[0] == ["e1"]
+        with pytest.raises(ApiError) as unknown:
+            views.select(Selection(line="c"))
+        assert unknown.value.status == 404
         monkeypatch.setattr(Parts, "build", build)
         outcome = await lines.reloader.reload()  # the same file: the line starts now
         assert outcome.outcome == "ok" and outcome.changes == ["line b started"]

@@ -25,6 +25,7 @@ from pkwbus.service.writes.checks import ApiError
 __all__ = [
     "alarm_views",
     "event_views",
+    "known_line",
     "line_views",
     "maintenance_view",
     "parse_since",
@@ -37,6 +38,12 @@ __all__ = [
 ]
 
 
+def known_line(runtime: Runtime, name: str) -> bool:
+    """Whether ``name`` is a line of this load: one that runs, or one whose drives are here
+    though it could not start."""
+    return name in runtime.runners or any(e.line == name for e in runtime.drives.values())
+
+
 def line_views(
     runtime: Runtime, looks: dict[str, tuple[float, float]], now: float
 ) -> list[LineView]:
@@ -47,8 +54,10 @@ def line_views(
     by_line: dict[str, list[str]] = {name: [] for name in runtime.runners}
     for d, e in runtime.drives.items():
         by_line.setdefault(e.line, []).append(d)
-    # In hot standby every configured line, those mastered elsewhere too.
-    names = list(runtime.runners) if masters is None else list(masters.lines())
+    # Every line with a runner or a drive (a line a reload could not start has only its
+    # drives: it is shown down); in hot standby every configured line, those mastered
+    # elsewhere too.
+    names = list(by_line) if masters is None else list(masters.lines())
     for name in names:
         mine = by_line.get(name, [])
         up = sum(1 for d in mine if (state := snap.drives.get(d)) is None or state.up)

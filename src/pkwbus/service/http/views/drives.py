@@ -32,6 +32,7 @@ from pkwbus.protocol.pzd import status_bits
 from pkwbus.service.http.models import DriveOverview, DriveView, ParameterReading
 from pkwbus.service.http.views import (
     alarm_views,
+    known_line,
     maintenance_view,
     settings_changed,
     settings_swept,
@@ -214,7 +215,7 @@ class DriveViews:
                 mastered_elsewhere(runtime, chosen.drive)
                 raise ApiError(404, "unknown_drive", f"no drive is named {chosen.drive!r}")
             names: Iterable[str] = (chosen.drive,)
-        elif chosen.line is not None and chosen.line not in runtime.runners:
+        elif chosen.line is not None and not known_line(runtime, chosen.line):
             line_mastered_elsewhere(runtime, chosen.line)
             raise ApiError(404, "unknown_line", f"no line is named {chosen.line!r}")
         else:
