@@ -183,14 +183,35 @@ def test_a_configured_length_the_answers_contradict_refuses_changes() -> None:
     assert length.gate(word=True)[0] is Gate.SEND
 
 
-def test_a_configured_3_agrees_again_once_the_drive_answers_with_3_words() -> None:
-    """A word in 3 words to 3 words fits 3 and variable alike: for a drive set to 3 it is
-    agreement, so a conflict told before (a double word in 4 words) clears."""
+def test_a_configured_3_in_conflict_is_asked_again_once_the_drive_was_away() -> None:
+    """A word in 3 words to 3 words fits 3 and variable alike: it neither clears a conflict
+    told before (a double word in 4 words) nor tells one. No answer tells a fixed-3 drive
+    apart, so the conflict is asked again once the drive was away."""
     length = PkwLength(3)
     word = pkw.ValueResponse(1, 52, 0, 7, pkw.Width.WORD)
     dword = pkw.ValueResponse(2, 1082, 0, 7, pkw.Width.DWORD)
+    assert not length.observe(3, 3, word) and not length.in_conflict
     assert length.observe(3, 4, dword) and length.conflict is VARIABLE
-    assert length.observe(3, 3, word) and not length.in_conflict
+    assert not length.observe(3, 3, word) and length.in_conflict
+    length.forget()
+    assert not length.in_conflict and length.words == 3
+    assert length.observe(3, 4, dword) and length.in_conflict  # told again
+
+
+def test_a_configured_4_conflict_stands_through_answers_that_fit_both() -> None:
+    """A variable drive configured 4: its word answers (3 words to 4) tell the conflict;
+    its double words in 4 words to 4 fit both and must not clear it, or the conflict and
+    its warning come and go with every answer and changes slip out in between."""
+    length = PkwLength(4)
+    word = pkw.ValueResponse(1, 52, 0, 7, pkw.Width.WORD)
+    dword = pkw.ValueResponse(2, 304, 0, 0x43660000, pkw.Width.DWORD)
+    assert length.observe(4, 3, word) and length.in_conflict
+    for _ in range(3):
+        assert not length.observe(4, 4, dword)
+        assert length.in_conflict and length.gate(word=False)[0] is Gate.REFUSE
+        assert not length.observe(4, 3, word)  # told once, not again
+    length.forget()  # the drive away: a configured 4 is told apart by its next word
+    assert length.in_conflict
 
 
 def test_a_learned_target_splits_answers_by_their_length() -> None:
@@ -237,3 +258,20 @@ def test_an_answer_that_fits_both_tells_a_configured_length_nothing() -> None:
     dword = pkw.ValueResponse(2, 1082, 0, 0x42480000, pkw.Width.DWORD)
     assert not length.observe(4, 4, dword)
     assert not length.in_conflict and length.words is VARIABLE
+
+
+def test_a_fixed_3_drive_back_from_away_has_its_conflict_asked_again() -> None:
+    """The carrier tells the conflict's end when the drive was away (the metric and the log
+    follow what it tells); nothing when there was none to end."""
+    carrier = SerialCarrier(DriveTarget.create("uss", 1, pkw_words=3))
+    assert carrier.forget() is None
+    length = carrier.length
+    assert length is not None
+    dword = pkw.ValueResponse(2, 1082, 0, 7, pkw.Width.DWORD)
+    assert length.observe(3, 4, dword) and length.in_conflict  # as an answer told it
+    told = carrier.forget()
+    assert told is not None and not told.in_conflict and told.configured == 3
+    assert carrier.forget() is None
+    fixed_4 = SerialCarrier(DriveTarget.create("uss", 1, pkw_words=4))
+    assert fixed_4.length is not None and fixed_4.length.observe(4, 3, dword)
+    assert fixed_4.forget() is None and fixed_4.length.in_conflict  # its words tell it

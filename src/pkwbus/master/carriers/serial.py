@@ -219,10 +219,16 @@ class SerialCarrier:
         return self._retarget()
 
     def forget(self) -> PkwLength | None:
+        """The drive was away: a learned length is learned again, and a configured one's
+        conflict that no answer clears (a fixed 3's) asked again; what is known of it now,
+        when that changed."""
         length = self.length
-        if length is None or not self.target.learn or not length.known:
+        if length is None or (self.target.learn and not length.known):
             return None
+        was = length.conflict
         length.forget()
+        if not self.target.learn and length.conflict == was:
+            return None
         return self._retarget()
 
     def _retarget(self) -> PkwLength | None:

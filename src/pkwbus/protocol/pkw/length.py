@@ -123,18 +123,21 @@ class PkwLength:
         """The drive was away: what it told may have changed (a learned length is asked again)."""
         if self.configured == AUTO:
             self.words, self.known = UNKNOWN_SEND_WORDS, False
+        elif self.configured == 3:
+            # No answer tells a fixed-3 drive from a variable one (a word fits both): a
+            # conflict it showed is asked again once it is back (set to 3 meanwhile, say).
+            self.conflict = "?"
 
     def observe(self, sent_words: int, answer_words: int, response: PkwResponse) -> bool:
         """Take what an answer told; True when ``words`` or ``conflict`` changed."""
         verdict = told(sent_words, answer_words, response)
         if self.configured != AUTO:
-            # A configured 3 is never told apart from variable by a word: it agrees.
-            agrees = verdict == self.configured or (
-                verdict == "?" and answer_words == sent_words == self.configured
-            )
-            conflict: PkwWords | Literal["?"] = "?" if agrees else verdict
-            if isinstance(conflict, str) and not agrees:
-                return False  # tells nothing either way
+            if isinstance(verdict, str):
+                # Fits more than one length (a double word in 4 words to 4, a word in 3 to
+                # 3): neither agreement nor conflict. Taken for agreement, it cleared a
+                # conflict that the next word's answer told again, over and over.
+                return False
+            conflict: PkwWords | Literal["?"] = "?" if verdict == self.configured else verdict
             changed = conflict != self.conflict
             self.conflict = conflict
             return changed
