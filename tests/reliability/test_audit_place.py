@@ -1,6 +1,6 @@
-"""An ``audit_db`` that cannot be a database here: `check-config` and `run` name it and
-exit 2 (a configuration problem), never 70 (an internal error), without a traceback;
-`pkwbus audit` too."""
+"""An ``audit_db`` or ``history_db`` that cannot be a database here: `check-config` and
+`run` name it and exit 2 (a configuration problem), never 70 (an internal error), without
+a traceback; `pkwbus audit` too."""
 
 from __future__ import annotations
 
@@ -54,20 +54,24 @@ def bad_place(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[tuple[
     yield make(tmp_path), says
 
 
-def config(tmp: Path, audit_db: Path) -> Path:
+def config(tmp: Path, audit_db: Path, key: str = "audit_db") -> Path:
     path = tmp / "pkwbus.yaml"
-    path.write_text(f"audit_db: {audit_db}\n{LINES}")
+    if key == "audit_db":
+        path.write_text(f"audit_db: {audit_db}\n{LINES}")
+    else:  # the audit log in a good place, the other database in the bad one
+        path.write_text(f"audit_db: {tmp / 'audit.sqlite'}\n{key}: {audit_db}\n{LINES}")
     return path
 
 
+@pytest.mark.parametrize("key", ["audit_db", "history_db"])
 def test_check_config_and_run_refuse_the_place(
-    bad_place: tuple[Path, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    bad_place: tuple[Path, str], tmp_path: Path, capsys: pytest.CaptureFixture[str], key: str
 ) -> None:
     place, says = bad_place
-    path = config(tmp_path, place)
+    path = config(tmp_path, place, key)
     assert cli.main(["check-config", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "audit_db:" in err and says in err, err
+    assert f"{key}:" in err and says in err, err
     # The service stops at its audit_db before it binds: an address this test holds is
     # one no other test worker can take meanwhile, and were it bound, a refusal too.
     with socket.socket() as held:
@@ -81,7 +85,7 @@ def test_check_config_and_run_refuse_the_place(
             timeout=60,
         )
     assert done.returncode == 2, done
-    assert "audit_db:" in done.stderr and says in done.stderr, done.stderr
+    assert f"{key}:" in done.stderr and says in done.stderr, done.stderr
     assert "Traceback" not in done.stderr + done.stdout
     assert "internal error" not in done.stderr
     assert not Path("/dev/null-journal").exists() and not Path("/dev/null-wal").exists()

@@ -63,9 +63,17 @@ def run_check(args: argparse.Namespace) -> int:
     from pkwbus.service.audit.log import path_problem
 
     config = load(args.file)
-    problem = path_problem(config.audit_db)
-    if problem is not None:
-        raise CommandError(f"invalid configuration:\n  audit_db: {problem}", Exit.BAD_INPUT)
+    # The places the service opens before anything else, checked as `run` checks them.
+    problems = [
+        f"{key}: {problem}"
+        for key, problem in (
+            ("audit_db", path_problem(config.audit_db)),
+            ("history_db", path_problem(config.history_path, "the history database")),
+        )
+        if problem is not None
+    ]
+    if problems:
+        raise CommandError("invalid configuration:\n  " + "\n  ".join(problems), Exit.BAD_INPUT)
     for line in check_config_report(config):
         print(line)
     if config.mqtt is not None:
