@@ -4,7 +4,16 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, StrictStr
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    StrictInt,
+    StrictStr,
+    field_validator,
+)
 
 from pkwbus import __version__
 from pkwbus.protocol import pkw
@@ -104,7 +113,18 @@ class MaintenanceBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     on: StrictBool = Field(description="true: nothing goes out to the drive until false")
-    reason: StrictStr = Field(default="", max_length=200, description="shown with it")
+    reason: StrictStr = Field(
+        default="", max_length=200, description="shown with it; one line, no control characters"
+    )
+
+    @field_validator("reason")
+    @classmethod
+    def _one_line(cls, reason: str) -> str:
+        # A newline (any control character) would start a line of its own in the audit's
+        # table and in the log, as if another entry.
+        if any(ord(c) < 0x20 or ord(c) == 0x7F for c in reason):
+            raise ValueError("one line of text: no newline, tab or other control character")
+        return reason
 
 
 class RestoreBody(BaseModel):
