@@ -6,7 +6,9 @@ import asyncio
 from pathlib import Path
 
 from pkwbus.protocol.pkw.dialects import Command
-from tests.service.http.conftest import POLLED_WRITABLES, fc_drives, service
+from pkwbus.sim import SimTiming, Simulator
+from tests.master.conftest import until
+from tests.service.http.conftest import POLLED_WRITABLES, STEADY, fc_drives, service
 
 
 async def test_not_while_running_is_409_with_fault_17(tmp_path: Path) -> None:
@@ -151,3 +153,27 @@ async def test_a_change_whose_read_the_drive_refuses_is_not_sent(tmp_path: Path)
         assert read.command is Command.READ and read.subindex == 135
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "rejected"
+
+
+async def test_a_drive_down_since_the_start_says_so_rather_than_try_again_soon(
+    tmp_path: Path,
+) -> None:
+    """A drive that never answered has described nothing: its reads and writes answer 503
+    not_described, saying it is down (a few seconds would not do), and nothing is sent."""
+    sim = Simulator("fc", [1, 2], timing=SimTiming(response_delay=0.002), catalog="danfoss-fc",
+                    seed=11, model=STEADY)  # fmt: skip
+    sim.kill(2)
+    drives = fc_drives(polls=[("16-13", "50ms")])
+    async with service(tmp_path, fc=drives, keep={"fc": sim}, ready=False) as svc:
+        await until(lambda: not svc.runtime.snapshot.drives["fan2"].up)
+        await until(lambda: not svc.runtime.snapshot.decoding["fan1"].pending)
+        before = len(svc.audit_writer.for_pnu(2, 341))
+        for r in (await svc.client.get("/api/v1/drives/fan2/parameters/3-41"),
+                  await svc.put("fan2", "3-41", {"value": 12})):  # fmt: skip
+            assert r.status_code == 503, r.text
+            error = r.json()["error"]
+            assert error["kind"] == "not_described"
+            assert "fan2 is down" in error["message"] and "few seconds" not in error["message"]
+        assert len(svc.audit_writer.for_pnu(2, 341)) == before
+        r = await svc.client.get("/api/v1/drives/fan1/parameters/3-41")  # the other: as ever
+        assert r.status_code == 200, r.text

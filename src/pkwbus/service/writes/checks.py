@@ -87,12 +87,15 @@ def described_format(
     """What ``ref`` is on the drive; 503 while the drive has not described it yet (a value
     written or read now would be scaled as the catalog says, maybe not as the drive does).
     Where nothing else types it, the type the drive named in its own answers."""
-    decoding = runtime.snapshot.decoding.get(entry.name)
+    snapshot = runtime.snapshot
+    decoding = snapshot.decoding.get(entry.name)
     if decoding is not None and ref.pnu in decoding.pending:
-        raise ApiError(
-            503, "not_described",
-            f"{entry.name} has not described {ref.name} yet: try again in a few seconds",
-        )  # fmt: skip
+        state = snapshot.drives.get(entry.name)
+        if state is not None and not state.up:  # a few seconds would not do: say why
+            why = f"{entry.name} is down: it describes {ref.name} once it answers again"
+        else:
+            why = f"{entry.name} has not described {ref.name} yet: try again in a few seconds"
+        raise ApiError(503, "not_described", why)
     return runtime.format_of(entry.name, ref)
 
 
