@@ -6,8 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from prometheus_client import CollectorRegistry
 
 from pkwbus.service.history.store import DriveEvent, HistoryError, HistoryStore
+from pkwbus.service.history.stream import EventStream
 
 
 def event(
@@ -74,3 +76,23 @@ def test_a_place_that_cannot_hold_the_database_is_one_clear_error(tmp_path: Path
     (tmp_path / "file").write_text("x")
     with pytest.raises(HistoryError, match="cannot open the history database"):
         HistoryStore(tmp_path / "file" / "history.sqlite")
+
+
+async def test_the_count_at_start_is_of_the_drives_configured_now(tmp_path: Path) -> None:
+    """What the history holds of a drive removed (or moved to another line) is kept, but not
+    counted at the next start: its series would stand for a drive that is not there."""
+    store = HistoryStore(tmp_path / "history.sqlite")
+    store.add([event("a"), event("b"), event("c", drive="gone")])
+    registry = CollectorRegistry()
+    stream = EventStream(store, registry)
+    stream.present = frozenset({("l1", "d1")})
+    assert await stream.start()
+    counted = {
+        s.labels["drive"]: s.value
+        for f in registry.collect()
+        for s in f.samples
+        if s.name == "pkwbus_drive_events_total"
+    }
+    assert counted == {"d1": 2.0}
+    assert store.known("gone") == {"c"}  # kept all the same
+    store.close()

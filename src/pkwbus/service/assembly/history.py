@@ -139,6 +139,8 @@ class Memory:
     def watch(self, config: cfg.Config, next_load: LoadBuilder) -> None:
         """Watch the drives of ``config`` on the lines of ``next_load`` (the runtime's next load:
         at the start, a reload's, a line's won or lost in hot standby)."""
+        self.stream.present = frozenset((line.name, d.name) for line in config.lines
+                                        for d in line.drives)  # fmt: skip
         self.logs = watch_logs(config, next_load, self.stream)
         self.settings = watch_settings(config, self.runtime, next_load, self.stream, self._store)
         swept = set(self.settings.swept) if self.settings is not None else set()

@@ -43,6 +43,9 @@ class EventStream:
         )
         self._newest: dict[tuple[str, str], tuple[str, ...]] = {}  # (drive, kind) -> labels
         self._started = False
+        # The (line, drive) pairs of the configuration: what the history holds of others (a
+        # drive removed, or moved to another line) is not counted at the start (None: all).
+        self.present: frozenset[tuple[str, str]] | None = None
         # Who is told of each new event, the oldest first, as it is counted (MQTT).
         self.listeners: list[Callable[[list[DriveEvent]], None]] = []
 
@@ -60,8 +63,10 @@ class EventStream:
         try:
             if not self._started:
                 counts = await asyncio.to_thread(self.store.counts)
+                present = self.present
                 for labels, n in counts.items():
-                    self.counter.labels(*labels).inc(n)
+                    if present is None or (labels[0], labels[1]) in present:
+                        self.counter.labels(*labels).inc(n)
                 self._started = True
             for line, drive, kind in kinds:
                 newest = await asyncio.to_thread(self.store.newest, drive, kind)
