@@ -85,6 +85,15 @@ def test_a_found_drive_and_the_summary(pty_sim: str) -> None:
     assert "\r" not in done.stderr  # stderr is a pipe here: no progress display
 
 
+def test_parities_without_baudrates_are_tried_at_the_one_rate(pty_sim: str) -> None:
+    done = scan("--port", pty_sim, "--addresses", "2", "--parities", "N,E", "--json")
+    assert done.returncode == 0, done.stderr
+    (drive,) = json.loads(done.stdout)
+    assert drive["parity"] == "N"  # the first one tried, at the one rate
+    bad = scan("--port", pty_sim, "--addresses", "2", "--parities", "X")
+    assert bad.returncode == 2 and "--parities: 'X' is not E, O or N" in bad.stderr
+
+
 def test_nothing_answered_is_exit_3_with_a_summary(pty_sim: str) -> None:
     done = scan("--port", pty_sim, "--addresses", "5-6", "--baudrates", "19200,9600")
     assert done.returncode == 3

@@ -74,8 +74,9 @@ def add_parsers(sub: Any) -> None:
     )
     scan.add_argument(
         "--parities",
-        default="E,O,N",
-        help="the parities tried at each rate with --baudrates (default E,O,N)",
+        default=None,
+        help="the parities tried at each rate, e.g. E,N (default: E,O,N with --baudrates,"
+        " else --parity)",
     )
     scan.set_defaults(func=run_scan)
 
@@ -267,11 +268,14 @@ def run_scan(args: argparse.Namespace) -> int:
         addresses = parse_addresses(args.addresses, low, high)
     else:
         addresses = list(range(low, high + 1))
-    if args.baudrates is not None:
+    if args.parities is not None:
         parities = parse_parities(args.parities)
+    else:
+        parities = parse_parities("E,O,N") if args.baudrates is not None else [args.parity]
+    if args.baudrates is not None:
         settings = [(b, p) for b in parse_baudrates(args.baudrates) for p in parities]
     else:
-        settings = [(args.baudrate or DEFAULT_BAUDRATE, args.parity)]
+        settings = [(args.baudrate or DEFAULT_BAUDRATE, p) for p in parities]
     progress = Progress(sys.stderr, enabled=not args.json and sys.stderr.isatty())
     started = time.monotonic()
     try:
