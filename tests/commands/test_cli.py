@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import re
 import subprocess
 import sys
@@ -122,10 +123,15 @@ def test_bad_write_value_exit_2(capsys: pytest.CaptureFixture[str], sim_port: st
     assert "below the minimum" in err or "range" in err
 
 
-def test_port_cannot_be_opened_exit_4(capsys: pytest.CaptureFixture[str]) -> None:
+def test_port_cannot_be_opened_exit_4(
+    capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.WARNING)
     code, _, err = run(capsys, "read", "--port", "/nonexistent/tty", "--address", "1", "16-13")
     assert code == 4
     assert "cannot open /nonexistent/tty" in err and "Traceback" not in err
+    # Said once, by the command: the line's own warning is the service's log, not this.
+    assert not [r for r in caplog.records if "/nonexistent/tty" in r.getMessage()]
 
 
 def test_scan_finds_scattered_addresses(capsys: pytest.CaptureFixture[str], sim_port: str) -> None:

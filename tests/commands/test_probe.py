@@ -76,10 +76,13 @@ def test_a_drive_that_does_not_answer_is_named_and_exits_3(pty: str, tmp_path: P
     assert "Traceback" not in done.stderr
 
 
-def test_a_port_that_cannot_be_opened_is_said(tmp_path: Path) -> None:
-    done = check(config(tmp_path, str(tmp_path / "no-such-tty"), [1]))
-    assert done.returncode == 3
-    assert "line hall: cannot open" in done.stdout
+def test_a_port_that_cannot_be_opened_is_said_once_and_exits_4(tmp_path: Path) -> None:
+    port = str(tmp_path / "no-such-tty")
+    done = check(config(tmp_path, port, [1]))
+    assert done.returncode == 4, done  # the exit code of a port that cannot be opened
+    assert f"line hall: cannot open {port}" in done.stdout
+    assert done.stdout.count(port) == 1 and done.stdout.count("cannot open") == 1
+    assert "WARNING" not in done.stderr, done.stderr  # the command says it, not the log
 
 
 @pytest.fixture

@@ -45,14 +45,17 @@ from pkwbus.service.config.resolved import (
 __all__ = ["probe", "run_probe"]
 
 
-def probe(config: cfg.Config) -> tuple[list[str], bool]:
-    """The report's lines, and whether every probed drive answered."""
+def probe(config: cfg.Config) -> tuple[list[str], bool | None]:
+    """The report's lines, and whether every probed drive answered (None: a line's port
+    could not be opened)."""
     return link.run(_probe(config))
 
 
-async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
+async def _probe(config: cfg.Config) -> tuple[list[str], bool | None]:
+    """The report, and whether every probed drive answered (None: a line's port could not
+    be opened)."""
     report: list[str] = []
-    every = True
+    every: bool | None = True
     for line in config.lines:
         if line.sim is not None:
             report.append(f"line {line.name}: simulated ({line.port}), not probed")
@@ -65,11 +68,12 @@ async def _probe(config: cfg.Config) -> tuple[list[str], bool]:
             continue
         answered, lines = await _probe_line(line)
         report += lines
-        every = every and answered
+        if every is not None:
+            every = None if answered is None else every and answered
     return report, every
 
 
-async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
+async def _probe_line(line: cfg.Line) -> tuple[bool | None, list[str]]:
     bus = port_for(line, line.port)
     targets = {drive.name: target_for(line, drive) for drive in line.drives}
     specs = [DriveSpec(name, carrier_for(target)) for name, target in targets.items()]
@@ -77,7 +81,8 @@ async def _probe_line(line: cfg.Line) -> tuple[bool, list[str]]:
     try:
         await session.open()
     except PortError as exc:
-        return False, [f"line {line.name}: cannot open {line.port}: {exc}"]
+        said = str(exc)  # most name the port already: "cannot open /dev/ttyUSB0: ..."
+        return None, [f"line {line.name}: {said if line.port in said else f'{line.port}: {said}'}"]
     out = [f"line {line.name}: {line.port} open, {line.baudrate} baud {line.parity}"]
     every = True
     loop = asyncio.get_running_loop()
@@ -165,6 +170,8 @@ def run_probe(config: cfg.Config) -> int:
     lines, every = probe(config)
     for text in lines:
         print(text)
+    if every is None:
+        raise CommandError("a line's port cannot be opened (see above)", Exit.PORT)
     if not every:
         raise CommandError("some drives did not answer (see above)", Exit.NO_ANSWER)
     return Exit.OK

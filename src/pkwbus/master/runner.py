@@ -90,8 +90,12 @@ class LineRunner(Generic[Request, Answer]):
         poll_deadline: float | None = None,
         wall_clock: Callable[[], float] = time.time,
         batch_every: float = BATCH_EVERY,
+        log_port: bool = True,
     ) -> None:
         self.name = name
+        # A port that fails, in the log (the service's lines); a command's session says it
+        # to its user itself, once.
+        self._log_port = log_port
         self.port = port
         self.wire = wire
         self.snapshot = snapshot if snapshot is not None else Snapshot()
@@ -381,7 +385,8 @@ class LineRunner(Generic[Request, Answer]):
             log.info("line %s: port %s open", self.name, self.link.settings.url, extra=ctx)
             self._unrecorded.append(([LineState(self.name, True)], self._wall()))
         elif state is LinkState.FAILED:
-            log.warning("line %s: %s", self.name, error, extra=ctx)
+            if self._log_port:
+                log.warning("line %s: %s", self.name, error, extra=ctx)
             self.planner.port_failed()
             self.wire.lost()
             state_event = LineState(self.name, False, error, refused=self._refusing)

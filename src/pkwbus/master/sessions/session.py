@@ -72,7 +72,7 @@ class LineSession:
         # The session asks nothing of the requests and answers: the runner's own business.
         self.runner: LineRunner[Any, Any] = LineRunner(
             "command line", port, wire, drives, retries=retries, observers=observers,
-            policy=_ASKED_ONLY,
+            policy=_ASKED_ONLY, log_port=False,  # the command says it (PortError)
         )  # fmt: skip
         # Set (to SessionEnded) by the watcher; a job waits for it beside its own result.
         self.ended: asyncio.Future[None] | None = None
