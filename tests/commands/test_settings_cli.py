@@ -329,6 +329,31 @@ def test_restore_of_a_siemens_drive(
         assert b.value(pnu, index) == a.value(pnu, index)
 
 
+def test_a_dry_run_checks_each_write_as_it_would_go_out(
+    capsys: pytest.CaptureFixture[str], uss: Served, tmp_path: Path
+) -> None:
+    """A value the parameter's type cannot hold exactly (p1120 is an f32) is not sent by a
+    restore: its dry run says so and exits 2 (nothing sent, bad input), not 0."""
+    path = tmp_path / "a.json"
+    back_up(capsys, uss, path, "uss")
+    document = json.loads(path.read_text())
+    (ramp,) = [s for s in document["settings"] if s["parameter"] == "p1120"]
+    ramp["value"] = 12.345678901234567
+    path.write_text(json.dumps(document))
+    b = uss.drive(B)
+    before = stored(b)
+    code, out, err = run(capsys, "restore", str(path), *line(uss, B, "uss"), "--dry-run")
+    assert code == 2, (out, err)
+    assert "p1120: invalid: not sent:" in out and "dry run: nothing written" in out
+    assert "p1120 (invalid)" in err
+    assert stored(b) == before
+    code, out, _ = run(capsys, "restore", str(path), *line(uss, B, "uss"), "--dry-run",
+                       "--json")  # fmt: skip
+    results = json.loads(out)["results"]
+    assert {r["parameter"]: r["outcome"] for r in results}["p1120"] == "invalid"
+    assert {r["outcome"] for r in results if r["parameter"] != "p1120"} <= {"dry_run"}
+
+
 @pytest.mark.parametrize(
     ("name", "text", "says"),
     [

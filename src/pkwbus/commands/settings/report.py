@@ -45,11 +45,13 @@ def exit_code(done: Restored) -> Exit:
     if done.other is not None:
         return Exit.BAD_INPUT
     outcomes = {r["outcome"] for r in done.results}
+    if done.dry_run and "invalid" in outcomes:
+        return Exit.BAD_INPUT  # a write that could not go out: nothing was sent
     if "mismatch" in outcomes:
         return Exit.MISMATCH
     if outcomes & _NO_ANSWER:
         return Exit.NO_ANSWER
-    if outcomes - {"ok"}:
+    if outcomes - {"ok", "dry_run"}:
         return Exit.REJECTED
     return Exit.OK
 
@@ -83,6 +85,9 @@ def report(args: argparse.Namespace, done: Restored) -> None:
         for s in done.skipped:
             print(f"  {_name(s.parameter, s.index)}: {s.why}")
     if done.dry_run:
+        for r in done.results:
+            if r["outcome"] != "dry_run":
+                print(f"  {_name(r['parameter'], r['index'])}: {_result(r)}")
         print("dry run: nothing written")
         return
     if done.results:
@@ -106,7 +111,7 @@ def _problem(done: Restored) -> str | None:
     failed = [
         f"{_name(r['parameter'], r['index'])} ({r['outcome']})"
         for r in done.results
-        if r["outcome"] != "ok"
+        if r["outcome"] not in ("ok", "dry_run")
     ]
     if failed:
         return f"{len(failed)} write(s) not made: {', '.join(failed)}"

@@ -93,14 +93,16 @@ def run_restore(args: argparse.Namespace) -> int:
     present, targets = _present(access, backup, catalog)
     plan, skipped = plan_restore(backup, present, target_identity=identity, force=args.force)
     done = Restored(backup, identity, plan, skipped, args.dry_run)
-    if not args.dry_run:
-        store = pkw.Store(args.store)
+    store = pkw.Store(args.store)
 
-        async def write(step: Planned) -> dict[str, Any]:
-            ref, fmt = targets[(step.parameter, step.index)]
-            return await _write(access, ref, fmt, step.new, store)
+    async def write(step: Planned) -> dict[str, Any]:
+        ref, fmt = targets[(step.parameter, step.index)]
+        if args.dry_run:  # each write checked as it would go out, none sent
+            made = _request(access, ref, fmt, step.new, store)
+            return {"outcome": "dry_run"} if not isinstance(made, str) else _invalid(made)
+        return await _write(access, ref, fmt, step.new, store)
 
-        done.results = link.run(carry_out(plan, write))
+    done.results = link.run(carry_out(plan, write))
     report(args, done)
     return exit_code(done)
 
@@ -181,12 +183,10 @@ async def _write(
     """One write as `pkwbus write` sends it, then its read-back: the outcome (ok,
     rejected, mismatch, unverified, timeout, line_error, invalid) and what it says."""
     d = access.dialect
-    try:
-        raw, width = fmt.encode(value, str(ref))
-        request = pkw.write(d, ref.pnu, raw, width, index=ref.index, store=store)
-        access.check(request)
-    except LocalProtocolError as exc:
-        return {"outcome": "invalid", "detail": f"not sent: {exc}"}
+    made = _request(access, ref, fmt, value, store)
+    if isinstance(made, str):
+        return _invalid(made)
+    raw, request = made
     back = pkw.read(d, ref.pnu, ref.index)
     try:
         written, answer = await access.run([request, back], fmt.vtype)
@@ -212,3 +212,22 @@ async def _write(
         )
         return {"outcome": "mismatch", "detail": detail}
     return {"outcome": "ok", "raw": raw}
+
+
+def _request(
+    access: DriveAccess, ref: ParameterRef, fmt: ParameterDescription, value: Value,
+    store: pkw.Store,
+) -> tuple[int, pkw.PkwRequest] | str:  # fmt: skip
+    """The raw value and the write request of ``value``, as `pkwbus write` makes them; why
+    not, where it cannot go out (a value its type cannot hold exactly, say)."""
+    try:
+        raw, width = fmt.encode(value, str(ref))
+        request = pkw.write(access.dialect, ref.pnu, raw, width, index=ref.index, store=store)
+        access.check(request)
+    except LocalProtocolError as exc:
+        return str(exc)
+    return raw, request
+
+
+def _invalid(why: str) -> dict[str, Any]:
+    return {"outcome": "invalid", "detail": f"not sent: {why}"}
