@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import tempfile
 import threading
 from collections.abc import Iterator
@@ -368,3 +369,35 @@ def test_read_write_and_describe_through_data_record_47(
     # Every Data_Exchange of PPO 3 (no PKW words) began with a control word of 0.
     ctws = [int.from_bytes(f.data[:2], "big") for f in served.wire.data_exchanges()]
     assert ctws and all(w == pzd.MONITORING_CTW for w in ctws)
+
+
+@pytest.mark.parametrize(
+    ("given", "says"),
+    [
+        (["--ident", "0x9999"], "slave 8 refuses its parameters (Prm_Fault): its ident number is"),
+        (["--ppo", "3"], "slave 8 refuses its configuration (Cfg_Fault)"),
+    ],
+    ids=["ident", "ppo"],
+)
+def test_a_slave_that_refuses_what_it_is_sent_is_named_once(
+    capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture, given: list[str],
+    says: str,
+) -> None:  # fmt: skip
+    """A slave that refuses its parameters or configuration is parametrised again every
+    cycle: the log says so once, not every cycle, and the command's message says why from
+    the slave's diagnosis, not only that the time ran out."""
+    caplog.set_level(logging.WARNING)
+    served = serve("tcp")
+    try:
+        ident = given if given[0] == "--ident" else ["--ident", hex(served.sim.ident)]
+        args = dp(served, "--address", "8", "16-13", ident=False)
+        code, _, err = run(capsys, "read", *ident, *[g for g in given if g not in ident], *args)
+    finally:
+        served.close()
+    assert code == 3, err
+    assert says in err, err
+    if given[0] == "--ident":
+        assert f"{served.sim.ident:#06x}, not 0x9999" in err
+    again = [r for r in caplog.records if "parametrised again" in r.getMessage()]
+    assert len(again) == 1, [r.getMessage() for r in again]
+    assert served.wire.set_prm()[(8, 2)] > 3  # parametrised over and over meanwhile

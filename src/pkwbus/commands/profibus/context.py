@@ -302,6 +302,9 @@ async def session(
             raise CommandError(str(exc), Exit.NO_ANSWER, kind=exc.kind) from None
     finally:
         await drive.close()
+    refused = watch.refusal(ctx.parameters.ident)
+    if refused is not None:  # never in data exchange: say why, not only that time ran out
+        outcomes = [TimedOut(refused) if isinstance(o, TimedOut) else o for o in outcomes]
     return outcomes
 
 
@@ -315,6 +318,29 @@ class _Watch:
         self.session: LineSession | None = None
         self.state = SlaveState.OFFLINE
         self.owner: int | None = None
+        self.diagnosis: dps.Diagnosis | None = None  # the slave's last
+        self.exchanged = False  # in data exchange at some time
+
+    def refusal(self, ident: int) -> str | None:
+        """Why the slave never came to data exchange, where its diagnosis says it refuses
+        what it was sent (Prm_Fault, Cfg_Fault: PROFIBUS DP Slave_Diag, station status 1);
+        ``ident`` the ident number it was parametrised with."""
+        d = self.diagnosis
+        if d is None or self.exchanged:
+            return None
+        if "prm_fault" in d.flags:
+            why = (
+                f"its ident number is {d.ident:#06x}, not {ident:#06x} (--ident, --gsd)"
+                if d.ident != ident
+                else "its ident number or user parameters (--ident, --gsd, --user-prm)"
+            )
+            return f"slave {self.address} refuses its parameters (Prm_Fault): {why}"
+        if "cfg_fault" in d.flags:
+            return (
+                f"slave {self.address} refuses its configuration (Cfg_Fault): its modules are"
+                " not those sent (--ppo, --cfg, --gsd)"
+            )
+        return None
 
     def _end(self, kind: EndKind, reason: str) -> None:
         if self.session is not None:
@@ -324,8 +350,10 @@ class _Watch:
         for event in events:
             if isinstance(event, SlaveDiagnosed):
                 self.owner = event.diagnosis.master
+                self.diagnosis = event.diagnosis
             elif isinstance(event, SlaveStateChanged):
                 self.state = event.state
+                self.exchanged = self.exchanged or event.state is SlaveState.DATA_EXCHANGE
                 if event.state is SlaveState.LOCKED:
                     self._end(EndKind.LOCKED, str(SlaveLocked(self.address, self.owner)))
             elif isinstance(event, SlaveSilent):

@@ -6,6 +6,8 @@ the slave showed AK 0 (it may still be answering an earlier request)."""
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -16,6 +18,7 @@ from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
+from pkwbus.master.wires.profibus.wire import RESTARTS_SAID_EVERY, CycleWire
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Command
@@ -158,3 +161,22 @@ def test_a_ppo_write_of_another_length_is_refused() -> None:
     with pytest.raises(LocalProtocolError):
         slot.submit(pkw.read(PCV, 1613), b"\x00" * 4)
     assert not slot.busy
+
+
+def test_a_slave_parametrised_over_and_over_is_said_once_a_minute(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A slave that refuses its parameters is parametrised again every cycle: the first time
+    is in the log at once, then one line a minute with how often, until it is in data
+    exchange (then the next time is said at once again)."""
+    caplog.set_level(logging.WARNING, logger="pkwbus.master.wires.profibus.wire")
+    wire = CycleWire([], name="dp")
+    for at in range(0, int(RESTARTS_SAID_EVERY) + 1):  # every second for a minute and one
+        wire._restarted("fan", "prm_required", float(at))
+    said = [r.getMessage() for r in caplog.records]
+    assert said == [
+        "drive fan: parametrised again (prm_required)",
+        f"drive fan: parametrised again {int(RESTARTS_SAID_EVERY)} times in"
+        f" {RESTARTS_SAID_EVERY:.0f} s, not in data exchange since (prm_required the last"
+        " time): see its diagnosis",
+    ]

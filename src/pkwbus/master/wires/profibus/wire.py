@@ -88,6 +88,7 @@ _ERROR_KINDS = {
     FailureKind.UNEXPECTED: ErrorKind.UNEXPECTED,
 }
 DEFAULT_POLL_DEADLINE = 2.0  # seconds: cycles of every slave, a lagging answer included
+RESTARTS_SAID_EVERY = 60.0  # seconds between log lines of a slave parametrised over and over
 
 
 @dataclass(frozen=True)
@@ -129,6 +130,9 @@ class CycleWire:
         self._events: list[Event] = [SlaveStateChanged(d.name, SlaveState.OFFLINE) for d in drives]
         self._garbled: dict[str, SlotGarbled] = {}  # this exchange's unreadable PKW answer
         self._unreadable: set[str] = set()  # slaves whose PKW answers cannot be read
+        # Slaves parametrised again and not in data exchange since: when it was last said in
+        # the log, and how often since (one that refuses its parameters: every cycle).
+        self._restarts: dict[str, tuple[float, int]] = {}
 
     def poll_deadline(self, retries: int) -> float:
         return DEFAULT_POLL_DEADLINE
@@ -269,8 +273,7 @@ class CycleWire:
             self._state(planner, name, event, now)
         elif isinstance(event, Restarted):
             events.append(SlaveRestarted(name, event.reason))
-            log.warning("drive %s: parametrised again (%s)", name, event.reason,
-                        extra={"line": self.name, "drive": name})  # fmt: skip
+            self._restarted(name, event.reason, now)
         elif isinstance(event, DiagnosisRead):
             events.append(SlaveDiagnosed(name, event.diagnosis))
         elif isinstance(event, SlotAnswer):
@@ -326,11 +329,32 @@ class CycleWire:
             self._unreadable.discard(name)
             log.info("drive %s: its PKW answers can be read again", name, extra=ctx)
 
+    def _restarted(self, name: str, reason: str, now: float) -> None:
+        """A slave parametrised again: in the log at once, then, until it is in data exchange,
+        once every :data:`RESTARTS_SAID_EVERY` seconds with how often (a slave that refuses
+        its parameters, a wrong ident say, is parametrised again every cycle)."""
+        ctx = {"line": self.name, "drive": name}
+        said = self._restarts.get(name)
+        if said is None:
+            self._restarts[name] = (now, 0)
+            log.warning("drive %s: parametrised again (%s)", name, reason, extra=ctx)
+            return
+        at, since = said[0], said[1] + 1
+        if now - at < RESTARTS_SAID_EVERY:
+            self._restarts[name] = (at, since)
+            return
+        self._restarts[name] = (now, 0)
+        log.warning(
+            "drive %s: parametrised again %d times in %.0f s, not in data exchange since (%s"
+            " the last time): see its diagnosis", name, since, now - at, reason, extra=ctx,
+        )  # fmt: skip
+
     def _state(self, planner: Planner, name: str, event: StateChanged, now: float) -> None:
         self._events.append(SlaveStateChanged(name, event.new))
         ctx = {"line": self.name, "drive": name}
         if event.new is SlaveState.DATA_EXCHANGE:
             log.info("drive %s: in data exchange", name, extra=ctx)
+            self._restarts.pop(name, None)
             planner.told_health(name, True, "", now)
         elif event.old is SlaveState.DATA_EXCHANGE:
             planner.told_health(name, False, f"left data exchange ({event.new})", now)
