@@ -31,6 +31,15 @@ CASES: list[tuple[str, str, str, Any, int, str]] = [
     ("missing_value", "fan1", "3-41", {}, 422, "invalid_request"),
     ("bad_store", "fan1", "3-41", {"value": 10, "store": "flash"}, 422, "invalid_request"),
     ("not_json", "fan1", "3-41", "value=10", 422, "invalid_request"),
+    ("not_utf8", "fan1", "3-41", b'{"value": "\xff\xfe"}', 422, "invalid_request"),
+    (
+        "nested_too_deep",
+        "fan1",
+        "3-41",
+        '{"value": ' + "[" * 2000 + "]" * 2000 + "}",
+        422,
+        "invalid_request",
+    ),
     ("unknown_drive", "nope", "3-41", {"value": 10}, 404, "unknown_drive"),
     ("notation", "fan1", "banana", {"value": 10}, 404, "unknown_parameter"),
     ("notation_index", "fan1", "3-41[999]", {"value": 10}, 404, "unknown_parameter"),
@@ -54,7 +63,7 @@ async def test_refused_before_sending(
 ) -> None:
     async with service(tmp_path, uss=USS_DRIVES) as svc:
         url = f"/api/v1/drives/{drive}/parameters/{parameter}"
-        if isinstance(body, str):
+        if isinstance(body, str | bytes):
             headers = {**AUTH, "Content-Type": "application/json"}
             r = await svc.client.put(url, content=body, headers=headers)
         else:
@@ -118,3 +127,13 @@ async def test_a_refusal_names_the_nearest_values(tmp_path: Path) -> None:
             assert r.status_code == 422
             assert r.json()["error"]["message"] == message
         assert svc.audit_writer.writes() == []
+
+
+async def test_what_no_route_takes_answers_in_the_apis_shape(tmp_path: Path) -> None:
+    async with service(tmp_path) as svc:
+        r = await svc.client.get("/api/v1/nothing-here")
+        assert r.status_code == 404 and r.json()["error"]["kind"] == "not_found", r.text
+        r = await svc.client.delete("/api/v1/drives/fan1/parameters/3-41", headers=AUTH)
+        assert r.status_code == 405, r.text
+        assert r.json()["error"]["kind"] == "method_not_allowed"
+        assert r.headers["allow"]  # what it takes

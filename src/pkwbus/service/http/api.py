@@ -22,12 +22,13 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.security import HTTPBearer
 from fastapi.staticfiles import StaticFiles
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from pkwbus import __version__
 from pkwbus.service.audit.log import AuditError, AuditLog, as_dict
 from pkwbus.service.audit.writer import AuditWriter
 from pkwbus.service.history.store import HistoryError
+from pkwbus.service.http.body_limit import BodyLimit
 from pkwbus.service.http.docs_pages import SERVERS, add_docs
 from pkwbus.service.http.maintenance import Maintenance
 from pkwbus.service.http.models import (
@@ -83,6 +84,9 @@ MAX_EVENTS_LIMIT = 1000  # entries of one GET /api/v1/events
 # The status page at / and its script and style: package data, nothing from elsewhere.
 STATIC = Path(__file__).parent / "static"
 
+# The error kind of Starlette's own answers (a path no route has, a method it does not take).
+_HTTP_KINDS = {404: "not_found", 405: "method_not_allowed"}
+
 # Declares the token in the OpenAPI schema (the Authorize button of /docs); the
 # endpoints check it themselves, so that every refusal is counted and audited.
 BEARER = HTTPBearer(
@@ -90,61 +94,6 @@ BEARER = HTTPBearer(
     scheme_name="token",
     description="the write token (writes, the audit log) or the read token (the audit log)",
 )
-
-
-class _TooLarge(BaseException):
-    """Raised out of ``receive``; a BaseException so that FastAPI's body parsing,
-    which turns every Exception into 400, lets it through to :class:`BodyLimit`."""
-
-
-class BodyLimit:
-    """ASGI middleware: a body over ``limit`` bytes gets 413, whether it announces its
-    length or comes chunked; nothing beyond the limit is kept in memory."""
-
-    def __init__(self, app: ASGIApp, limit: int, large: tuple[str, int] | None = None) -> None:
-        self.app = app
-        self.limit = limit
-        self.large = large  # (the end of a path, its own limit)
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        if self.large is not None and str(scope.get("path", "")).endswith(self.large[0]):
-            await BodyLimit(self.app, self.large[1])(scope, receive, send)
-            return
-        headers = dict(scope.get("headers") or [])
-        length = headers.get(b"content-length")
-        if length is not None and (not length.isdigit() or int(length) > self.limit):
-            await self._refuse(scope, receive, send)
-            return
-        seen = 0
-
-        async def counted() -> Message:
-            nonlocal seen
-            message = await receive()
-            if message["type"] == "http.request":
-                seen += len(message.get("body", b""))
-                if seen > self.limit:
-                    raise _TooLarge
-            return message
-
-        started = False
-
-        async def watched(message: Message) -> None:
-            nonlocal started
-            started = started or message["type"] == "http.response.start"
-            await send(message)
-
-        try:
-            await self.app(scope, counted, watched)
-        except _TooLarge:
-            if not started:
-                await self._refuse(scope, receive, send)
-
-    async def _refuse(self, scope: Scope, receive: Receive, send: Send) -> None:
-        body = {"error": {"kind": "too_large", "message": f"body over {self.limit} bytes"}}
-        await JSONResponse(body, status_code=413)(scope, receive, send)
 
 
 @dataclass(frozen=True)
@@ -218,7 +167,20 @@ def build_api(
             f"{'.'.join(_cap(str(x), 40) for x in e.get('loc', ()))}: {e.get('msg', '')}"
             for e in exc.errors()[:5]
         ]
-        message = _cap("; ".join(problems))
+        return await malformed(request, _cap("; ".join(problems)))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        """Starlette's own answers in the API's shape: a body it cannot read (not UTF-8,
+        nested too deep) as any malformed body; an unknown path, a method not allowed."""
+        if exc.status_code == 400:
+            return await malformed(request, _cap(f"body: {exc.detail}"))
+        kind = _HTTP_KINDS.get(exc.status_code, "http_error")
+        body = {"error": {"kind": kind, "message": _cap(str(exc.detail))}}
+        return JSONResponse(body, status_code=exc.status_code, headers=exc.headers)
+
+    async def malformed(request: Request, message: str) -> JSONResponse:
+        """422 invalid_request; a PUT to a drive's parameter or maintenance audited."""
         body: dict[str, Any] = {"error": {"kind": "invalid_request", "message": message}}
         params = request.path_params
         if request.method == "PUT" and "drive" in params:
