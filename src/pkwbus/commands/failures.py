@@ -21,6 +21,7 @@ from pkwbus.master.planning.outcomes import (
     Outcome,
     Rejected,
     TimedOut,
+    unanswered,
 )
 
 __all__ = ["CommandFailure", "command_failure"]
@@ -52,6 +53,6 @@ def command_failure(outcome: Outcome) -> CommandFailure | None:
         case NotSent(reason=reason):
             return CommandFailure(Exit.BAD_INPUT, "not_sent", f"nothing was sent: {reason}")
         case TimedOut(reason=reason) | LineFailed(reason=reason) | Cancelled(reason=reason):
-            return CommandFailure(Exit.NO_ANSWER, "timeout", f"no valid answer: {reason}")
+            return CommandFailure(Exit.NO_ANSWER, "timeout", unanswered(reason))
         case _:
             assert_never(outcome)

@@ -28,6 +28,7 @@ __all__ = [
     "Rejected",
     "TimedOut",
     "metric_label",
+    "unanswered",
 ]
 
 
@@ -106,6 +107,12 @@ class JobOutcome(enum.StrEnum):
     TIMEOUT = "timeout"
     CANCELLED = "cancelled"
     MISMATCH = "mismatch"
+
+
+def unanswered(reason: str) -> str:
+    """What a job that got no valid answer says: ``no valid answer: REASON``, said once
+    where the reason says it already ("no valid answer after 3 tries")."""
+    return reason if reason.startswith("no valid answer") else f"no valid answer: {reason}"
 
 
 def metric_label(outcome: Outcome) -> JobOutcome:
