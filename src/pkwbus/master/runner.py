@@ -161,12 +161,15 @@ class LineRunner(Generic[Request, Answer]):
         self.planner.add_drive(spec, asyncio.get_running_loop().time())
         self._changed()
 
-    def remove_drive(self, drive: str, reason: str) -> None:
+    def remove_drive(self, drive: str, reason: str) -> bool:
         """A drive gone from the line: its jobs end with ``reason``, nothing more goes out to
-        it (an exchange of it that is out ends at its result), nothing of it is shown."""
+        it (an exchange of it that is out ends at its result), nothing of it is shown.
+        Whether an exchange of it was out: its end is the line's time alone."""
+        out = self.planner.drive(drive).busy
         self.planner.remove_drive(drive, reason, asyncio.get_running_loop().time())
         self.flush()  # what ended, to its callers and the observers, before it is forgotten
-        self.writer.remove_drive(drive)
+        self.writer.remove_drive(drive, exchange_out=out)
+        return out
 
     def update_polls(self, spec: DriveSpec) -> None:
         """The drive's polls and described parameters now (``spec``, its carrier and form

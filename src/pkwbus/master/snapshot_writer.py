@@ -84,7 +84,13 @@ class SnapshotWriter:
         # What lands in the snapshot's readings: the configured polls.
         self._keys: set[ReadingKey] = set()
         self._silent: set[str] = set()  # drives told to leave their descriptions unanswered
+        # Every parameter each drive was asked to describe, the latest asked first (its
+        # describer keeps one no longer asked: planning.reload), and those not settled yet.
         self._targets: dict[str, tuple[DescribeTarget, ...]] = {}
+        self._waiting: dict[str, set[int]] = {}
+        # Drives a reload took away with an exchange out: its end is the line's time alone
+        # (a drive of the same name may be on the line already).
+        self._leaving: set[str] = set()
         self._totals = snapshot.totals.setdefault(line, LineTotals())
         self._values = DecodedValues()  # a value that holds is decoded once
         self._alarms = LineAlarms(line)  # the polled parameters that tell active alarms
@@ -115,20 +121,25 @@ class SnapshotWriter:
         self._polls[name] = spec.polls
         self._keys.update((name, p.parameter, p.index) for p in spec.polls)
         self._targets[name] = spec.describe
-        pending = {t.pnu for t in spec.describe} if spec.form is not None else set()
+        waiting = {t.pnu for t in spec.describe} if spec.form is not None else set()
+        self._waiting[name] = waiting
         formats = {(p.parameter, p.index): p.fmt for p in spec.polls}
-        snapshot.decoding[name] = Decoding(formats, pending=pending)
+        snapshot.decoding[name] = Decoding(formats, pending=set(waiting))
         snapshot.counts[name] = DriveCounts()
         snapshot.drives[name] = DriveState()
         self._alarms.watch(name, spec.alarms)
         snapshot.changes.touch(name)
 
-    def remove_drive(self, drive: str) -> None:
+    def remove_drive(self, drive: str, *, exchange_out: bool = False) -> None:
         """A drive gone from the line: everything the snapshot shows of it goes; whatever of
-        it still ends (an exchange out when it went) resolves its caller, nothing more."""
+        it still ends (``exchange_out``: an exchange of it was out when it went) resolves its
+        caller and counts as the line's time, nothing more."""
         self._polls.pop(drive, None)
         self._keys = {k for k in self._keys if k[0] != drive}
         self._targets.pop(drive, None)
+        self._waiting.pop(drive, None)
+        if exchange_out:
+            self._leaving.add(drive)
         self._silent.discard(drive)
         self._refusals.forget(drive)
         self._values.forget(drive)
@@ -139,27 +150,38 @@ class SnapshotWriter:
         """The line gone from the configuration (its runner stopped): all of it leaves."""
         for drive in list(self._polls):
             self.remove_drive(drive)
+        self._leaving.clear()
         self.snapshot.lines.pop(self.line, None)
         self.snapshot.totals.pop(self.line, None)
 
     def update_polls(self, spec: DriveSpec, polls: Sequence[PollSpec]) -> None:
-        """The drive's polls now (as described) and the parameters it is asked to
-        describe (``spec``); the values of the polls gone leave, a new parameter to describe
-        waits for its description."""
+        """The drive's polls now (as described) and the parameters it is asked to describe
+        (``spec``). The values of the polls gone leave, and those of a kept poll decoded
+        otherwise now (its latest too): never shown in a format they were not decoded in,
+        they come back with its next answer. A parameter new to its descriptions waits for
+        its description; one described before (a reload took it away) does not."""
         drive = spec.name
         self._polls[drive] = tuple(polls)
-        now = {(p.parameter, p.index) for p in polls}
+        decoding = self.snapshot.decoding[drive]
+        was, now = decoding.formats, {(p.parameter, p.index): p.fmt for p in polls}
         self._keys = {k for k in self._keys if k[0] != drive} | {(drive, *k) for k in now}
-        readings = self.snapshot.readings
+        readings, latest = self.snapshot.readings, self.snapshot.latest
         for key in [k for k in readings if k[0] == drive and k[1:] not in now]:
             del readings[key]
-        decoding = self.snapshot.decoding[drive]
-        known = {t.pnu for t in self._targets.get(drive, ())}
-        self._targets[drive] = spec.describe
+        for poll in polls:
+            at = (poll.parameter, poll.index)
+            if at in was and was[at] != now[at]:
+                readings.pop((drive, *at), None)
+                latest.pop((drive, poll.request.pnu, poll.request.subindex), None)
+        old = self._targets.get(drive, ())
+        known = {t.pnu for t in old}
         asked = {t.pnu for t in spec.describe}
+        self._targets[drive] = (*spec.describe, *(t for t in old if t.pnu not in asked))
+        waiting = self._waiting.setdefault(drive, set())
         if spec.form is not None:
-            decoding.pending = (decoding.pending & asked) | (asked - known)
-        decoding.formats = {(p.parameter, p.index): p.fmt for p in polls}
+            waiting |= asked - known
+            decoding.pending = waiting & asked
+        decoding.formats = now
         if self._alarms.watch(drive, spec.alarms):
             self._show_alarms(drive)  # what a parameter no longer watched showed
         self.snapshot.changes.touch(drive)
@@ -179,11 +201,16 @@ class SnapshotWriter:
         return out
 
     def _exchanged(self, event: Exchanged, at: float) -> None:
+        # One exchange is out at a time: the first to end of a drive that left is its own.
+        if gone := event.drive in self._leaving:
+            self._leaving.discard(event.drive)
         if event.error is ErrorKind.PORT:
             return  # nothing went on the wire
         totals = self._totals
         totals.telegrams += 1
         totals.busy += event.busy
+        if gone:
+            return  # not the errors of a drive of its name added since
         if event.error is not None and (counts := self.snapshot.counts.get(event.drive)):
             counts.errors += 1
             self.snapshot.changes.touch(event.drive)
@@ -206,7 +233,13 @@ class SnapshotWriter:
         """New polls of a parameter told before (a reload): nothing to log again."""
         if (decoding := self._decoding(event.drive)) is not None:
             self._decode_as(decoding, event)
+            self._described(event.drive, decoding, event.target.pnu)  # its describer has it
             self._out.append(DescriptionChecked(event))
+
+    def _described(self, drive: str, decoding: Decoding, pnu: int) -> None:
+        """``pnu``'s description settled: its values and the API's reads and writes go."""
+        decoding.pending.discard(pnu)
+        self._waiting.get(drive, set()).discard(pnu)
 
     def _forgotten(self, event: Forgotten, at: float) -> None:
         """Another drive now: no value of its parameters until it described them."""
@@ -217,6 +250,7 @@ class SnapshotWriter:
             log.warning("drive %s is %s: its parameters are described afresh", drive,
                         event.why, extra={"line": self.line, "drive": drive})  # fmt: skip
         decoding.pending.add(target.pnu)
+        self._waiting.setdefault(drive, set()).add(target.pnu)
         decoding.described.pop(target.pnu, None)
         self._out.append(DescriptionChecked(event))
 
@@ -226,7 +260,7 @@ class SnapshotWriter:
         drive, target, found = event.drive, event.target, event.description
         if (decoding := self._decoding(drive)) is None:
             return
-        decoding.pending.discard(target.pnu)
+        self._described(drive, decoding, target.pnu)
         if found is not None:
             decoding.described[target.pnu] = found
         else:
@@ -271,20 +305,30 @@ class SnapshotWriter:
         if isinstance(response, pkw.ValueResponse) and response.vtype is not None:
             self.snapshot.stated[(drive, work.request.pnu)] = response.vtype  # its own type
         result = self._result(event, work)
-        reading, previous = self._remember(drive, work.request, result, at)
         if isinstance(work, PollSpec):
             self._refusals.tell(drive, work, event.outcome)
             self._out.append(JobDone(drive, JobKind.READ, result))
             key = (drive, work.parameter, work.index)
-            if reading is not None and key in self._keys:  # still polled (a reload)
-                self._land(key, reading)
+            # Still polled, and decoded as its values are shown now (a poll out when a
+            # reload changed it is not): its value is the parameter's latest, and shown.
+            if key in self._keys and self._decoded_as_now(drive, work):
+                reading, _ = self._remember(drive, work.request, result, at)
+                if reading is not None:
+                    self._land(key, reading)
             return
+        reading, previous = self._remember(drive, work.request, result, at)
         if reading is not None:
             self._show_confirmed(drive, work, reading)
         if event.tally is not None and not isinstance(event.outcome, Cancelled):
             result = replace(result, previous=previous)  # it ran: a write's old value
         self._out.append(JobDone(drive, work.kind, result))
         work.resolve(result)
+
+    def _decoded_as_now(self, drive: str, poll: PollSpec) -> bool:
+        """Whether ``poll``'s value is decoded as its values are shown now (a poll out when a
+        reload changed its format is not)."""
+        fmt = self.snapshot.decoding[drive].formats.get((poll.parameter, poll.index))
+        return fmt is poll.fmt or fmt == poll.fmt
 
     def _count(self, drive: str, event: Finished) -> None:
         """A fault answer, or answers the request did not ask for, counted for the page."""

@@ -4,6 +4,7 @@ removed, added, replaced, and changed in place (:mod:`.reload`)."""
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import replace
 from typing import Any
 
 from pydantic import BaseModel
@@ -22,6 +23,10 @@ IN_PLACE = frozenset(
     {"poll", "maintenance", "writable", "parameters", "alarms", "counters", "events",
      "events_every", "settings"}
 )  # fmt: skip
+# What each of those says when it changes, besides the polls and maintenance.
+_SAID = {"writable": "writable parameters changed", "parameters": "parameter overrides changed",
+         "alarms": "alarms changed", "counters": "counters changed", "events": "events changed",
+         "events_every": "events_every changed", "settings": "settings changed"}  # fmt: skip
 REMOVED = "removed from the configuration by a reload"
 REPLACED = "its configuration changed (a reload)"
 CONFIGURED = "configuration"  # the reason of a maintenance the file asks for
@@ -62,8 +67,11 @@ class DriveChanges:
         counts = self.parts.counts[new.name]
         olds = {d.name: d for d in old.drives}
         said = f"line {new.name}:"
-        changes = []
-        defaults_same = fields(old, {"drives"}) == fields(new, {"drives"})
+        lined, drived = fields(old, {"drives"}), fields(new, {"drives"})
+        # The drives' defaults the line gives (its bus settings are the same here).
+        changes = [f"{said} {_SAID.get(k, f'{k} changed')}" for k in drived
+                   if lined.get(k) != drived[k]]  # fmt: skip
+        defaults_same = not changes
         for drive in new.drives:
             name = drive.name
             before = olds.get(name)
@@ -72,8 +80,13 @@ class DriveChanges:
             if before is not None and self._same_drive(runner, before, drive, specs[name],
                                                        entries[name]):  # fmt: skip
                 changed = self._update_polls(runner, plan, specs[name], entries[name])
-                if changed:
-                    changes.append(f"{said} drive {name}: {changed}")
+                told = [
+                    text for k, text in _SAID.items() if getattr(before, k) != getattr(drive, k)
+                ]
+                if changed == "polls changed" or (changed and not told):
+                    told.insert(0, changed)
+                if told:
+                    changes.append(f"{said} drive {name}: {', '.join(told)}")
                 if drive.maintenance and not before.maintenance:
                     runner.maintenance(name, True, CONFIGURED)
                     changes.append(f"{said} drive {name} in maintenance")
@@ -119,27 +132,31 @@ class DriveChanges:
         entry: DriveEntry,
     ) -> str | None:
         """The drive's new polls, described parameters and entry (its writable list, its
-        overrides), its state kept; what changed (None: nothing the line sees)."""
+        overrides, its watch settings), its state kept, and the drive marked changed for the
+        views; what changed of what the line sees (None: nothing)."""
         name = entry.name
         old = self.parts.entries[name]
-        described = runner.planner.drive(name).spec.describe
+        running = set(runner.planner.drive(name).spec.describe)
         changed = (
             "polls changed"
             if old.polls != entry.polls
-            else ("changed in place" if described != spec.describe else None)
+            # a parameter no longer described stays known as it was (planning.reload)
+            else ("changed in place" if not running.issuperset(spec.describe) else None)
         )
         # What the drive described stays in the read model; its writer takes the polls as
         # the planner decodes them now, and a parameter new to its descriptions waits for its
-        # own (SnapshotWriter.update_polls).
-        keys = {(name, p.parameter, p.index) for p in entry.polls}
+        # own (SnapshotWriter.update_polls). A value whose poll changed other than in its
+        # interval is decoded otherwise now: its trend's points go with its value.
+        was = {(p.parameter, p.index): replace(p, every=0.0) for p in old.polls}
+        keys = {(name, p.parameter, p.index) for p in entry.polls
+                if was.get((p.parameter, p.index)) == replace(p, every=0.0)}  # fmt: skip
         self.parts.entries[name] = entry
         self.parts.collector.set_parameters(name, plan.infos_of(name))
         self.parts.trends.forget(name, keep=keys)
-        if changed is not None:
-            runner.update_polls(spec)
+        runner.update_polls(spec)
         return changed
 
     def _remove(self, runner: LineRunner[Any, Any], line: str, drive: str, reason: str) -> None:
-        runner.remove_drive(drive, reason)
-        self.parts.counts[line].forget_drive(drive)
+        out = runner.remove_drive(drive, reason)  # an exchange of it out: the line's time
+        self.parts.counts[line].forget_drive(drive, exchange_out=out)
         self.parts.forget(line, drive)

@@ -126,6 +126,7 @@ class SnapshotCollector(Collector):
         self._snapshot = snapshot
         self._drives = dict(drives)
         self._parameters = {p.key: p for p in parameters}
+        self._given = dict(self._parameters)  # as the configuration gave them
         self._mismatches: dict[tuple[str, str, str], Mismatch] = {}
         self._line_of = {p.drive: p.line for p in self._parameters.values()}
         self._line_of.update({name: d.line for name, d in self._drives.items()})
@@ -149,16 +150,21 @@ class SnapshotCollector(Collector):
 
     def set_parameters(self, drive: str, parameters: Iterable[ParameterInfo]) -> None:
         """The drive's polled parameters now (a reload): a kept one keeps its info as
-        described, the others' series go."""
+        described while the configuration gives it as before, and takes the configuration's
+        when that changed (its description, where the drive gives one, follows:
+        :meth:`described`); the others' series go."""
         given = {p.key: p for p in parameters}
         for key in [k for k in self._parameters if k[0] == drive and k not in given]:
             del self._parameters[key]
+            self._given.pop(key, None)
             self._heads.pop(key, None)
             self._values.drop(key)
         for key, info in given.items():
             if key not in self._parameters:
-                self._parameters[key] = info
                 self._head(key)
+            elif self._given.get(key) == info:
+                continue
+            self._parameters[key] = self._given[key] = info
         self._info_text = None
 
     def forget_drive(self, drive: str) -> None:

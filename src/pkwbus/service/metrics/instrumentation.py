@@ -220,6 +220,7 @@ class LineMetrics:
         self._jobs: dict[tuple[str, str, JobOutcome], Series] = {}
         self._states: dict[str, dict[SlaveState, Any]] = {}
         self._restarts: dict[tuple[str, RestartReason], Series] = {}
+        self._leaving: set[str] = set()  # drives taken away with an exchange out
         for d, dialect in drives.items():
             self.add_drive(d, dialect)
         self._on: dict[type, Callable[[Any], None]] = {
@@ -253,9 +254,12 @@ class LineMetrics:
             for r in RestartReason:
                 self._restarts[(d, r)] = m.dp_restarts.labels(line, d, r.value, zero=True)
 
-    def forget_drive(self, d: str) -> None:
+    def forget_drive(self, d: str, *, exchange_out: bool = False) -> None:
         """A drive a reload took from the line: its counts here (its series go with
-        :func:`~pkwbus.service.metrics.forget.forget_series`)."""
+        :func:`~pkwbus.service.metrics.forget.forget_series`); ``exchange_out``: an exchange
+        of it was out, whose end is the line's time alone (a drive of its name may be back)."""
+        if exchange_out:
+            self._leaving.add(d)
         self._faults = {k: v for k, v in self._faults.items() if k[0] != d}
         self._errors = {k: v for k, v in self._errors.items() if k[0] != d}
         self._jobs = {k: v for k, v in self._jobs.items() if k[0] != d}
@@ -273,10 +277,13 @@ class LineMetrics:
 
     def _exchanged(self, event: Exchanged) -> None:
         error, drive, busy = event.error, event.drive, event.busy
+        gone = drive in self._leaving  # one exchange is out at a time: the first to end
+        if gone:
+            self._leaving.discard(drive)
         if error is ErrorKind.PORT:
             return  # nothing went on the wire
         self._busy.inc(busy)
-        telegrams = self._telegrams.get(drive)
+        telegrams = None if gone else self._telegrams.get(drive)
         if telegrams is None:
             return  # a drive a reload removed with its exchange out: the line's time alone
         telegrams.inc()
