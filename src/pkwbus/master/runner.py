@@ -12,19 +12,18 @@ one that opens and closes the port, starts each request and hands its answer
 over; a wire never holds its port.
 
 A run of exchanges goes on in the port's callbacks: each answer goes to the
-wire, and the next request starts from the same callback while the line's
-start pause runs, until the wire has nothing to send now; then the runner may
-idle until the wire's time, or until a job comes in.
+wire, the next request starts from the same callback while the line's start
+pause runs, until the wire has nothing to send now; then the runner idles until
+the wire's time, or until a job comes in.
 
 Everything that happens - the planner's events, the wire's, the port's state -
 is one stream of events (:mod:`pkwbus.master.events`), recorded in batches at
-most :data:`BATCH_EVERY` seconds after the first of a batch (a loop timer),
-each with the time it happened: the snapshot's one writer first,
-then the observers given at construction. What someone waits for is recorded
-at once: a finished write or on-demand read (its caller), a drive's change of
-health (its log line); so is everything at the end of a run, when the port
-fails, and when the line stops. A line never stops for an error: it is
-reported, the port given up and reopened at back-off.
+most :data:`BATCH_EVERY` seconds after the first of a batch (a loop timer), each
+with its time: the snapshot's one writer first, then the observers given. What
+someone waits for is recorded at once: a finished write or on-demand read (its
+caller), a drive's change of health (its log line); so is everything at the end
+of a run, when the port fails, and when the line stops. A line never stops for
+an error: it is reported, the port given up and reopened at back-off.
 """
 
 from __future__ import annotations
@@ -45,7 +44,7 @@ from pkwbus.master.planning.health import HealthPolicy
 from pkwbus.master.planning.jobs import Job, ProbeJob
 from pkwbus.master.planning.plan import DriveSpec, Finished, HealthChanged, Idle
 from pkwbus.master.planning.planner import Planner
-from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot import Maintained, Snapshot
 from pkwbus.master.snapshot_writer import SnapshotWriter
 from pkwbus.waiting import wait_event
 
@@ -93,9 +92,7 @@ class LineRunner(Generic[Request, Answer]):
         log_port: bool = True,
     ) -> None:
         self.name = name
-        # A port that fails, in the log (the service's lines); a command's session says it
-        # to its user itself, once.
-        self._log_port = log_port
+        self._log_port = log_port  # a port that fails, logged (a command says it itself)
         self.port = port
         self.wire = wire
         self.snapshot = snapshot if snapshot is not None else Snapshot()
@@ -135,15 +132,22 @@ class LineRunner(Generic[Request, Answer]):
         LocalProtocolError for one it cannot carry, KeyError for a drive not here."""
         return self.planner.drive(drive).carrier.preview(item)
 
-    def maintenance(self, drive: str, on: bool, reason: str = "") -> None:
+    def maintenance(
+        self, drive: str, on: bool, reason: str = "", since: float | None = None
+    ) -> None:
         """Put ``drive`` in maintenance (nothing goes out to it, not even a probe or a DP
-        Data_Exchange) or take it out (a drive that came back); KeyError: not here."""
+        Data_Exchange) or take it out (a drive that came back); KeyError: not here.
+        ``since``: one kept from before (a reload), shown with its reason and since."""
+        shown = self.snapshot.maintenance.get(drive)
         if self.planner.drive(drive).maintenance == on:  # KeyError: an unknown drive
-            return  # as it was: its reason and since stay
-        now = asyncio.get_running_loop().time()
-        self.planner.maintenance(drive, on, now)
-        self.wire.leave_out(self.planner, drive, on, now)
-        self.tell([MaintenanceChanged(drive, on, reason)])
+            kept = since is None or shown == Maintained(reason, since)
+            if (on and kept) or (not on and shown is None):
+                return  # as it was: its reason and since stay
+        else:
+            now = asyncio.get_running_loop().time()
+            self.planner.maintenance(drive, on, now)
+            self.wire.leave_out(self.planner, drive, on, now)
+        self._unrecorded.append(([MaintenanceChanged(drive, on, reason)], since or self._wall()))
         self.flush()
         self._wake.set()
 
@@ -163,8 +167,7 @@ class LineRunner(Generic[Request, Answer]):
 
     def remove_drive(self, drive: str, reason: str) -> bool:
         """A drive gone from the line: its jobs end with ``reason``, nothing more goes out to
-        it (an exchange of it that is out ends at its result), nothing of it is shown.
-        Whether an exchange of it was out: its end is the line's time alone."""
+        it, nothing of it is shown; whether an exchange of it was out (its end: line time)."""
         out = self.planner.drive(drive).busy
         self.planner.remove_drive(drive, reason, asyncio.get_running_loop().time())
         self.flush()  # what ended, to its callers and the observers, before it is forgotten
@@ -220,11 +223,8 @@ class LineRunner(Generic[Request, Answer]):
                 except LineRefused as exc:
                     self._refused(exc)
                 except Exception as exc:  # a line never stops: report, reopen, go on
-                    log.exception(
-                        "line %s: unexpected error, reopening its port",
-                        self.name,
-                        extra={"line": self.name},
-                    )
+                    log.exception("line %s: unexpected error, reopening its port", self.name,
+                                  extra={"line": self.name})  # fmt: skip
                     if link.is_open:
                         link.abort(f"unexpected error: {exc!r}")
         finally:

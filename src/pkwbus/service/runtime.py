@@ -26,7 +26,7 @@ from pkwbus.master.events import Observer, Outputs
 from pkwbus.master.planning.carrier import Item, Preview
 from pkwbus.master.planning.jobs import Cancelled, Job, JobKind, JobResult, Priority
 from pkwbus.master.planning.plan import PollSpec
-from pkwbus.master.snapshot import Snapshot
+from pkwbus.master.snapshot import Maintained, Snapshot
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.protocol.pkw.descriptions import DriveDescription
@@ -167,6 +167,9 @@ class Runtime:
         # What every line's stream goes to (given to each runner at its construction).
         self.outputs = outputs if outputs is not None else Outputs()
         self._load = load if load is not None else Load()
+        # The drives the API put in maintenance (why, since when): a reload keeps each on
+        # whichever line its drive is; the API's {"on": false} or a restart ends it.
+        self.api_maintenance: dict[str, Maintained] = {}
         self.stopping = False  # set by stop(): no line starts from then on
         self._tasks: dict[str, tuple[LineTask, asyncio.Task[None]]] = {}  # by line
         self._ended: set[str] = set()  # lines stopped for good, still in the load

@@ -32,7 +32,7 @@ from pkwbus.master.planning.plan import (
     Redecoded,
     Send,
 )
-from pkwbus.master.planning.planner import Planner
+from pkwbus.master.planning.planner import NOT_HERE, Planner
 from pkwbus.master.target import DriveTarget
 from pkwbus.protocol import pkw
 from pkwbus.sim import SimTiming, Simulator
@@ -229,9 +229,14 @@ def test_a_removed_drives_queued_jobs_end_cancelled_and_nothing_more_goes_to_it(
     assert [e.work for e in told if isinstance(e, Finished)] == [write, read, background]
     assert len(told) == 3, "nothing else of it after its removal"
     assert line.polls_ok("d1") >= polled + 2.0 / (50 * MS) - 2  # the other drive goes on
-    with pytest.raises(KeyError):
-        line.planner.submit(Job("d2", pkw.read(dialect, 1530), JobKind.READ,
-                                Priority.READ, line.now + 1.0), line.now)  # fmt: skip
+    # A job for it submitted now (checked before the reload took it away) ends at once, for
+    # its caller alone, and nothing goes out.
+    sent, late = len(line.sent), job(line, "d2", pkw.write(dialect, 341, 1, pkw.Width.DWORD),
+                                     Priority.WRITE)  # fmt: skip
+    (ended,) = line.finished(late)
+    assert ended.outcome == Cancelled(NOT_HERE) and ended.gone and ended.tally is None
+    line.run(0.5)
+    assert to_drive(line, 2, sent) == [] and line.sim.drives[2].value(341) == old
     with pytest.raises(KeyError):
         line.planner.update_polls(dataclasses.replace(spec, polls=()), line.now)
 

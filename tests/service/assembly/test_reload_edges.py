@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 
 from pkwbus.protocol.buses import decode_adr
@@ -22,6 +23,7 @@ from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.reload import Reloader, ReloadRefused
 from pkwbus.service.config import parse_config
 from pkwbus.service.history.store import HistoryStore
+from pkwbus.service.http.api import build_api
 from pkwbus.service.http.views import line_views
 from pkwbus.service.http.views.drives import DriveViews, Selection
 from pkwbus.service.metrics.exposition import render
@@ -148,8 +150,13 @@ async def test_maintenance_stays_across_a_change_in_place_and_a_move() -> None:
         ]
 
     async with running([[1, 2], [1, 2, 3]], first, 0.002) as lines:
-        runner_b = lines.runtime.runners["b"]
-        runner_b.maintenance("e2", True, "fitter")
+        api = build_api(lines.runtime, write_token="t0ken")  # no audit log: none kept
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=api.app),
+                                     base_url="http://pkwbus.test") as client:  # fmt: skip
+            r = await client.put("/api/v1/drives/e2/maintenance",
+                                 json={"on": True, "reason": "fitter"},
+                                 headers={"Authorization": "Bearer t0ken"})  # fmt: skip
+        assert r.status_code == 200, r.text
         a, b = lines.ends[0].url, lines.ends[1].url
         lines.set([
             line("a", a, [drive("d1", 1), drive("d2", 2, maintenance=True, writable=["3-41"]),

@@ -273,3 +273,52 @@ async def test_a_malformed_switch_is_refused_audited_and_changes_nothing(tmp_pat
         rows = [(row.drive, row.parameter, row.outcome) for row in svc.audit.latest(10)]
         assert ("fan1", "maintenance", "invalid") in rows
         assert ("nobody", "maintenance", "invalid") in rows
+
+
+async def test_a_write_queued_when_maintenance_begins_is_answered_in_maintenance(
+    tmp_path: Path,
+) -> None:
+    """A write waits behind another of its drive when the drive goes in maintenance: it is
+    never sent, and is answered and audited as a write to a drive in maintenance is (README
+    "A drive in maintenance": 409 in_maintenance, audited not_sent)."""
+    from pkwbus.sim import SimTiming
+
+    async with service(tmp_path, fc=fc_drives()[:1], timing=SimTiming(response_delay=0.15),
+                       line_timeout=1.0) as svc:  # fmt: skip
+        before = svc.sim.drives[1].value(342)
+        first = asyncio.create_task(svc.put("fan1", "3-41", {"value": 11}))
+        queued = asyncio.create_task(svc.put("fan1", "3-42", {"value": 12}))
+        from pkwbus.master.planning.jobs import Job
+
+        d = svc.runtime.runners["line_fc"].planner.drive("fan1")  # type: ignore[attr-defined]
+        await until(  # the first on the wire, the second queued behind it
+            lambda: d.active is not None and isinstance(d.active.work, Job) and len(d.writes) == 1
+        )
+        r = await svc.client.put("/api/v1/drives/fan1/maintenance",
+                                 json={"on": True, "reason": "bearing"}, headers=AUTH)  # fmt: skip
+        assert r.status_code == 200
+        await first
+        answer = await queued
+        assert (answer.status_code, answer.json()["error"]["kind"]) == (409, "in_maintenance")
+        assert svc.audit is not None
+        (row,) = [e for e in svc.audit.latest(10) if e.parameter == "3-42"]
+        assert row.outcome == "not_sent", row
+        assert svc.audit_writer.writes(1, 342) == [] and svc.sim.drives[1].value(342) == before
+
+
+async def test_taken_out_ends_a_maintenance_shown_that_the_line_no_longer_holds(
+    tmp_path: Path,
+) -> None:
+    """``{"on": false}`` ends what is shown even where the line's planner had the drive out
+    already (a maintenance told by a line a reload replaced): writes go through again."""
+    from pkwbus.master.snapshot import Maintained
+
+    async with service(tmp_path, fc=fc_drives()[:1]) as svc:
+        svc.runtime.snapshot.maintenance["fan1"] = Maintained("told by a line gone", 1.0)
+        assert (await svc.put("fan1", "3-41", {"value": 11})).status_code == 409
+        r = await svc.client.put("/api/v1/drives/fan1/maintenance", json={"on": False},
+                                 headers=AUTH)  # fmt: skip
+        assert r.status_code == 200 and r.json()["on"] is False
+        assert "fan1" not in svc.runtime.snapshot.maintenance
+        assert not maintenance_series(svc.runtime.registry)
+        assert (await svc.put("fan1", "3-41", {"value": 11})).status_code == 200

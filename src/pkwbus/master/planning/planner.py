@@ -4,19 +4,19 @@ The policy, in order:
 
 - a drive's transaction in flight goes on before anything new of that drive
   (its parameter channel holds one request);
-- across drives: writes, then on-demand reads, then due polls (and probes of
-  a down drive), then background jobs; among equals the earliest deadline or due time, then the
-  drive served longest ago (fairness);
+- across drives: writes, then on-demand reads, then due polls (and probes of a down
+  drive), then background jobs; among equals the earliest deadline or due time, then
+  the drive served longest ago (fairness);
 - a drive whose last answer was "not yet", or missing, yields to another
   drive's exchange of the same priority before its repeat (lag interleaving);
 - a drive without a valid answer for ``down_after`` exchanges is down: its
   poll in flight ends, and it is probed with one short telegram at capped
   exponential back-off until it answers; then all its polls are due at once
   (none counts as an overrun);
-- a poll that starts more than one interval after it was due is an overrun; nothing
-  is sent past its deadline; a job still queued at its deadline ends;
-- a drive in maintenance gets nothing (no poll, job or probe) and is neither up nor
-  down; out of it, it is a drive that came back (identified again, its polls due).
+- a poll that starts more than one interval after it was due is an overrun; nothing is
+  sent past its deadline; a job still queued at its deadline ends;
+- a drive in maintenance gets nothing (no poll, job or probe) and is neither up nor down;
+  out of it, it is a drive that came back (identified again, its polls due).
 
 Drives wait for their turn on an :class:`~pkwbus.master.planning.agenda.Agenda` (two
 heaps), so one exchange costs O(log n) in the number of drives.
@@ -56,10 +56,11 @@ from pkwbus.master.planning.reload import Roster, only_callers, update_polls
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.planning.write_gate import gate_write
 
-__all__ = ["IDLE_AT_MOST", "IN_MAINTENANCE", "PORT_CLOSED", "Planner"]
+__all__ = ["IDLE_AT_MOST", "IN_MAINTENANCE", "NOT_HERE", "PORT_CLOSED", "Planner"]
 
 PORT_CLOSED = "the line's port is not open"
 IN_MAINTENANCE = "the drive is in maintenance"
+NOT_HERE = "the drive is not on its line now: a reload changed it"
 IDLE_AT_MOST = 3600.0
 
 
@@ -107,8 +108,7 @@ class Planner:
         d.version += 1
 
     def update_polls(self, spec: DriveSpec, now: float) -> list[PollSpec]:
-        """The drive's polls and described parameters as the configuration now gives them
-        (:mod:`.reload`); each poll as it goes out now (as described)."""
+        """The drive's polls and described parameters now (:mod:`.reload`), as they go out."""
         d = self._by_name[spec.name]
         specs = update_polls(d, spec.polls, spec.describe, now, self.events)
         self._index(d, now)
@@ -121,9 +121,10 @@ class Planner:
     # ------------------------------------------------------------- inputs
 
     def submit(self, job: Job | ProbeJob, now: float) -> None:
-        """Queue a write, an on-demand read or a probe (KeyError for a drive not on this
-        line)."""
-        d = self._by_name[job.drive]
+        """Queue a write, an on-demand read or a probe (one for a drive not here ends now)."""
+        if (d := self._by_name.get(job.drive)) is None:  # a reload took it away meanwhile
+            self.events.append(Finished(job.drive, job, Cancelled(NOT_HERE), gone=True))
+            return
         if self.stopping:
             self.events.append(Finished(d.name, job, Cancelled("the service is stopping")))
             return

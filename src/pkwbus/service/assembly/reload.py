@@ -30,8 +30,15 @@ new one, nothing else:
 - the API's tokens and connection limit apply at once; ``listen``,
   ``audit_db``, ``history_db``, ``log_format`` and ``mqtt`` take a restart: a change of
   theirs is refused with that reason while the rest applies;
-- a drive the API put in maintenance stays so; ``maintenance: true`` added in
-  the file puts a drive in maintenance, taken away takes it out.
+- a drive the API put in maintenance stays so (with its reason and since, on
+  whichever line runs it, also where the API switched it while its line was being
+  opened again); ``maintenance: true`` added in the file puts a drive in
+  maintenance, taken away takes it out (but out of the API's maintenance).
+
+A reload's changes apply at once with the next load's swap, after its last
+await: a running line's drives change with their entries, and the lines it
+opens start then, so that a request checked against a drive's entry never goes
+to another drive (:mod:`pkwbus.service.writes.path`).
 
 Reloads never overlap: one waits for the other; none begins once the service
 stops (:meth:`Reloader.close`). Each, and what it changed, is logged (and
@@ -49,11 +56,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from pkwbus.master.runner import LineRunner
 from pkwbus.protocol.buses import Bus
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
 from pkwbus.service.assembly.history import Memory
-from pkwbus.service.assembly.line_changes import CONFIGURED, IN_PLACE, DriveChanges, fields
+from pkwbus.service.assembly.line_changes import IN_PLACE, DriveChanges, fields
 from pkwbus.service.assembly.loading import LoadBuilder, change
 from pkwbus.service.assembly.standby_lines import StandbyLines
 from pkwbus.service.config import ConfigError
@@ -128,6 +136,7 @@ class Reloader:
         self._drives = DriveChanges(runtime, parts)
         self._lock = asyncio.Lock()
         self._down: set[str] = set()  # lines a reload could not start: started by the next
+        self._opened: list[LineRunner[Any, Any]] = []  # lines this reload built, to start
         self.after: list[Callable[[], None]] = []  # told once a reload applied (MQTT)
         self.closing = False
 
@@ -155,7 +164,7 @@ class Reloader:
                 )  # fmt: skip
                 return ReloadOutcome(False, list(exc.problems))
             new, refused = self._restart_only(new)
-            held = self._held()
+            before = set(self.runtime.api_maintenance)  # what the API keeps in maintenance
             touched = self._touched(new)
             if touched and self.memory is not None:
                 # Watched afresh below, on the lines as they are then.
@@ -169,14 +178,29 @@ class Reloader:
                     # The next load, built from the running one and swapped in whole.
                     with change(self.runtime, drives=self.parts.entries) as next_load:
                         try:
-                            await self._apply(new, held, changes, failed, next_load)
+                            updates, at = await self._apply(new, changes, failed, next_load)
                             if self.gate is not None:
                                 started, again = await self.gate.reloaded(
                                     new, next_load, watch=not touched
                                 )
                                 changes += started
                                 watched = watched or again
+                            # After the last await, at once with the swap of the next load:
+                            # the running lines' drives change as their entries do (a write
+                            # checked against a drive's entry never goes to another drive).
+                            for old, line in updates:  # said where they were before
+                                kept = self._api_kept(old, line)
+                                said = self._drives.update(new, kept, line, self._held())
+                                changes[at:at] = said
+                                at += len(said)
                         finally:
+                            # The lines opened start now, and every line holds what the API
+                            # keeps in maintenance now (also what it switched meanwhile),
+                            # before a line sends anything (at the next await).
+                            for runner in self._opened:
+                                self.runtime.start_line(runner)
+                            self._opened.clear()
+                            self._keep_maintenance(new, next_load, before)
                             if touched and self.memory is not None:
                                 self.memory.watch(new, next_load)
             except Exception as exc:  # a defect: say so; the next reload opens them afresh
@@ -226,24 +250,50 @@ class Reloader:
         )
 
     def _held(self) -> dict[str, str]:
-        """The drives the API put in maintenance, with their reasons (they stay so, on
+        """The drives the API keeps in maintenance, with their reasons (they stay so, on
         whichever line they are now)."""
-        return {
-            name: held.reason
-            for name, held in self.runtime.snapshot.maintenance.items()
-            if held.reason != CONFIGURED
-        }
+        return {name: held.reason for name, held in self.runtime.api_maintenance.items()}
+
+    def _api_kept(self, old: cfg.Line, line: cfg.Line) -> cfg.Line:
+        """``old`` as a running line's drives compare to ``line``'s: where the API keeps a
+        drive in maintenance, with ``line``'s ``maintenance`` (the file's flag added or taken
+        away leaves the API's maintenance as it is: its reason and since stay)."""
+        kept = self.runtime.api_maintenance
+        flags = {d.name: d.maintenance for d in line.drives if d.name in kept}
+        drives = [
+            d.model_copy(update={"maintenance": flags[d.name]}) if d.name in flags else d
+            for d in old.drives
+        ]
+        return old.model_copy(update={"drives": drives}) if flags else old
+
+    def _keep_maintenance(self, new: cfg.Config, next_load: LoadBuilder, before: set[str]) -> None:
+        """The API's maintenance on the lines as they run from now on: what it keeps, with
+        its reason and since, also where the API switched a drive while its line was being
+        opened again (of ``before``, those it took out meanwhile are out unless the file
+        keeps them); a drive gone from the configuration leaves it."""
+        kept = self.runtime.api_maintenance
+        configured = {d.name: d.maintenance for line in new.lines for d in line.drives}
+        for name in [name for name in kept if name not in configured]:
+            del kept[name]
+        for name in sorted(before | kept.keys()):
+            entry = next_load.drives.get(name)
+            runner = next_load.runners.get(entry.line) if entry is not None else None
+            if runner is None or runner.stopping:
+                continue
+            held = kept.get(name)
+            with contextlib.suppress(KeyError):  # not on its line: it could not start
+                if held is not None:
+                    runner.maintenance(name, True, held.reason, since=held.since)
+                elif not configured.get(name):
+                    runner.maintenance(name, False)
 
     async def _apply(
-        self,
-        new: cfg.Config,
-        held: dict[str, str],
-        changes: list[str],
-        failed: list[str],
-        next_load: LoadBuilder,
-    ) -> None:
+        self, new: cfg.Config, changes: list[str], failed: list[str], next_load: LoadBuilder
+    ) -> tuple[list[tuple[cfg.Line, cfg.Line]], int]:
         """Apply ``new`` over the running configuration, into the next load ``next_load``: what
-        changed into ``changes``, lines that could not start into ``failed``."""
+        changed into ``changes``, lines that could not start into ``failed``. The running
+        lines whose drives change in place, changed after every await (:meth:`reload`), and
+        where in ``changes`` that is said."""
         old_lines = {line.name: line for line in self.config.lines}
         new_lines = {line.name: line for line in new.lines}
         # Everything that goes first, then what comes: a drive that moves to another line
@@ -269,13 +319,13 @@ class Reloader:
             else:
                 changes += self._drives.removed(old, line)
                 updates.append((old, line))
-        for old, line in updates:
-            changes += self._drives.update(new, old, line, held)
+        at = len(changes)
         for line, how in starts:
-            changes += await self._start_line(new, line, failed, how, held, next_load)
+            changes += await self._start_line(new, line, failed, how, next_load)
         if self._api is not None and (new.api != self.config.api):
             self._api(new)
             changes.append("API settings applied")
+        return updates, at
 
     def _in_place(self, old: cfg.Line, new: cfg.Line) -> bool:
         """Whether ``new`` can apply to ``old``'s running line without closing its port."""
@@ -314,7 +364,6 @@ class Reloader:
         line: cfg.Line,
         failed: list[str],
         how: str,
-        held: dict[str, str],
         next_load: LoadBuilder,
     ) -> list[str]:
         plan = self.parts.plan(line)
@@ -328,11 +377,8 @@ class Reloader:
             log.error("reload: %s", problem)
             failed.append(problem)
             return []
-        for drive in line.drives:  # a maintenance the API began survives a reload
-            if drive.name in held:
-                built.runner.maintenance(drive.name, True, held[drive.name])
         if built.close is not None:
             next_load.closers[line.name] = built.close
         next_load.runners[line.name] = built.runner
-        self.runtime.start_line(built.runner)
+        self._opened.append(built.runner)  # started once the reload applied (:meth:`reload`)
         return [f"line {line.name} {how}"]

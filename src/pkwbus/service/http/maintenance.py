@@ -6,17 +6,23 @@ planner gives it nothing, a DP slave is left out of the cycle) until ``{"on":
 false}``, which brings it back as a drive that came back. Each switch is a row
 of the audit log (parameter ``maintenance``, the new state as its value, the
 reason as its detail), stored before the switch: an audit log that cannot
-store it leaves the drive as it was (503).
+store it leaves the drive as it was (503); a drive a reload removed meanwhile
+is 404, its row completed. What the API switched on is kept
+(``Runtime.api_maintenance``): a reload keeps it, whatever its reason, on the
+line that runs the drive after it (README "A drive in maintenance").
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import time
 from typing import Any
 
+from pkwbus.master.snapshot import Maintained
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditWriter
-from pkwbus.service.runtime import Runtime
+from pkwbus.service.runtime import LineTask, Runtime
 from pkwbus.service.writes.checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
@@ -60,9 +66,7 @@ class Maintenance:
             client=caller.client, drive=clip(drive, MAX_DRIVE_NAME), parameter=MAINTENANCE,
             index=0, outcome="pending", token_id=identity, new_value=on, detail=reason or None,
         )  # fmt: skip
-        entry = self.runtime.drives.get(drive)
-        runner = self.runtime.runners.get(entry.line) if entry is not None else None
-        if entry is None or runner is None:
+        if self._line_of(drive) is None:
             audit.outcome = "invalid"
             try:
                 mastered_elsewhere(self.runtime, drive)
@@ -72,8 +76,20 @@ class Maintenance:
             refusal.audit_incomplete = not await self.audit_writer.note(audit)
             raise refusal
         row = await attempted(self.audit_writer, audit, "the drive stays as it was")
-        runner.maintenance(drive, on, reason)
-        held = self.runtime.snapshot.maintenance.get(drive)
+        # The drive as it is now: a reload may have removed it while the row was stored.
+        runner = self._line_of(drive)
+        if runner is None:
+            refusal = ApiError(
+                404,
+                "unknown_drive",
+                f"no drive named {drive!r} (a reload removed it): nothing changed",
+            )
+            stored = await asyncio.shield(
+                self.audit_writer.outcome(row, outcome="invalid", detail=str(refusal))
+            )
+            refusal.audit_incomplete = not stored
+            raise refusal
+        held = self._switch(drive, on, reason, runner)
         # Done: its row is completed even when the client goes away meanwhile.
         stored = await asyncio.shield(self.audit_writer.outcome(row, outcome="ok"))
         body: dict[str, Any] = {
@@ -85,3 +101,28 @@ class Maintenance:
         if not stored:
             body["audit"] = INCOMPLETE
         return body
+
+    def _line_of(self, drive: str) -> LineTask | None:
+        """The runner of ``drive``'s line in the running load (None: no such drive here)."""
+        entry = self.runtime.drives.get(drive)
+        return self.runtime.runners.get(entry.line) if entry is not None else None
+
+    def _switch(self, drive: str, on: bool, reason: str, runner: LineTask) -> Maintained | None:
+        """Switch ``drive`` as the API asks, kept as the API's: a reload keeps it on whichever
+        line runs the drive then, also a line it opens again now; on its running line at
+        once. A drive in maintenance already stays so as it is shown (its reason, since).
+        The maintenance now (None: none)."""
+        kept = self.runtime.api_maintenance
+        held = None
+        if on:
+            shown = self.runtime.snapshot.maintenance.get(drive)
+            held = kept[drive] = kept.get(drive) or shown or Maintained(reason, time.time())
+        else:
+            kept.pop(drive, None)
+        if not runner.stopping:  # else a reload opens its line again: the next one holds it
+            with contextlib.suppress(KeyError):  # not on its line now: a reload moves it
+                if held is not None:
+                    runner.maintenance(drive, True, held.reason, since=held.since)
+                else:
+                    runner.maintenance(drive, False)
+        return held

@@ -228,7 +228,7 @@ def fit_index(ref: ParameterRef, fmt: ParameterDescription) -> ParameterRef:
 
 def raise_for(result: JobResult) -> None:
     """The :class:`ApiError` of a job that did not succeed; nothing for one that did."""
-    failure = http_failure(result.outcome)
+    failure = http_failure(result.outcome, result.tally.telegrams if result.tally else 0)
     if failure is not None:
         raise ApiError(failure.status, failure.kind, failure.message, **failure.extra)
 

@@ -20,7 +20,9 @@ from pkwbus.master.planning.outcomes import (
     Outcome,
     Rejected,
     TimedOut,
+    unanswered,
 )
+from pkwbus.master.planning.planner import IN_MAINTENANCE
 
 __all__ = ["AuditOutcome", "HttpFailure", "audit_outcome", "http_failure"]
 
@@ -38,8 +40,9 @@ class HttpFailure:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-def http_failure(outcome: Outcome) -> HttpFailure | None:
-    """The API's error answer for ``outcome``; None when the drive answered."""
+def http_failure(outcome: Outcome, sent: int = 0) -> HttpFailure | None:
+    """The API's error answer for ``outcome``; None when the drive answered. ``sent``: how
+    many times its request went out."""
     match outcome:
         case Answered() | Heard():
             return None
@@ -61,9 +64,13 @@ def http_failure(outcome: Outcome) -> HttpFailure | None:
         case NotSent(reason=reason):
             return HttpFailure(409, "not_sent", f"nothing was sent: {reason}")
         case TimedOut(reason=reason):
-            return HttpFailure(504, "timeout", f"no valid answer: {reason}")
+            return HttpFailure(504, "timeout", unanswered(reason))
         case LineFailed(reason=reason):
-            return HttpFailure(504, "line_error", f"no valid answer: {reason}")
+            return HttpFailure(504, "line_error", unanswered(reason))
+        case Cancelled(reason=reason) if reason == IN_MAINTENANCE and not sent:
+            # Ended, before it went out, by a maintenance that began while it waited:
+            # answered as a job for a drive in maintenance is (README "A drive in maintenance").
+            return HttpFailure(409, "in_maintenance", f"{reason}: nothing was sent")
         case Cancelled(reason=reason):
             return HttpFailure(503, "cancelled", reason)
         case _:
@@ -100,6 +107,8 @@ def audit_outcome(outcome: Outcome, sent: int) -> AuditOutcome:
                 return AuditOutcome("not_sent", None, reason)
             return AuditOutcome("timeout", None, reason + note)
         case Cancelled(reason=reason):
+            if reason == IN_MAINTENANCE and not sent:  # ended before it went out
+                return AuditOutcome("not_sent", None, reason)
             return AuditOutcome("cancelled", None, reason + note)
         case _:
             assert_never(outcome)

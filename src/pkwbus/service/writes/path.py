@@ -6,7 +6,10 @@ the configuration (a value the raw number cannot represent exactly is refused, n
 rounded). Every attempt, refused ones included, lands in the audit log with its caller
 (an HTTP client's address and token id, ``mqtt:{user}``); a write is sent only once
 its row is stored, and once queued it runs to its end and its row is completed even if
-the caller goes away. With ``verify`` the value is read back and compared.
+the caller goes away. With ``verify`` the value is read back and compared. A write goes
+only to the drive it was checked against: a reload that removed the drive or changed
+its entry while the row was being stored refuses it, nothing sent (404 unknown_drive,
+503 cancelled), its row completed.
 
 Who may write at all (the HTTP API's token) is the caller's to check first: this path
 starts from a caller already identified.
@@ -45,6 +48,7 @@ from pkwbus.service.writes.checks import (
     fit_index,
     locate,
     malformed,
+    mastered_elsewhere,
     raise_for,
 )
 from pkwbus.service.writes.outcomes import audit_outcome
@@ -142,6 +146,35 @@ class WritePath:
         task.add_done_callback(self._finished)
         return await asyncio.shield(task)
 
+    def _changed(self, entry: DriveEntry) -> ApiError | None:
+        """Why a write checked against ``entry`` does not go out now that its row is stored:
+        a reload removed its drive or made it a new entry meanwhile (another address,
+        catalog, ``writable`` list or limits, maybe); None: it goes, to the drive checked.
+        Queued at once after this, its job ends if a reload changes the drive later."""
+        now = self.runtime.drives.get(entry.name)
+        if now is entry:
+            return None
+        if now is None:
+            try:
+                mastered_elsewhere(self.runtime, entry.name)
+                changed = ApiError(
+                    404, "unknown_drive",
+                    f"no drive named {entry.name!r} now: a reload removed it while the write"
+                    " was being recorded; nothing was sent",
+                )  # fmt: skip
+                changed.outcome = "invalid"
+            except ApiError as elsewhere:  # hot standby: another instance took its line
+                changed = elsewhere
+                changed.outcome = "not_sent"
+            return changed
+        changed = ApiError(
+            503, "cancelled",
+            f"a reload changed {entry.name}'s configuration while the write was being"
+            " recorded: nothing was sent; send it again if it still applies",
+        )  # fmt: skip
+        changed.outcome = "cancelled"
+        return changed
+
     def _finished(self, task: asyncio.Future[WriteDone]) -> None:
         self._running.discard(task)
         if not task.cancelled():
@@ -200,6 +233,12 @@ class WritePath:
             )
             refusal.outcome = "not_sent"
             raise refusal from None
+        if (changed := self._changed(entry)) is not None:  # checked, then a reload came
+            changed.audit_id = audit.id
+            changed.audit_incomplete = not await self.audit_writer.outcome(
+                row, outcome=changed.outcome, detail=str(changed)
+            )
+            raise changed
         result = await self.runtime.submit(
             entry.name, request, JobKind.WRITE, fmt, parameter=ref.name, index=ref.index or 0
         )

@@ -15,7 +15,7 @@ from typing import Any
 
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.master.planning.jobs import JobKind, JobResult
-from pkwbus.master.planning.outcomes import Answered
+from pkwbus.master.planning.outcomes import Answered, Cancelled
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.values import ParameterRef
@@ -86,7 +86,10 @@ class Reads:
     ) -> JobResult:
         """A read whose failure is not an error: the result, with no value when unanswered.
 
-        Not counted in the per-drive bound: it is the read-back of a write."""
+        Not counted in the per-drive bound: it is the read-back of a write, of the drive
+        written (none where a reload removed it or made it a new entry since)."""
+        if self.runtime.drives.get(entry.name) is not entry:
+            return JobResult(Cancelled("a reload changed the drive since: not read back"))
         request = read_request(entry, ref, fmt)
         result = await self.runtime.submit(
             entry.name, request, JobKind.READ, fmt, parameter=ref.name, index=ref.index or 0
