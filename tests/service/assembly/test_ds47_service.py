@@ -219,6 +219,15 @@ async def test_a_write_goes_through_the_record_and_is_read_back(tmp_path: Path) 
                 (svc.sample("pkwbus_parameter_value", drive="pump", parameter="p1121") or 0) - 12.15
             ) < 1e-5
         )  # fmt: skip
+        # With verify, the answer gives the value the read-back confirmed (README: the value
+        # is null only without verify).
+        r = await svc.client.put(
+            "/api/v1/drives/pump/parameters/p1121",
+            json={"value": 12.5, "verify": True},
+            headers={"Authorization": f"Bearer {TOKEN}"},
+        )
+        assert r.status_code == 200, r.text
+        assert r.json()["verified"] is True and abs(r.json()["value"] - 12.5) < 1e-5
 
 
 async def test_a_write_takes_the_type_the_drive_names_in_its_answers(tmp_path: Path) -> None:

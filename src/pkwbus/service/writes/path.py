@@ -248,12 +248,15 @@ class WritePath:
         audited = audit_outcome(result.outcome, result.tally.telegrams if result.tally else 0)
         outcome, fault, detail = audited.outcome, audited.fault, audited.detail
         verified: bool | None = None
+        read_back = None  # the value read back, where it matched
         if outcome == "ok" and order.verify:
             back = await self._reads.try_read(entry, ref, fmt)
             if isinstance(back.outcome, Answered):
                 verified = back.value == result.value if request.text else back.raw == request.value
                 if not verified:
                     outcome, detail = "mismatch", f"read back {back.value!r} (raw {back.raw})"
+                else:
+                    read_back = back.value
             else:
                 verified = False
                 outcome, detail = "unverified", "the read-back had no answer"
@@ -268,6 +271,8 @@ class WritePath:
             raise
         body = self._write_body(entry, ref, fmt, order, request, telegram, audit, result)
         body.update(old_value=old, verified=verified)
+        if body["value"] is None and read_back is not None:  # an answer without the value
+            body["value"] = read_back  # (data record 47): the value the read-back confirmed
         if not stored:
             body["audit"] = INCOMPLETE
         return WriteDone(body, outcome)
