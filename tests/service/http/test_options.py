@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from pkwbus.protocol.pkw import PkwRequest, PkwResponse
-from tests.service.http.conftest import service
+from tests.service.http.conftest import POLLED_WRITABLES, fc_drives, service
 
 
 def fc_telegram(address: int, ak: int, pnu: int, raw: int) -> str:
@@ -123,3 +123,16 @@ async def test_verify_without_an_answer_is_not_verified(tmp_path: Path) -> None:
         assert r.json()["verified"] is False
         assert svc.audit is not None
         assert svc.audit.latest(1)[0].outcome == "unverified"
+
+
+async def test_a_dry_run_says_the_value_it_would_change(tmp_path: Path) -> None:
+    """The old value of a dry run is the latest the drive confirmed, as a write's is: in the
+    answer and in its audit row."""
+    async with service(tmp_path, fc=fc_drives(polls=POLLED_WRITABLES)) as svc:
+        held = svc.sim.drives[2].value(341) / 100  # 3-41 in s, conversion -2
+        r = await svc.put("fan2", "3-41", {"value": 12.5, "dry_run": True})
+        assert r.status_code == 200, r.text
+        assert r.json()["old_value"] == held
+        assert svc.audit is not None
+        (row,) = svc.audit.latest(5)
+        assert (row.outcome, row.old_value) == ("dry_run", held)

@@ -132,8 +132,10 @@ class WritePath:
         telegram = preview.telegram.hex(" ")
         if order.dry_run:
             audit.outcome = "dry_run"
+            audit.old_value = old = self._latest(entry, ref)  # what it would change from
             stored = await self.audit_writer.note(audit)
             body = self._write_body(entry, ref, fmt, order, request, telegram, audit, None)
+            body["old_value"] = old
             if preview.note:
                 body["telegram_note"] = preview.note
             return WriteDone(body if stored else {**body, "audit": INCOMPLETE}, "dry_run")
