@@ -283,6 +283,19 @@ def test_poll_overrides_and_parameters() -> None:
     assert not drive.may_write(ParameterRef(341, 2, "3-41"))
 
 
+def test_a_number_in_exponent_form_is_a_number() -> None:
+    """YAML 1.1 reads 1e3 (no point) as text; the configuration takes it as the number it
+    is, and still refuses text that is no number."""
+    drive_text = """{name: d, address: 1, catalog: danfoss-fc,
+        parameters: {"3-41": {min: 5E-1, max: 1e3}}}"""
+    drive = parse(with_drive(drive_text)).lines[0].drives[0]
+    limits = drive.overrides_for(ParameterRef(341, None, "3-41"))
+    assert (limits.min, limits.max) == (0.5, 1000.0)
+    with pytest.raises(ConfigError) as refused:
+        parse(with_drive('{name: d, address: 1, parameters: {"3-41": {max: "1e3x"}}}'))
+    assert "is not a number" in str(refused.value)
+
+
 def test_ipv6_listen_and_its_text() -> None:
     config = parse("listen: '[::1]:9000'\n" + MINIMAL)
     assert (config.listen.host, config.listen.port) == ("::1", 9000)

@@ -4,6 +4,7 @@ type names, PKW lengths, names. Each validator raises ValueError with a plain me
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, Literal
 
 from pydantic import (
@@ -56,7 +57,14 @@ _NAME = r"^[A-Za-z0-9_.-]+$"
 _NAME_MAX = 64
 
 
+# A number in exponent form without a point (1e3, 5E-2): YAML 1.1, as PyYAML reads it,
+# takes it for text, though any reader of the file sees a number.
+_EXPONENT = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
 def _number(value: object) -> float:
+    if isinstance(value, str) and _EXPONENT.fullmatch(value.strip()):
+        value = float(value)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ValueError(f"{short(value)} is not a number")
     try:
