@@ -25,6 +25,7 @@ import pytest
 
 from pkwbus.master.planning.jobs import JobKind
 from pkwbus.service.assembly.build import Parts
+from pkwbus.service.assembly.line_marks import LineMarks
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.audit.log import AuditEntry, AuditLog
 from pkwbus.service.http.api import build_api
@@ -376,3 +377,31 @@ async def test_the_files_flag_taken_away_still_ends_the_files_maintenance(tmp_pa
         assert "fan2" not in p.runtime.snapshot.maintenance
         back = len(p.heard.requests)
         await until(lambda: p.to(2, back) >= 1)
+
+
+class _NoMarks:
+    """etcd's marks, none kept: what LineMarks reads and writes, for the maintenance only."""
+
+    async def get(self, line: str, name: str) -> bytes | None:
+        return None
+
+    async def put(self, line: str, name: str, value: bytes) -> bool:
+        return True
+
+
+async def test_a_maintenance_carried_from_the_other_master_is_kept_as_the_apis(
+    tmp_path: Path,
+) -> None:
+    """Hot standby: a line won carries the other instance's maintenance (its marks give the
+    reason only). The API's there is the API's here: a reload that opens the line again
+    keeps it; the line lost, its next master keeps it, not this instance."""
+    async with plant(tmp_path) as p:
+        marks = LineMarks(_NoMarks(), p.runtime, None, lambda line: ["fan1", "fan2"])
+        marks.maintained("fc", {"fan2": "bearing change"})
+        held = p.runtime.snapshot.maintenance["fan2"]
+        assert held.reason == "bearing change"
+        p.set(fan("fan2", 2), timeout="300ms")  # the line's port opened again
+        assert (await p.reloader.reload()).changes == ["line fc reopened"]
+        assert p.runtime.snapshot.maintenance.get("fan2") == held  # its reason and since
+        await marks.release("fc", flush=False)
+        assert "fan2" not in p.runtime.api_maintenance

@@ -261,7 +261,15 @@ async def test_a_malformed_switch_is_refused_audited_and_changes_nothing(tmp_pat
         assert r.status_code == 422 and r.json()["error"]["kind"] == "invalid_request"
         # A reason is one line of text: a newline or another control character would start
         # a line of its own in the audit table and the log, as if another entry.
-        for reason in ("bearing\n2026-11-29 ok write fan1 3-41", "tab\there", "bell\x07"):
+        for reason in (
+            "bearing\n2026-11-29 ok write fan1 3-41",
+            "tab\there",
+            "bell\x07",
+            "next\x85line",
+            "line\u2028separator",
+            "csi\x9b2J",
+            "rtl\u202eoverride",
+        ):
             r = await svc.client.put(url, json={"on": True, "reason": reason}, headers=AUTH)
             assert r.status_code == 422, (reason, r.text)
             assert r.json()["error"]["kind"] == "invalid_request"

@@ -113,13 +113,15 @@ class FakeRunner:
     def __init__(self) -> None:
         self.switched: list[tuple[str, bool, str]] = []
 
-    def maintenance(self, drive: str, on: bool, reason: str = "") -> None:
+    def maintenance(
+        self, drive: str, on: bool, reason: str = "", since: float | None = None
+    ) -> None:
         self.switched.append((drive, on, reason))
 
 
 def fake_runtime(maintenance: dict[str, Any]) -> Any:
     snapshot = SimpleNamespace(maintenance=maintenance)
-    return SimpleNamespace(snapshot=snapshot, runners={"l1": FakeRunner()})
+    return SimpleNamespace(snapshot=snapshot, runners={"l1": FakeRunner()}, api_maintenance={})
 
 
 async def test_written_on_change_only_and_a_failed_put_tried_again(

@@ -111,7 +111,7 @@ class Setup:
         self.marks = FakeMarks()
         self.maintenance: dict[str, Any] = {}
         runtime = SimpleNamespace(snapshot=SimpleNamespace(maintenance=self.maintenance),
-                                  runners={})  # fmt: skip
+                                  runners={}, api_maintenance={})  # fmt: skip
         lines = {"l1": ["d1", "d2"], "l2": ["d9"]}
         self.line_marks = LineMarks(
             self.marks, runtime, path, lambda line: lines.get(line, []),
@@ -237,7 +237,8 @@ async def test_without_counts_every_turn_reads_as_before(
     store.add([event("d1", "k1", 1.0)])
     store.close()
     marks = FakeMarks()
-    runtime = SimpleNamespace(snapshot=SimpleNamespace(maintenance={}), runners={})
+    runtime = SimpleNamespace(snapshot=SimpleNamespace(maintenance={}), runners={},
+                              api_maintenance={})  # fmt: skip
     plain = LineMarks(marks, runtime, path, lambda line: ["d1"])  # no counts given
     counted = Counted(monkeypatch)
     for _ in range(3):

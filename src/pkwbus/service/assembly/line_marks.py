@@ -40,11 +40,14 @@ import contextlib
 import json
 import logging
 import sqlite3
+import time
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Final, Protocol
 
 from pkwbus.master.planning.identity import DescriptionBook
+from pkwbus.master.snapshot import Maintained
+from pkwbus.service.assembly.line_changes import CONFIGURED
 from pkwbus.service.history.marks import Made, dumps, encode, export, make, merge
 from pkwbus.service.history.store import EVENTS, SETTINGS, Changes
 from pkwbus.service.runtime import LineTask, Runtime
@@ -167,10 +170,14 @@ class LineMarks:
         runner = runner if runner is not None else self.runtime.runners.get(line)
         if runner is None:
             return
+        held = self.runtime.api_maintenance
         for drive, reason in kept.items():
             if drive in self.drives_of(line):
+                since = None
+                if reason != CONFIGURED:  # the API's on the other instance: the API's here
+                    since = held.setdefault(drive, Maintained(reason, time.time())).since
                 with contextlib.suppress(KeyError):
-                    runner.maintenance(drive, True, reason)
+                    runner.maintenance(drive, True, reason, since=since)
 
     def hold(self, line: str) -> None:
         """Write ``line``'s marks while it is held."""
@@ -189,6 +196,8 @@ class LineMarks:
             await self.write(line)
         self._written.pop(line, None)
         self._made.pop(line, None)
+        for drive in self.drives_of(line):  # its master from now on keeps their maintenance
+            self.runtime.api_maintenance.pop(drive, None)
 
     async def keep_only(self, lines: Collection[str]) -> None:
         """A reload removed the other lines: their marks are no longer written."""

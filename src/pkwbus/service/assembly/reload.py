@@ -38,7 +38,8 @@ new one, nothing else:
 A reload's changes apply at once with the next load's swap, after its last
 await: a running line's drives change with their entries, and the lines it
 opens start then, so that a request checked against a drive's entry never goes
-to another drive (:mod:`pkwbus.service.writes.path`).
+to another drive (:mod:`pkwbus.service.writes.path`). Drives removed leave
+first: a job for one ends cancelled, nothing sent.
 
 Reloads never overlap: one waits for the other; none begins once the service
 stops (:meth:`Reloader.close`). Each, and what it changed, is logged (and

@@ -79,13 +79,17 @@ class Maintenance:
         # The drive as it is now: a reload may have removed it while the row was stored.
         runner = self._line_of(drive)
         if runner is None:
-            refusal = ApiError(
-                404,
-                "unknown_drive",
-                f"no drive named {drive!r} (a reload removed it): nothing changed",
-            )
+            outcome = "invalid"
+            try:  # hot standby: its line lost meanwhile, another instance masters it
+                mastered_elsewhere(self.runtime, drive)
+                refusal = ApiError(
+                    404, "unknown_drive",
+                    f"no drive named {drive!r} (a reload removed it): nothing changed",
+                )  # fmt: skip
+            except ApiError as elsewhere:
+                refusal, outcome = elsewhere, "not_sent"
             stored = await asyncio.shield(
-                self.audit_writer.outcome(row, outcome="invalid", detail=str(refusal))
+                self.audit_writer.outcome(row, outcome=outcome, detail=str(refusal))
             )
             refusal.audit_incomplete = not stored
             raise refusal

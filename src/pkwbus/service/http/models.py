@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import unicodedata
 from typing import Any, Literal
 
 from pydantic import (
@@ -109,6 +110,11 @@ class MaintenanceView(BaseModel):
     since: float  # wall clock, seconds
 
 
+# What a line of text cannot hold: control characters (C0, C1: newline, tab, escape),
+# format controls (a right-to-left override) and the line and paragraph separators.
+_NOT_IN_A_LINE = frozenset({"Cc", "Cf", "Zl", "Zp"})
+
+
 class MaintenanceBody(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -122,7 +128,7 @@ class MaintenanceBody(BaseModel):
     def _one_line(cls, reason: str) -> str:
         # A newline (any control character) would start a line of its own in the audit's
         # table and in the log, as if another entry.
-        if any(ord(c) < 0x20 or ord(c) == 0x7F for c in reason):
+        if any(unicodedata.category(c) in _NOT_IN_A_LINE for c in reason):
             raise ValueError("one line of text: no newline, tab or other control character")
         return reason
 
