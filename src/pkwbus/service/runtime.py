@@ -169,7 +169,7 @@ class Runtime:
         self._load = load if load is not None else Load()
         # The drives the API put in maintenance (why, since when): a reload keeps each on
         # whichever line its drive is; the API's {"on": false} or a restart ends it.
-        self.api_maintenance: dict[str, Maintained] = {}
+        self._api_maintenance: dict[str, Maintained] = {}
         self.stopping = False  # set by stop(): no line starts from then on
         self._tasks: dict[str, tuple[LineTask, asyncio.Task[None]]] = {}  # by line
         self._ended: set[str] = set()  # lines stopped for good, still in the load
@@ -189,6 +189,21 @@ class Runtime:
         """The drives' watchers leave the lines' outputs (they stop: the service stops, or a
         reload watches afresh); the load's base stays."""
         self.outputs.swap(self._load.base)
+
+    @property
+    def api_maintenance(self) -> Mapping[str, Maintained]:
+        """The drives the API keeps in maintenance (here, or carried from the other master
+        in hot standby), with why and since when."""
+        return MappingProxyType(self._api_maintenance)
+
+    def hold_maintenance(self, drive: str, held: Maintained) -> Maintained:
+        """Keep ``drive`` in maintenance as the API's; one kept already stays as it is. The
+        maintenance kept."""
+        return self._api_maintenance.setdefault(drive, held)
+
+    def end_maintenance(self, drive: str) -> None:
+        """``drive`` no longer kept in maintenance as the API's."""
+        self._api_maintenance.pop(drive, None)
 
     @property
     def runners(self) -> Mapping[str, LineTask]:

@@ -119,9 +119,22 @@ class FakeRunner:
         self.switched.append((drive, on, reason))
 
 
+class FakeRuntime(SimpleNamespace):
+    """What LineMarks asks of the runtime: its snapshot, runners and the API's maintenance."""
+
+    def __init__(self, maintenance: dict[str, Any], runners: dict[str, Any]) -> None:
+        super().__init__(snapshot=SimpleNamespace(maintenance=maintenance), runners=runners)
+        self.api_maintenance: dict[str, Any] = {}
+
+    def hold_maintenance(self, drive: str, held: Any) -> Any:
+        return self.api_maintenance.setdefault(drive, held)
+
+    def end_maintenance(self, drive: str) -> None:
+        self.api_maintenance.pop(drive, None)
+
+
 def fake_runtime(maintenance: dict[str, Any]) -> Any:
-    snapshot = SimpleNamespace(maintenance=maintenance)
-    return SimpleNamespace(snapshot=snapshot, runners={"l1": FakeRunner()}, api_maintenance={})
+    return FakeRuntime(maintenance, {"l1": FakeRunner()})
 
 
 async def test_written_on_change_only_and_a_failed_put_tried_again(

@@ -22,6 +22,7 @@ from pkwbus.service.history import marks as mark_document
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import DriveEvent, HistoryStore
 from tests.service.standby_service.test_line_marks import FakeMarks as KeptMarks
+from tests.service.standby_service.test_line_marks import FakeRuntime
 
 IDLE_TURNS = 25
 
@@ -110,8 +111,7 @@ class Setup:
         self.kept = Keeper(DescriptionBook())
         self.marks = FakeMarks()
         self.maintenance: dict[str, Any] = {}
-        runtime = SimpleNamespace(snapshot=SimpleNamespace(maintenance=self.maintenance),
-                                  runners={}, api_maintenance={})  # fmt: skip
+        runtime = FakeRuntime(self.maintenance, {})
         lines = {"l1": ["d1", "d2"], "l2": ["d9"]}
         self.line_marks = LineMarks(
             self.marks, runtime, path, lambda line: lines.get(line, []),
@@ -237,8 +237,7 @@ async def test_without_counts_every_turn_reads_as_before(
     store.add([event("d1", "k1", 1.0)])
     store.close()
     marks = FakeMarks()
-    runtime = SimpleNamespace(snapshot=SimpleNamespace(maintenance={}), runners={},
-                              api_maintenance={})  # fmt: skip
+    runtime = FakeRuntime({}, {})
     plain = LineMarks(marks, runtime, path, lambda line: ["d1"])  # no counts given
     counted = Counted(monkeypatch)
     for _ in range(3):

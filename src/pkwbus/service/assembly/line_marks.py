@@ -170,12 +170,12 @@ class LineMarks:
         runner = runner if runner is not None else self.runtime.runners.get(line)
         if runner is None:
             return
-        held = self.runtime.api_maintenance
         for drive, reason in kept.items():
             if drive in self.drives_of(line):
                 since = None
                 if reason != CONFIGURED:  # the API's on the other instance: the API's here
-                    since = held.setdefault(drive, Maintained(reason, time.time())).since
+                    held = self.runtime.hold_maintenance(drive, Maintained(reason, time.time()))
+                    since = held.since
                 with contextlib.suppress(KeyError):
                     runner.maintenance(drive, True, reason, since=since)
 
@@ -197,7 +197,7 @@ class LineMarks:
         self._written.pop(line, None)
         self._made.pop(line, None)
         for drive in self.drives_of(line):  # its master from now on keeps their maintenance
-            self.runtime.api_maintenance.pop(drive, None)
+            self.runtime.end_maintenance(drive)
 
     async def keep_only(self, lines: Collection[str]) -> None:
         """A reload removed the other lines: their marks are no longer written."""

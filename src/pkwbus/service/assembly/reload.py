@@ -275,7 +275,7 @@ class Reloader:
         kept = self.runtime.api_maintenance
         configured = {d.name: d.maintenance for line in new.lines for d in line.drives}
         for name in [name for name in kept if name not in configured]:
-            del kept[name]
+            self.runtime.end_maintenance(name)
         for name in sorted(before | kept.keys()):
             entry = next_load.drives.get(name)
             runner = next_load.runners.get(entry.line) if entry is not None else None

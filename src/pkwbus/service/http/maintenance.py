@@ -116,13 +116,12 @@ class Maintenance:
         line runs the drive then, also a line it opens again now; on its running line at
         once. A drive in maintenance already stays so as it is shown (its reason, since).
         The maintenance now (None: none)."""
-        kept = self.runtime.api_maintenance
-        held = None
+        runtime, held = self.runtime, None
         if on:
-            shown = self.runtime.snapshot.maintenance.get(drive)
-            held = kept[drive] = kept.get(drive) or shown or Maintained(reason, time.time())
+            shown = runtime.snapshot.maintenance.get(drive)
+            held = runtime.hold_maintenance(drive, shown or Maintained(reason, time.time()))
         else:
-            kept.pop(drive, None)
+            runtime.end_maintenance(drive)
         if not runner.stopping:  # else a reload opens its line again: the next one holds it
             with contextlib.suppress(KeyError):  # not on its line now: a reload moves it
                 if held is not None:
