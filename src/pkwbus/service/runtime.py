@@ -6,6 +6,7 @@ queues jobs through :meth:`Runtime.submit`."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass, field
@@ -204,6 +205,20 @@ class Runtime:
     def end_maintenance(self, drive: str) -> None:
         """``drive`` no longer kept in maintenance as the API's."""
         self._api_maintenance.pop(drive, None)
+
+    def show_maintenance(self, runner: LineTask, drive: str, *, configured: bool = False) -> None:
+        """``drive``'s maintenance on ``runner`` as it is kept: the API's, with its reason and
+        since; none unless ``configured`` (the file's, which the line holds itself). Nothing
+        on a line that stops (a reload opens it again and holds it then), nor for a drive
+        not on it."""
+        if runner.stopping:
+            return
+        held = self._api_maintenance.get(drive)
+        with contextlib.suppress(KeyError):
+            if held is not None:
+                runner.maintenance(drive, True, held.reason, since=held.since)
+            elif not configured:
+                runner.maintenance(drive, False)
 
     @property
     def runners(self) -> Mapping[str, LineTask]:

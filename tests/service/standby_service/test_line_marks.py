@@ -132,6 +132,10 @@ class FakeRuntime(SimpleNamespace):
     def end_maintenance(self, drive: str) -> None:
         self.api_maintenance.pop(drive, None)
 
+    def show_maintenance(self, runner: Any, drive: str) -> None:
+        held = self.api_maintenance[drive]
+        runner.maintenance(drive, True, held.reason, since=held.since)
+
 
 def fake_runtime(maintenance: dict[str, Any]) -> Any:
     return FakeRuntime(maintenance, {"l1": FakeRunner()})

@@ -55,9 +55,7 @@ class DriveChanges:
             self._remove(runner, new.name, name, REMOVED)
         return [f"line {new.name}: drive {name} removed" for name in gone]
 
-    def update(
-        self, config: cfg.Config, old: cfg.Line, new: cfg.Line, api_held: dict[str, str]
-    ) -> list[str]:
+    def update(self, config: cfg.Config, old: cfg.Line, new: cfg.Line) -> list[str]:
         """Drives and polls of a running line, its port open throughout."""
         runner = self.runtime.runners[new.name]
         assert isinstance(runner, LineRunner)
@@ -91,18 +89,17 @@ class DriveChanges:
                     runner.maintenance(name, True, CONFIGURED)
                     changes.append(f"{said} drive {name} in maintenance")
                 elif before.maintenance and not drive.maintenance:
-                    held_now = self.runtime.snapshot.maintenance.get(name)
-                    if held_now is not None and held_now.reason == CONFIGURED:
-                        runner.maintenance(name, False)
-                        changes.append(f"{said} drive {name} out of maintenance")
+                    # The file's (the API's own compares as unchanged: Reloader._api_kept).
+                    runner.maintenance(name, False)
+                    changes.append(f"{said} drive {name} out of maintenance")
                 continue
             if before is not None:
                 self._remove(runner, new.name, name, REPLACED)
             runner.add_drive(specs[name])
             counts.add_drive(name, drive.pkw_dialect)
             self.parts.show(plan, {name})
-            if name in api_held:  # the API's maintenance stays, on whichever line it is now
-                runner.maintenance(name, True, api_held[name])
+            if name in self.runtime.api_maintenance:  # it stays, on whichever line it is now
+                self.runtime.show_maintenance(runner, name)
             elif drive.maintenance:
                 runner.maintenance(name, True, CONFIGURED)
             changes.append(f"{said} drive {name} {'added' if before is None else 'replaced'}")

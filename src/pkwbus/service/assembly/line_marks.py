@@ -171,13 +171,14 @@ class LineMarks:
         if runner is None:
             return
         for drive, reason in kept.items():
-            if drive in self.drives_of(line):
-                since = None
-                if reason != CONFIGURED:  # the API's on the other instance: the API's here
-                    held = self.runtime.hold_maintenance(drive, Maintained(reason, time.time()))
-                    since = held.since
+            if drive not in self.drives_of(line):
+                continue
+            if reason != CONFIGURED:  # the API's on the other instance: the API's here
+                self.runtime.hold_maintenance(drive, Maintained(reason, time.time()))
+                self.runtime.show_maintenance(runner, drive)
+            else:
                 with contextlib.suppress(KeyError):
-                    runner.maintenance(drive, True, reason, since=since)
+                    runner.maintenance(drive, True, reason)
 
     def hold(self, line: str) -> None:
         """Write ``line``'s marks while it is held."""

@@ -191,7 +191,7 @@ class Reloader:
                             # checked against a drive's entry never goes to another drive).
                             for old, line in updates:  # said where they were before
                                 kept = self._api_kept(old, line)
-                                said = self._drives.update(new, kept, line, self._held())
+                                said = self._drives.update(new, kept, line)
                                 changes[at:at] = said
                                 at += len(said)
                         finally:
@@ -250,11 +250,6 @@ class Reloader:
             or new.history_retention != self.config.history_retention
         )
 
-    def _held(self) -> dict[str, str]:
-        """The drives the API keeps in maintenance, with their reasons (they stay so, on
-        whichever line they are now)."""
-        return {name: held.reason for name, held in self.runtime.api_maintenance.items()}
-
     def _api_kept(self, old: cfg.Line, line: cfg.Line) -> cfg.Line:
         """``old`` as a running line's drives compare to ``line``'s: where the API keeps a
         drive in maintenance, with ``line``'s ``maintenance`` (the file's flag added or taken
@@ -279,14 +274,8 @@ class Reloader:
         for name in sorted(before | kept.keys()):
             entry = next_load.drives.get(name)
             runner = next_load.runners.get(entry.line) if entry is not None else None
-            if runner is None or runner.stopping:
-                continue
-            held = kept.get(name)
-            with contextlib.suppress(KeyError):  # not on its line: it could not start
-                if held is not None:
-                    runner.maintenance(name, True, held.reason, since=held.since)
-                elif not configured.get(name):
-                    runner.maintenance(name, False)
+            if runner is not None:
+                self.runtime.show_maintenance(runner, name, configured=configured.get(name, False))
 
     async def _apply(
         self, new: cfg.Config, changes: list[str], failed: list[str], next_load: LoadBuilder

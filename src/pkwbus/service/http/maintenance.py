@@ -15,7 +15,6 @@ line that runs the drive after it (README "A drive in maintenance").
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from typing import Any
 
@@ -26,14 +25,13 @@ from pkwbus.service.runtime import LineTask, Runtime
 from pkwbus.service.writes.checks import (
     INCOMPLETE,
     MAX_DRIVE_NAME,
-    ApiError,
     Caller,
     TokenCheck,
     attempted,
     clip,
     identified,
     malformed,
-    mastered_elsewhere,
+    not_here,
 )
 
 __all__ = ["MAINTENANCE", "Maintenance"]
@@ -67,29 +65,21 @@ class Maintenance:
             index=0, outcome="pending", token_id=identity, new_value=on, detail=reason or None,
         )  # fmt: skip
         if self._line_of(drive) is None:
-            audit.outcome = "invalid"
-            try:
-                mastered_elsewhere(self.runtime, drive)
-                refusal = ApiError(404, "unknown_drive", f"no drive named {drive!r}")
-            except ApiError as elsewhere:
-                audit.outcome, refusal = "not_sent", elsewhere
+            refusal = not_here(self.runtime, drive, f"no drive named {drive!r}")
+            audit.outcome = refusal.outcome or "invalid"  # not_here gives one
             refusal.audit_incomplete = not await self.audit_writer.note(audit)
             raise refusal
         row = await attempted(self.audit_writer, audit, "the drive stays as it was")
         # The drive as it is now: a reload may have removed it while the row was stored.
         runner = self._line_of(drive)
-        if runner is None:
-            outcome = "invalid"
-            try:  # hot standby: its line lost meanwhile, another instance masters it
-                mastered_elsewhere(self.runtime, drive)
-                refusal = ApiError(
-                    404, "unknown_drive",
-                    f"no drive named {drive!r} (a reload removed it): nothing changed",
-                )  # fmt: skip
-            except ApiError as elsewhere:
-                refusal, outcome = elsewhere, "not_sent"
+        if runner is None:  # removed, or (hot standby) its line lost meanwhile
+            refusal = not_here(
+                self.runtime,
+                drive,
+                f"no drive named {drive!r} (a reload removed it): nothing changed",
+            )
             stored = await asyncio.shield(
-                self.audit_writer.outcome(row, outcome=outcome, detail=str(refusal))
+                self.audit_writer.outcome(row, outcome=refusal.outcome, detail=str(refusal))
             )
             refusal.audit_incomplete = not stored
             raise refusal
@@ -122,10 +112,5 @@ class Maintenance:
             held = runtime.hold_maintenance(drive, shown or Maintained(reason, time.time()))
         else:
             runtime.end_maintenance(drive)
-        if not runner.stopping:  # else a reload opens its line again: the next one holds it
-            with contextlib.suppress(KeyError):  # not on its line now: a reload moves it
-                if held is not None:
-                    runner.maintenance(drive, True, held.reason, since=held.since)
-                else:
-                    runner.maintenance(drive, False)
+        runtime.show_maintenance(runner, drive)
         return held

@@ -44,6 +44,7 @@ __all__ = [
     "locate",
     "malformed",
     "mastered_elsewhere",
+    "not_here",
     "raise_for",
 ]
 
@@ -191,6 +192,20 @@ def mastered_elsewhere(runtime: Runtime, drive: str) -> None:
     line = masters.line_of(drive)
     if line is not None:
         _not_master(masters, line, f"{drive} is on line {line}")
+
+
+def not_here(runtime: Runtime, drive: str, message: str) -> ApiError:
+    """The refusal of a request for ``drive``, not among this instance's drives (now): 409
+    ``not_master`` where another instance masters its line (hot standby; audited
+    ``not_sent``), else 404 ``unknown_drive`` with ``message`` (audited ``invalid``)."""
+    try:
+        mastered_elsewhere(runtime, drive)
+    except ApiError as elsewhere:
+        elsewhere.outcome = "not_sent"
+        return elsewhere
+    unknown = ApiError(404, "unknown_drive", message)
+    unknown.outcome = "invalid"
+    return unknown
 
 
 def line_mastered_elsewhere(runtime: Runtime, line: str) -> None:

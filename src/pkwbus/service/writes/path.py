@@ -48,7 +48,7 @@ from pkwbus.service.writes.checks import (
     fit_index,
     locate,
     malformed,
-    mastered_elsewhere,
+    not_here,
     raise_for,
 )
 from pkwbus.service.writes.outcomes import audit_outcome
@@ -156,19 +156,12 @@ class WritePath:
         now = self.runtime.drives.get(entry.name)
         if now is entry:
             return None
-        if now is None:
-            try:
-                mastered_elsewhere(self.runtime, entry.name)
-                changed = ApiError(
-                    404, "unknown_drive",
-                    f"no drive named {entry.name!r} now: a reload removed it while the write"
-                    " was being recorded; nothing was sent",
-                )  # fmt: skip
-                changed.outcome = "invalid"
-            except ApiError as elsewhere:  # hot standby: another instance took its line
-                changed = elsewhere
-                changed.outcome = "not_sent"
-            return changed
+        if now is None:  # removed, or (hot standby) its line taken by another instance
+            return not_here(
+                self.runtime, entry.name,
+                f"no drive named {entry.name!r} now: a reload removed it while the write was"
+                " being recorded; nothing was sent",
+            )  # fmt: skip
         changed = ApiError(
             503, "cancelled",
             f"a reload changed {entry.name}'s configuration while the write was being"
