@@ -33,7 +33,7 @@ import contextlib
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Generic, TypeVar
 
 from pkwbus.link import Link, LinkState, PortError
@@ -174,12 +174,12 @@ class LineRunner(Generic[Request, Answer]):
         self.writer.remove_drive(drive, exchange_out=out)
         return out
 
-    def update_polls(self, spec: DriveSpec) -> None:
-        """The drive's polls and described parameters now (``spec``, its carrier and form
-        as they were): a kept poll goes on at its due time, a new one is due now, the values
-        of those gone leave (KeyError: not here)."""
+    def update_polls(self, spec: DriveSpec, restated: Collection[tuple[int, int]] = ()) -> None:
+        """The drive's polls and described parameters now (``spec``, its carrier and form as
+        they were): a kept poll goes on at its due time, a new one is due now, the values of
+        those gone and the latest decoded otherwise now (``restated``) leave (KeyError)."""
         now = asyncio.get_running_loop().time()
-        self.writer.update_polls(spec, self.planner.update_polls(spec, now))
+        self.writer.update_polls(spec, self.planner.update_polls(spec, now), restated)
         self._changed()
 
     def forget(self) -> None:

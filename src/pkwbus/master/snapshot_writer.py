@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import replace
 from functools import partial
 from typing import Any
@@ -154,12 +154,13 @@ class SnapshotWriter:
         self.snapshot.lines.pop(self.line, None)
         self.snapshot.totals.pop(self.line, None)
 
-    def update_polls(self, spec: DriveSpec, polls: Sequence[PollSpec]) -> None:
-        """The drive's polls now (as described) and the parameters it is asked to describe
-        (``spec``). The values of the polls gone leave, and those of a kept poll decoded
-        otherwise now (its latest too): never shown in a format they were not decoded in,
-        they come back with its next answer. A parameter new to its descriptions waits for
-        its description; one described before (a reload took it away) does not."""
+    def update_polls(
+        self, spec: DriveSpec, polls: Sequence[PollSpec], restated: Collection[tuple[int, int]] = ()
+    ) -> None:
+        """The drive's polls now (as described) and what it is asked to describe (``spec``).
+        The values of the polls gone leave, and those decoded otherwise now (a kept poll's, its
+        latest, and the latest ``restated``: PNU, subindex) until the next answer. A parameter
+        new to its descriptions waits for its description; one described before does not."""
         drive = spec.name
         self._polls[drive] = tuple(polls)
         decoding = self.snapshot.decoding[drive]
@@ -173,6 +174,8 @@ class SnapshotWriter:
             if at in was and was[at] != now[at]:
                 readings.pop((drive, *at), None)
                 latest.pop((drive, poll.request.pnu, poll.request.subindex), None)
+        for pnu, subindex in restated:
+            latest.pop((drive, pnu, subindex), None)
         old = self._targets.get(drive, ())
         known = {t.pnu for t in old}
         asked = {t.pnu for t in spec.describe}

@@ -18,6 +18,7 @@ from pkwbus.protocol.values import ParameterRef
 from pkwbus.service.http.views.drives import DriveViews, Selection, overview_row
 from pkwbus.service.metrics.exposition import render
 from pkwbus.service.writes.checks import described_format
+from pkwbus.service.writes.reads import Reads
 from pkwbus.sim import SimTiming, Simulator
 from tests.service.assembly.test_reload_dp import reloadable, until
 from tests.service.assembly.test_reload_edges import drive, line, running
@@ -173,3 +174,47 @@ async def test_a_replaced_drive_does_not_inherit_the_old_ones_timeout() -> None:
         assert overview_row(runtime, "d2", time.time()).telegram_errors == 0
         errors = 'pkwbus_telegram_errors_total{drive="d2",'  # a series once one is counted
         assert errors not in (await render(parts.registry)).decode()
+
+
+@pytest.mark.parametrize(
+    ("override", "kept"), [({"scale": 0.1}, False), ({"unit": "min"}, False), ({"max": 50}, True)]
+)
+async def test_a_latest_value_decoded_otherwise_now_is_not_shown_until_read_again(
+    override: dict[str, Any], kept: bool
+) -> None:
+    """3-41, writable and polled by nothing: read on demand, its value is the one the drive's
+    writable parameters show (and a write's old value). A reload changes its overrides, the
+    drive in maintenance (nothing of it is answered): a value decoded otherwise now is no
+    longer shown; one decoded the same way (a limit changed) stays; read again, it is
+    decoded as the configuration says now."""
+
+    def d1(**extra: Any) -> dict[str, Any]:
+        given = {"parameters": {"3-41": {"scale": 0.01, **override}}} if extra else {}
+        return drive("d1", 1, describe="off", writable=["3-41"], **given, **extra)
+
+    key = ("d1", 341, 0)
+    async with running([[1, 2]], lambda u: [line("l", u[0], [d1(), drive("d2", 2)])],
+                       0.002) as lines:  # fmt: skip
+        runtime, url, views = lines.runtime, lines.ends[0].url, DriveViews(lines.runtime)
+
+        async def shown() -> Any:
+            (found,) = [w for w in json.loads(await views.full(["d1"]))[0]["writable"]
+                        if w["parameter"] == "3-41"]  # fmt: skip
+            return found["value"], found["unit"]
+
+        await Reads(runtime).read("d1", "3-41", None)
+        raw = runtime.snapshot.latest[key].raw
+        assert await shown() == (pytest.approx(raw * 0.01), "s")  # the catalog's: 0.01 s
+        lines.set([line("l", url, [d1(maintenance=True), drive("d2", 2)])])
+        await lines.reloader.reload()
+        value, unit = await shown()
+        if kept:
+            assert (value, unit) == (pytest.approx(raw * 0.01), "s")
+            return
+        assert key not in runtime.snapshot.latest and value is None
+        lines.set([line("l", url, [d1(maintenance=False), drive("d2", 2)])])
+        await lines.reloader.reload()
+        await Reads(runtime).read("d1", "3-41", None)
+        raw = runtime.snapshot.latest[key].raw
+        scale = override.get("scale", 0.01)
+        assert await shown() == (pytest.approx(raw * scale), override.get("unit", "s"))

@@ -11,6 +11,7 @@ from pydantic import BaseModel
 
 from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.runner import LineRunner
+from pkwbus.protocol.values import ParameterRef
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import LinePlan, Parts
 from pkwbus.service.runtime import DriveEntry, Runtime
@@ -147,11 +148,33 @@ class DriveChanges:
         was = {(p.parameter, p.index): replace(p, every=0.0) for p in old.polls}
         keys = {(name, p.parameter, p.index) for p in entry.polls
                 if was.get((p.parameter, p.index)) == replace(p, every=0.0)}  # fmt: skip
+        restated = self._restated(old, entry)
         self.parts.entries[name] = entry
         self.parts.collector.set_parameters(name, plan.infos_of(name))
         self.parts.trends.forget(name, keep=keys)
-        runner.update_polls(spec)
+        runner.update_polls(spec, restated)
         return changed
+
+    def _restated(self, old: DriveEntry, new: DriveEntry) -> frozenset[tuple[int, int]]:
+        """The drive's latest values (PNU, subindex) that ``new`` decodes otherwise than
+        ``old`` (its overrides' type, scaling or unit changed): a writable parameter or one
+        read on demand, polled or not, is never shown in a format it was not decoded in."""
+        if (old.parameters, old.layers) == (new.parameters, new.layers):
+            return frozenset()
+        snap, name = self.runtime.snapshot, new.name
+        decoding = snap.decoding.get(name)
+        described = decoding.described if decoding is not None else {}
+
+        def decoded_as(entry: DriveEntry, ref: ParameterRef) -> tuple[object, ...]:
+            fmt = entry.format_of(ref, described, snap.stated.get((name, ref.pnu)))
+            return fmt.vtype, fmt.scaling, fmt.unit
+
+        found = set()
+        for _, pnu, sub in [k for k in snap.latest if k[0] == name]:
+            refs = [ParameterRef(pnu, sub, ""), *([ParameterRef(pnu, None, "")] if not sub else [])]
+            if any(decoded_as(old, ref) != decoded_as(new, ref) for ref in refs):
+                found.add((pnu, sub))
+        return frozenset(found)
 
     def _remove(self, runner: LineRunner[Any, Any], line: str, drive: str, reason: str) -> None:
         out = runner.remove_drive(drive, reason)  # an exchange of it out: the line's time
