@@ -25,7 +25,7 @@ import pytest
 
 from pkwbus.master.planning.jobs import JobKind
 from pkwbus.service.assembly.build import Parts
-from pkwbus.service.assembly.line_marks import LineMarks
+from pkwbus.service.assembly.line_marks import Kept, LineMarks
 from pkwbus.service.assembly.reload import Reloader
 from pkwbus.service.audit.log import AuditEntry, AuditLog
 from pkwbus.service.http.api import build_api
@@ -397,7 +397,7 @@ async def test_a_maintenance_carried_from_the_other_master_is_kept_as_the_apis(
     keeps it; the line lost, its next master keeps it, not this instance."""
     async with plant(tmp_path) as p:
         marks = LineMarks(_NoMarks(), p.runtime, None, lambda line: ["fan1", "fan2"])
-        marks.maintained("fc", {"fan2": "bearing change"})
+        marks.maintained("fc", {"fan2": Kept("bearing change", by_api=True)})
         held = p.runtime.snapshot.maintenance["fan2"]
         assert held.reason == "bearing change"
         p.set(fan("fan2", 2), timeout="300ms")  # the line's port opened again

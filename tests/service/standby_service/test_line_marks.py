@@ -15,7 +15,8 @@ import pytest
 
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.protocol.pkw.descriptions import DriveDescription
-from pkwbus.service.assembly.line_marks import MARK, LineMarks, encode, export, merge
+from pkwbus.service.assembly.line_changes import CONFIGURED
+from pkwbus.service.assembly.line_marks import MARK, Kept, LineMarks, encode, export, merge
 from pkwbus.service.history.settings_store import SettingRow, SettingsStore
 from pkwbus.service.history.store import DriveEvent, HistoryStore
 
@@ -173,17 +174,39 @@ async def test_loaded_marks_merge_and_put_drives_in_maintenance(tmp_path: Path) 
     first, second = tmp_path / "a.sqlite", tmp_path / "b.sqlite"
     fill(first, [event("d1", "k1", 1.0)], 5, 10.0)
     marks = FakeMarks()
-    there = LineMarks(marks, fake_runtime({"d1": SimpleNamespace(reason="bearing")}), first,
-                      lambda line: ["d1"])  # fmt: skip
+    drives = ["d1", "d2", "d3"]
+    # d1 and d2 the API's there (d2's reason the file's word), d3 the file's
+    held = {d: SimpleNamespace(reason=r, since=1.0)
+            for d, r in [("d1", "bearing"), ("d2", CONFIGURED), ("d3", CONFIGURED)]}  # fmt: skip
+    there_runtime = fake_runtime(held)
+    there_runtime.api_maintenance.update(d1=held["d1"], d2=held["d2"])
+    there = LineMarks(marks, there_runtime, first, lambda line: drives)
     assert await there.write("l1")
     runtime = fake_runtime({})
-    here = LineMarks(marks, runtime, second, lambda line: ["d1"])
+    here = LineMarks(marks, runtime, second, lambda line: drives)
     kept = await here.load("l1")
-    assert kept == {"d1": "bearing"}
+    assert kept == {"d1": Kept("bearing", True), "d2": Kept(CONFIGURED, True),
+                    "d3": Kept(CONFIGURED, False)}  # fmt: skip
     here.maintained("l1", kept)
-    assert runtime.runners["l1"].switched == [("d1", True, "bearing")]
+    assert sorted(runtime.api_maintenance) == ["d1", "d2"]  # the API's here: a reload keeps them
+    assert sorted(runtime.runners["l1"].switched) == [
+        ("d1", True, "bearing"),
+        ("d2", True, CONFIGURED),
+        ("d3", True, CONFIGURED),
+    ]
     assert baseline_of(second) == (5, 10.0)
     assert await here.load("l2") == {}  # never written: nothing
+
+
+async def test_the_marks_of_an_older_instance_tell_the_apis_maintenance_by_its_reason(
+    tmp_path: Path,
+) -> None:
+    """A document without ``maintenance_by_api``: the file's reason is the file's."""
+    marks = FakeMarks()
+    doc = {"maintenance": {"d1": "pump", "d2": CONFIGURED}}
+    marks.kept[("l1", MARK)] = json.dumps(doc).encode()
+    here = LineMarks(marks, fake_runtime({}), None, lambda line: ["d1", "d2"])
+    assert await here.load("l1") == {"d1": Kept("pump", True), "d2": Kept(CONFIGURED, False)}
 
 
 async def test_unusable_marks_are_left_aside(tmp_path: Path) -> None:

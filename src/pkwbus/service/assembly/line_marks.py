@@ -6,8 +6,9 @@ One JSON document per line, the mark ``memory`` (:class:`~pkwbus.service.standby
 ``events`` (the log entries kept of the line's drives, as the history database keeps
 them: what was told), ``settings`` and ``swept`` (each drive's settings, baselines
 included, and the identity and end of its last sweep), ``maintenance`` (the drives in
-maintenance and why), ``book`` (the describe book: drives' descriptions by model, shared
-by the instance's lines, so it is carried whole).
+maintenance and why) and ``maintenance_by_api`` (those of them the API put in maintenance;
+the others the configuration file did: a reason does not tell), ``book`` (the describe
+book: drives' descriptions by model, shared by the instance's lines, so it is carried whole).
 
 Merge rule, when this instance wins the line (before its watchers tell anything):
 
@@ -16,7 +17,9 @@ Merge rule, when this instance wins the line (before its watchers tell anything)
 - a drive's settings are taken whole from etcd when etcd's last sweep (or baseline) of
   it is newer than the local one, or the local database has none: etcd wins for what
   this instance did not see itself, the newer view of a drive wins otherwise;
-- a drive etcd says is in maintenance is put in maintenance here (since the move);
+- a drive etcd says is in maintenance is put in maintenance here (since the move), as the
+  API's when the API put it in maintenance there (a document without ``maintenance_by_api``,
+  of an older instance: when its reason is not the configuration file's);
 - a describe book entry is added when this instance has none for that model and
   parameter, or one with fewer elements read; its own stay.
 
@@ -43,7 +46,7 @@ import sqlite3
 import time
 from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
-from typing import Final, Protocol
+from typing import Final, NamedTuple, Protocol
 
 from pkwbus.master.planning.identity import DescriptionBook
 from pkwbus.master.snapshot import Maintained
@@ -52,7 +55,9 @@ from pkwbus.service.history.marks import Made, dumps, encode, export, make, merg
 from pkwbus.service.history.store import EVENTS, SETTINGS, Changes
 from pkwbus.service.runtime import LineTask, Runtime
 
-__all__ = ["MARK", "MAX_MARK_BYTES", "WRITE_EVERY", "LineMarks", "encode", "export", "merge"]
+__all__ = [
+    "MARK", "MAX_MARK_BYTES", "WRITE_EVERY", "Kept", "LineMarks", "encode", "export", "merge",
+]  # fmt: skip
 
 log = logging.getLogger("pkwbus.service.standby")
 
@@ -60,10 +65,19 @@ MARK: Final = "memory"
 MAX_MARK_BYTES: Final = 1_000_000
 WRITE_EVERY: Final = 2.0
 
+
+class Kept(NamedTuple):
+    """A drive in maintenance, as a line's marks carry it: why, and whether the API (not the
+    configuration file) put it there."""
+
+    reason: str
+    by_api: bool
+
+
 # What a line's marks are made of, on the loop: its drives, the history's counts of their
 # log entries' and settings' changes (None: not counted), the book's saves (None: not
-# counted), the drives in maintenance and why.
-Sources = tuple[tuple[str, ...], tuple[int | None, int | None], int | None, dict[str, str]]
+# counted), the drives in maintenance.
+Sources = tuple[tuple[str, ...], tuple[int | None, int | None], int | None, dict[str, Kept]]
 
 
 class Saved(Protocol):
@@ -117,7 +131,7 @@ class LineMarks:
         self._failing: set[str] = set()
         self._cut: set[str] = set()
 
-    async def load(self, line: str) -> dict[str, str]:
+    async def load(self, line: str) -> dict[str, Kept]:
         """Merge ``line``'s marks into the local database; the drives in maintenance and
         why (to put them in maintenance once the line runs). Nothing when etcd does not
         answer (logged: old log entries may then be told again)."""
@@ -141,8 +155,7 @@ class LineMarks:
                     self.changes.changed(EVENTS, drives)
                     self.changes.changed(SETTINGS, drives)
             self._merge_book(doc.get("book"))
-            kept = doc.get("maintenance", {})
-            return {str(k): str(v) for k, v in kept.items()} if isinstance(kept, dict) else {}
+            return _kept(doc.get("maintenance", {}), doc.get("maintenance_by_api"))
         except (ValueError, TypeError, IndexError, sqlite3.Error) as exc:
             log.warning("line %s: its marks in etcd are unusable, left aside: %s", line, exc)
             return {}
@@ -163,17 +176,17 @@ class LineMarks:
             self.saved.save()
 
     def maintained(
-        self, line: str, kept: Mapping[str, str], runner: LineTask | None = None
+        self, line: str, kept: Mapping[str, Kept], runner: LineTask | None = None
     ) -> None:
         """Put the drives of ``kept`` in maintenance on ``line``'s ``runner`` (None: the one
         running; a line started now is in the runtime's next load)."""
         runner = runner if runner is not None else self.runtime.runners.get(line)
         if runner is None:
             return
-        for drive, reason in kept.items():
+        for drive, (reason, by_api) in kept.items():
             if drive not in self.drives_of(line):
                 continue
-            if reason != CONFIGURED:  # the API's on the other instance: the API's here
+            if by_api:  # the API's on the other instance: the API's here
                 self.runtime.hold_maintenance(drive, Maintained(reason, time.time()))
                 self.runtime.show_maintenance(runner, drive)
             else:
@@ -227,7 +240,8 @@ class LineMarks:
             counts = (0, 0)  # nothing read
         saves = 0 if self.book is None else self.saved.saves if self.saved is not None else None
         maintenance = self.runtime.snapshot.maintenance
-        kept = {d: m.reason for d, m in maintenance.items() if d in drives}
+        api = self.runtime.api_maintenance
+        kept = {d: Kept(m.reason, d in api) for d, m in maintenance.items() if d in drives}
         return drives, counts, saves, kept
 
     async def write(self, line: str) -> bool:
@@ -284,13 +298,17 @@ class LineMarks:
         drives: tuple[str, ...],
         counts: tuple[int | None, int | None],
         last: Made | None,
-        maintenance: dict[str, str],
+        maintenance: dict[str, Kept],
         book: str | DescriptionBook | None,
     ) -> tuple[Made, bytes, int, str | None]:
         """The marks made (:func:`pkwbus.service.history.marks.make`), in a thread: up to a
         megabyte of JSON must not hold the loop; and the book's JSON text."""
         text = book if book is None or isinstance(book, str) else dumps(book.to_json())
-        extra = [("maintenance", dumps(maintenance))]
+        by_api = sorted(d for d, kept in maintenance.items() if kept.by_api)
+        extra = [
+            ("maintenance", dumps({d: kept.reason for d, kept in maintenance.items()})),
+            ("maintenance_by_api", dumps(by_api)),
+        ]
         if text is not None:
             extra.append(("book", text))
         return (*make(self.history, drives, counts, last, extra, self.limit), text)
@@ -299,6 +317,19 @@ class LineMarks:
         if line not in self._failing:
             self._failing.add(line)
             log.warning("line %s: %s", line, what, extra={"line": line})
+
+
+def _kept(found: object, by_api: object) -> dict[str, Kept]:
+    """The drives in maintenance a line's marks carry (``found``: drive -> reason), and
+    whether the API put each there (``by_api``: the list of those; None, of an older
+    instance: when its reason is not the configuration file's)."""
+    if not isinstance(found, dict):
+        return {}
+    api = {str(d) for d in by_api} if isinstance(by_api, list) else None
+    return {
+        str(d): Kept(str(r), str(d) in api if api is not None else str(r) != CONFIGURED)
+        for d, r in found.items()
+    }
 
 
 def _copy(book: DescriptionBook) -> DescriptionBook:
