@@ -5,6 +5,7 @@ from pkwbus.link.fence import ALWAYS_OPEN, Fence
 from pkwbus.link.ownership import PortBusy, same_line
 from pkwbus.link.port import Link, PortError, PortSettings
 from pkwbus.link.reconnect import LinkState, Reconnect
+from pkwbus.link.serialport import closes_done
 
 __all__ = [
     "ALWAYS_OPEN",
@@ -15,6 +16,7 @@ __all__ = [
     "PortError",
     "PortSettings",
     "Reconnect",
+    "closes_done",
     "new_event_loop",
     "run",
     "same_line",

@@ -11,6 +11,7 @@ or refuses RS-485 mode.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import errno
 import fcntl
@@ -33,6 +34,7 @@ from pkwbus.link.settings import PARITIES, PortSettings
 __all__ = [
     "apply_adapter_settings",
     "closer",
+    "closes_done",
     "describe_error",
     "is_pty",
     "open_port",
@@ -232,6 +234,13 @@ class _Closer:
 
 
 closer = _Closer()
+
+
+async def closes_done(timeout: float) -> bool:
+    """Whether every port close handed over so far is done within ``timeout`` s (waited in a
+    thread): a device's output drained by then and its descriptor closed, a TCP connection
+    closed; False when one still runs."""
+    return await asyncio.to_thread(closer.wait, timeout)
 
 
 # Ports whose write() is a plain write(2) of the bytes to their descriptor.

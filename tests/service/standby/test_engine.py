@@ -148,3 +148,22 @@ async def test_marks_are_kept_by_the_holder_only(etcd: Etcd, engines: Make) -> N
     assert await b.standby.marks.get("l0", "told") == b"\x00entry 17"  # kept across the move
     assert await b.standby.marks.put("l0", "told", b"entry 18")
     assert await b.standby.marks.get("l0", "told") == b"entry 18"
+
+
+async def test_a_stop_that_leaves_the_lines_lease_hands_the_line_over_at_its_expiry(
+    etcd: Etcd, engines: Make
+) -> None:
+    """Its ports not closed yet (``revoke_lines=False``): the line's key stays until the lease
+    expires, and b holds the line only after that, never while a's lease stands."""
+    a = engines(etcd, "a", ["l0"])
+    b = engines(etcd, "b", ["l0"])
+    await a.standby.start()
+    await until(lambda: a.held() == ["l0"], 10, "a holds l0")
+    await b.standby.start()
+    await until(lambda: b.standby.master_of("l0") is not None, 10, "b learns who masters l0")
+    stopped = asyncio.get_running_loop().time()
+    await a.standby.stop(revoke_lines=False)
+    assert not a.standby.holds("l0")
+    assert "/test/lines/l0" in await etcd.keys("/test/lines/")  # a's, still
+    await until(lambda: b.held() == ["l0"], 5 * LEASE, "b holds l0 once a's lease expired")
+    assert asyncio.get_running_loop().time() - stopped >= LEASE - 1  # not at once

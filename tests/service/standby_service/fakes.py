@@ -74,7 +74,8 @@ class FakeEngine:
         self.etcd_up = True
         self.calls.append("start")
 
-    async def stop(self) -> None:
+    async def stop(self, *, revoke_lines: bool = True) -> None:
+        self.revoked_lines = revoke_lines
         if self.at_stop is not None:
             self.at_stop()
         self.stopped = True

@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import threading
 import time
+from types import SimpleNamespace
 from typing import Any
 
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
+from pkwbus.link.serialport import closer
 from pkwbus.service.assembly import standby_lines
 from pkwbus.service.metrics.exposition import render
 from tests.service.standby_service.fakes import (
@@ -205,16 +208,39 @@ async def test_the_ports_close_before_the_leases_are_revoked() -> None:
 
         def at_stop() -> None:  # each line's port, open or not, when the leases go
             seen.append({n: r.link.is_open for n, r in runners.items()})  # type: ignore[attr-defined]
+            # and its connection as the gateway sees it (the socket's close runs in a thread)
+            seen.append({n: svc.open_connections(n) > 0 for n in runners})
 
         svc.engine.at_stop = at_stop
         await svc.runtime.stop()
-        assert svc.engine.calls == ["start", "stop"]
+        assert svc.engine.calls == ["start", "stop"] and svc.engine.revoked_lines
         svc.engine.grant("l1")  # a win that comes once stopped starts nothing
         await asyncio.sleep(0.3)
         await until(lambda: svc.open_connections("l1") == svc.open_connections("l2") == 0)
         assert svc.ends["l1"].connections == 1
-    # Both lines' ports were closed when the leases were revoked.
-    assert seen == [{"l1": False, "l2": False}]
+    # Both lines' ports were closed when the leases were revoked, their connections too.
+    assert seen == [{"l1": False, "l2": False}] * 2
+
+
+async def test_a_port_whose_close_does_not_end_leaves_the_lines_lease_to_expire(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A close that hangs (an adapter's output that does not drain): the lines' lease is not
+    revoked, so the standby takes the lines only once it expired, and it is said."""
+    monkeypatch.setattr(standby_lines, "PORTS_CLOSED_WAIT", 0.2)
+    jammed = threading.Event()
+    async with service() as svc:
+        svc.engine.grant("l1")
+        await until(lambda: polled(svc, ("a1", "a2")))
+        closer.wrap(stuck := SimpleNamespace(close=lambda: jammed.wait(10)), "jammed")
+        stuck.close()  # handed to the closer's thread, ahead of the line's port
+        try:
+            with caplog.at_level(logging.WARNING, "pkwbus.service.standby"):
+                await svc.runtime.stop()
+        finally:
+            jammed.set()
+        assert svc.engine.calls == ["start", "stop"] and not svc.engine.revoked_lines
+    assert any("left to expire" in r.message for r in caplog.records)
 
 
 async def test_a_reload_hands_the_engine_the_new_lines_and_changes_only_lines_held() -> None:

@@ -23,6 +23,7 @@ import logging
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
+from pkwbus.link import closes_done
 from pkwbus.link.fence import Fence, LineFence
 from pkwbus.service import config as cfg
 from pkwbus.service.assembly.build import Parts
@@ -53,13 +54,15 @@ STOP_GRACE = 0.5
 # tried again while it is held: after RETRY_FIRST seconds, doubling up to RETRY_MAX.
 RETRY_FIRST = 5.0
 RETRY_MAX = 300.0
+# How long a stop waits for its ports' closes before it revokes the lines' lease (s).
+PORTS_CLOSED_WAIT = 3.0
 
 
 class Engine(Protocol):
     """The hot standby's engine as the lines use it (service.standby.Standby)."""
 
     async def start(self) -> None: ...
-    async def stop(self) -> None: ...
+    async def stop(self, *, revoke_lines: bool = True) -> None: ...
     def holds(self, line: str) -> bool: ...
     def fence(self, line: str) -> Fence: ...
     def master_of(self, line: str) -> LineMaster | None: ...
@@ -307,8 +310,17 @@ class StandbyLines:
         if self.marks is not None:  # the leases still held: the marks written last
             with contextlib.suppress(Exception):
                 await self.marks.close()
+        # The ports were told to close; their closes run in a thread. The lines' lease is
+        # revoked (the standby takes them at once) only once every one is done: a telegram
+        # still draining from this instance's adapter must not meet the next master's.
+        closed = await closes_done(PORTS_CLOSED_WAIT)
+        if not closed:
+            log.warning(
+                "hot standby: a port still closing after %g s: the lines' lease is left to"
+                " expire, the standby takes them then", PORTS_CLOSED_WAIT,
+            )  # fmt: skip
         with contextlib.suppress(Exception):
-            await self.engine.stop()
+            await self.engine.stop(revoke_lines=closed)
 
 
 def _line_marks(

@@ -124,10 +124,11 @@ class Standby:
             task.add_done_callback(self._ended)
             self._tasks.append(task)
 
-    async def stop(self) -> None:
+    async def stop(self, *, revoke_lines: bool = True) -> None:
         """Stops campaigning, revokes the registry's lease and then the lines' (their
-        keys deleted: the others take the lines at once). The caller closed the ports
-        first; ``on_change`` is not called, every fence is closed."""
+        keys deleted: the others take the lines at once; not ``revoke_lines``: left to
+        expire). The caller closed the ports first; ``on_change`` is not called, every
+        fence is closed."""
         self._stopped = True
         for task in self._tasks:
             task.cancel()
@@ -138,6 +139,8 @@ class Standby:
         self._tasks = []
         self._held.clear()
         self._held_lease.clear()
+        if not revoke_lines:
+            self.lease.forget()  # left to expire, never revoked later
         for keeper in (self.registry, self.lease):
             try:
                 await keeper.revoke()
