@@ -27,12 +27,13 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
-# Three workers (pytest-xdist) on a two-core machine: most tests wait on simulators,
+# Four workers (pytest-xdist) on a two-core machine: most tests wait on simulators,
 # subprocesses and sockets (two workers kept the cores 35 % busy: 6 min 5 s, 3 min 51 s of
-# CPU); three took 4 min 40 s, and passed as well beside one and two busy loops taking
-# whole cores. A fixed number, not "auto", which counts the host's cores where a
+# CPU). As the suite grew, three took make test to 4 min 57 s (pytest 282-288 s); four
+# take it to 4 min 12 s (pytest 237 s), and passed beside a busy loop taking a whole core
+# (4 min 48-58 s). A fixed number, not "auto", which counts the host's cores where a
 # container may have fewer.
-PYTEST_WORKERS ?= 3
+PYTEST_WORKERS ?= 4
 # Work stealing: each worker starts on its share of the tests and one that runs out takes
 # half of what another still has queued. With the default (load), a worker is handed a
 # run of tests in collection order that it alone may run while the others have nothing
