@@ -147,6 +147,7 @@ class Service:
     client: httpx.AsyncClient
     reloader: Reloader
     text: list[str] = field(default_factory=list)
+    api: Any = None  # the HTTP app's Api (its audit writer)
 
     async def metrics(self) -> str:
         return (await render(self.parts.registry)).decode()
@@ -215,7 +216,7 @@ async def service(names: Sequence[str] = ("l1", "l2", "l3")) -> AsyncIterator[Se
         client = await stack.enter_async_context(
             httpx.AsyncClient(transport=transport, base_url="http://pkwbus")
         )
-        yield Service(ends, heard, runtime, parts, gate, engines[0], client, reloader, text)
+        yield Service(ends, heard, runtime, parts, gate, engines[0], client, reloader, text, api)
 
 
 @asynccontextmanager

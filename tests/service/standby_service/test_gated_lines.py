@@ -196,6 +196,38 @@ async def test_lines_name_their_master() -> None:
         assert {x["name"]: x["master"] for x in r.json()}["l2"] is None
 
 
+async def test_a_maintenance_switch_whose_line_is_lost_meanwhile_answers_409_not_master() -> None:
+    """The line is lost while the switch's audit row is stored: nothing is switched here (its
+    new master keeps the drive), 409 names where to go, and the row says nothing was sent."""
+    async with service() as svc:
+        svc.engine.grant("l1")
+        await until(lambda: polled(svc, ("a1", "a2")))
+        writer = svc.api.audit_writer
+        attempt, outcome = writer.attempt, writer.outcome
+        outcomes: list[str] = []
+
+        async def attempted(entry: Any) -> Any:
+            row = await attempt(entry)
+            svc.engine.lose("l1", Master("there", "http://there.example:9725"))
+            await until(lambda: "l1" not in svc.runtime.runners)
+            return row
+
+        async def completed(row: Any, **kw: Any) -> Any:
+            outcomes.append(kw["outcome"])
+            return await outcome(row, **kw)
+
+        writer.attempt, writer.outcome = attempted, completed
+        r = await svc.client.put(
+            "/api/v1/drives/a1/maintenance", json={"on": True, "reason": "bearing"}, headers=AUTH
+        )
+        assert r.status_code == 409, r.text
+        error = r.json()["error"]
+        assert (error["kind"], error["master"]) == ("not_master", "there")
+        assert outcomes == ["not_sent"]
+        assert "a1" not in svc.runtime.api_maintenance
+        assert "a1" not in svc.runtime.snapshot.maintenance
+
+
 async def test_the_ports_close_before_the_leases_are_revoked() -> None:
     seen: list[dict[str, bool]] = []
     async with service() as svc:
