@@ -8,20 +8,26 @@ from pkwbus.link.fence import FENCE_CLOCK
 from pkwbus.service.standby import Master, margin
 from tests.service.standby_process.etcd import Etcd
 
-from .conftest import LEASE, Make, until
+from .conftest import LEASE, Engine, Make, until
 
 LINES = ["l0", "l1", "l2", "l3"]
 
 
-async def test_exactly_one_holds_each_line_and_a_stop_hands_it_over(
-    etcd: Etcd, engines: Make
-) -> None:
+async def a_holds_l0_b_waits(etcd: Etcd, engines: Make) -> tuple[Engine, Engine]:
+    """Engines a and b for line l0, started one after the other: a holds it, b knows."""
     a = engines(etcd, "a", ["l0"])
     b = engines(etcd, "b", ["l0"])
     await a.standby.start()
     await until(lambda: a.held() == ["l0"], 10, "a holds l0")
     await b.standby.start()
     await until(lambda: b.standby.master_of("l0") is not None, 10, "b learns who masters l0")
+    return a, b
+
+
+async def test_exactly_one_holds_each_line_and_a_stop_hands_it_over(
+    etcd: Etcd, engines: Make
+) -> None:
+    a, b = await a_holds_l0_b_waits(etcd, engines)
     assert b.standby.master_of("l0") == Master("a", "http://a.example:9725")
     assert a.standby.master_of("l0") == Master("a", "http://a.example:9725")
     assert a.standby.etcd_up and b.standby.etcd_up
@@ -155,12 +161,7 @@ async def test_a_stop_that_leaves_the_lines_lease_hands_the_line_over_at_its_exp
 ) -> None:
     """Its ports not closed yet (``revoke_lines=False``): the line's key stays until the lease
     expires, and b holds the line only after that, never while a's lease stands."""
-    a = engines(etcd, "a", ["l0"])
-    b = engines(etcd, "b", ["l0"])
-    await a.standby.start()
-    await until(lambda: a.held() == ["l0"], 10, "a holds l0")
-    await b.standby.start()
-    await until(lambda: b.standby.master_of("l0") is not None, 10, "b learns who masters l0")
+    a, b = await a_holds_l0_b_waits(etcd, engines)
     stopped = asyncio.get_running_loop().time()
     await a.standby.stop(revoke_lines=False)
     assert not a.standby.holds("l0")
