@@ -25,6 +25,7 @@ __all__ = [
     "ValueTopic",
     "ValueTopics",
     "drive_status",
+    "index_shown",
     "quality",
     "stale_after",
     "value_json",
@@ -54,6 +55,13 @@ def quality(snapshot: Snapshot, drive: str, reading: Reading, interval: float, n
     if now - reading.timestamp > stale_after(interval):
         return "stale"
     return "good"
+
+
+def index_shown(array: int | None, polled: int, index: int) -> bool:
+    """Whether a value's topic carries its index: the parameter is an array (``array``
+    elements, its catalog says), polled at several indexes (``polled``), or ``index`` is
+    not 0."""
+    return array is not None or polled > 1 or index != 0
 
 
 def value_json(value: Value | None) -> str:
@@ -130,9 +138,8 @@ class ValueTopics:
             return None
         decoding = self.snapshot.decoding.get(drive)
         fmt = decoding.formats.get((parameter, index), poll.fmt) if decoding else poll.fmt
-        shown = fmt.array is not None or len(polls) > 1 or index != 0
         topic = f"{self.status_topic(entry)[: -len('status')]}value/{parameter}"
-        if shown:
+        if index_shown(fmt.array, len(polls), index):
             topic += f"/{index}"
         return ValueTopic(drive, topic, json.dumps(fmt.unit), poll.every)
 

@@ -13,8 +13,11 @@ MQTT 5's retain-as-published) and one whose MQTT 5 message expiry passed before 
 would be sent; the subscription asks for retain handling 2, so the broker never hands
 over a stored retained set, and no old command fires after a reconnect.
 
-The result goes to the request's MQTT 5 response topic with its correlation data, else
-to ``{prefix}/{line}/{drive}/result`` (QoS 1): ``{"request_id", "outcome", "audit_id",
+The result goes to the request's MQTT 5 response topic with its correlation data when
+that topic is the publisher's own (``replies/{user}/...``: the ACL lets each operator read
+only its own replies, and pkwbus writes under ``replies/#``), else to
+``{prefix}/{line}/{drive}/result`` (QoS 1); another response topic (pkwbus's own, another
+operator's) is never written to: ``{"request_id", "outcome", "audit_id",
 ...}`` with the audit log's outcome names (``ok``, ``refused``, ``invalid``,
 ``not_sent``, ``rejected``, ``mismatch``, ``unverified``, ``timeout``,
 ``cancelled``), the write's answer as the HTTP API gives it, or its ``error`` (kind
@@ -41,6 +44,8 @@ from typing import Any, Final
 
 from pkwbus.errors import PkwbusError
 from pkwbus.protocol import pkw
+from pkwbus.protocol.values import ParameterRef
+from pkwbus.service.mqtt.values import index_shown
 from pkwbus.service.writes.checks import ApiError
 from pkwbus.service.writes.path import WriteDone, WriteOrder, WritePath
 
@@ -64,6 +69,7 @@ MAX_REQUEST_ID: Final = 128  # characters of a request_id echoed back
 MAX_USER: Final = 64  # characters of the {user} segment kept in the audit row
 MAX_PENDING: Final = 64  # sets under way at once; more are refused ("busy"), not queued
 QOS_RESULT: Final = 1
+REPLIES: Final = "replies/"  # under which each operator's own reply topics are
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +158,7 @@ class SetTopics:
         self.topic_filter = f"{prefix}/+/+/set/#"
         self._tasks: set[asyncio.Task[None]] = set()
         self._turns: dict[str, asyncio.Lock] = {}
+        self._told: set[str] = set()  # users told once of a response topic not their own
 
     def take(self, message: SetMessage) -> None:
         """Handle ``message`` in a task of its own (the caller's loop is not held)."""
@@ -231,8 +238,17 @@ class SetTopics:
 
     async def _answer(self, topic: SetTopic, message: SetMessage, result: dict[str, Any]) -> None:
         payload = json.dumps(_finite(result), allow_nan=False, default=str).encode()
-        if message.response_topic:
-            reply = Reply(message.response_topic, payload, QOS_RESULT, message.correlation_data)
+        response = message.response_topic
+        if response and not _own_reply(response, topic.user):
+            if topic.user not in self._told:
+                self._told.add(topic.user)
+                log.warning(
+                    "MQTT: %s gave the response topic %r, not under %s%s/: answered on the"
+                    " drive's result topic", _client(topic.user), response, REPLIES, topic.user,
+                )  # fmt: skip
+            response = None
+        if response:
+            reply = Reply(response, payload, QOS_RESULT, message.correlation_data)
         else:
             where = f"{self.prefix}/{topic.line}/{topic.drive}/result"
             reply = Reply(where, payload, QOS_RESULT)
@@ -242,9 +258,9 @@ class SetTopics:
         body = done.body
         if body.get("verified") is not True:
             return
-        where = f"{self.prefix}/{topic.line}/{topic.drive}/value/{body['parameter']}"
-        if topic.index is not None or body["index"]:
-            where += f"/{body['index']}"
+        where = self.value_topic(
+            topic.line, topic.drive, body["parameter"], body["pnu"], body["index"]
+        )
         value = {
             "v": _finite(body["value"]),
             "raw": body["raw"],
@@ -254,11 +270,29 @@ class SetTopics:
         }
         await self._send(Reply(where, json.dumps(value, allow_nan=False).encode(), 0))
 
+    def value_topic(self, line: str, drive: str, parameter: str, pnu: int, index: int) -> str:
+        """The value topic of ``drive``'s ``parameter`` (``pnu``) at ``index``, as its polled
+        values have it (:func:`~pkwbus.service.mqtt.values.index_shown`)."""
+        where = f"{self.prefix}/{line}/{drive}/value/{parameter}"
+        runtime = self.path.runtime
+        entry = runtime.drives.get(drive)
+        array, polled = None, 0
+        if entry is not None:
+            polled = sum(1 for p in entry.polls if p.parameter == parameter)
+            with contextlib.suppress(KeyError):  # a reload took the drive away meanwhile
+                array = runtime.format_of(drive, ParameterRef(pnu, index, parameter)).array
+        return f"{where}/{index}" if index_shown(array, polled, index) else where
+
     async def _send(self, reply: Reply) -> None:
         try:
             await self.replies(reply)
         except Exception as exc:  # the broker went away: the audit row holds the outcome
             log.warning("MQTT: could not publish to %s: %s", reply.topic, exc)
+
+
+def _own_reply(topic: str, user: str) -> bool:
+    """Whether ``topic`` is one of ``user``'s reply topics (and a topic one may publish to)."""
+    return topic.startswith(f"{REPLIES}{user}/") and not any(c in topic for c in "+#\0")
 
 
 _RETAINED = "a set published with the retain flag is never executed: publish it unretained"
