@@ -95,6 +95,19 @@ def test_the_deadband() -> None:
     assert topic.changed("stop", 5.0) and not topic.changed("run", 5.0)
 
 
+async def test_the_deadband_holds_back_no_change_of_a_code_or_a_word(runtime: Runtime) -> None:
+    """15-30 (the alarm log's codes, no unit in the catalog) is published on any change
+    whatever the deadband (given in a value's unit, it would hold an alarm back until the
+    heartbeat); 16-13 (Hz) keeps its deadband."""
+    topics = ValueTopics("pkwbus", lambda: runtime.drives, runtime.snapshot)
+    code, frequency = topics.get(("fan", "15-30", 2)), topics.get(("fan", "16-13", 0))
+    assert code is not None and frequency is not None
+    assert (code.unit, frequency.unit) == ('""', '"Hz"')  # as the catalog gives them
+    code.last, frequency.last = 4, 50.0
+    assert code.changed(5, 1.0) and not code.changed(4, 1.0)
+    assert not frequency.changed(50.5, 1.0) and frequency.changed(51.5, 1.0)
+
+
 async def test_the_observer_path_only_notes(runtime: Runtime, tmp_path: Path) -> None:
     settings = Mqtt.model_validate({"url": "mqtt://127.0.0.1:1", "values": {"heartbeat": "1m"}})
     metrics = MqttMetrics(CollectorRegistry())

@@ -77,13 +77,16 @@ def value_json(value: Value | None) -> str:
 
 @dataclass(slots=True)
 class ValueTopic:
-    """One polled value's topic, its unit (as JSON) and poll interval, and what was last
-    published of it (``last``: None, nothing yet; ``sent``: the loop's time)."""
+    """One polled value's topic, its unit (as JSON) and poll interval, whether it is
+    published on any change (``exact``: a value without a unit, a word of bits, a code, an
+    option, where a deadband would hold back an alarm), and what was last published of it
+    (``last``: None, nothing yet; ``sent``: the loop's time)."""
 
     drive: str
     topic: str
     unit: str
     interval: float
+    exact: bool = False
     last: Value | None = None
     sent: float = -math.inf
     head: bytes = b""  # its PUBLISH packet's part before the payload (publish_head)
@@ -100,11 +103,12 @@ class ValueTopic:
 
     def changed(self, value: Value, deadband: float) -> bool:
         """Whether ``value`` is to be published: the first, or beyond the deadband from the
-        one last published (any change for a text or with no deadband)."""
+        one last published (any change for a text, an exact value or with no deadband)."""
         last = self.last
         if last is None:
             return True
-        if deadband > 0 and type(value) in (int, float) and type(last) in (int, float):
+        numbers = type(value) in (int, float) and type(last) in (int, float)
+        if deadband > 0 and numbers and not self.exact:
             return bool(abs(value - last) > deadband)  # type: ignore[operator]
         return value != last
 
@@ -141,7 +145,8 @@ class ValueTopics:
         topic = f"{self.status_topic(entry)[: -len('status')]}value/{parameter}"
         if index_shown(fmt.array, len(polls), index):
             topic += f"/{index}"
-        return ValueTopic(drive, topic, json.dumps(fmt.unit), poll.every)
+        exact = not fmt.unit or fmt.enumerates  # bits, codes, options: each change counts
+        return ValueTopic(drive, topic, json.dumps(fmt.unit), poll.every, exact)
 
     def status_topic(self, entry: DriveEntry) -> str:
         return f"{self.prefix}/{entry.line}/{entry.name}/status"
