@@ -349,3 +349,38 @@ async def test_events_wait_through_a_broker_outage(tmp_path: Path) -> None:
 @pytest.mark.long
 async def test_events_wait_through_a_30_s_broker_outage(tmp_path: Path) -> None:
     await _outage(tmp_path, 30.0)
+
+
+async def test_a_site_prefix_has_its_own_device_ids_and_its_stale_configs_are_emptied(
+    tmp_path: Path,
+) -> None:
+    """Under ``pkwbus/hall-a`` the device ids carry the site. A config of pkwbus's under that
+    prefix for no drive of the service now (here: the id fan1 had before the site was in
+    it) is emptied; another site's and another program's are left as they are."""
+    ours = "homeassistant/device/pkwbus_hall-a_line_fc_fan1/config"
+    stale = "homeassistant/device/pkwbus_line_fc_fan1/config"
+    other_site = "homeassistant/device/pkwbus_hall-b_line_fc_fan1/config"
+    foreign = "homeassistant/device/boiler/config"
+
+    def doc(origin: str, status: str) -> bytes:
+        body = {"origin": {"name": origin}, "availability": [{"topic": status}]}
+        return json.dumps(body).encode()
+
+    with mosquitto(tmp_path / "broker", ACL) as broker:
+        async with aiomqtt.Client(
+            broker.host, broker.port, username="pkwbus", password=USERS["pkwbus"]
+        ) as client:
+            for topic, payload in ((stale, doc("pkwbus", "pkwbus/hall-a/status")),
+                                   (other_site, doc("pkwbus", "pkwbus/hall-b/status")),
+                                   (foreign, doc("boiler", "pkwbus/hall-a/status"))):  # fmt: skip
+                await client.publish(topic, payload, qos=1, retain=True)
+        async with plant() as (_, url), subscriber(broker, "homeassistant/#") as seen:
+            path = config(tmp_path, url, broker, prefix="pkwbus/hall-a")
+            async with run(tmp_path, path):
+                await until(lambda: bool(seen.on(ours)), "fan1's config under its site's id")
+                await until(lambda: seen.on(stale)[-1:] == [b""], "the stale config emptied")
+        async with subscriber(broker, "homeassistant/#") as late:
+            await until(lambda: ours in {t for t, _, r in late.messages if r}, "retained")
+            retained = {t for t, _, r in late.messages if r}
+            assert stale not in retained
+            assert {other_site, foreign} <= retained

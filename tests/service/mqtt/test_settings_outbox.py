@@ -10,7 +10,13 @@ from pathlib import Path
 import pytest
 
 from pkwbus.service.config import ConfigError, parse_config
-from pkwbus.service.config.mqtt import EXTRA_HINT, Mqtt, MqttSettingsError, mqtt_report
+from pkwbus.service.config.mqtt import (
+    EXTRA_HINT,
+    Mqtt,
+    MqttSettingsError,
+    ha_device_id,
+    mqtt_report,
+)
 from pkwbus.service.mqtt.outbox import Outbox
 
 LINES = """
@@ -124,3 +130,31 @@ def test_the_outbox_drops_the_oldest_over_its_caps(tmp_path: Path) -> None:
     assert dropped == 0  # already dropped by the add
     assert [r.topic for r in rows] == ["t/4"] and box.size() == (1, 1)
     box.close()
+
+
+TWO_FANS = """
+lines:
+  - name: l1
+    port: sim://fc?drives=1,2
+    protocol: fc
+    baudrate: 115200
+    drives:
+      - {name: fan.1, address: 1, catalog: danfoss-fc}
+      - {name: fan_1, address: 2, catalog: danfoss-fc}
+"""
+
+
+def test_drives_whose_home_assistant_ids_would_be_one_are_refused_while_discovery_is_on() -> None:
+    with pytest.raises(ConfigError) as exc:
+        parse_config(f"mqtt:\n  url: mqtt://broker\n{TWO_FANS}", environ={})
+    (said,) = exc.value.problems
+    assert said.startswith("lines[0].drives[1].name: 'fan_1'") and "pkwbus_l1_fan_1" in said
+    off = "mqtt:\n  url: mqtt://broker\n  homeassistant: {discovery: false}\n"
+    assert parse_config(off + TWO_FANS, environ={}).mqtt is not None
+
+
+def test_a_site_in_the_prefix_is_in_the_device_id_and_the_default_id_stays() -> None:
+    assert ha_device_id("pkwbus", "line_fc", "fan1") == "pkwbus_line_fc_fan1"
+    assert ha_device_id("pkwbus/hall-a", "line_fc", "fan1") == "pkwbus_hall-a_line_fc_fan1"
+    site = "pkwbus/hall-a"
+    assert ha_device_id(site, "l", "fan.1") == ha_device_id(site, "l", "fan_1")

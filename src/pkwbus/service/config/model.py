@@ -44,7 +44,7 @@ from pkwbus.service.config.base import (
 )
 from pkwbus.service.config.fields import Retention
 from pkwbus.service.config.line import LineBase
-from pkwbus.service.config.mqtt import Mqtt
+from pkwbus.service.config.mqtt import Mqtt, ha_id_clashes
 from pkwbus.service.config.profibus import ProfibusDrive
 from pkwbus.service.config.profibus_line import ProfibusLine
 from pkwbus.service.config.serial import FcDrive, FcLine, UssDrive, UssLine
@@ -355,6 +355,10 @@ class Config(Model):
                     problems.append(
                         (f"{place}.name", f"drive name {drive.name!r} is already used at {first}")
                     )
+        named = ((f"lines[{i}].drives[{j}]", line.name, drive.name)
+                 for i, line in enumerate(self.lines)
+                 for j, drive in enumerate(line.drives))  # fmt: skip
+        problems += ha_id_clashes(self.mqtt, named)
         if problems:
             raise fail(problems)
         return self

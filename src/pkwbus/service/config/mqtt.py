@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import Annotated, Final, Self
 from urllib.parse import urlsplit
 
@@ -25,7 +25,7 @@ from pkwbus.notation.durations import parse_duration
 from pkwbus.notation.hostport import MAX_TCP_PORT, check_host
 from pkwbus.notation.limits import parse_size
 from pkwbus.notation.problems import short
-from pkwbus.service.config.base import Model
+from pkwbus.service.config.base import Model, Place
 
 __all__ = [
     "DEFAULT_PORTS",
@@ -37,6 +37,8 @@ __all__ = [
     "Outbox",
     "Sparkplug",
     "Values",
+    "ha_device_id",
+    "ha_id_clashes",
     "mqtt_report",
 ]
 
@@ -119,6 +121,34 @@ class Values(Model):
     heartbeat: Annotated[
         float, PlainValidator(lambda v: parse_duration(v, durations.MQTT_HEARTBEAT))
     ] = 300.0
+
+
+_HA_ID = re.compile(r"[^A-Za-z0-9_-]")
+
+
+def ha_device_id(prefix: str, line: str, drive: str) -> str:
+    """A drive's Home Assistant device id: ``{prefix}_{line}_{drive}`` with what Home
+    Assistant does not take in an id as _ (``pkwbus_{line}_{drive}`` under the default
+    prefix); the site a prefix carries (``pkwbus/hall-a``) keeps apart the drives of two
+    services on one broker that have the same line and drive names."""
+    return _HA_ID.sub("_", f"{prefix}_{line}_{drive}")
+
+
+def ha_id_clashes(mqtt: Mqtt | None, drives: Iterable[tuple[str, str, str]]) -> list[Place]:
+    """Drives (place, line, name) whose Home Assistant device ids would be one (``fan.1`` and
+    ``fan_1`` on a line): one device would hide the other. None while discovery is off."""
+    if mqtt is None or not mqtt.homeassistant.discovery:
+        return []
+    seen: dict[str, tuple[str, str]] = {}
+    problems: list[Place] = []
+    for place, line, name in drives:
+        ident = ha_device_id(mqtt.prefix, line, name)
+        first, other = seen.setdefault(ident, (place, name))
+        if first != place:
+            problems.append((f"{place}.name", f"{name!r} has the Home Assistant device id {ident}"
+                             f" of {other!r} ({first}): an id keeps only A-Z, a-z, 0-9, _ and"
+                             " -; rename one"))  # fmt: skip
+    return problems
 
 
 class HomeAssistant(Model):

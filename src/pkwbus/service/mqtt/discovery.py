@@ -1,5 +1,6 @@
 """Home Assistant's MQTT device discovery: one retained config per drive,
-``{ha prefix}/device/pkwbus_{line}_{drive}/config``, with a sensor per polled value.
+``{ha prefix}/device/{id}/config`` (``id``: ``pkwbus_{line}_{drive}`` under the default
+prefix, :func:`~pkwbus.service.config.mqtt.ha_device_id`), with a sensor per polled value.
 
 Each sensor has the value's name and unit; its ``device_class`` where Home Assistant has
 one for that unit (frequency, current, voltage, power, energy, temperature, duration,
@@ -8,7 +9,10 @@ a counter the drive keeps of its own life (energy, running hours, power-ups: the
 ``counter``), ``measurement`` for any other number, none for a value with named options.
 The device is available while both the service's status and the drive's status say
 ``online`` (a drive in maintenance is unavailable). An empty retained payload removes
-the device (a reload removed the drive).
+the device (a reload removed the drive). A retained config of pkwbus's under the same
+prefix (its availability names ``{prefix}/status``) for a device that is not one of the
+service's drives now, a drive removed while it was stopped or the id of an earlier version,
+is emptied when found (:func:`stale_config`).
 """
 
 from __future__ import annotations
@@ -19,10 +23,11 @@ from typing import Any, Final
 
 from pkwbus import __version__
 from pkwbus.protocol.values.types import ValueType
+from pkwbus.service.config.mqtt import ha_device_id
 from pkwbus.service.mqtt.values import ValueTopics
 from pkwbus.service.runtime import DriveEntry
 
-__all__ = ["DEVICE_CLASSES", "device_config", "device_id", "discovery_topic"]
+__all__ = ["DEVICE_CLASSES", "device_config", "device_id", "discovery_topic", "stale_config"]
 
 # Home Assistant's sensor device classes by the units it accepts for them.
 DEVICE_CLASSES: Final = {
@@ -42,18 +47,35 @@ _ID = re.compile(r"[^A-Za-z0-9_-]")
 _AVAILABLE = "{{ 'online' if value == 'online' else 'offline' }}"
 
 
-def device_id(line: str, drive: str) -> str:
-    """``pkwbus_{line}_{drive}``, with what Home Assistant does not take in an id as _."""
-    return _ID.sub("_", f"pkwbus_{line}_{drive}")
+device_id = ha_device_id
 
 
-def discovery_topic(ha_prefix: str, line: str, drive: str) -> str:
-    return f"{ha_prefix}/device/{device_id(line, drive)}/config"
+def discovery_topic(ha_prefix: str, prefix: str, line: str, drive: str) -> str:
+    return f"{ha_prefix}/device/{device_id(prefix, line, drive)}/config"
+
+
+def stale_config(prefix: str, payload: bytes) -> bool:
+    """Whether ``payload``, a retained device config, is one pkwbus published under
+    ``prefix`` (its first availability topic ``{prefix}/status``); the caller asks only of
+    a topic that is not one of its drives' now."""
+    try:
+        doc = json.loads(payload) if payload else None
+    except ValueError:  # not JSON (UnicodeDecodeError is one): not pkwbus's
+        return False
+    if not isinstance(doc, dict) or not isinstance(doc.get("origin"), dict):
+        return False
+    available = doc.get("availability")
+    first = available[0] if isinstance(available, list) and available else None
+    return (
+        doc["origin"].get("name") == "pkwbus"
+        and isinstance(first, dict)
+        and first.get("topic") == f"{prefix}/status"
+    )
 
 
 def device_config(prefix: str, entry: DriveEntry, topics: ValueTopics) -> bytes:
     """The drive's device discovery payload (JSON, keys sorted)."""
-    ident = device_id(entry.line, entry.name)
+    ident = device_id(prefix, entry.line, entry.name)
     components: dict[str, dict[str, Any]] = {}
     for poll in entry.polls:
         topic = topics.get((entry.name, poll.parameter, poll.index))

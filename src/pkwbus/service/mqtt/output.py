@@ -37,7 +37,7 @@ from pkwbus.service.history.store import DriveEvent
 from pkwbus.service.history.stream import EventStream
 from pkwbus.service.http.views import event_views
 from pkwbus.service.mqtt.connection import Connection, NotConnected
-from pkwbus.service.mqtt.discovery import device_config, discovery_topic
+from pkwbus.service.mqtt.discovery import device_config, discovery_topic, stale_config
 from pkwbus.service.mqtt.metrics import MqttMetrics
 from pkwbus.service.mqtt.outbox import Outbox, OutboxError, Stored, outbox_path
 from pkwbus.service.mqtt.values import ValueTopic, ValueTopics, drive_status, quality
@@ -87,6 +87,7 @@ class MqttOutput:
         ha = settings.homeassistant
         if ha.discovery:
             connection.subscribe(f"{ha.prefix}/status", self._ha_status, retain_handling=0)
+            connection.subscribe(f"{ha.prefix}/device/+/config", self._ha_config, retain_handling=0)
 
     # ------------------------------------------------------------ told
 
@@ -249,7 +250,7 @@ class MqttOutput:
         done = publish(self.topics.status_topic(entry), b"", 1, True)
         ha = self.settings.homeassistant
         if ha.discovery:
-            topic = discovery_topic(ha.prefix, entry.line, entry.name)
+            topic = discovery_topic(ha.prefix, self.prefix, entry.line, entry.name)
             done = publish(topic, b"", 1, True) and done
         if not done:
             self._gone.append(entry)
@@ -262,11 +263,21 @@ class MqttOutput:
             return
         for n, entry in enumerate(entries, 1):
             payload = device_config(self.prefix, entry, self.topics)
-            topic = discovery_topic(ha.prefix, entry.line, entry.name)
+            topic = discovery_topic(ha.prefix, self.prefix, entry.line, entry.name)
             if self.connection.publish_nowait(topic, payload, 1, True):
                 self.metrics.sent["discovery"].inc()
             if n % 50 == 0:
                 await asyncio.sleep(0)
+
+    def _ha_config(self, message: aiomqtt.Message) -> None:
+        """A device config on the broker: one of pkwbus's under this prefix that is none of
+        the drives' now (discovery.stale_config) is emptied."""
+        payload, topic = message.payload, message.topic.value
+        if not isinstance(payload, bytes | bytearray) or not stale_config(self.prefix, payload):
+            return
+        ha, drives = self.settings.homeassistant, self.runtime.drives.values()
+        if all(topic != discovery_topic(ha.prefix, self.prefix, e.line, e.name) for e in drives):
+            self.connection.publish_nowait(topic, b"", 1, True)
 
     def _ha_status(self, message: aiomqtt.Message) -> None:
         if message.payload in (b"online", "online"):
