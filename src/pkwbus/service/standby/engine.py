@@ -160,11 +160,12 @@ class Standby:
 
     def master_of(self, line: str) -> Master | None:
         """Who masters ``line``: this instance while it holds it, else the holder etcd
-        named last (None: nobody, or this instance's key while it does not hold it)."""
+        names (None: nobody, this instance's key while it does not hold it, or not known:
+        etcd is not watched now, and what it named last may have expired since)."""
         if self.holds(line):
             return self.me
         holder = self.view.holders.get(line)
-        if holder is None or holder.master.name == self.name:
+        if holder is None or holder.master.name == self.name or not self.view.fresh:
             return None
         return holder.master
 

@@ -220,11 +220,13 @@ def line_mastered_elsewhere(runtime: Runtime, line: str) -> None:
 def _not_master(masters: Masters, line: str, what: str) -> NoReturn:
     master = masters.master_of(line)
     name, url = (master.name, master.url) if master is not None else (None, None)
-    where = f"instance {name}" if name is not None else "no instance now"
-    raise ApiError(
-        409, "not_master", f"{what}, which {where} masters: ask there",
-        master=name, url=url,
-    )  # fmt: skip
+    said = (
+        f"{what}, which instance {name} masters: ask there"
+        if name is not None
+        else f"{what}, which this instance does not master, nor knows an instance that does"
+        " (etcd not reachable, or the line between masters): try again in a few seconds"
+    )
+    raise ApiError(409, "not_master", said, master=name, url=url)
 
 
 def fit_index(ref: ParameterRef, fmt: ParameterDescription) -> ParameterRef:
