@@ -186,9 +186,11 @@ async def test_lines_name_their_master() -> None:
         assert r.status_code == 200
         lines = {x["name"]: x for x in r.json()}
         assert list(lines) == ["l1", "l2"]
-        assert lines["l1"]["master"] == {"name": "here", "url": "http://here.example:9725"}
+        assert lines["l1"]["master"] == {"name": "here", "url": "http://here.example:9725",
+                                         "here": True}  # fmt: skip
         assert lines["l1"]["open"] is True and lines["l1"]["drives"] == 2
-        assert lines["l2"]["master"] == {"name": "there", "url": "http://there.example:9725"}
+        assert lines["l2"]["master"] == {"name": "there", "url": "http://there.example:9725",
+                                         "here": False}  # fmt: skip
         assert lines["l2"]["open"] is False and lines["l2"]["drives"] == 1
         assert lines["l2"]["drives_up"] == 0
         svc.engine.masters.pop("l2")

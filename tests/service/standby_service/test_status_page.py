@@ -1,6 +1,7 @@
 """The status page of an instance in hot standby, in a real headless browser (Debian's
 chromium, driven by Playwright): a line mastered here shows its port; a line another
-instance masters says which, linking to its page; a line nobody masters is closed. Skipped,
+instance masters says which, linking to its page; a line nobody masters is closed; the
+line mastered here whose gateway is gone is closed in red, not "mastered by" itself. Skipped,
 saying why, without chromium or Playwright (deploy/browser-setup installs them)."""
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class Served:
         self.stop = threading.Event()
         self.url = ""
         self.engine: FakeEngine | None = None
+        self.gateway: Any = None  # l1's simulated gateway
         self.loop: asyncio.AbstractEventLoop | None = None
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._run, name="standby", daemon=True)
@@ -47,6 +49,7 @@ class Served:
             svc.engine.masters["l2"] = Master("hall-b", "http://hall-b.example:9725/")
             await until(lambda: bool(svc.runtime.snapshot.lines.get("l1")))
             self.engine, self.loop = svc.engine, asyncio.get_running_loop()
+            self.gateway = svc.ends["l1"]
             sock = socket.socket()
             sock.bind(("127.0.0.1", 0))
             host, port = sock.getsockname()
@@ -109,6 +112,13 @@ def test_a_standby_names_the_master_of_each_line_with_a_link(tmp_path: Path) -> 
                 expect(there).to_have_text("closed", timeout=20_000)
                 expect(there.locator("a")).to_have_count(0)
                 expect(page.locator("#lines tfoot")).to_contain_text("1 of 2 open")
+                # l1's gateway goes away: mastered here, its port is closed, in red.
+                gateway = served.gateway
+                assert served.loop is not None and gateway is not None
+                asyncio.run_coroutine_threadsafe(gateway.close(), served.loop).result(30)
+                expect(here).to_have_text("closed", timeout=20_000)
+                expect(here).to_have_class("port bad")
+                expect(page.locator("#lines tfoot")).to_contain_text("0 of 2 open")
             finally:
                 browser.close()
     finally:

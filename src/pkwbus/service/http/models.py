@@ -200,6 +200,7 @@ class MasterView(BaseModel):
 
     name: str
     url: str | None = Field(default=None, description="its advertised URL (null: none given)")
+    here: bool = Field(default=False, description="whether it is the instance answering")
 
 
 class NotMasterDetail(BaseModel):

@@ -428,7 +428,7 @@ function fillLine(r, c, line) {
     const bad = c[key] > 0 && (key === "down" || key === "alarm");
     setClass(r.cells[key], `count${bad ? " bad" : ""}${key === "warning" && c[key] ? " warn" : ""}`);
   }
-  if (line && !line.open && line.master) {  // hot standby: the instance that masters it
+  if (line && line.master && !line.master.here) {  // hot standby: the instance that masters it
     showMaster(r.cells.port, line.master);
     setText(r.cells.busy, "-");
   } else if (line) {
@@ -481,7 +481,7 @@ function drawLines(lines) {
   }
   fillLine(all, total, null);
   const up = lines.filter((l) => l.open).length;
-  const elsewhere = lines.filter((l) => !l.open && l.master).length;  // hot standby
+  const elsewhere = lines.filter((l) => l.master && !l.master.here).length;  // hot standby
   const here = lines.length - elsewhere;
   setText(all.cells.port,
     `${up} of ${here} open${elsewhere ? `, ${elsewhere} mastered elsewhere` : ""}`);

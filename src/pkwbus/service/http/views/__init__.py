@@ -74,7 +74,9 @@ def line_views(
         views.append(
             LineView(
                 name=name,
-                master=MasterView(name=master.name, url=master.url) if master else None,
+                master=MasterView(name=master.name, url=master.url, here=masters.here(name))
+                if master is not None and masters is not None
+                else None,
                 open=bool(snap.lines.get(name)),
                 drives=len(mine),
                 drives_up=up,
