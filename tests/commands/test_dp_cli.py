@@ -401,3 +401,8 @@ def test_a_slave_that_refuses_what_it_is_sent_is_named_once(
     again = [r for r in caplog.records if "parametrised again" in r.getMessage()]
     assert len(again) == 1, [r.getMessage() for r in again]
     assert served.wire.set_prm()[(8, 2)] > 3  # parametrised over and over meanwhile
+
+
+def test_a_scan_whose_port_cannot_be_opened_exits_4(capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "scan", "--port", "/nonexistent/tty", "--protocol", "profibus")
+    assert code == 4 and "/nonexistent/tty" in err

@@ -18,3 +18,4 @@ class Exit(enum.IntEnum):
     MISMATCH = 5  # the drive acknowledged a write with another value than the one sent
     BUG = 70  # EX_SOFTWARE: an exception pkwbus did not expect
     INTERRUPTED = 130  # 128 + SIGINT
+    PIPE_CLOSED = 141  # 128 + SIGPIPE: the reader of the output went away (| head)

@@ -88,9 +88,12 @@ class _LiveList:
             elif isinstance(event, StationFound):
                 entry = _entry(event)
                 self.found.append(entry)
-                if not self.json:
+                if not self.json and not self.over.done():
                     self.progress.clear()
-                    print(_describe(entry), flush=True)
+                    try:
+                        print(_describe(entry), flush=True)
+                    except BrokenPipeError as exc:  # its reader went away: the scan ends
+                        self.over.set_exception(exc)
             elif isinstance(event, StationsAsked) and not self.over.done():
                 self.over.set_result(None)
             elif isinstance(event, LineState) and not event.up and event.error:
@@ -121,7 +124,7 @@ async def _scan(
         await session.open()
         await session.until(watch.over)
     except PortError as exc:
-        if watch.lost is None:  # the port could not be opened
+        if watch.lost is None or not watch.lost.refused:  # the port, not another master
             raise CommandError(str(exc), Exit.PORT) from None
     finally:
         progress.clear()
