@@ -247,9 +247,10 @@ def _dp_runner(
     )
     resolved = []
     for drive in line.drives:
-        found, _ = drive.dp.settings()
+        found, problems = drive.dp.settings()
         if found is None:  # the configuration checked it; a GSD file changed since
-            raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable")
+            why = "; ".join(f"{place}: {text}" if place else text for place, text in problems)
+            raise ValueError(f"drive {drive.name}: its PROFIBUS settings are not usable: {why}")
         resolved.append(found)
     slot = dp_settings.slot_time(line.baudrate, line.slot_time, (s.gsd for s in resolved))
     # The line's master: it clears its slaves before its port closes.
