@@ -285,6 +285,9 @@ async def test_a_reload_hands_the_engine_the_new_lines_and_changes_only_lines_he
         svc.text[0] = config_text(urls, ("l1", "l3"))
         outcome = await svc.reloader.reload()
         assert outcome.loaded, outcome
+        # said (and audited) though nothing of l3 runs here yet
+        added = "line l3 added (started where it is mastered)"
+        assert outcome.changes == ["line l2 removed", added]
         assert svc.engine.set == [["l1", "l3"]]
         assert "l3" not in svc.runtime.runners and svc.ends["l3"].connections == 0
         assert svc.ends["l1"].connections == 1  # l1 ran on, untouched

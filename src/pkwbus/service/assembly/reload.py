@@ -296,7 +296,12 @@ class Reloader:
         for name, line in new_lines.items():
             old = old_lines.get(name)
             if self.gate is not None and name not in next_load.runners:
-                continue  # not mastered here now: started by the gate when it is
+                # Not mastered here now: started by the gate when it is; said all the same.
+                if old is None:
+                    changes.append(f"line {name} added (started where it is mastered)")
+                elif old != line:
+                    changes.append(f"line {name} changed (applied where it is mastered)")
+                continue
             if old is None or name in self._down:
                 if old is not None:
                     await self._stop_line(name, next_load)
