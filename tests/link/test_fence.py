@@ -62,7 +62,7 @@ def test_a_line_fence_names_its_line_and_asks_the_engines_fence() -> None:
     inner = FakeFence(FENCE_CLOCK() + 100)
     fence = LineFence("hall-a", inner)
     assert fence.open_until() == inner.until
-    assert "lease of line hall-a expired" in fenced_reason(fence)
+    assert "line hall-a is no longer mastered here" in fenced_reason(fence)
     inner.close()
     assert fence_closed(fence)
 
@@ -71,11 +71,11 @@ async def test_a_closed_fence_refuses_the_opening(pty: tuple[int, str]) -> None:
     _, path = pty
     fence = FakeFence(0.0)  # not held: 0.0, as the engine's fence of a line not held
     link = Link(PortSettings(path, baudrate=19200), fence=LineFence("l1", fence))
-    with pytest.raises(PortError, match="lease of line l1 expired"):
+    with pytest.raises(PortError, match="line l1 is no longer mastered here"):
         await link.open()
     assert link.state is LinkState.FAILED and not link.is_open
     assert link.reconnect.last_error is not None
-    assert "lease of line l1 expired" in link.reconnect.last_error
+    assert "line l1 is no longer mastered here" in link.reconnect.last_error
     fence.until = FENCE_CLOCK() + 60  # won: the port opens
     await link.open()
     assert link.is_open
@@ -98,13 +98,13 @@ async def test_writes_go_out_while_open_and_none_once_the_fence_closed(
         assert readable(controller, 5.0)
         assert os.read(controller, 64) == b"\x02\x04"
         fence.close()  # e.g. a process resumed after SIGSTOP: the lease is stale
-        with pytest.raises(PortError, match="lease of line l1 expired"):
+        with pytest.raises(PortError, match="line l1 is no longer mastered here"):
             link.write_now(b"\x02\x05", discard=False)
         with pytest.raises(PortError):
             await link.send(b"\x02\x06")
         assert not link.is_open and link.state is LinkState.FAILED  # given up
         assert readable(controller, 0.3) is False  # not a byte went out
-        assert "lease of line l1 expired" in (link.reconnect.last_error or "")
+        assert "line l1 is no longer mastered here" in (link.reconnect.last_error or "")
         # Reopened at back-off: refused while the fence stays closed.
         assert await link.reopen() is False
         assert not link.is_open
@@ -151,7 +151,7 @@ async def test_a_refused_write_closes_the_gateway_connection(
         await asyncio.sleep(0.01)
     assert got == [b"\x01"]
     fence.close()
-    with pytest.raises(PortError, match="lease of its line expired"):
+    with pytest.raises(PortError, match="its line is no longer mastered here"):
         link.write_now(b"\x02", discard=False)
     await asyncio.wait_for(closed.wait(), 10.0)
     assert b"".join(got) == b"\x01"

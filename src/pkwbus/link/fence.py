@@ -80,7 +80,10 @@ def fence_closed(fence: Fence, clock: Callable[[], float] = FENCE_CLOCK) -> bool
 
 
 def fenced_reason(fence: Fence) -> str:
-    """Why a closed ``fence`` keeps the port shut, for people."""
-    if isinstance(fence, LineFence):
-        return f"lease of line {fence.line} expired (hot standby): the port is given up"
-    return "lease of its line expired (hot standby): the port is given up"
+    """Why a closed ``fence`` keeps the port shut, for people: the line is no longer this
+    instance's to master (its lease expired, or it was handed over to another instance)."""
+    line = f"line {fence.line}" if isinstance(fence, LineFence) else "its line"
+    return (
+        f"{line} is no longer mastered here (hot standby: its lease ended or the line was"
+        " handed over): the port is given up"
+    )

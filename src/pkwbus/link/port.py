@@ -256,7 +256,7 @@ class Link:
             raise PortError(f"{self.settings.url} is not open")
         if fence_closed(self.fence):
             reason = f"{self.settings.url}: {fenced_reason(self.fence)}"
-            log.warning("%s", reason)
+            log.debug("%s", reason)  # told by the abort to the line's listeners, who log it
             self.abort(reason)
             raise PortError(reason)
         if discard:
