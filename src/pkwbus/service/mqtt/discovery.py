@@ -8,11 +8,12 @@ pressure, apparent and reactive power), and its ``state_class``: ``total_increas
 a counter the drive keeps of its own life (energy, running hours, power-ups: the catalog's
 ``counter``), ``measurement`` for any other number, none for a value with named options.
 The device is available while both the service's status and the drive's status say
-``online`` (a drive in maintenance is unavailable). An empty retained payload removes
-the device (a reload removed the drive). A retained config of pkwbus's under the same
-prefix (its availability names ``{prefix}/status``) for a device that is not one of the
-service's drives now, a drive removed while it was stopped or the id of an earlier version,
-is emptied when found (:func:`stale_config`).
+``online`` (a drive in maintenance is unavailable). A poll that waits for the drive to
+describe its type (no vendor document types it) has no sensor until the drive has. An
+empty retained payload removes the device (a reload removed the drive). A retained
+config of pkwbus's under the same prefix (its availability names ``{prefix}/status``)
+for a device that is not one of the service's drives now, a drive removed while it was
+stopped or the id of an earlier version, is emptied when found (:func:`stale_config`).
 """
 
 from __future__ import annotations
@@ -77,7 +78,12 @@ def device_config(prefix: str, entry: DriveEntry, topics: ValueTopics) -> bytes:
     """The drive's device discovery payload (JSON, keys sorted)."""
     ident = device_id(prefix, entry.line, entry.name)
     components: dict[str, dict[str, Any]] = {}
+    decoding = topics.snapshot.decoding.get(entry.name)
+    described = decoding.described if decoding is not None else {}
     for poll in entry.polls:
+        told = described.get(poll.request.pnu)
+        if poll.described_only and (told is None or told.vtype is None):
+            continue  # not polled until the drive describes its type (then announced again)
         topic = topics.get((entry.name, poll.parameter, poll.index))
         if topic is None:
             continue

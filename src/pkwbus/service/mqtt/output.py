@@ -29,6 +29,7 @@ from typing import Any
 import aiomqtt
 
 from pkwbus.master.events import Event, HealthChanged, MaintenanceChanged, ValueLanded
+from pkwbus.master.planning.plan import DescribedAnew, DescribedFromBook
 from pkwbus.master.reading import Reading
 from pkwbus.master.snapshot import ReadingKey
 from pkwbus.service.config import Config
@@ -74,6 +75,7 @@ class MqttOutput:
         self.topics = ValueTopics(settings.prefix, lambda: runtime.drives, runtime.snapshot)
         self._pending: dict[ReadingKey, Reading] = {}
         self._statuses: set[str] = set()
+        self._described: set[str] = set()  # drives whose withheld polls got a type
         self._wake = asyncio.Event()
         self._incoming: list[tuple[str, bytes]] = []
         self._events = asyncio.Event()
@@ -100,7 +102,12 @@ class MqttOutput:
                 pending[event.key] = event.reading  # type: ignore[union-attr]
             elif kind is HealthChanged or kind is MaintenanceChanged:
                 statuses.add(event.drive)  # type: ignore[union-attr]
-        if (pending or statuses) and not self._wake.is_set():
+            elif (kind is DescribedAnew or kind is DescribedFromBook) and any(
+                p.described_only
+                for p in event.polls  # type: ignore[union-attr]
+            ):  # a poll typed by the drive now: its sensor announced
+                self._described.add(event.drive)  # type: ignore[union-attr]
+        if (pending or statuses or self._described) and not self._wake.is_set():
             self._wake.set()
 
     def on_drive_events(self, events: list[DriveEvent]) -> None:
@@ -162,8 +169,12 @@ class MqttOutput:
             self._wake.clear()
             pending, self._pending = self._pending, {}
             statuses, self._statuses = self._statuses, set()
+            described, self._described = self._described, set()
             if statuses and self.connection.is_connected:
                 self._publish_statuses(statuses)
+            if described and self.connection.is_connected and self.settings.homeassistant.discovery:
+                drives = self.runtime.drives
+                await self._announce([drives[d] for d in sorted(described) if d in drives])
             await self._publish_values(pending)
 
     async def _publish_values(self, pending: dict[ReadingKey, Reading]) -> None:
@@ -270,8 +281,7 @@ class MqttOutput:
                 await asyncio.sleep(0)
 
     def _ha_config(self, message: aiomqtt.Message) -> None:
-        """A device config on the broker: one of pkwbus's under this prefix that is none of
-        the drives' now (discovery.stale_config) is emptied."""
+        """A device config of pkwbus's under this prefix, of none of its drives now: emptied."""
         payload, topic = message.payload, message.topic.value
         if not isinstance(payload, bytes | bytearray) or not stale_config(self.prefix, payload):
             return
