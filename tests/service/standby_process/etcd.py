@@ -1,7 +1,8 @@
 """A real etcd of one or three members on loopback, each in its own temp folder, for the hot
 standby's process tests and its benchmark: members are killed (SIGKILL) and started again on
-the same ports and data, the leader is found from the members' own status, and the gRPC
-requests served are counted from each member's ``/metrics``.
+the same ports and data (or, wiped, as a new empty store on the same ports), the leader is
+found from the members' own status, and the gRPC requests served are counted from each
+member's ``/metrics``.
 
 Debian's ``etcd-server`` provides ``etcd``; :func:`etcd_binary` is None where it is missing.
 """
@@ -141,6 +142,14 @@ class Etcd:
             member.log.close()
             member.log = None
 
+    def wipe(self, member: Member) -> None:
+        """SIGKILL, and its data deleted: launched again, it is a new, empty store on the same
+        ports, its revisions started anew (one member only: a wiped member of three would
+        not join its peers again)."""
+        assert self.size == 1, "only the member of a one-member etcd can be wiped"
+        self.kill(member)
+        shutil.rmtree(member.data, ignore_errors=True)
+
     def stop(self) -> None:
         for member in self.members:
             self.kill(member)
@@ -185,6 +194,18 @@ class Etcd:
                         )
                         for kv in kvs
                     }
+        raise EtcdError("no member answered")
+
+    async def put(self, key: str, value: bytes) -> int:
+        """``key`` set to ``value`` on any running member: the store's revision after it."""
+        body = {"key": _b64(key.encode()), "value": _b64(value)}
+        async with httpx.AsyncClient(timeout=2) as client:
+            for member in self.members:
+                if not member.running:
+                    continue
+                with contextlib.suppress(httpx.HTTPError, ValueError, KeyError):
+                    r = await client.post(f"{member.url}/v3/kv/put", json=body)
+                    return int(r.json()["header"]["revision"])
         raise EtcdError("no member answered")
 
     async def served(self) -> dict[str, float]:

@@ -24,6 +24,13 @@ etcd away: the lease's fence closes lease - margin after the last renewal sent (
 lines are told lost), ``etcd_up`` is False, logged once per outage; when etcd answers
 again and still has the lease, its lines are held again (their keys never left),
 otherwise they are campaigned for anew.
+
+etcd another store (its data lost, restored from an older snapshot: the view's read
+finds its revision gone back, or another cluster id): its view is read anew, every line
+is told lost and none is held or campaigned for during one lease - the masters of the
+old store hold their lines on its leases until their fences close, within a lease -,
+then the lines are campaigned for as at a start. Leases the new store does not know are
+granted anew by their keepers (a renewal answered with no TTL).
 """
 
 from __future__ import annotations
@@ -104,6 +111,8 @@ class Standby:
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._stopped = False
+        self._quiet_until = 0.0  # nothing held or campaigned for before (etcd another store)
+        self._store = 0  # how many times etcd was found another store
         self.marks = Marks(self)
 
     # ------------------------------------------------------------------ the contract
@@ -116,7 +125,7 @@ class Standby:
         runs = {
             "lease": self.lease.run(),
             "registry": self.registry.run(),
-            "watch": keep_watching(self.etcd, self.view, self._kick),
+            "watch": keep_watching(self.etcd, self.view, self._kick, self._new_store),
             "campaign": self._campaigning(),
         }
         for what, run in runs.items():
@@ -212,6 +221,21 @@ class Standby:
             )
         self._kick()
 
+    def _new_store(self) -> None:
+        """etcd is another store than the one read (the view forgotten, see the module's
+        docstring): what was known of the old one forgotten, every line told lost."""
+        self._store += 1
+        self._quiet_until = self._clock() + self.config.lease
+        self._releasing.clear()
+        self._given.clear()
+        self._orphans.clear()
+        self._joined_seen = None
+        self._registered = None
+        # free since the quiet ends: each takes its share first, as at a start
+        self.view.note_free(self._lines, since=self._quiet_until)
+        self._reconcile()
+        self._kick()
+
     def _ended(self, task: asyncio.Task[None]) -> None:
         if not task.cancelled() and (exc := task.exception()) is not None:
             log.error("hot standby: %s ended: %r", task.get_name(), exc)
@@ -221,7 +245,8 @@ class Standby:
         if self.view.joined != self._joined_seen:  # lines taken as orphans may go now
             self._joined_seen = self.view.joined
             self._orphans.clear()
-        lease = self.lease.id if self.lease.is_open() else None
+        quiet = self._clock() < self._quiet_until
+        lease = self.lease.id if self.lease.is_open() and not quiet else None
         for line in list(self._held):
             if (
                 lease is None
@@ -274,7 +299,7 @@ class Standby:
     async def _step(self) -> None:
         self._reconcile()
         await self._register()
-        if not (self.view.fresh and self.lease.is_open()):
+        if not (self.view.fresh and self.lease.is_open()) or self._clock() < self._quiet_until:
             return
         lease = self.lease.id
         assert lease is not None
@@ -289,11 +314,12 @@ class Standby:
                 log.info("hot standby: line %s given away to share the lines", give)
                 self._releasing[give] = now
         self._reconcile()
+        store = self._store
         for line, since in list(self._releasing.items()):
-            if now - since >= RELEASE_GRACE:
+            if now - since >= RELEASE_GRACE and store == self._store:
                 await self._release(line, lease)
         tried: set[str] = set()
-        while self.lease.is_open() and self.lease.id == lease:
+        while self.lease.is_open() and self.lease.id == lease and store == self._store:
             situation = self._situation(self._clock())
             todo = [
                 line
@@ -323,7 +349,7 @@ class Standby:
         )
 
     async def _campaign(self, line: str, lease: int) -> bool:
-        key = self.view.line_key(line)
+        key, store = self.view.line_key(line), self._store
         won, answers, revision = await self.etcd.txn(
             [{"target": "CREATE", "key": b64(key), "create_revision": "0"}],
             [
@@ -337,6 +363,8 @@ class Standby:
             ],
             [{"request_range": {"key": b64(key)}}],
         )
+        if store != self._store:  # answered by the store forgotten meanwhile
+            return False
         if won:
             self.view.held_by(line, self.me, lease, revision)
             self._given.pop(line, None)
@@ -346,11 +374,13 @@ class Standby:
         return False
 
     async def _release(self, line: str, lease: int) -> None:
-        key = b64(self.view.line_key(line))
+        key, store = b64(self.view.line_key(line)), self._store
         ours, _, revision = await self.etcd.txn(
             [{"target": "LEASE", "key": key, "lease": str(lease)}],
             [{"request_delete_range": {"key": key}}],
         )
+        if store != self._store:  # answered by the store forgotten meanwhile
+            return
         del self._releasing[line]
         if ours:
             self.view.freed(line, revision)

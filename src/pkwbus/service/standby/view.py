@@ -3,6 +3,12 @@ value and lease) and the live instances, kept by one range and then one watch.
 
 Keys: ``{prefix}/lines/{line}`` (value ``{"name", "url"}``, the holder's lease) and
 ``{prefix}/instances/{name}`` (the same value, the instance's registry lease).
+
+Each read checks that etcd is still the store the view was read from: an etcd whose data
+was lost (started anew, empty, on the same address) or restored from an older snapshot
+answers with a revision below one already seen, another cluster with another cluster id.
+The view is then forgotten whole and read anew (its revisions are the old store's: kept,
+they would hide the new store's keys).
 """
 
 from __future__ import annotations
@@ -73,13 +79,39 @@ class View:
         self.free_since: dict[str, float] = {}
         self.joined: float | None = None  # when an instance last registered anew
         self.fresh = False  # read whole, and watched since
-        self.revision = 0
+        self.revision = 0  # the highest revision of the store seen
+        self.cluster_id = ""  # the store's cluster, as its answers name it ("": not read yet)
 
     def line_key(self, line: str) -> str:
         return self.lines_prefix + line
 
     def instance_key(self, name: str) -> str:
         return self.instances_prefix + name
+
+    def read_from(self, cluster_id: str, revision: int) -> str | None:
+        """etcd answered a read with this header: None when it is the store the view was
+        read from, else why not (the view is then forgotten: :meth:`reset`)."""
+        why = None
+        if self.cluster_id and cluster_id and cluster_id != self.cluster_id:
+            why = f"cluster id changed from {self.cluster_id} to {cluster_id}"
+        elif revision < self.revision:
+            why = f"revision went back from {self.revision} to {revision}"
+        if why is not None:
+            self.reset()
+        self.cluster_id = cluster_id or self.cluster_id
+        return why
+
+    def reset(self) -> None:
+        """Everything forgotten, as before the first read: holders, instances, the
+        revisions seen, when lines were seen free, when an instance joined."""
+        self.holders.clear()
+        self.changed_at.clear()
+        self.instances = {}
+        self.free_since.clear()
+        self.joined = None
+        self.fresh = False
+        self.revision = 0
+        self.cluster_id = ""
 
     def load(self, revision: int, lines: Iterable[KeyValue], instances: Iterable[KeyValue]) -> None:
         """Everything as read at ``revision`` (the watch goes on from the next). A line
@@ -157,20 +189,27 @@ class View:
     def free(self, line: str) -> bool:
         return line not in self.holders
 
-    def note_free(self, lines: Iterable[str]) -> None:
-        """Lines not seen held are free from now on, unless seen so before."""
-        now = self.clock()
+    def note_free(self, lines: Iterable[str], since: float | None = None) -> None:
+        """Lines not seen held are free from ``since`` (default: now) on, unless seen so
+        before."""
+        at = self.clock() if since is None else since
         for line in lines:
             if line not in self.holders:
-                self.free_since.setdefault(line, now)
+                self.free_since.setdefault(line, at)
 
 
-async def keep_watching(etcd: Etcd, view: View, kick: Callable[[], None]) -> None:
+async def keep_watching(
+    etcd: Etcd,
+    view: View,
+    kick: Callable[[], None],
+    new_store: Callable[[], None] = lambda: None,
+) -> None:
     """Keeps ``view`` as etcd has it, calling ``kick`` after each change; until cancelled.
-    The view is ``fresh`` while the watch runs."""
+    The view is ``fresh`` while the watch runs. ``new_store`` is called when etcd was found
+    another store than the one read (logged), the view forgotten, before it is read anew."""
     while True:
         try:
-            await _watch(etcd, view, kick)
+            await _watch(etcd, view, kick, new_store)
             continue  # read anew after RESYNC_EVERY
         except EtcdError as exc:
             log.debug("hot standby: watch: %s", exc)
@@ -179,16 +218,29 @@ async def keep_watching(etcd: Etcd, view: View, kick: Callable[[], None]) -> Non
         await asyncio.sleep(_WATCH_RETRY)
 
 
-async def _watch(etcd: Etcd, view: View, kick: Callable[[], None]) -> None:
+async def _watch(
+    etcd: Etcd, view: View, kick: Callable[[], None], new_store: Callable[[], None]
+) -> None:
     """One read of the keys (both prefixes at one revision), then one watch from there."""
     prefixes = [view.lines_prefix, view.instances_prefix]
     ranges = [
         {"request_range": {"key": b64(p), "range_end": b64(prefix_end(p.encode()))}}
         for p in prefixes
     ]
-    _, answers, revision = await etcd.txn([], ranges)
-    if len(answers) != 2:
+    # the transaction's whole answer: its header names the store
+    answer, _ = await etcd.call("/v3/kv/txn", {"compare": [], "success": ranges, "failure": []})
+    answers = answer.get("responses")
+    header = answer.get("header")
+    if not isinstance(answers, list) or len(answers) != 2 or not isinstance(header, dict):
         raise EtcdError("etcd answered a read of the keys without its two ranges")
+    try:
+        revision = int(header["revision"])
+    except (KeyError, TypeError, ValueError):
+        raise EtcdError("etcd answered a read of the keys without its revision") from None
+    why = view.read_from(str(header.get("cluster_id", "")), revision)
+    if why is not None:
+        log.warning("hot standby: etcd is not the store it was (%s): its view read anew", why)
+        new_store()
     view.load(revision, range_kvs(answers[0]), range_kvs(answers[1]))
     async with etcd.watch(prefixes, revision + 1) as stream:
         view.fresh = True
