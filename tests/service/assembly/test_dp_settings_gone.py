@@ -9,23 +9,14 @@ import pytest
 
 from pkwbus.service.assembly.build import build_runtime
 from pkwbus.service.config import parse_config
-
-GSD = """\
-#Profibus_DP
-Vendor_Name = "Test"
-Ident_Number = 0x0402
-User_Prm_Data_Len = 1
-User_Prm_Data = 0x00
-Module = "PPO 1" 0xF3,0xF1
-EndModule
-"""
+from tests.commands.test_dp_cli import GSD_TEXT
 
 
 async def test_a_gsd_file_gone_since_the_check_is_named_when_the_line_starts(
     tmp_path: Path,
 ) -> None:
     gsd = tmp_path / "slave.gsd"
-    gsd.write_text(GSD)
+    gsd.write_text(GSD_TEXT)
     text = f"""
 audit_db: {tmp_path}/audit.sqlite
 lines:

@@ -24,20 +24,12 @@ from pkwbus.service.mqtt.outbox import Outbox
 from pkwbus.service.mqtt.output import MqttOutput
 from pkwbus.service.mqtt.values import ValueTopics
 from pkwbus.service.runtime import Runtime
+from tests.service.mqtt.test_values import CONFIG as VALUES_CONFIG
 
 U32 = next(code for code, (_, vtype) in DATA_TYPES.items() if vtype is ValueType.U32)
 
-CONFIG = """
-audit_db: {folder}/audit.sqlite
-lines:
-  - name: hall
-    port: /dev/pkwbus-test-no-port
-    protocol: fc
-    baudrate: 115200
-    alarms: off
-    drives:
-      - {{name: fan, address: 1, catalog: danfoss-fc, poll: [{{parameter: "16-13", every: 1s}}]}}
-"""
+# test_values' drive, with the default counters (the catalog types none by a vendor document)
+CONFIG = VALUES_CONFIG.replace("    counters: off\n", "")
 
 
 @pytest.fixture
