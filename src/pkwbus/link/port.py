@@ -157,7 +157,7 @@ class Link:
         self._fine = has_fine_timers(loop)
         self._quiet_at = loop.time()
         self._state = LinkState.OPEN
-        self.reconnect.opened()
+        self.reconnect.opened(loop.time())
 
     async def reopen(self, wake: asyncio.Event | None = None) -> bool:
         """Open the port once its back-off has passed; True when it is open.
@@ -201,6 +201,16 @@ class Link:
             self._fine_timer = None
         self._state = LinkState.CLOSED
         self.reconnect.closed()
+
+    def usable(self) -> None:
+        """A station answered: the port is usable, its back-off starts afresh (said in the
+        log where openings of the outage were not). At each answer: one test while no
+        outage is on (its back-off is fresh then: every failure starts an outage)."""
+        if not self.reconnect.outage:
+            return
+        openings = self.reconnect.usable()
+        if openings:
+            log.info("%s: a station answers again, after %d openings", self.settings.url, openings)
 
     def abort(self, reason: str = "given up") -> None:
         """Give the port up at once (an unexpected error); reopened after a back-off."""

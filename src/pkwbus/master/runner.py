@@ -37,6 +37,7 @@ from collections.abc import Callable, Collection, Sequence
 from typing import Generic, TypeVar
 
 from pkwbus.link import Link, LinkState, PortError
+from pkwbus.master import told
 from pkwbus.master.bus import Done, LineRefused, Port, Wire
 from pkwbus.master.events import Event, LineState, MaintenanceChanged, Observer, SettingsSeen
 from pkwbus.master.planning.carrier import Item, Preview
@@ -235,7 +236,7 @@ class LineRunner(Generic[Request, Answer]):
             self.writer.apply([LineState(self.name, False)])
 
     def _refused(self, exc: LineRefused) -> None:
-        log.error("line %s: %s", self.name, exc, extra={"line": self.name})
+        told.port(self.name, logging.ERROR, str(exc), self.link.reconnect.told(str(exc)))
         if self.link.is_open:
             self._refusing = True  # told with the loss it causes
             try:
@@ -382,14 +383,13 @@ class LineRunner(Generic[Request, Answer]):
             log.exception("line %s: recording failed", self.name, extra={"line": self.name})
 
     def _on_port(self, state: LinkState, error: str | None) -> None:
-        up = state is LinkState.OPEN
-        ctx = {"line": self.name}
-        if up:
-            log.info("line %s: port %s open", self.name, self.link.settings.url, extra=ctx)
+        repeated = self.link.reconnect.repeated  # in an outage told already: not again
+        if state is LinkState.OPEN:
+            told.port(self.name, logging.INFO, f"port {self.link.settings.url} open", repeated)
             self._unrecorded.append(([LineState(self.name, True)], self._wall()))
         elif state is LinkState.FAILED:
             if self._log_port:
-                log.warning("line %s: %s", self.name, error, extra=ctx)
+                told.port(self.name, logging.WARNING, str(error), repeated)
             self.planner.port_failed()
             self.wire.lost()
             state_event = LineState(self.name, False, error, refused=self._refusing)

@@ -115,8 +115,8 @@ class SnapshotWriter:
 
     def add_drive(self, spec: DriveSpec) -> None:
         """A drive of the line (at the start, or added by a reload): shown up until it
-        fails, its values to come, decoded as its polls say until it describes them (no
-        value of a parameter it is asked to describe lands before)."""
+        fails (a DP slave: down until in data exchange), its values to come, decoded as its
+        polls say until it describes them (none of a parameter it is to describe before)."""
         name, snapshot = spec.name, self.snapshot
         self._polls[name] = spec.polls
         self._keys.update((name, p.parameter, p.index) for p in spec.polls)
@@ -126,7 +126,7 @@ class SnapshotWriter:
         formats = {(p.parameter, p.index): p.fmt for p in spec.polls}
         snapshot.decoding[name] = Decoding(formats, pending=set(waiting))
         snapshot.counts[name] = DriveCounts()
-        snapshot.drives[name] = DriveState()
+        snapshot.drives[name] = DriveState(up=not spec.carrier.tells_health)
         self._alarms.watch(name, spec.alarms)
         snapshot.changes.touch(name)
 

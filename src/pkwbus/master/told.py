@@ -28,6 +28,7 @@ __all__ = [
     "described",
     "health",
     "pkw_length",
+    "port",
     "unanswered",
 ]
 
@@ -117,6 +118,12 @@ def health(line: str, event: HealthChanged) -> None:
     elif event.reason:
         log.warning("drive %s is down: %s (probing at back-off)", event.drive, event.reason,
                     extra=ctx)  # fmt: skip
+
+
+def port(line: str, level: int, text: str, repeated: bool) -> None:
+    """A line's port opened, failed or was refused, at ``level``: once per outage (at
+    debug level only where it is ``repeated``: the same outage told already)."""
+    log.log(logging.DEBUG if repeated else level, "line %s: %s", line, text, extra={"line": line})
 
 
 def pkw_length(line: str, event: PkwLengthTold) -> None:

@@ -8,6 +8,7 @@ of 0 (bit 10 clear), so the service never took control of a drive.
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections import Counter
 from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from contextlib import AsyncExitStack, asynccontextmanager
@@ -26,6 +27,7 @@ from pkwbus.master.events import Event, Exchanged
 from pkwbus.master.planning.answers import ExchangeResult, Failure, PkwAnswer, Reply
 from pkwbus.master.planning.jobs import JobKind
 from pkwbus.master.planning.outcomes import Rejected
+from pkwbus.master.planning.plan import HealthChanged
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.runner import LineRunner
 from pkwbus.master.wires.profibus.wire import CycleWire
@@ -250,10 +252,12 @@ async def test_a_dead_slave_goes_offline_while_the_others_keep_their_poll_rate(
 
 
 async def test_a_slave_dead_from_the_start_is_shown_down_until_it_answers(
-    tmp_path: Path,
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
     """A slave that never reached data exchange and answers none of a request's repeats is
-    down (pkwbus_drive_up 0: PkwbusDriveDown), not up by default; the others are up."""
+    down (pkwbus_drive_up 0: PkwbusDriveDown), not up by default, and the log says it does
+    not answer; the others are up."""
+    caplog.set_level(logging.WARNING, logger="pkwbus.master.runner")
     sim = DpSimulator(ADDRESSES, dialect="danfoss-pcv", timing=SimTiming(response_delay=0.001),
                       seed=5, faults=DpFaults(dead=frozenset({10})))  # fmt: skip
     end = await sim.serve_tcp("127.0.0.1", 0)
@@ -269,10 +273,78 @@ async def test_a_slave_dead_from_the_start_is_shown_down_until_it_answers(
         await until(lambda: up("fan") is False)
         await until(lambda: all(runtime.snapshot.readings.get((n, "16-13", 0)) for n in
                                 ("mixer", "pump")))  # fmt: skip
+        said = "drive fan is down: does not answer"
+        await until(lambda: any(r.getMessage().startswith(said) for r in caplog.records))
         assert up("mixer") is not False and up("pump") is not False
         sim.revive(10)
         await until(lambda: up("fan") is True)
     finally:
+        await runtime.stop()
+        await end.close()
+
+
+async def test_slaves_that_never_reach_data_exchange_are_down_and_the_api_says_why(
+    tmp_path: Path,
+) -> None:
+    """A slave owned by another master from the start, and one that refuses its parameters
+    (another ident number), never reach data exchange: they are down from the start
+    (pkwbus_drive_up 0, overview "down"), never shown up, and a read or write of theirs
+    answers 503 with their state and the cause their diagnosis gives, not "try again in a
+    few seconds"."""
+    sim = DpSimulator(ADDRESSES, dialect="danfoss-pcv", timing=SimTiming(response_delay=0.001),
+                      seed=5)  # fmt: skip
+    sim.lock(10, 1)
+    sim.slaves[9].ident = 0x1234
+    end = await sim.serve_tcp("127.0.0.1", 0)
+    text = config_text(end.url, tmp_path / "audit.sqlite", "20ms")
+    config = parse_config(text, environ={"TEST_TOKEN": TOKEN})
+    runtime = await build_runtime(config)
+    shown_up: set[str] = set()
+
+    class Watch:
+        def on_events(self, events: Sequence[Event]) -> None:
+            shown_up.update(e.drive for e in events if isinstance(e, HealthChanged) and e.up)
+
+    runtime.runners["dp"].observers.append(Watch())  # type: ignore[attr-defined]
+    await runtime.start()
+    audit = AuditLog(config.audit_db)
+    app = create_app(runtime, audit=audit, write_token=config.write_token({"TEST_TOKEN": TOKEN}))
+    client = httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://t")
+    snapshot = runtime.snapshot
+
+    def flags(name: str) -> frozenset[str]:
+        live = snapshot.slaves.get(name)
+        return live.flags if live is not None else frozenset()
+
+    try:
+        await until(lambda: runtime.snapshot.readings.get(("mixer", "16-13", 0)) is not None)
+        await until(lambda: "prm_fault" in flags("pump"))
+        await until(lambda: snapshot.slaves["fan"].state is SlaveState.LOCKED)
+        metrics = generate_latest(runtime.registry).decode()
+        for name, up in (("mixer", 1), ("pump", 0), ("fan", 0)):
+            assert f'pkwbus_drive_up{{drive="{name}",line="dp"}} {up}.0' in metrics
+        overview = (await client.get("/api/v1/drives?view=overview")).json()
+        assert {d["name"]: d["state"] for d in overview} == {
+            "mixer": "up", "pump": "down", "fan": "down"
+        }  # fmt: skip
+        assert shown_up == {"mixer"}  # the others never, not even at the start
+        fan = await client.get("/api/v1/drives/fan/parameters/16-13")
+        pump = await client.put(
+            "/api/v1/drives/pump/parameters/3-41", json={"value": 12.5},
+            headers={"Authorization": f"Bearer {TOKEN}"},
+        )  # fmt: skip
+        assert fan.status_code == pump.status_code == 503
+        said = {n: r.json()["error"]["message"] for n, r in (("fan", fan), ("pump", pump))}
+        assert said["fan"].startswith(
+            "fan is down: not in data exchange (locked): slave 10 is owned by master 1"
+        )
+        assert said["pump"].startswith("pump is down: not in data exchange (")
+        assert "slave 9 refuses its parameters (Prm_Fault)" in said["pump"]
+        assert all("few seconds" not in m for m in said.values())
+        assert sim.drives[9].params.value(341) != 1250  # nothing was sent
+    finally:
+        await client.aclose()
+        audit.close()
         await runtime.stop()
         await end.close()
 

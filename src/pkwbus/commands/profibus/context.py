@@ -40,6 +40,7 @@ from pkwbus.master.sessions.session import EndKind, LineSession, SessionEnded
 from pkwbus.master.target import DriveTarget, RecordAccess
 from pkwbus.master.wires.profibus.cycle import SlaveLocked
 from pkwbus.master.wires.profibus.port import FdlPort
+from pkwbus.master.wires.profibus.refusal import OPTIONS, refusal
 from pkwbus.master.wires.profibus.wire import CycleWire, SlaveSpec
 from pkwbus.notation import durations, limits
 from pkwbus.protocol import pkw
@@ -328,19 +329,7 @@ class _Watch:
         d = self.diagnosis
         if d is None or self.exchanged:
             return None
-        if "prm_fault" in d.flags:
-            why = (
-                f"its ident number is {d.ident:#06x}, not {ident:#06x} (--ident, --gsd)"
-                if d.ident != ident
-                else "its ident number or user parameters (--ident, --gsd, --user-prm)"
-            )
-            return f"slave {self.address} refuses its parameters (Prm_Fault): {why}"
-        if "cfg_fault" in d.flags:
-            return (
-                f"slave {self.address} refuses its configuration (Cfg_Fault): its modules are"
-                " not those sent (--ppo, --cfg, --gsd)"
-            )
-        return None
+        return refusal(self.address, d.flags, d.ident, ident, OPTIONS)
 
     def _end(self, kind: EndKind, reason: str) -> None:
         if self.session is not None:

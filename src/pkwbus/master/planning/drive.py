@@ -94,7 +94,9 @@ class DrivePlan:
         if carrier.tells_health:  # the wire tells it: missing answers never take it down
             policy = replace(policy, from_answers=False)
         self.health = DriveHealth(policy)
-        self.shown_up = True
+        # A DP slave is down until its wire tells it is in data exchange; others are up
+        # until they fail.
+        self.shown_up = not carrier.tells_health
         self.maintenance = False  # in maintenance: nothing goes out to it
         self.writes: deque[Job] = deque()
         self.reads: deque[Job | ProbeJob] = deque()

@@ -20,7 +20,10 @@ from typing import Any, NoReturn
 from pkwbus.catalog.description import ParameterDescription
 from pkwbus.errors import PkwbusError
 from pkwbus.master.planning.jobs import JobResult
+from pkwbus.master.snapshot import LiveSlave
+from pkwbus.master.wires.profibus.refusal import CONFIGURATION, why_not_exchanging
 from pkwbus.protocol.errors import LocalProtocolError
+from pkwbus.protocol.profibus.dp.slave_model import SlaveState
 from pkwbus.protocol.values import ParameterNotationError, ParameterRef, parse_parameter
 from pkwbus.service.audit.log import AuditEntry
 from pkwbus.service.audit.writer import AuditUnavailable, AuditWriter
@@ -44,6 +47,7 @@ __all__ = [
     "locate",
     "malformed",
     "mastered_elsewhere",
+    "not_exchanging",
     "not_here",
     "raise_for",
 ]
@@ -92,12 +96,29 @@ def described_format(
     decoding = snapshot.decoding.get(entry.name)
     if decoding is not None and ref.pnu in decoding.pending:
         state = snapshot.drives.get(entry.name)
-        if state is not None and not state.up:  # a few seconds would not do: say why
+        slave = snapshot.slaves.get(entry.name)
+        if state is not None and not state.up and slave is not None:  # a DP slave
+            why = (
+                f"{entry.name} is down: {not_exchanging(entry, slave)}; it describes"
+                f" {ref.name} once it is in data exchange"
+            )
+        elif state is not None and not state.up:  # a few seconds would not do: say why
             why = f"{entry.name} is down: it describes {ref.name} once it answers again"
         else:
             why = f"{entry.name} has not described {ref.name} yet: try again in a few seconds"
         raise ApiError(503, "not_described", why)
     return runtime.format_of(entry.name, ref)
+
+
+def not_exchanging(entry: DriveEntry, slave: LiveSlave) -> str:
+    """Why DP slave ``entry`` is not in data exchange: its state, and the cause its
+    diagnosis gives where it gives one."""
+    said = f"not in data exchange ({slave.state.value})"
+    locked = slave.state is SlaveState.LOCKED
+    cause = why_not_exchanging(
+        entry.target.address, locked, slave.owner, slave.flags, slave.ident, None, CONFIGURATION
+    )
+    return f"{said}: {cause}" if cause is not None else said
 
 
 def clip(name: str, limit: int) -> str:

@@ -16,13 +16,17 @@ from pkwbus.master.carriers import SlotCarrier, carrier_for
 from pkwbus.master.planning.answers import ErrorKind, Failure, Reply
 from pkwbus.master.planning.carrier import Item
 from pkwbus.master.planning.outcomes import Answered, Mismatch, Outcome, Rejected, TimedOut
+from pkwbus.master.planning.plan import DriveSpec
 from pkwbus.master.planning.transaction import PkwTransaction
 from pkwbus.master.target import DriveTarget
-from pkwbus.master.wires.profibus.wire import RESTARTS_SAID_EVERY, CycleWire
+from pkwbus.master.wires.profibus.wire import RESTARTS_SAID_EVERY, CycleWire, SlaveSpec
 from pkwbus.protocol import pkw
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.pkw.dialects import Command
 from pkwbus.protocol.profibus.dp import ppo
+from pkwbus.protocol.profibus.dp import services as dps
+from pkwbus.protocol.profibus.dp.services import Diagnosis
+from pkwbus.protocol.profibus.dp.slave import SlaveSetup
 from tests.protocol.profibus.test_ppo import IDLE, PCV, PPO1, pkw_of, ppo_read, value
 
 TARGET = DriveTarget.create("profibus", 8, dialect_name="danfoss-pcv")
@@ -180,3 +184,33 @@ def test_a_slave_parametrised_over_and_over_is_said_once_a_minute(
         f" {RESTARTS_SAID_EVERY:.0f} s, not in data exchange since (prm_required the last"
         " time): see its diagnosis",
     ]
+
+
+@pytest.mark.parametrize(
+    ("diagnosis", "cause"),
+    [
+        (
+            Diagnosis(frozenset({"cfg_fault"}), None, 0x0402),
+            "slave 8 refuses its configuration (Cfg_Fault): its modules are not those sent"
+            " (ppo, cfg, gsd)",
+        ),
+        (
+            Diagnosis(frozenset({"prm_fault"}), None, 0x1234),
+            "slave 8 refuses its parameters (Prm_Fault): its ident number is 0x1234, not"
+            " 0x0402 (ident, gsd)",
+        ),
+    ],
+)
+def test_the_minutes_line_of_a_refusing_slave_says_what_its_diagnosis_refuses(
+    caplog: pytest.LogCaptureFixture, diagnosis: Diagnosis, cause: str
+) -> None:
+    """Where the slave's latest diagnosis names a fault, the line a minute says it (in the
+    words of the drive's configuration), not only "see its diagnosis"."""
+    caplog.set_level(logging.WARNING, logger="pkwbus.master.wires.profibus.wire")
+    setup = SlaveSetup(8, 2, dps.Parameters(0x0402), b"\xf3\xf1")
+    wire = CycleWire([SlaveSpec(DriveSpec("fan", carrier_for(TARGET)), setup, PPO1)], name="dp")
+    wire._diagnoses["fan"] = diagnosis  # as the cycle read it
+    for at in range(0, int(RESTARTS_SAID_EVERY) + 1):
+        wire._restarted("fan", "prm_required", float(at))
+    said = caplog.records[-1].getMessage()
+    assert said.endswith(f"(prm_required the last time): {cause}")

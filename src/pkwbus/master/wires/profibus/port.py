@@ -278,6 +278,7 @@ class FdlPort:
                     waiter.set_exception(ForeignMaster(self._refusal()))
                 continue
             if waiter is not None and not waiter.done() and self._answers(event):
+                self.link.usable()  # a station answered: the port is usable
                 waiter.set_result(event)
         if (
             waiter is not None

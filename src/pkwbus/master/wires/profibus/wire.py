@@ -59,8 +59,10 @@ from pkwbus.master.wires.profibus.cycle import (
     SlaveRun,
     StartupAnswered,
 )
+from pkwbus.master.wires.profibus.refusal import CONFIGURATION, refusal
 from pkwbus.protocol.errors import LocalProtocolError
 from pkwbus.protocol.profibus.dp.ppo import PkwSlot, PpoType, SlotAnswer, SlotGarbled, pzd_words
+from pkwbus.protocol.profibus.dp.services import Diagnosis
 from pkwbus.protocol.profibus.dp.slave import (
     Answer,
     DiagnosisRead,
@@ -133,6 +135,8 @@ class CycleWire:
         # Slaves parametrised again and not in data exchange since: when it was last said in
         # the log, and how often since (one that refuses its parameters: every cycle).
         self._restarts: dict[str, tuple[float, int]] = {}
+        self._told: set[str] = set()  # slaves whose health was told: not down from the start
+        self._diagnoses: dict[str, Diagnosis] = {}  # each slave's latest
 
     def poll_deadline(self, retries: int) -> float:
         return DEFAULT_POLL_DEADLINE
@@ -267,8 +271,8 @@ class CycleWire:
             silent = event.kind is FailureKind.TIMEOUT and not slave.waiting
             if silent and slave.state is SlaveState.OFFLINE:  # every repeat went unanswered
                 events.append(SlaveSilent(name, event.detail))
-                if planner.drive(name).shown_up:  # a slave that never answered is down too
-                    planner.told_health(name, False, "does not answer", now)
+                if planner.drive(name).shown_up or name not in self._told:  # never answered
+                    self._tell(planner, name, False, "does not answer", now)
         elif isinstance(event, StateChanged):
             self._state(planner, name, event, now)
         elif isinstance(event, Restarted):
@@ -276,6 +280,7 @@ class CycleWire:
             self._restarted(name, event.reason, now)
         elif isinstance(event, DiagnosisRead):
             events.append(SlaveDiagnosed(name, event.diagnosis))
+            self._diagnoses[name] = event.diagnosis
         elif isinstance(event, SlotAnswer):
             if planner.sending(name) is not None:
                 self._read(planner, run, now, answered)
@@ -346,8 +351,22 @@ class CycleWire:
         self._restarts[name] = (now, 0)
         log.warning(
             "drive %s: parametrised again %d times in %.0f s, not in data exchange since (%s"
-            " the last time): see its diagnosis", name, since, now - at, reason, extra=ctx,
+            " the last time): %s", name, since, now - at, reason, self._refusal(name), extra=ctx,
         )  # fmt: skip
+
+    def _refusal(self, name: str) -> str:
+        """What the slave's latest diagnosis says it refuses (else: see its diagnosis)."""
+        spec = next((s for s in self.drives if s.name == name), None)
+        d = self._diagnoses.get(name)
+        if spec is None or d is None:
+            return "see its diagnosis"
+        setup = spec.setup
+        found = refusal(setup.address, d.flags, d.ident, setup.parameters.ident, CONFIGURATION)
+        return found or "see its diagnosis"
+
+    def _tell(self, planner: Planner, name: str, up: bool, reason: str, now: float) -> None:
+        self._told.add(name)
+        planner.told_health(name, up, reason, now)
 
     def _state(self, planner: Planner, name: str, event: StateChanged, now: float) -> None:
         self._events.append(SlaveStateChanged(name, event.new))
@@ -355,9 +374,9 @@ class CycleWire:
         if event.new is SlaveState.DATA_EXCHANGE:
             log.info("drive %s: in data exchange", name, extra=ctx)
             self._restarts.pop(name, None)
-            planner.told_health(name, True, "", now)
+            self._tell(planner, name, True, "", now)
         elif event.old is SlaveState.DATA_EXCHANGE:
-            planner.told_health(name, False, f"left data exchange ({event.new})", now)
+            self._tell(planner, name, False, f"left data exchange ({event.new})", now)
         elif event.new is SlaveState.LOCKED:
             log.error(
                 "drive %s: owned by another master: pkwbus does not parametrise it", name,

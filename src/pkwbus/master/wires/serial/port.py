@@ -255,6 +255,8 @@ class TelegramPort:
         if self._send_timer is not None:
             self._send_timer.cancel()
             self._send_timer = None
+        if isinstance(result, Reply):
+            self.link.usable()  # a drive answered: the port is usable
         if not isinstance(result, Reply) or self._deframer.buffered:
             self._stray = True  # what follows a bad answer must not start the next one
         done, self._done = self._done, None
