@@ -394,5 +394,6 @@ class Standby:
         if lease == self._registered and (not self.view.fresh or self.name in self.view.instances):
             return
         key = self.view.instance_key(self.name)
+        self.view.own_lease = lease  # before the put: its watch event may come first
         await self.etcd.put(key, master_value(self.me.name, self.me.url), lease)
         self._registered = lease

@@ -80,6 +80,8 @@ class View:
         self.joined: float | None = None  # when an instance last registered anew
         self.fresh = False  # read whole, and watched since
         self.revision = 0  # the highest revision of the store seen
+        self.own_lease = 0  # the registry lease this instance registered on (0: not yet)
+        self._twin_told = False  # another instance registered under this one's name: said
         self.cluster_id = ""  # the store's cluster, as its answers name it ("": not read yet)
 
     def line_key(self, line: str) -> str:
@@ -129,7 +131,8 @@ class View:
         old = set(self.instances)
         self.instances = {}
         for kv in instances:
-            self.instances[kv.key.removeprefix(self.instances_prefix)] = _master(kv.value)
+            self.instances[name := kv.key.removeprefix(self.instances_prefix)] = _master(kv.value)
+            self._check_twin(name, kv)
         if old and set(self.instances) - old - {self.me}:
             self.joined = now
         self.revision = max(self.revision, revision)
@@ -158,6 +161,20 @@ class View:
                     if name not in self.instances and name != self.me:
                         self.joined = now
                     self.instances[name] = _master(kv.value)
+                    self._check_twin(name, kv)
+
+    def _check_twin(self, name: str, kv: KeyValue) -> None:
+        """This instance's registry key put by another instance (on another lease): two
+        instances share ``standby.name``; said once (each registers over the other, and the
+        status pages and the 409s cannot tell them apart)."""
+        if name != self.me or not self.own_lease or kv.lease in (0, self.own_lease):
+            return
+        if not self._twin_told:
+            self._twin_told = True
+            log.error(
+                "hot standby: another instance registered as %r (lease %x, this one's %x):"
+                " give each instance its own standby.name", name, kv.lease, self.own_lease,
+            )  # fmt: skip
 
     def apply_put(self, kv: KeyValue) -> None:
         """A line's key as read now (a campaign lost: who won)."""
