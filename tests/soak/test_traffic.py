@@ -94,6 +94,24 @@ async def test_an_unexpected_answer_to_a_write_is_found() -> None:
     assert problems.counts["status"] == 1
 
 
+async def test_a_write_cut_off_by_the_soaks_end_may_have_no_row_or_one_without_its_value() -> None:
+    # Cut off before it was sent: no row. Cut off while its body was on the way: the
+    # service audits an unreadable request (outcome invalid, no value).
+    for row in (None, {"new_value": None, "outcome": "invalid"}):
+        fake = Fake(audit=False)
+        writer, problems = fake.writer()
+        await writer.one()
+        writer.writes[-1].status = 0  # as if its PUT had been cancelled
+        if row is not None:
+            fake.rows.append({"id": 1, "drive": writer.writes[-1].drive.name,
+                              "parameter": writer.writes[-1].parameter, **row})  # fmt: skip
+        await writer.check_audit()
+        assert problems.counts == {}, row
+    # Answered, a write without its row is a problem.
+    problems = await write(Fake(audit=False), 1)
+    assert problems.counts == {"unaudited": 1}
+
+
 async def test_a_write_cut_off_by_the_soaks_end_may_have_a_pending_row() -> None:
     # The soak cancels its writer at the end: a write whose PUT never returned has no
     # answer to hold its row against; the service completes the row later.
