@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from typing import Any, Final
 
 from pkwbus import __version__
@@ -28,7 +29,9 @@ from pkwbus.service.config.mqtt import ha_device_id
 from pkwbus.service.mqtt.values import ValueTopics
 from pkwbus.service.runtime import DriveEntry
 
-__all__ = ["DEVICE_CLASSES", "device_config", "device_id", "discovery_topic", "stale_config"]
+__all__ = [
+    "DEVICE_CLASSES", "OwnConfigs", "device_config", "device_id", "discovery_topic", "stale_config",
+]  # fmt: skip
 
 # Home Assistant's sensor device classes by the units it accepts for them.
 DEVICE_CLASSES: Final = {
@@ -57,8 +60,8 @@ def discovery_topic(ha_prefix: str, prefix: str, line: str, drive: str) -> str:
 
 def stale_config(prefix: str, payload: bytes) -> bool:
     """Whether ``payload``, a retained device config, is one pkwbus published under
-    ``prefix`` (its first availability topic ``{prefix}/status``); the caller asks only of
-    a topic that is not one of its drives' now."""
+    ``prefix`` (its first availability topic ``{prefix}/status``); asked only of a topic
+    that is not one of the drives' now (:class:`OwnConfigs`)."""
     try:
         doc = json.loads(payload) if payload else None
     except ValueError:  # not JSON (UnicodeDecodeError is one): not pkwbus's
@@ -72,6 +75,28 @@ def stale_config(prefix: str, payload: bytes) -> bool:
         and isinstance(first, dict)
         and first.get("topic") == f"{prefix}/status"
     )
+
+
+class OwnConfigs:
+    """The device config topics of the service's drives now, made again only when the
+    runtime's drives are another mapping (a load swapped in): a retained config found on the
+    broker costs one set lookup when it is a drive's own, its JSON read only otherwise."""
+
+    def __init__(self, ha_prefix: str, prefix: str) -> None:
+        self.ha_prefix, self.prefix = ha_prefix, prefix
+        self._of: Mapping[str, DriveEntry] | None = None
+        self._topics: frozenset[str] = frozenset()
+
+    def stale(self, drives: Mapping[str, DriveEntry], topic: str, payload: bytes) -> bool:
+        """Whether the config ``payload`` on ``topic`` is pkwbus's under the prefix for none
+        of ``drives`` (:func:`stale_config`)."""
+        if drives is not self._of:
+            self._of = drives
+            self._topics = frozenset(
+                discovery_topic(self.ha_prefix, self.prefix, e.line, e.name)
+                for e in drives.values()
+            )
+        return topic not in self._topics and stale_config(self.prefix, payload)
 
 
 def device_config(prefix: str, entry: DriveEntry, topics: ValueTopics) -> bytes:

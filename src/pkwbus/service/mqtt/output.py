@@ -38,7 +38,7 @@ from pkwbus.service.history.store import DriveEvent
 from pkwbus.service.history.stream import EventStream
 from pkwbus.service.http.views import event_views
 from pkwbus.service.mqtt.connection import Connection, NotConnected
-from pkwbus.service.mqtt.discovery import device_config, discovery_topic, stale_config
+from pkwbus.service.mqtt.discovery import OwnConfigs, device_config, discovery_topic
 from pkwbus.service.mqtt.metrics import MqttMetrics
 from pkwbus.service.mqtt.outbox import Outbox, OutboxError, Stored, outbox_path
 from pkwbus.service.mqtt.values import ValueTopic, ValueTopics, drive_status, quality
@@ -90,6 +90,7 @@ class MqttOutput:
         if ha.discovery:
             connection.subscribe(f"{ha.prefix}/status", self._ha_status, retain_handling=0)
             connection.subscribe(f"{ha.prefix}/device/+/config", self._ha_config, retain_handling=0)
+        self._configs = OwnConfigs(ha.prefix, self.prefix)  # found on the broker: stale ones
 
     # ------------------------------------------------------------ told
 
@@ -282,11 +283,8 @@ class MqttOutput:
 
     def _ha_config(self, message: aiomqtt.Message) -> None:
         """A device config of pkwbus's under this prefix, of none of its drives now: emptied."""
-        payload, topic = message.payload, message.topic.value
-        if not isinstance(payload, bytes | bytearray) or not stale_config(self.prefix, payload):
-            return
-        ha, drives = self.settings.homeassistant, self.runtime.drives.values()
-        if all(topic != discovery_topic(ha.prefix, self.prefix, e.line, e.name) for e in drives):
+        payload, topic, drives = message.payload, message.topic.value, self.runtime.drives
+        if isinstance(payload, bytes | bytearray) and self._configs.stale(drives, topic, payload):
             self.connection.publish_nowait(topic, b"", 1, True)
 
     def _ha_status(self, message: aiomqtt.Message) -> None:
